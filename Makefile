@@ -1,0 +1,31 @@
+# id_learning quick start: `make demo` runs the main job on bags/, `make test` runs the tests.
+# Both create .venv when it is missing. With ROS 2 Jazzy installed from apt (sourced or under
+# /opt/ros/jazzy) the venv sees the system's rclpy; otherwise ROS 2 Jazzy comes from PyPI wheels.
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+BAG ?= bags/default
+OUT ?= out/demo
+
+.PHONY: demo test lint venv clean bag
+
+venv: $(VENV)/.ready
+
+$(VENV)/.ready: tools/bootstrap_venv.sh pyproject.toml setup.py
+	bash tools/bootstrap_venv.sh $(VENV)
+	touch $@
+
+demo: venv
+	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(BAG) --out $(OUT)
+
+test: venv
+	source tools/env.sh $(VENV) && $(PY) -m pytest -q test
+
+lint: venv
+	$(VENV)/bin/ruff check id_learning test benchmarks tools && $(VENV)/bin/ruff format --check id_learning test benchmarks tools
+
+bag: venv
+	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli simulate --config config/twin_default.yaml --out $(BAG) --force
+
+clean:
+	rm -rf out build install log

@@ -1,0 +1,33 @@
+"""rosbag2 MCAP bags: the bag contract's messages, a writer that keeps serialized bytes, a reader."""
+
+from __future__ import annotations
+
+from id_learning.bag.messages import (
+    JOINT_STATE,
+    JointStateMessage,
+    decode_joint_state,
+    encode_joint_state,
+)
+from id_learning.bag.reader import (
+    BagInfo,
+    JointStateSeries,
+    TopicInfo,
+    bag_info,
+    iter_raw,
+    read_joint_states,
+)
+from id_learning.bag.writer import BagWriter
+
+__all__ = [
+    'JOINT_STATE',
+    'BagInfo',
+    'BagWriter',
+    'JointStateMessage',
+    'JointStateSeries',
+    'TopicInfo',
+    'bag_info',
+    'decode_joint_state',
+    'encode_joint_state',
+    'iter_raw',
+    'read_joint_states',
+]

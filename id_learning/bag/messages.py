@@ -1,0 +1,86 @@
+"""CDR encoding of the message types the bag contract uses, without rclpy (through rosbags)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+
+__all__ = [
+    'JOINT_STATE',
+    'JointStateMessage',
+    'decode_joint_state',
+    'encode_joint_state',
+    'message_definition',
+    'typestore',
+]
+
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+NS_PER_S = 1_000_000_000
+
+
+@cache
+def typestore() -> Any:
+    """The ROS 2 Jazzy message types known to rosbags."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+@cache
+def message_definition(msgtype: str) -> tuple[str, str]:
+    """Return (ros2msg definition text, RIHS01 type hash) of a message type."""
+    store = typestore()
+    text, _ = store.generate_msgdef(msgtype, ros_version=2)
+    return text, store.hash_rihs01(msgtype)
+
+
+@dataclass(frozen=True, eq=False)
+class JointStateMessage:
+    """One decoded sensor_msgs/JointState. Arrays may be empty where the sender left them out."""
+
+    stamp_ns: int
+    frame_id: str
+    name: tuple[str, ...]
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+
+def encode_joint_state(
+    stamp_ns: int,
+    name: tuple[str, ...] | list[str],
+    position: np.ndarray,
+    velocity: np.ndarray,
+    effort: np.ndarray,
+    frame_id: str = '',
+) -> bytes:
+    """Serialize a JointState to CDR bytes; stamp_ns is the header stamp [ns since epoch]."""
+    store = typestore()
+    time_type = store.types['builtin_interfaces/msg/Time']
+    header_type = store.types['std_msgs/msg/Header']
+    msg_type = store.types[JOINT_STATE]
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    msg = msg_type(
+        header=header_type(stamp=time_type(sec=sec, nanosec=nanosec), frame_id=frame_id),
+        name=list(name),
+        position=np.asarray(position, dtype=np.float64),
+        velocity=np.asarray(velocity, dtype=np.float64),
+        effort=np.asarray(effort, dtype=np.float64),
+    )
+    return bytes(store.serialize_cdr(msg, JOINT_STATE))
+
+
+def decode_joint_state(data: bytes | memoryview) -> JointStateMessage:
+    """Deserialize CDR bytes of a JointState."""
+    msg = typestore().deserialize_cdr(data, JOINT_STATE)
+    stamp = msg.header.stamp
+    return JointStateMessage(
+        stamp_ns=int(stamp.sec) * NS_PER_S + int(stamp.nanosec),
+        frame_id=msg.header.frame_id,
+        name=tuple(msg.name),
+        position=msg.position,
+        velocity=msg.velocity,
+        effort=msg.effort,
+    )

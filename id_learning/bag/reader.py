@@ -1,0 +1,214 @@
+"""Read rosbag2 bags (MCAP or SQLite storage) through rosbags, with errors that name file and topic."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from rosbags.rosbag2 import Reader
+from rosbags.rosbag2.errors import ReaderError
+
+from id_learning.bag.messages import JOINT_STATE, decode_joint_state
+from id_learning.errors import BagError, DatasetError
+
+__all__ = ['BagInfo', 'JointStateSeries', 'TopicInfo', 'bag_info', 'iter_raw', 'read_joint_states']
+
+RECOVER_HINT = 'if the recording was interrupted, `id-learning bag recover PATH` rebuilds it'
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """One topic of a bag."""
+
+    name: str
+    msgtype: str
+    count: int
+
+
+@dataclass(frozen=True)
+class BagInfo:
+    """What a bag's metadata says."""
+
+    path: Path
+    storage: str
+    files: tuple[str, ...]
+    start_ns: int
+    duration_ns: int
+    topics: tuple[TopicInfo, ...]
+
+    def topic(self, name: str) -> TopicInfo:
+        """Return a topic by name.
+
+        Raises:
+            BagError: the bag has no such topic (lists those it has).
+        """
+        for topic in self.topics:
+            if topic.name == name:
+                return topic
+        raise BagError(
+            f'{self.path}: missing topic {name}; the bag has {[t.name for t in self.topics]}'
+        )
+
+
+def _open(path: Path) -> Reader:
+    if not path.exists():
+        raise BagError(f'{path}: no such bag')
+    if path.is_file():
+        raise BagError(f'{path}: expected a rosbag2 folder (with metadata.yaml), got a file')
+    if not (path / 'metadata.yaml').is_file():
+        raise BagError(f'{path}: not a complete rosbag2 folder (no metadata.yaml); {RECOVER_HINT}')
+    reader = Reader(path)
+    try:
+        reader.open()
+    except (ReaderError, struct.error, EOFError, ValueError, OSError) as err:
+        raise BagError(f'{path}: cannot open bag: {err}; {RECOVER_HINT}') from err
+    return reader
+
+
+def bag_info(path: Path | str) -> BagInfo:
+    """Read a bag's topics, counts and time span.
+
+    Raises:
+        BagError: the folder is missing, incomplete, truncated or corrupt.
+    """
+    path = Path(path)
+    reader = _open(path)
+    files = tuple(sorted(p.name for p in path.iterdir() if p.suffix in {'.mcap', '.db3'}))
+    try:
+        topics = tuple(
+            TopicInfo(
+                conn.topic,
+                conn.msgtype,
+                int(conn.msgcount),
+            )
+            for conn in reader.connections
+        )
+        return BagInfo(
+            path=path,
+            storage='mcap' if all(name.endswith('.mcap') for name in files) else 'other',
+            files=files,
+            start_ns=int(reader.start_time) if reader.message_count else 0,
+            duration_ns=int(reader.duration) if reader.message_count else 0,
+            topics=topics,
+        )
+    finally:
+        reader.close()
+
+
+def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int, bytes]]:
+    """Yield (topic, log time [ns], serialized bytes) of the given topics in log-time order.
+
+    Raises:
+        BagError: a topic is missing, or the file is truncated or corrupt.
+    """
+    path = Path(path)
+    reader = _open(path)
+    try:
+        by_name = {conn.topic: conn for conn in reader.connections}
+        missing = [topic for topic in topics if topic not in by_name]
+        if missing:
+            raise BagError(f'{path}: missing topic(s) {missing}; the bag has {sorted(by_name)}')
+        connections = [by_name[topic] for topic in topics]
+        try:
+            for conn, timestamp, data in reader.messages(connections=connections):
+                yield conn.topic, int(timestamp), bytes(data)
+        except (ReaderError, struct.error, EOFError, ValueError, KeyError) as err:
+            raise BagError(
+                f'{path}: corrupt or truncated bag while reading {topics}: {err}; {RECOVER_HINT}'
+            ) from err
+        except Exception as err:  # zstd/lz4 raise their own error types on damaged chunks
+            if type(err).__module__.split('.')[0] in {
+                'zstd',
+                'zstandard',
+                'compression',
+                'backports',
+                'lz4',
+            }:
+                raise BagError(f'{path}: damaged compressed chunk: {err}; {RECOVER_HINT}') from err
+            raise
+    finally:
+        reader.close()
+
+
+@dataclass(frozen=True, eq=False)
+class JointStateSeries:
+    """The JointState messages of one topic, stacked.
+
+    Attributes:
+        topic: topic name.
+        stamps_ns: (N,) header stamps [ns].
+        log_ns: (N,) bag log times [ns].
+        names: joint names, in the messages' order.
+        position: (N, n); velocity and effort (N, n) or None when the messages leave them empty.
+    """
+
+    topic: str
+    stamps_ns: np.ndarray
+    log_ns: np.ndarray
+    names: tuple[str, ...]
+    position: np.ndarray | None
+    velocity: np.ndarray | None
+    effort: np.ndarray | None
+
+
+def read_joint_states(path: Path | str, topic: str) -> JointStateSeries:
+    """Read and stack every sensor_msgs/JointState on a topic.
+
+    Raises:
+        BagError: missing topic, wrong message type, corrupt file.
+        DatasetError: messages disagree on joint names or array lengths (names the sample).
+    """
+    path = Path(path)
+    info = bag_info(path)
+    msgtype = info.topic(topic).msgtype
+    if msgtype != JOINT_STATE:
+        raise BagError(f'{path}: topic {topic} has type {msgtype}, expected {JOINT_STATE}')
+    stamps: list[int] = []
+    logs: list[int] = []
+    fields: dict[str, list[np.ndarray]] = {'position': [], 'velocity': [], 'effort': []}
+    names: tuple[str, ...] | None = None
+    lengths: dict[str, int] = {}
+    for index, (_, log_ns, data) in enumerate(iter_raw(path, [topic])):
+        msg = decode_joint_state(data)
+        if names is None:
+            names = msg.name
+            lengths = {key: len(getattr(msg, key)) for key in fields}
+            for key, length in lengths.items():
+                if length not in (0, len(names)):
+                    raise DatasetError(
+                        f'{path}: {topic} sample 0: {key} has {length} values for {len(names)} joints'
+                    )
+        elif msg.name != names:
+            raise DatasetError(
+                f'{path}: {topic} sample {index} (stamp {msg.stamp_ns} ns): joint names {list(msg.name)} '
+                f"differ from the first message's {list(names)}"
+            )
+        for key, values in fields.items():
+            array = getattr(msg, key)
+            if len(array) != lengths[key]:
+                raise DatasetError(
+                    f'{path}: {topic} sample {index} (stamp {msg.stamp_ns} ns): {key} has '
+                    f'{len(array)} values, earlier samples have {lengths[key]}'
+                )
+            if lengths[key]:
+                values.append(array)
+        stamps.append(msg.stamp_ns)
+        logs.append(log_ns)
+    if names is None:
+        raise DatasetError(f'{path}: topic {topic} has no messages')
+
+    def stacked(key: str) -> np.ndarray | None:
+        return np.vstack(fields[key]) if lengths[key] else None
+
+    return JointStateSeries(
+        topic=topic,
+        stamps_ns=np.array(stamps, dtype=np.int64),
+        log_ns=np.array(logs, dtype=np.int64),
+        names=names,
+        position=stacked('position'),
+        velocity=stacked('velocity'),
+        effort=stacked('effort'),
+    )

@@ -1,0 +1,9 @@
+"""``python -m id_learning.cli``."""
+
+from __future__ import annotations
+
+import sys
+
+from id_learning.cli.main import main
+
+sys.exit(main())

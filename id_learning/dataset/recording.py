@@ -1,0 +1,241 @@
+"""A recording as aligned arrays, read from and written to the bag contract.
+
+The bag contract: ``/joint_states`` (sensor_msgs/JointState: name, position [rad], velocity
+[rad/s], effort = measured joint torque [N*m] or empty) and ``/motor_currents``
+(sensor_msgs/JointState whose effort holds motor currents [A]), with the same joint names and the
+same header stamps sample by sample. Topic names come from the robot config.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from id_learning.bag import (
+    JOINT_STATE,
+    BagWriter,
+    JointStateSeries,
+    encode_joint_state,
+    read_joint_states,
+)
+from id_learning.errors import DatasetError
+from id_learning.robot.config import RobotConfig, TopicConfig
+
+__all__ = ['Recording', 'check_finite', 'check_stamps', 'load_recording', 'write_recording']
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """Synchronised samples of one recording, in ``joints`` order.
+
+    Attributes:
+        joints: joint names, the column order of every array.
+        stamps_ns: (N,) header stamps [ns since epoch], strictly increasing.
+        position: (N, n) joint positions [rad].
+        velocity: (N, n) joint velocities [rad/s].
+        current: (N, n) motor currents [A], or None when the recording has none.
+        joint_torque: (N, n) measured joint torques [N*m], or None when not measured.
+        source: where the samples came from (bag path, log file), for error messages.
+    """
+
+    joints: tuple[str, ...]
+    stamps_ns: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    current: np.ndarray | None = None
+    joint_torque: np.ndarray | None = None
+    source: str = '<memory>'
+
+    def __post_init__(self) -> None:
+        """Check that every array has one row per stamp and one column per joint."""
+        n_samples, n_joints = len(self.stamps_ns), len(self.joints)
+        for key in ('position', 'velocity', 'current', 'joint_torque'):
+            array = getattr(self, key)
+            if array is not None and array.shape != (n_samples, n_joints):
+                raise DatasetError(
+                    f'{self.source}: {key} has shape {array.shape}, expected ({n_samples}, {n_joints})'
+                )
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples."""
+        return len(self.stamps_ns)
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample [s]."""
+        return float(self.stamps_ns[-1] - self.stamps_ns[0]) * 1e-9 if self.n_samples else 0.0
+
+    def select(self, index: slice | np.ndarray) -> Recording:
+        """Return the samples at ``index`` as a new recording."""
+
+        def pick(array: np.ndarray | None) -> np.ndarray | None:
+            return None if array is None else array[index]
+
+        return Recording(
+            joints=self.joints,
+            stamps_ns=self.stamps_ns[index],
+            position=self.position[index],
+            velocity=self.velocity[index],
+            current=pick(self.current),
+            joint_torque=pick(self.joint_torque),
+            source=self.source,
+        )
+
+
+def write_recording(
+    recording: Recording,
+    path: Path | str,
+    topics: TopicConfig | None = None,
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """Write a recording as a bag in the contract; header stamp = log time = ``stamps_ns``."""
+    topics = topics or TopicConfig()
+    path = Path(path)
+    empty = np.empty(0)
+    with BagWriter(path, overwrite=overwrite) as writer:
+        writer.add_topic(topics.joint_states, JOINT_STATE)
+        if recording.current is not None:
+            writer.add_topic(topics.motor_currents, JOINT_STATE)
+        for k, stamp in enumerate(recording.stamps_ns.tolist()):
+            effort = empty if recording.joint_torque is None else recording.joint_torque[k]
+            writer.write(
+                topics.joint_states,
+                stamp,
+                encode_joint_state(
+                    stamp, recording.joints, recording.position[k], recording.velocity[k], effort
+                ),
+            )
+            if recording.current is not None:
+                writer.write(
+                    topics.motor_currents,
+                    stamp,
+                    encode_joint_state(
+                        stamp, recording.joints, empty, empty, recording.current[k]
+                    ),
+                )
+    return path
+
+
+def check_finite(
+    array: np.ndarray, joints: tuple[str, ...], stamps_ns: np.ndarray, where: str
+) -> None:
+    """Raise on the first NaN or Inf, naming the sample, its stamp and the joint.
+
+    Raises:
+        DatasetError: a value is NaN or infinite.
+    """
+    bad = ~np.isfinite(array)
+    if bad.any():
+        sample, column = (int(i) for i in np.argwhere(bad)[0])
+        raise DatasetError(
+            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), joint {joints[column]}: '
+            f'value {array[sample, column]} is not finite ({int(bad.sum())} bad values in all)'
+        )
+
+
+def check_stamps(
+    stamps_ns: np.ndarray, period_s: float, max_gap_periods: float, where: str
+) -> None:
+    """Require strictly increasing stamps without gaps longer than ``max_gap_periods`` periods.
+
+    Raises:
+        DatasetError: a stamp repeats or goes backwards, or a gap is too long (names the sample).
+    """
+    steps = np.diff(stamps_ns)
+    if (steps <= 0).any():
+        sample = int(np.argmax(steps <= 0)) + 1
+        kind = 'repeats' if steps[sample - 1] == 0 else 'goes backwards'
+        raise DatasetError(
+            f'{where}: time stamp {kind} at sample {sample}: {int(stamps_ns[sample - 1])} ns -> '
+            f'{int(stamps_ns[sample])} ns'
+        )
+    limit_ns = max_gap_periods * period_s * 1e9
+    if (steps > limit_ns).any():
+        sample = int(np.argmax(steps > limit_ns)) + 1
+        raise DatasetError(
+            f'{where}: gap of {steps[sample - 1] * 1e-6:.1f} ms before sample {sample} '
+            f'(stamp {int(stamps_ns[sample])} ns) exceeds {max_gap_periods:g} IPO periods of '
+            f'{period_s * 1e3:g} ms'
+        )
+
+
+def _reorder(series: JointStateSeries, joints: tuple[str, ...], where: str) -> np.ndarray:
+    """Column permutation that puts a topic's joints in config order (by name)."""
+    if set(series.names) != set(joints) or len(series.names) != len(joints):
+        missing = [name for name in joints if name not in series.names]
+        extra = [name for name in series.names if name not in joints]
+        raise DatasetError(
+            f'{where}: joint names {list(series.names)} do not match the robot config {list(joints)} '
+            f'(missing {missing}, unexpected {extra})'
+        )
+    return np.array([series.names.index(name) for name in joints])
+
+
+def load_recording(
+    path: Path | str,
+    robot: RobotConfig,
+    *,
+    max_gap_periods: float = 3.0,
+    require_current: bool = True,
+) -> Recording:
+    """Read a bag in the contract into a Recording, validated and in the robot's joint order.
+
+    Joint columns are reordered by name when only the order differs.
+
+    Raises:
+        BagError: missing topic, wrong type, truncated or corrupt file.
+        DatasetError: joint names differ, NaN/Inf samples, stamps backwards/repeated/gapped, or
+            the two topics' stamps do not match (each names topic, joint and sample).
+    """
+    path = Path(path)
+    topics = robot.topics
+    states = read_joint_states(path, topics.joint_states)
+    where_js = f'{path}: {topics.joint_states}'
+    order = _reorder(states, robot.joints, where_js)
+    if states.position is None or states.velocity is None:
+        raise DatasetError(
+            f'{where_js}: messages carry no {"position" if states.position is None else "velocity"}'
+        )
+    check_stamps(states.stamps_ns, robot.ipo_period_s, max_gap_periods, where_js)
+    position = states.position[:, order]
+    velocity = states.velocity[:, order]
+    joint_torque = None if states.effort is None else states.effort[:, order]
+    check_finite(position, robot.joints, states.stamps_ns, f'{where_js} position')
+    check_finite(velocity, robot.joints, states.stamps_ns, f'{where_js} velocity')
+    if joint_torque is not None:
+        check_finite(joint_torque, robot.joints, states.stamps_ns, f'{where_js} effort')
+
+    current = None
+    if require_current:
+        currents = read_joint_states(path, topics.motor_currents)
+        where_mc = f'{path}: {topics.motor_currents}'
+        order_mc = _reorder(currents, robot.joints, where_mc)
+        if currents.effort is None:
+            raise DatasetError(f'{where_mc}: messages carry no effort (the motor currents)')
+        check_stamps(currents.stamps_ns, robot.ipo_period_s, max_gap_periods, where_mc)
+        if len(currents.stamps_ns) != len(states.stamps_ns) or np.any(
+            currents.stamps_ns != states.stamps_ns
+        ):
+            size = min(len(currents.stamps_ns), len(states.stamps_ns))
+            mismatch = np.flatnonzero(currents.stamps_ns[:size] != states.stamps_ns[:size])
+            sample = int(mismatch[0]) if mismatch.size else size
+            raise DatasetError(
+                f'{path}: {topics.motor_currents} and {topics.joint_states} stamps differ from sample '
+                f'{sample} on ({len(currents.stamps_ns)} vs {len(states.stamps_ns)} messages); the '
+                'bag contract requires one current message per joint state with the same header stamp'
+            )
+        current = currents.effort[:, order_mc]
+        check_finite(current, robot.joints, currents.stamps_ns, f'{where_mc} effort')
+    return Recording(
+        joints=robot.joints,
+        stamps_ns=states.stamps_ns,
+        position=position,
+        velocity=velocity,
+        current=current,
+        joint_torque=joint_torque,
+        source=str(path),
+    )

@@ -1,0 +1,30 @@
+"""Robot description: config (URDF, joints, drives, limits) and rigid-body dynamics."""
+
+from __future__ import annotations
+
+from id_learning.robot.config import (
+    DriveConfig,
+    JointLimits,
+    RobotConfig,
+    TopicConfig,
+    load_robot_config,
+)
+from id_learning.robot.drives import (
+    current_from_motor_torque,
+    motor_torque_from_current,
+    rotor_inertia_torque,
+)
+from id_learning.robot.dynamics import RigidBodyDynamics, build_pinocchio_model
+
+__all__ = [
+    'DriveConfig',
+    'JointLimits',
+    'RigidBodyDynamics',
+    'RobotConfig',
+    'TopicConfig',
+    'build_pinocchio_model',
+    'current_from_motor_torque',
+    'load_robot_config',
+    'motor_torque_from_current',
+    'rotor_inertia_torque',
+]

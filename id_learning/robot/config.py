@@ -1,0 +1,319 @@
+"""Robot config: URDF, joint order, drives, limits, IPO period and filter cut-offs, from one YAML.
+
+Units are SI throughout. Drive values on the motor side say so in the README's convention:
+``gear_ratio`` is motor turns per joint turn, ``torque_constant`` is in N*m/A at the motor shaft,
+``rotor_inertia`` in kg*m^2 at the motor shaft. Everything else is joint side.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from id_learning.config_io import check_keys, float_vector, load_yaml_mapping
+from id_learning.errors import ConfigError
+
+__all__ = [
+    'DriveConfig',
+    'JointLimits',
+    'RobotConfig',
+    'TopicConfig',
+    'load_robot_config',
+    'resolve_urdf',
+]
+
+EXAMPLE_ROBOT_DATA_SCHEME = 'example-robot-data://'
+
+# The reference study's per-axis cut-offs, used when a config gives none (6-axis robots only).
+STUDY_CUTOFF_HZ = (1.2, 0.3, 0.3, 0.7, 0.5, 0.7)
+
+
+@dataclass(frozen=True, eq=False)
+class DriveConfig:
+    """Per-joint drive train, in the convention of the README.
+
+    Attributes:
+        gear_ratio: (n,) motor turns per joint turn [-].
+        torque_constant: (n,) motor torque per motor current [N*m/A], motor side.
+        rotor_inertia: (n,) rotor inertia [kg*m^2], motor side.
+    """
+
+    gear_ratio: np.ndarray
+    torque_constant: np.ndarray
+    rotor_inertia: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class JointLimits:
+    """Joint-side limits: position [rad], velocity [rad/s], acceleration [rad/s^2], torque [N*m]."""
+
+    position_lower: np.ndarray
+    position_upper: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    torque: np.ndarray
+
+
+@dataclass(frozen=True)
+class TopicConfig:
+    """Topic names of the bag contract."""
+
+    joint_states: str = '/joint_states'
+    motor_currents: str = '/motor_currents'
+
+
+@dataclass(frozen=True, eq=False)
+class RobotConfig:
+    """Everything the package needs to know about one robot.
+
+    Attributes:
+        name: robot name, stored in bags' ground truth and model artifacts.
+        urdf_path: absolute path of the URDF.
+        joints: ordered actuated joint names; every array below follows this order.
+        locked_joints: URDF joints held fixed at the given position [rad or m] (e.g. gripper fingers).
+        drives: gear ratios, torque constants and rotor inertias.
+        limits: joint-side limits.
+        ipo_period_s: controller interpolation (IPO) cycle [s].
+        lowpass_cutoff_hz: (n,) zero-phase low-pass cut-off per joint [Hz].
+        payload_frame: URDF frame at which a payload is attached.
+        topics: topic names of the bag contract.
+        source: the YAML file this was read from, if any.
+    """
+
+    name: str
+    urdf_path: Path
+    joints: tuple[str, ...]
+    drives: DriveConfig
+    limits: JointLimits
+    ipo_period_s: float
+    lowpass_cutoff_hz: np.ndarray
+    payload_frame: str
+    locked_joints: dict[str, float] = field(default_factory=dict)
+    topics: TopicConfig = field(default_factory=TopicConfig)
+    source: Path | None = None
+
+    @property
+    def n_joints(self) -> int:
+        """Number of actuated joints."""
+        return len(self.joints)
+
+    def urdf_sha256(self) -> str:
+        """SHA-256 of the URDF file, to tie data and models to the exact robot description."""
+        return hashlib.sha256(self.urdf_path.read_bytes()).hexdigest()
+
+
+def _example_robot_data_roots() -> list[Path]:
+    """Folders where the example-robot-data package keeps its robots (pip/cmeel, apt, robotpkg)."""
+    roots = [Path(entry) / 'cmeel.prefix/share/example-robot-data/robots' for entry in sys.path]
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            roots.append(Path(prefix) / 'share/example-robot-data/robots')
+    roots += [Path('/opt/openrobots/share/example-robot-data/robots')]
+    return [root for root in roots if root.is_dir()]
+
+
+def resolve_urdf(value: str, base_dir: Path) -> Path:
+    """Resolve a config's ``urdf`` entry to an existing file.
+
+    Args:
+        value: a path (relative to the config file's folder, or absolute) or
+            ``example-robot-data://<robot>_description/urdf/<file>.urdf``.
+        base_dir: folder of the config file.
+
+    Raises:
+        ConfigError: the file does not exist.
+    """
+    if value.startswith(EXAMPLE_ROBOT_DATA_SCHEME):
+        relative = value[len(EXAMPLE_ROBOT_DATA_SCHEME) :]
+        roots = _example_robot_data_roots()
+        for root in roots:
+            candidate = root / relative
+            if candidate.is_file():
+                return candidate.resolve()
+        raise ConfigError(
+            f'urdf {value!r}: not found in the example-robot-data package (searched {roots or "none"}); '
+            'install it with `pip install example-robot-data` or `apt install ros-jazzy-example-robot-data`'
+        )
+    path = Path(value)
+    if not path.is_absolute():
+        path = base_dir / path
+    if not path.is_file():
+        raise ConfigError(f'urdf {value!r}: no such file {path}')
+    return path.resolve()
+
+
+_TOP_KEYS = (
+    'name',
+    'urdf',
+    'joints',
+    'locked_joints',
+    'drives',
+    'limits',
+    'ipo_period_s',
+    'lowpass_cutoff_hz',
+    'payload_frame',
+    'topics',
+)
+_LIMIT_KEYS = ('position_lower', 'position_upper', 'velocity', 'acceleration', 'torque')
+
+
+def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> RobotConfig:
+    """Build a validated RobotConfig from a parsed YAML mapping.
+
+    Raises:
+        ConfigError: a key is unknown or missing, or a value is out of range (names key and value).
+    """
+    check_keys(
+        data,
+        _TOP_KEYS,
+        where,
+        required=('name', 'urdf', 'joints', 'drives', 'limits', 'ipo_period_s', 'payload_frame'),
+    )
+    joints = data['joints']
+    if (
+        not isinstance(joints, list)
+        or not joints
+        or not all(isinstance(name, str) and name for name in joints)
+    ):
+        raise ConfigError(
+            f'{where}: joints: expected a non-empty list of joint names, got {joints!r}'
+        )
+    duplicates = sorted({name for name in joints if joints.count(name) > 1})
+    if duplicates:
+        raise ConfigError(f'{where}: joints: duplicate joint names {duplicates}')
+    n = len(joints)
+
+    drives = data['drives']
+    if not isinstance(drives, dict):
+        raise ConfigError(f'{where}: drives: expected a mapping')
+    check_keys(
+        drives,
+        ('gear_ratio', 'torque_constant', 'rotor_inertia'),
+        f'{where}: drives',
+        required=('gear_ratio', 'torque_constant', 'rotor_inertia'),
+    )
+    drive = DriveConfig(
+        gear_ratio=float_vector(
+            drives['gear_ratio'],
+            f'{where}: drives.gear_ratio',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        torque_constant=float_vector(
+            drives['torque_constant'],
+            f'{where}: drives.torque_constant',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        rotor_inertia=float_vector(
+            drives['rotor_inertia'], f'{where}: drives.rotor_inertia', n, minimum=0.0
+        ),
+    )
+
+    limits_data = data['limits']
+    if not isinstance(limits_data, dict):
+        raise ConfigError(f'{where}: limits: expected a mapping')
+    check_keys(limits_data, _LIMIT_KEYS, f'{where}: limits', required=_LIMIT_KEYS)
+    lower = float_vector(limits_data['position_lower'], f'{where}: limits.position_lower', n)
+    upper = float_vector(limits_data['position_upper'], f'{where}: limits.position_upper', n)
+    if np.any(lower >= upper):
+        joint = joints[int(np.argmax(lower >= upper))]
+        raise ConfigError(
+            f'{where}: limits: position_lower must be below position_upper (joint {joint})'
+        )
+    limits = JointLimits(
+        position_lower=lower,
+        position_upper=upper,
+        velocity=float_vector(
+            limits_data['velocity'],
+            f'{where}: limits.velocity',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        acceleration=float_vector(
+            limits_data['acceleration'],
+            f'{where}: limits.acceleration',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        torque=float_vector(
+            limits_data['torque'],
+            f'{where}: limits.torque',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+    )
+
+    period = data['ipo_period_s']
+    if not isinstance(period, (int, float)) or not 1e-5 <= float(period) <= 1.0:
+        raise ConfigError(f'{where}: ipo_period_s must be in [1e-5, 1] s, got {period!r}')
+    nyquist = 0.5 / float(period)
+    if 'lowpass_cutoff_hz' in data:
+        cutoff = float_vector(
+            data['lowpass_cutoff_hz'],
+            f'{where}: lowpass_cutoff_hz',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        )
+    elif n == len(STUDY_CUTOFF_HZ):
+        cutoff = float_vector(list(STUDY_CUTOFF_HZ), f'{where}: lowpass_cutoff_hz', n)
+    else:
+        raise ConfigError(f'{where}: lowpass_cutoff_hz is required for a {n}-joint robot')
+    if np.any(cutoff >= nyquist):
+        raise ConfigError(
+            f'{where}: lowpass_cutoff_hz must be below the Nyquist frequency {nyquist:g} Hz, '
+            f'got {cutoff.tolist()}'
+        )
+
+    locked = data.get('locked_joints') or {}
+    if not isinstance(locked, dict) or not all(
+        isinstance(value, (int, float)) for value in locked.values()
+    ):
+        raise ConfigError(f'{where}: locked_joints: expected a mapping joint name -> position')
+    overlap = sorted(set(locked) & set(joints))
+    if overlap:
+        raise ConfigError(f'{where}: locked_joints {overlap} are also listed in joints')
+
+    topics_data = data.get('topics') or {}
+    check_keys(topics_data, ('joint_states', 'motor_currents'), f'{where}: topics')
+    topics = TopicConfig(**topics_data)
+
+    name = data['name']
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f'{where}: name must be a non-empty string')
+    return RobotConfig(
+        name=name,
+        urdf_path=resolve_urdf(str(data['urdf']), base_dir),
+        joints=tuple(joints),
+        drives=drive,
+        limits=limits,
+        ipo_period_s=float(period),
+        lowpass_cutoff_hz=cutoff,
+        payload_frame=str(data['payload_frame']),
+        locked_joints={key: float(value) for key, value in locked.items()},
+        topics=topics,
+    )
+
+
+def load_robot_config(path: Path | str) -> RobotConfig:
+    """Read and validate a robot config YAML (see config/mabi_max100.yaml).
+
+    Raises:
+        ConfigError: the file or one of its values is invalid; the message names file and key.
+    """
+    path = Path(path)
+    data = load_yaml_mapping(path)
+    config = robot_config_from_dict(data, path.parent, str(path))
+    return RobotConfig(**{**config.__dict__, 'source': path.resolve()})

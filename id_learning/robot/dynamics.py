@@ -1,0 +1,260 @@
+"""Rigid-body dynamics of a robot config through pinocchio, batched over samples.
+
+Arrays follow the config's joint order, whatever order pinocchio builds the tree in:
+q: (..., n) [rad], v: (..., n) [rad/s], a: (..., n) [rad/s^2], tau: (..., n) [N*m] joint side.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from id_learning.errors import RobotModelError
+from id_learning.robot.config import RobotConfig
+
+__all__ = ['RigidBodyDynamics', 'build_pinocchio_model']
+
+N_INERTIAL_PARAMETERS = 10  # m, m*c (3), inertia at the joint frame (6): pinocchio's order
+
+
+def build_pinocchio_model(config: RobotConfig) -> pin.Model:
+    """Build the pinocchio model of the config's URDF, locking the config's locked joints.
+
+    Raises:
+        RobotModelError: the URDF cannot be parsed, or its movable joints differ from the config.
+    """
+    try:
+        full = pin.buildModelFromUrdf(str(config.urdf_path))
+    except (RuntimeError, ValueError) as err:
+        raise RobotModelError(
+            f'{config.urdf_path}: cannot build a model from the URDF: {err}'
+        ) from err
+    urdf_joints = [name for name in full.names[1:]]
+    missing = [name for name in config.joints if name not in urdf_joints]
+    unknown_locked = [name for name in config.locked_joints if name not in urdf_joints]
+    if missing or unknown_locked:
+        raise RobotModelError(
+            f'{config.urdf_path}: the URDF has no joint(s) {missing + unknown_locked} named in the '
+            f'robot config {config.source or ""}; URDF movable joints: {urdf_joints}'
+        )
+    extra = [
+        name
+        for name in urdf_joints
+        if name not in config.joints and name not in config.locked_joints
+    ]
+    if extra:
+        raise RobotModelError(
+            f"{config.urdf_path}: movable URDF joint(s) {extra} are neither in the robot config's "
+            f'joints nor in its locked_joints {config.source or ""}'
+        )
+    if not config.locked_joints:
+        model = full
+    else:
+        reference = pin.neutral(full)
+        lock_ids = []
+        for name, value in config.locked_joints.items():
+            joint_id = full.getJointId(name)
+            joint = full.joints[joint_id]
+            if joint.nq != 1:
+                raise RobotModelError(
+                    f'{config.urdf_path}: locked joint {name} is not a 1-DoF joint'
+                )
+            reference[joint.idx_q] = value
+            lock_ids.append(joint_id)
+        model = pin.buildReducedModel(full, lock_ids, reference)
+    for name in config.joints:
+        joint = model.joints[model.getJointId(name)]
+        if joint.nq != 1 or joint.nv != 1:
+            raise RobotModelError(
+                f'{config.urdf_path}: joint {name} has {joint.nq} position coordinates; only 1-DoF '
+                'revolute or prismatic joints are supported (declare continuous joints as revolute)'
+            )
+    if not model.existFrame(config.payload_frame):
+        raise RobotModelError(
+            f'{config.urdf_path}: payload_frame {config.payload_frame!r} is not a URDF frame'
+        )
+    return model
+
+
+class RigidBodyDynamics:
+    """Inverse dynamics, gravity, mass matrix and regressor of one robot, in config joint order.
+
+    The pinocchio model is fixed; scratch data is kept apart and reused between calls.
+    """
+
+    def __init__(
+        self, model: pin.Model, joints: tuple[str, ...], gravity: np.ndarray | None = None
+    ) -> None:
+        """Wrap a pinocchio model whose 1-DoF joints are exactly ``joints``."""
+        self.model = model.copy()
+        if gravity is not None:
+            self.model.gravity.linear = np.asarray(gravity, dtype=float)
+        self.joints = joints
+        names = list(self.model.names[1:])
+        if sorted(names) != sorted(joints) or self.model.nv != len(joints):
+            raise RobotModelError(
+                f'model joints {names} do not match the config joints {list(joints)}'
+            )
+        self._index = np.array(
+            [self.model.joints[self.model.getJointId(name)].idx_v for name in joints]
+        )
+        self._data = self.model.createData()
+
+    @classmethod
+    def from_config(cls, config: RobotConfig) -> RigidBodyDynamics:
+        """Build the nominal model from the config's URDF."""
+        return cls(build_pinocchio_model(config), config.joints)
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints."""
+        return len(self.joints)
+
+    @property
+    def n_bodies(self) -> int:
+        """Number of moving bodies (one per joint)."""
+        return self.model.njoints - 1
+
+    def total_moving_mass(self) -> float:
+        """Sum of the moving bodies' masses [kg]."""
+        return float(sum(self.model.inertias[i].mass for i in range(1, self.model.njoints)))
+
+    # -- conversions between config order and pinocchio order ------------------------------------
+    def _to_pin(self, x: np.ndarray) -> np.ndarray:
+        out = np.empty(self.model.nv)
+        out[self._index] = x
+        return out
+
+    def _batched(
+        self, fn: Callable[..., np.ndarray], *arrays: np.ndarray, out_shape: tuple[int, ...]
+    ) -> np.ndarray:
+        """Apply a per-sample function over (B, n) arrays (or (n,) single samples)."""
+        inputs = [np.asarray(x, dtype=float) for x in arrays]
+        single = inputs[0].ndim == 1
+        batch = [x.reshape(-1, self.n_joints) for x in inputs]
+        if any(x.shape[-1] != self.n_joints for x in inputs) or len({len(x) for x in batch}) != 1:
+            raise ValueError(
+                f'expected arrays of shape (B, {self.n_joints}), got {[x.shape for x in inputs]}'
+            )
+        out = np.empty((len(batch[0]), *out_shape))
+        for k in range(len(out)):
+            out[k] = fn(*[self._to_pin(x[k]) for x in batch])
+        return out[0] if single else out
+
+    # -- algorithms --------------------------------------------------------------------------------
+    def rnea(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Joint torques tau = M(q) a + C(q, v) v + g(q) [N*m]; shapes (..., n)."""
+        ix = self._index
+        return self._batched(
+            lambda qk, vk, ak: pin.rnea(self.model, self._data, qk, vk, ak)[ix],
+            q,
+            v,
+            a,
+            out_shape=(self.n_joints,),
+        )
+
+    def gravity(self, q: np.ndarray) -> np.ndarray:
+        """Gravity torques g(q) [N*m]; shape (..., n)."""
+        ix = self._index
+        return self._batched(
+            lambda qk: pin.computeGeneralizedGravity(self.model, self._data, qk)[ix],
+            q,
+            out_shape=(self.n_joints,),
+        )
+
+    def coriolis(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Coriolis and centrifugal torques C(q, v) v [N*m]; shape (..., n)."""
+        ix = self._index
+        zero = np.zeros(self.model.nv)
+
+        def one(qk: np.ndarray, vk: np.ndarray) -> np.ndarray:
+            nle = pin.rnea(self.model, self._data, qk, vk, zero)
+            return (nle - pin.computeGeneralizedGravity(self.model, self._data, qk))[ix]
+
+        return self._batched(one, q, v, out_shape=(self.n_joints,))
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """Joint-space mass matrix M(q) [kg*m^2]; shape (..., n, n)."""
+        ix = self._index
+
+        def one(qk: np.ndarray) -> np.ndarray:
+            mass = pin.crba(self.model, self._data, qk)
+            mass = np.triu(mass) + np.triu(mass, 1).T
+            return mass[np.ix_(ix, ix)]
+
+        return self._batched(one, q, out_shape=(self.n_joints, self.n_joints))
+
+    def regressor(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Joint torque regressor Y with tau = Y @ inertial_parameters(); shape (..., n, 10 * bodies)."""
+        ix = self._index
+        n_params = N_INERTIAL_PARAMETERS * self.n_bodies
+        return self._batched(
+            lambda qk, vk, ak: pin.computeJointTorqueRegressor(self.model, self._data, qk, vk, ak)[
+                ix
+            ],
+            q,
+            v,
+            a,
+            out_shape=(self.n_joints, n_params),
+        )
+
+    def inertial_parameters(self) -> np.ndarray:
+        """Stacked dynamic parameters of every body (pinocchio's order, 10 per body)."""
+        return np.concatenate(
+            [self.model.inertias[i].toDynamicParameters() for i in range(1, self.model.njoints)]
+        )
+
+    # -- variations of the model (the digital twin's "true" robot) ---------------------------------
+    def with_payload(
+        self, frame: str, mass: float, com: np.ndarray, inertia: np.ndarray | None = None
+    ) -> RigidBodyDynamics:
+        """Return a copy with a rigid payload attached at a frame.
+
+        Args:
+            frame: URDF frame name the payload is attached to.
+            mass: payload mass [kg].
+            com: (3,) payload centre of mass in the frame [m].
+            inertia: (3, 3) rotational inertia about the COM [kg*m^2]; a point mass if None.
+        """
+        model = self.model.copy()
+        frame_id = model.getFrameId(frame)
+        if frame_id >= len(model.frames):
+            raise RobotModelError(f'payload frame {frame!r} does not exist')
+        placement = model.frames[frame_id].placement
+        parent = model.frames[frame_id].parentJoint
+        rotational = np.zeros((3, 3)) if inertia is None else np.asarray(inertia, dtype=float)
+        payload = pin.Inertia(float(mass), np.asarray(com, dtype=float), rotational)
+        model.inertias[parent] = model.inertias[parent] + placement.act(payload)
+        return RigidBodyDynamics(model, self.joints)
+
+    def with_inertial_parameters(self, parameters: np.ndarray) -> RigidBodyDynamics:
+        """Return a copy whose bodies have the given stacked dynamic parameters (10 per body)."""
+        model = self.model.copy()
+        parameters = np.asarray(parameters, dtype=float).reshape(
+            self.n_bodies, N_INERTIAL_PARAMETERS
+        )
+        for body, values in enumerate(parameters, start=1):
+            model.inertias[body] = pin.Inertia.FromDynamicParameters(values)
+        return RigidBodyDynamics(model, self.joints)
+
+    def body_masses_and_coms(self) -> tuple[np.ndarray, np.ndarray]:
+        """Masses (bodies,) [kg] and centres of mass (bodies, 3) [m] in each joint frame."""
+        masses = np.array([self.model.inertias[i].mass for i in range(1, self.model.njoints)])
+        coms = np.array(
+            [self.model.inertias[i].lever.copy() for i in range(1, self.model.njoints)]
+        )
+        return masses, coms
+
+    def with_masses_and_coms(self, masses: np.ndarray, coms: np.ndarray) -> RigidBodyDynamics:
+        """Return a copy with new body masses and COMs, rotational inertia about the COM kept."""
+        model = self.model.copy()
+        for body in range(1, model.njoints):
+            old = model.inertias[body]
+            model.inertias[body] = pin.Inertia(
+                float(masses[body - 1]),
+                np.asarray(coms[body - 1], dtype=float),
+                old.inertia.copy(),
+            )
+        return RigidBodyDynamics(model, self.joints)

@@ -1,0 +1,489 @@
+"""The digital twin: a robot that differs from its nominal model by named effects, recorded as the
+real robot would be (quantised encoders, noisy and quantised currents, optional delay).
+
+``simulate`` is deterministic: the same config and seed give the same samples and the same bag.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+from id_learning.config_io import check_keys, float_vector, load_yaml_mapping
+from id_learning.dataset.recording import Recording, write_recording
+from id_learning.errors import ConfigError
+from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
+from id_learning.robot.config import RobotConfig, load_robot_config
+from id_learning.robot.drives import current_from_motor_torque, motor_torque_from_current
+from id_learning.robot.dynamics import RigidBodyDynamics
+from id_learning.twin.effects import (
+    CoggingEffect,
+    CoulombFriction,
+    EffectSet,
+    GravitySpring,
+    InertialParameterError,
+    JointOffset,
+    LoadDependentFriction,
+    PayloadMass,
+    RotorInertia,
+    SignalDelay,
+    StribeckFriction,
+    TorqueConstantScale,
+    TorqueOffset,
+    ViscousFriction,
+    effects_from_dict,
+)
+
+__all__ = [
+    'GROUND_TRUTH_ARRAYS',
+    'GROUND_TRUTH_JSON',
+    'MeasurementConfig',
+    'TwinConfig',
+    'TwinResult',
+    'load_twin_config',
+    'simulate',
+    'true_dynamics',
+    'write_twin_output',
+]
+
+_LOG = logging.getLogger(__name__)
+GROUND_TRUTH_JSON = 'ground_truth.json'
+GROUND_TRUTH_ARRAYS = 'ground_truth.npz'
+TWIN_CONFIG_COPY = 'twin_config.yaml'
+BLOCK = 4096  # samples per progress step
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementConfig:
+    """Sensor models. Vectors have one value per joint.
+
+    Attributes:
+        current_noise_std_a: white noise on the motor currents [A].
+        current_resolution_a: current quantisation step [A] (0: none).
+        encoder_counts_per_motor_turn: motor encoder resolution [counts/turn] (0: none).
+        velocity_noise_std: white noise on the drive's velocity [rad/s].
+        joint_torque_noise_std: noise of joint torque sensors, when the robot has them [N*m].
+    """
+
+    current_noise_std_a: np.ndarray
+    current_resolution_a: np.ndarray
+    encoder_counts_per_motor_turn: int
+    velocity_noise_std: np.ndarray
+    joint_torque_noise_std: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain representation for YAML/JSON."""
+        return {
+            key: value.tolist() if isinstance(value, np.ndarray) else value
+            for key, value in self.__dict__.items()
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class TwinConfig:
+    """Everything the twin needs: robot, effects, sensors, excitation, seed, and output options."""
+
+    robot: RobotConfig
+    robot_file: str
+    seed: int
+    start_time_ns: int
+    excitation: ExcitationConfig
+    effects: EffectSet
+    measurement: MeasurementConfig
+    joint_torque_sensors: bool = False
+    raw: dict[str, Any] = field(default_factory=dict)
+
+
+_TOP = (
+    'robot',
+    'seed',
+    'start_time_ns',
+    'excitation',
+    'effects',
+    'measurement',
+    'joint_torque_sensors',
+)
+_MEASUREMENT = (
+    'current_noise_std_a',
+    'current_resolution_a',
+    'encoder_counts_per_motor_turn',
+    'velocity_noise_std',
+    'joint_torque_noise_std',
+)
+
+
+def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> TwinConfig:
+    """Build a validated TwinConfig from a parsed mapping; ``robot`` is a path relative to base_dir.
+
+    Raises:
+        ConfigError: unknown keys or bad values, naming them.
+    """
+    check_keys(data, _TOP, where, required=('robot',))
+    robot_path = Path(str(data['robot']))
+    if not robot_path.is_absolute():
+        robot_path = base_dir / robot_path
+    robot = load_robot_config(robot_path)
+    n = robot.n_joints
+    excitation_data = data.get('excitation') or {}
+    check_keys(
+        excitation_data, [f for f in ExcitationConfig.__dataclass_fields__], f'{where}: excitation'
+    )
+    if 'home' in excitation_data and excitation_data['home'] is not None:
+        excitation_data = {
+            **excitation_data,
+            'home': tuple(
+                float_vector(excitation_data['home'], f'{where}: excitation.home', n).tolist()
+            ),
+        }
+    try:
+        excitation = ExcitationConfig(**excitation_data)
+    except TypeError as err:
+        raise ConfigError(f'{where}: excitation: {err}') from err
+    m = data.get('measurement') or {}
+    check_keys(m, _MEASUREMENT, f'{where}: measurement')
+    counts = m.get('encoder_counts_per_motor_turn', 0)
+    if not isinstance(counts, int) or counts < 0:
+        raise ConfigError(
+            f'{where}: measurement.encoder_counts_per_motor_turn must be an integer >= 0'
+        )
+    measurement = MeasurementConfig(
+        current_noise_std_a=float_vector(
+            m.get('current_noise_std_a', 0.0),
+            f'{where}: measurement.current_noise_std_a',
+            n,
+            minimum=0.0,
+        ),
+        current_resolution_a=float_vector(
+            m.get('current_resolution_a', 0.0),
+            f'{where}: measurement.current_resolution_a',
+            n,
+            minimum=0.0,
+        ),
+        encoder_counts_per_motor_turn=counts,
+        velocity_noise_std=float_vector(
+            m.get('velocity_noise_std', 0.0),
+            f'{where}: measurement.velocity_noise_std',
+            n,
+            minimum=0.0,
+        ),
+        joint_torque_noise_std=float_vector(
+            m.get('joint_torque_noise_std', 0.0),
+            f'{where}: measurement.joint_torque_noise_std',
+            n,
+            minimum=0.0,
+        ),
+    )
+    seed = data.get('seed', 0)
+    start = data.get('start_time_ns', 1_767_225_600_000_000_000)  # 2026-01-01T00:00:00Z
+    if not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f'{where}: seed must be a non-negative integer, got {seed!r}')
+    if not isinstance(start, int) or start < 0:
+        raise ConfigError(f'{where}: start_time_ns must be a non-negative integer, got {start!r}')
+    sensors = data.get('joint_torque_sensors', False)
+    if not isinstance(sensors, bool):
+        raise ConfigError(f'{where}: joint_torque_sensors must be true or false')
+    return TwinConfig(
+        robot=robot,
+        robot_file=str(robot_path),
+        seed=seed,
+        start_time_ns=start,
+        excitation=excitation,
+        effects=effects_from_dict(data.get('effects'), robot.joints, f'{where}: effects'),
+        measurement=measurement,
+        joint_torque_sensors=sensors,
+        raw=data,
+    )
+
+
+def load_twin_config(path: Path | str, overrides: dict[str, Any] | None = None) -> TwinConfig:
+    """Read a twin config YAML (see config/twin_default.yaml), with optional top-level overrides.
+
+    Raises:
+        ConfigError: the file or a value in it is invalid.
+    """
+    path = Path(path)
+    data = load_yaml_mapping(path)
+    data.update(overrides or {})
+    return twin_config_from_dict(data, path.parent, str(path))
+
+
+@dataclass(frozen=True, eq=False)
+class TwinResult:
+    """A simulated recording with its ground truth.
+
+    Attributes:
+        recording: what the sensors recorded, in the bag contract's quantities.
+        components: noise-free tau_u contributions [N*m] per name, each (N, n); they sum to
+            ``tau_u_clean`` (each already divided by the torque-constant scale).
+        tau_u_clean: (N, n) tau_u a perfect current sensor would give [N*m].
+        tau_joint_clean: (N, n) torque through the gear output (what a joint torque sensor sees).
+        q_true, v_true, a_true: (N, n) the true motion at the sample times.
+        parameters: true parameters and noise levels (JSON-ready).
+    """
+
+    recording: Recording
+    components: dict[str, np.ndarray]
+    tau_u_clean: np.ndarray
+    tau_joint_clean: np.ndarray
+    q_true: np.ndarray
+    v_true: np.ndarray
+    a_true: np.ndarray
+    parameters: dict[str, Any]
+
+
+def true_dynamics(config: TwinConfig, rng: np.random.Generator) -> RigidBodyDynamics:
+    """The twin's rigid-body model: URDF with inertial parameter errors and the payload."""
+    dynamics = RigidBodyDynamics.from_config(config.robot)
+    error = config.effects.get('inertial_parameter_error')
+    assert isinstance(error, InertialParameterError)
+    masses, coms = dynamics.body_masses_and_coms()
+    mass_draw = rng.standard_normal(masses.shape)
+    com_draw = rng.standard_normal(coms.shape)
+    if error.enabled:
+        dynamics = dynamics.with_masses_and_coms(
+            masses * (1.0 + error.mass_rel_std * mass_draw), coms + error.com_std_m * com_draw
+        )
+    payload = config.effects.get('payload_mass')
+    assert isinstance(payload, PayloadMass)
+    if payload.enabled and payload.mass_kg > 0:
+        dynamics = dynamics.with_payload(
+            config.robot.payload_frame,
+            payload.mass_kg,
+            np.array(payload.com_m),
+            np.diag(payload.inertia_kgm2),
+        )
+    return dynamics
+
+
+def _quantise(x: np.ndarray, step: np.ndarray | float) -> np.ndarray:
+    step = np.asarray(step, dtype=float)
+    safe = np.where(step > 0, step, 1.0)
+    return np.where(step > 0, np.round(x / safe) * safe, x)
+
+
+def _rigid_body_terms(
+    dynamics: RigidBodyDynamics, q: np.ndarray, v: np.ndarray, a: np.ndarray, progress: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gravity, Coriolis and inertial (M a) torques, block by block with a progress bar."""
+    gravity, coriolis, inertia = (np.empty_like(q) for _ in range(3))
+    starts = range(0, len(q), BLOCK)
+    for start in tqdm(
+        starts, desc='twin dynamics', unit='block', disable=not progress, leave=False
+    ):
+        rows = slice(start, start + BLOCK)
+        gravity[rows] = dynamics.gravity(q[rows])
+        coriolis[rows] = dynamics.coriolis(q[rows], v[rows])
+        inertia[rows] = np.einsum('bij,bj->bi', dynamics.mass_matrix(q[rows]), a[rows])
+    return gravity, coriolis, inertia
+
+
+def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
+    """Simulate an excitation run of the twin.
+
+    Raises:
+        ConfigError: the excitation leaves the joint limits, or the true motor torque exceeds the
+            config's torque limits (names joint and time).
+    """
+    robot, effects = config.robot, config.effects
+    streams = [np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(4)]
+    excitation_rng, parameter_rng, noise_rng, sensor_rng = streams
+    trajectory: ExcitationTrajectory = design_excitation(
+        config.excitation, robot.limits, robot.ipo_period_s, excitation_rng
+    )
+    n_samples = int(round(trajectory.duration_s / robot.ipo_period_s)) + 1
+    t = np.arange(n_samples) * robot.ipo_period_s
+    q, v, a = trajectory.evaluate(t)
+
+    delay = effects.get('signal_delay')
+    assert isinstance(delay, SignalDelay)
+    delay_s = delay.delay_s if delay.enabled else 0.0
+    # The currents measured at t belong to the motion at t - delay.
+    qc, vc, ac = trajectory.evaluate(t - delay_s) if delay_s else (q, v, a)
+
+    dynamics = true_dynamics(config, parameter_rng)
+    gravity, coriolis, inertia = _rigid_body_terms(dynamics, qc, vc, ac, progress)
+    components: dict[str, np.ndarray] = {
+        'inertia': inertia,
+        'coriolis': coriolis,
+        'gravity': gravity,
+    }
+
+    spring = effects.get('gravity_spring')
+    assert isinstance(spring, GravitySpring)
+    spring_torque = np.zeros_like(qc)
+    if spring.enabled:
+        j = robot.joints.index(spring.joint)
+        spring_torque[:, j] = spring.torque_on_joint(qc[:, j])
+        components['gravity_spring'] = -spring_torque
+    tau_joint = inertia + coriolis + gravity - spring_torque
+
+    gear = robot.drives.gear_ratio
+    rotor = effects.get('rotor_inertia')
+    assert isinstance(rotor, RotorInertia)
+    rotor_inertia = robot.drives.rotor_inertia * (rotor.scale if rotor.enabled else 1.0)
+    components['rotor_inertia'] = rotor_inertia * gear**2 * ac
+
+    viscous, coulomb, stribeck, load = (
+        effects.get(name)
+        for name in (
+            'viscous_friction',
+            'coulomb_friction',
+            'stribeck_friction',
+            'load_dependent_friction',
+        )
+    )
+    assert isinstance(viscous, ViscousFriction) and isinstance(coulomb, CoulombFriction)
+    assert isinstance(stribeck, StribeckFriction) and isinstance(load, LoadDependentFriction)
+    if viscous.enabled:
+        components['viscous_friction'] = viscous.torque(vc)
+    if coulomb.enabled:
+        components['coulomb_friction'] = coulomb.torque(vc)
+    if stribeck.enabled:
+        components['stribeck_friction'] = stribeck.torque(vc)
+    if load.enabled:
+        components['load_dependent_friction'] = load.torque(vc, tau_joint)
+    cogging = effects.get('cogging')
+    assert isinstance(cogging, CoggingEffect)
+    if cogging.enabled:
+        components['cogging'] = cogging.torque(qc, gear)
+
+    scale_effect = effects.get('torque_constant_scale')
+    assert isinstance(scale_effect, TorqueConstantScale)
+    kt_scale = scale_effect.scale if scale_effect.enabled else np.ones(robot.n_joints)
+    # tau_u from currents uses the datasheet k_t; the real one is kt_scale times larger.
+    components = {name: value / kt_scale for name, value in components.items()}
+    offset = effects.get('torque_offset')
+    assert isinstance(offset, TorqueOffset)
+    if offset.enabled:
+        components['torque_offset'] = np.broadcast_to(offset.offset, qc.shape).copy()
+    tau_u_clean = np.sum(list(components.values()), axis=0)
+    _check_torque_limits(tau_u_clean * kt_scale, robot, t)
+
+    m = config.measurement
+    current = current_from_motor_torque(tau_u_clean, robot.drives)
+    current = current + m.current_noise_std_a * noise_rng.standard_normal(current.shape)
+    current = _quantise(current, m.current_resolution_a)
+
+    joint_offset = effects.get('joint_offset')
+    assert isinstance(joint_offset, JointOffset)
+    q_measured = q - (joint_offset.offset if joint_offset.enabled else 0.0)
+    if m.encoder_counts_per_motor_turn:
+        q_measured = _quantise(q_measured, 2 * np.pi / (m.encoder_counts_per_motor_turn * gear))
+    v_measured = v + m.velocity_noise_std * sensor_rng.standard_normal(v.shape)
+    joint_torque = None
+    if config.joint_torque_sensors:
+        # A torque sensor at the gear output sees the motion at the sample time, without delay.
+        if delay_s:
+            g_now, c_now, i_now = _rigid_body_terms(dynamics, q, v, a, progress)
+            spring_now = np.zeros_like(q)
+            if spring.enabled:
+                j = robot.joints.index(spring.joint)
+                spring_now[:, j] = spring.torque_on_joint(q[:, j])
+            tau_joint_now = g_now + c_now + i_now - spring_now
+        else:
+            tau_joint_now = tau_joint
+        joint_torque = tau_joint_now + m.joint_torque_noise_std * sensor_rng.standard_normal(
+            q.shape
+        )
+
+    stamps = config.start_time_ns + np.round(t * 1e9).astype(np.int64)
+    recording = Recording(
+        joints=robot.joints,
+        stamps_ns=stamps,
+        position=q_measured,
+        velocity=v_measured,
+        current=current,
+        joint_torque=joint_torque,
+        source=f'twin seed {config.seed}',
+    )
+    parameters = _ground_truth_parameters(config, dynamics, rotor_inertia, kt_scale, delay_s)
+    parameters['excitation'] = trajectory.to_dict()
+    parameters['component_rms_nm'] = {
+        name: np.sqrt(np.mean(value**2, axis=0)).tolist() for name, value in components.items()
+    }
+    parameters['tau_u_clean_rms_nm'] = np.sqrt(np.mean(tau_u_clean**2, axis=0)).tolist()
+    return TwinResult(recording, components, tau_u_clean, tau_joint, q, v, a, parameters)
+
+
+def _check_torque_limits(tau_motor: np.ndarray, robot: RobotConfig, t: np.ndarray) -> None:
+    over = np.abs(tau_motor) > robot.limits.torque
+    if over.any():
+        k, j = (int(x) for x in np.argwhere(over)[0])
+        raise ConfigError(
+            f'twin: the motor torque of {robot.joints[j]} reaches {tau_motor[k, j]:.1f} N*m at '
+            f't = {t[k]:.3f} s, beyond its limit {robot.limits.torque[j]:.1f} N*m: slow the '
+            'excitation down or reduce the effects'
+        )
+
+
+def _ground_truth_parameters(
+    config: TwinConfig,
+    dynamics: RigidBodyDynamics,
+    rotor_inertia: np.ndarray,
+    kt_scale: np.ndarray,
+    delay_s: float,
+) -> dict[str, Any]:
+    robot, m = config.robot, config.measurement
+    tau_per_amp = robot.drives.gear_ratio * robot.drives.torque_constant
+    masses, coms = dynamics.body_masses_and_coms()
+    return {
+        'robot': robot.name,
+        'joints': list(robot.joints),
+        'urdf_sha256': robot.urdf_sha256(),
+        'seed': config.seed,
+        'ipo_period_s': robot.ipo_period_s,
+        'effects_enabled': config.effects.enabled_names(),
+        'effects': config.effects.to_dict(),
+        'true': {
+            'rotor_inertia_motor_side_kgm2': rotor_inertia.tolist(),
+            'torque_constant_nm_per_a': (robot.drives.torque_constant * kt_scale).tolist(),
+            'signal_delay_s': delay_s,
+            'body_masses_kg': masses.tolist(),
+            'body_coms_m': coms.tolist(),
+            'inertial_parameters': dynamics.inertial_parameters().tolist(),
+        },
+        'noise': {
+            **m.to_dict(),
+            'current_noise_std_as_tau_u_nm': (m.current_noise_std_a * tau_per_amp).tolist(),
+            'current_quantisation_std_as_tau_u_nm': (
+                m.current_resolution_a / np.sqrt(12) * tau_per_amp
+            ).tolist(),
+        },
+        'units': {'torque': 'N*m joint side', 'current': 'A', 'angle': 'rad', 'time': 's'},
+    }
+
+
+def write_twin_output(
+    result: TwinResult, config: TwinConfig, out: Path | str, *, overwrite: bool = False
+) -> Path:
+    """Write the bag plus ground truth (JSON parameters, NPZ noise-free torques) and the config.
+
+    The ground-truth files sit inside the bag folder, where rosbag2 tools ignore them.
+    """
+    out = Path(out)
+    write_recording(result.recording, out, config.robot.topics, overwrite=overwrite)
+    (out / GROUND_TRUTH_JSON).write_text(
+        json.dumps(result.parameters, indent=1) + '\n', encoding='utf-8'
+    )
+    # Only the two noise-free torques are stored per sample (float32: ~1e-4 N*m resolution); the
+    # true motion is exact from the excitation coefficients in the JSON, and the components are
+    # summarised there, which keeps the shipped bag small.
+    np.savez_compressed(
+        out / GROUND_TRUTH_ARRAYS,
+        stamps_ns=result.recording.stamps_ns,
+        tau_u_clean=result.tau_u_clean.astype(np.float32),
+        tau_joint_clean=result.tau_joint_clean.astype(np.float32),
+    )
+    raw = dict(config.raw)
+    raw['robot'] = os.path.relpath(Path(config.robot_file).resolve(), out.resolve())
+    (out / TWIN_CONFIG_COPY).write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
+    _LOG.info('twin: wrote %d samples to %s', result.recording.n_samples, out)
+    return out
