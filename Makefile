@@ -18,11 +18,12 @@ $(VENV)/.ready: tools/bootstrap_venv.sh pyproject.toml setup.py
 demo: venv
 	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(BAG) --out $(OUT)
 
+# pytest exits 5 when it collects no test: make treats that as the failure it is.
 test: venv
-	source tools/env.sh $(VENV) && $(PY) -m pytest -q test
+	source tools/env.sh $(VENV) && $(PY) -m pytest -q test $(PYTEST_ARGS)
 
 lint: venv
-	$(VENV)/bin/ruff check id_learning test benchmarks tools && $(VENV)/bin/ruff format --check id_learning test benchmarks tools
+	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
 
 bag: venv
 	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli simulate --config config/twin_default.yaml --out $(BAG) --force

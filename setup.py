@@ -18,6 +18,7 @@ setup(
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.py')),
         (f'share/{PACKAGE}/urdf', glob('urdf/*.urdf')),
+        (f'share/{PACKAGE}/bags/default', glob('bags/default/*')),
     ],
     install_requires=['setuptools'],
     extras_require={'test': ['pytest', 'hypothesis']},

@@ -29,7 +29,7 @@ class BagError(IdLearningError):
 
 
 class DatasetError(IdLearningError):
-    """Recorded samples are unusable (NaN, time stamps, gaps, length): names topic, joint, sample."""
+    """Recorded samples are unusable (NaN, stamps, gaps, length): names topic, joint, sample."""
 
 
 class CheckpointError(IdLearningError):

@@ -1,4 +1,4 @@
-"""rosbag2 MCAP bags: the bag contract's messages, a writer that keeps serialized bytes, a reader."""
+"""rosbag2 MCAP bags: the contract's messages, a writer that keeps serialized bytes, a reader."""
 
 from __future__ import annotations
 

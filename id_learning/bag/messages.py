@@ -54,6 +54,7 @@ def encode_joint_state(
     position: np.ndarray,
     velocity: np.ndarray,
     effort: np.ndarray,
+    *,
     frame_id: str = '',
 ) -> bytes:
     """Serialize a JointState to CDR bytes; stamp_ns is the header stamp [ns since epoch]."""
@@ -65,9 +66,9 @@ def encode_joint_state(
     msg = msg_type(
         header=header_type(stamp=time_type(sec=sec, nanosec=nanosec), frame_id=frame_id),
         name=list(name),
-        position=np.asarray(position, dtype=np.float64),
-        velocity=np.asarray(velocity, dtype=np.float64),
-        effort=np.asarray(effort, dtype=np.float64),
+        position=np.ascontiguousarray(position, dtype=np.float64),
+        velocity=np.ascontiguousarray(velocity, dtype=np.float64),
+        effort=np.ascontiguousarray(effort, dtype=np.float64),
     )
     return bytes(store.serialize_cdr(msg, JOINT_STATE))
 

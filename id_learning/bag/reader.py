@@ -1,4 +1,4 @@
-"""Read rosbag2 bags (MCAP or SQLite storage) through rosbags, with errors that name file and topic."""
+"""Read rosbag2 bags (MCAP or SQLite storage) through rosbags; errors name file and topic."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
+from tqdm import tqdm
 
 from id_learning.bag.messages import JOINT_STATE, decode_joint_state
 from id_learning.errors import BagError, DatasetError
@@ -91,7 +92,10 @@ def bag_info(path: Path | str) -> BagInfo:
             storage='mcap' if all(name.endswith('.mcap') for name in files) else 'other',
             files=files,
             start_ns=int(reader.start_time) if reader.message_count else 0,
-            duration_ns=int(reader.duration) if reader.message_count else 0,
+            # rosbags' end_time is one past the latest message; report last minus first.
+            duration_ns=int(reader.end_time - 1 - reader.start_time)
+            if reader.message_count
+            else 0,
             topics=topics,
         )
     finally:
@@ -154,7 +158,7 @@ class JointStateSeries:
     effort: np.ndarray | None
 
 
-def read_joint_states(path: Path | str, topic: str) -> JointStateSeries:
+def read_joint_states(path: Path | str, topic: str, *, progress: bool = False) -> JointStateSeries:
     """Read and stack every sensor_msgs/JointState on a topic.
 
     Raises:
@@ -171,19 +175,35 @@ def read_joint_states(path: Path | str, topic: str) -> JointStateSeries:
     fields: dict[str, list[np.ndarray]] = {'position': [], 'velocity': [], 'effort': []}
     names: tuple[str, ...] | None = None
     lengths: dict[str, int] = {}
-    for index, (_, log_ns, data) in enumerate(iter_raw(path, [topic])):
-        msg = decode_joint_state(data)
+    messages = tqdm(
+        iter_raw(path, [topic]),
+        total=info.topic(topic).count,
+        unit='msg',
+        desc=f'reading {topic}',
+        disable=not progress,
+        leave=False,
+    )
+    for index, (_, log_ns, data) in enumerate(messages):
+        try:
+            msg = decode_joint_state(data)
+        except Exception as err:  # rosbags raises SerdeError, struct and index errors alike
+            raise BagError(
+                f'{path}: {topic} message {index} (log time {log_ns} ns) is not a valid '
+                f'{JOINT_STATE}: {err}'
+            ) from err
         if names is None:
             names = msg.name
             lengths = {key: len(getattr(msg, key)) for key in fields}
             for key, length in lengths.items():
                 if length not in (0, len(names)):
                     raise DatasetError(
-                        f'{path}: {topic} sample 0: {key} has {length} values for {len(names)} joints'
+                        f'{path}: {topic} sample 0: {key} has {length} values '
+                        f'for {len(names)} joints'
                     )
         elif msg.name != names:
             raise DatasetError(
-                f'{path}: {topic} sample {index} (stamp {msg.stamp_ns} ns): joint names {list(msg.name)} '
+                f'{path}: {topic} sample {index} (stamp {msg.stamp_ns} ns): '
+                f'joint names {list(msg.name)} '
                 f"differ from the first message's {list(names)}"
             )
         for key, values in fields.items():

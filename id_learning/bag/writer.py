@@ -1,4 +1,4 @@
-"""rosbag2 writer with MCAP storage: a folder with ``metadata.yaml`` and one or more ``.mcap`` files.
+"""rosbag2 writer with MCAP storage: a folder with ``metadata.yaml`` and ``.mcap`` file(s).
 
 Messages are stored as serialized CDR bytes, as they came (no re-serialization). MCAP chunks are
 zstd-compressed; a small chunk size bounds what a crash can lose, since everything up to the last
@@ -127,7 +127,7 @@ class BagWriter:
         self._mcap: McapWriter | None = None
         self._schemas: dict[str, int] = {}
 
-    # -- life cycle --------------------------------------------------------------------------------
+    # -- life cycle -------------------------------------------------------------------------------
     def open(self) -> Self:
         """Create the folder and the first MCAP file.
 
@@ -185,7 +185,7 @@ class BagWriter:
             [(f.path, f.first_ns or 0, f.last_ns or 0, f.count) for f in self._files],
         )
 
-    # -- topics and messages -----------------------------------------------------------------------
+    # -- topics and messages ----------------------------------------------------------------------
     def _register(self, topic: str, msgtype: str) -> int:
         assert self._mcap is not None
         if msgtype not in self._schemas:
@@ -240,9 +240,12 @@ class BagWriter:
     def _should_split(self, current: _FileStats, log_time_ns: int) -> bool:
         if current.count == 0:
             return False
-        if self.split_duration_ns is not None and current.first_ns is not None:
-            if log_time_ns - current.first_ns >= self.split_duration_ns:
-                return True
+        if (
+            self.split_duration_ns is not None
+            and current.first_ns is not None
+            and log_time_ns - current.first_ns >= self.split_duration_ns
+        ):
+            return True
         if self.split_bytes is not None and self._stream is not None:
             return self._stream.tell() >= self.split_bytes
         return False

@@ -18,7 +18,7 @@ __all__ = ['build_parser', 'main']
 _LOG = logging.getLogger('id_learning.cli')
 
 
-def _robot(args: argparse.Namespace):  # noqa: ANN202 - RobotConfig, imported lazily
+def _robot(args: argparse.Namespace):
     from id_learning.robot import load_robot_config
 
     return load_robot_config(args.robot or default_robot_config())
@@ -41,7 +41,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     result = simulate(config, progress=not args.quiet)
     write_twin_output(result, config, args.out, overwrite=args.force)
     print(
-        f'wrote {result.recording.n_samples} samples ({result.recording.duration_s:.1f} s) to {args.out}; '
+        f'wrote {result.recording.n_samples} samples '
+        f'({result.recording.duration_s:.1f} s) to {args.out}; '
         f'effects: {", ".join(config.effects.enabled_names()) or "none"}'
     )
     return 0
@@ -95,7 +96,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     bag = Path(args.bag or default_bag())
     out = Path(args.out)
     print(f'loading {bag} ...', flush=True)
-    recording = load_recording(bag, robot)
+    recording = load_recording(bag, robot, progress=True)
     dataset = prepare_dataset(recording, robot, PreprocessConfig(target=args.target))
     ground_truth = tau_clean = None
     if (bag / GROUND_TRUTH_JSON).is_file():
@@ -107,7 +108,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
             tau_clean = arrays[key].astype(float)
     summary = write_summary(dataset, robot, out, ground_truth=ground_truth, tau_clean=tau_clean)
     print(
-        f'{summary.n_samples} samples, {summary.duration_s:.0f} s; summary written to {out / "summary.md"}'
+        f'{summary.n_samples} samples, {summary.duration_s:.0f} s; '
+        f'summary written to {out / "summary.md"}'
     )
     return 0
 

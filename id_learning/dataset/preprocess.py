@@ -89,7 +89,8 @@ def lowpass(x: np.ndarray, cutoff_hz: np.ndarray, period_s: float, order: int = 
             out[:, j] = signal.sosfiltfilt(sos, x[:, j])
         except ValueError as err:
             raise DatasetError(
-                f'{len(x)} samples are too few for the {cutoff_hz[j]:g} Hz low-pass of column {j}: {err}'
+                f'{len(x)} samples are too few for the {cutoff_hz[j]:g} Hz low-pass '
+                f'of column {j}: {err}'
             ) from err
     return out
 
@@ -132,14 +133,15 @@ class MinMaxScaler:
         return z * half + centre
 
     def scale(self) -> np.ndarray:
-        """Half ranges: an error e in physical units is e / scale() on the normalised scale."""
+        """Half ranges: an error e in physical units is e / half on the normalised scale."""
         return self._centre_half_range()[1]
 
     def to_dict(self) -> dict[str, list[float]]:
         """JSON-ready state."""
         centre, half = self._centre_half_range()
         del centre, half
-        assert self.low_ is not None and self.high_ is not None
+        assert self.low_ is not None
+        assert self.high_ is not None
         return {'low': self.low_.tolist(), 'high': self.high_.tolist()}
 
     @classmethod
@@ -159,7 +161,8 @@ class RegulariseReport:
     def summary(self) -> str:
         """One line for logs and reports."""
         return (
-            f'{self.n_snapped} stamps snapped to the IPO grid (max jitter {self.max_jitter_s * 1e3:.3f} ms), '
+            f'{self.n_snapped} stamps snapped to the IPO grid '
+            f'(max jitter {self.max_jitter_s * 1e3:.3f} ms), '
             f'{len(self.filled_samples)} missing samples interpolated'
         )
 
@@ -183,7 +186,8 @@ def regularise(
     if (jitter > jitter_tolerance * period_ns).any():
         sample = int(np.argmax(jitter > jitter_tolerance * period_ns))
         raise DatasetError(
-            f'{recording.source}: sample {sample} (stamp {int(recording.stamps_ns[sample])} ns) is '
+            f'{recording.source}: sample {sample} '
+            f'(stamp {int(recording.stamps_ns[sample])} ns) is '
             f'{jitter[sample] * 1e-6:.3f} ms off the {period_s * 1e3:g} ms IPO grid (tolerance '
             f'{jitter_tolerance * period_s * 1e3:.3f} ms); resample the log first'
         )
@@ -325,7 +329,8 @@ def prepare_dataset(
     if recording.duration_s < needed:
         slowest = robot.joints[int(np.argmin(cutoff))]
         raise DatasetError(
-            f'{recording.source}: {recording.duration_s:.1f} s of data is too short for the filter: '
+            f'{recording.source}: {recording.duration_s:.1f} s of data '
+            'is too short for the filter: '
             f'at least {needed:.1f} s are needed for the {cutoff.min():g} Hz cut-off of {slowest}'
         )
     regular, report = regularise(recording, robot.ipo_period_s, config.jitter_tolerance)
@@ -335,7 +340,7 @@ def prepare_dataset(
     v = lowpass(regular.velocity, cutoff, period, config.filter_order)
     tau = lowpass(tau_raw, cutoff, period, config.filter_order)
     a = differentiate(v, period)
-    n_train = int(round(config.train_fraction * len(q)))
+    n_train = round(config.train_fraction * len(q))
     inputs = np.hstack([q, v, a])
     return Dataset(
         joints=robot.joints,

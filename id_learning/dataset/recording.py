@@ -55,7 +55,8 @@ class Recording:
             array = getattr(self, key)
             if array is not None and array.shape != (n_samples, n_joints):
                 raise DatasetError(
-                    f'{self.source}: {key} has shape {array.shape}, expected ({n_samples}, {n_joints})'
+                    f'{self.source}: {key} has shape {array.shape}, '
+                    f'expected ({n_samples}, {n_joints})'
                 )
 
     @property
@@ -132,7 +133,8 @@ def check_finite(
     if bad.any():
         sample, column = (int(i) for i in np.argwhere(bad)[0])
         raise DatasetError(
-            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), joint {joints[column]}: '
+            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), '
+            f'joint {joints[column]}: '
             f'value {array[sample, column]} is not finite ({int(bad.sum())} bad values in all)'
         )
 
@@ -169,7 +171,8 @@ def _reorder(series: JointStateSeries, joints: tuple[str, ...], where: str) -> n
         missing = [name for name in joints if name not in series.names]
         extra = [name for name in series.names if name not in joints]
         raise DatasetError(
-            f'{where}: joint names {list(series.names)} do not match the robot config {list(joints)} '
+            f'{where}: joint names {list(series.names)} '
+            f'do not match the robot config {list(joints)} '
             f'(missing {missing}, unexpected {extra})'
         )
     return np.array([series.names.index(name) for name in joints])
@@ -181,6 +184,7 @@ def load_recording(
     *,
     max_gap_periods: float = 3.0,
     require_current: bool = True,
+    progress: bool = False,
 ) -> Recording:
     """Read a bag in the contract into a Recording, validated and in the robot's joint order.
 
@@ -193,12 +197,13 @@ def load_recording(
     """
     path = Path(path)
     topics = robot.topics
-    states = read_joint_states(path, topics.joint_states)
+    states = read_joint_states(path, topics.joint_states, progress=progress)
     where_js = f'{path}: {topics.joint_states}'
     order = _reorder(states, robot.joints, where_js)
     if states.position is None or states.velocity is None:
         raise DatasetError(
-            f'{where_js}: messages carry no {"position" if states.position is None else "velocity"}'
+            f'{where_js}: messages carry no '
+            f'{"position" if states.position is None else "velocity"}'
         )
     check_stamps(states.stamps_ns, robot.ipo_period_s, max_gap_periods, where_js)
     position = states.position[:, order]
@@ -211,7 +216,7 @@ def load_recording(
 
     current = None
     if require_current:
-        currents = read_joint_states(path, topics.motor_currents)
+        currents = read_joint_states(path, topics.motor_currents, progress=progress)
         where_mc = f'{path}: {topics.motor_currents}'
         order_mc = _reorder(currents, robot.joints, where_mc)
         if currents.effort is None:
@@ -224,9 +229,11 @@ def load_recording(
             mismatch = np.flatnonzero(currents.stamps_ns[:size] != states.stamps_ns[:size])
             sample = int(mismatch[0]) if mismatch.size else size
             raise DatasetError(
-                f'{path}: {topics.motor_currents} and {topics.joint_states} stamps differ from sample '
-                f'{sample} on ({len(currents.stamps_ns)} vs {len(states.stamps_ns)} messages); the '
-                'bag contract requires one current message per joint state with the same header stamp'
+                f'{path}: {topics.motor_currents} and {topics.joint_states} stamps differ '
+                f'from sample {sample} on '
+                f'({len(currents.stamps_ns)} vs {len(states.stamps_ns)} messages); the '
+                'bag contract requires one current message per joint state '
+                'with the same header stamp'
             )
         current = currents.effort[:, order_mc]
         check_finite(current, robot.joints, currents.stamps_ns, f'{where_mc} effort')

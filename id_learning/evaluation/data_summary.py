@@ -236,11 +236,13 @@ def write_summary(
         json.dumps(summary.to_dict(), indent=1) + '\n', encoding='utf-8'
     )
     pct = {name: [100 * x for x in values] for name, values in summary.shares.items()}
+    target = 'tau_u from motor currents' if dataset.target == 'motor' else 'measured joint torque'
     lines = [
         f'# Data summary: {dataset.source}',
         '',
-        f'{summary.n_samples} samples ({summary.duration_s:.1f} s at {dataset.period_s * 1e3:g} ms), '
-        f'target: {"tau_u from motor currents" if dataset.target == "motor" else "measured joint torque"}, '
+        f'{summary.n_samples} samples '
+        f'({summary.duration_s:.1f} s at {dataset.period_s * 1e3:g} ms), '
+        f'target: {target}, '
         f'train/test split at sample {summary.n_train} (contiguous). {summary.regularise}.',
         '',
         '## Ranges after filtering',

@@ -51,7 +51,7 @@ class DriveConfig:
 
 @dataclass(frozen=True, eq=False)
 class JointLimits:
-    """Joint-side limits: position [rad], velocity [rad/s], acceleration [rad/s^2], torque [N*m]."""
+    """Joint-side limits: position [rad], velocity [rad/s], accel. [rad/s^2], torque [N*m]."""
 
     position_lower: np.ndarray
     position_upper: np.ndarray
@@ -76,7 +76,8 @@ class RobotConfig:
         name: robot name, stored in bags' ground truth and model artifacts.
         urdf_path: absolute path of the URDF.
         joints: ordered actuated joint names; every array below follows this order.
-        locked_joints: URDF joints held fixed at the given position [rad or m] (e.g. gripper fingers).
+        locked_joints: URDF joints held fixed at the given position [rad or m] (e.g. gripper
+            fingers).
         drives: gear ratios, torque constants and rotor inertias.
         limits: joint-side limits.
         ipo_period_s: controller interpolation (IPO) cycle [s].
@@ -118,13 +119,14 @@ def _example_robot_data_roots() -> list[Path]:
     return [root for root in roots if root.is_dir()]
 
 
-def resolve_urdf(value: str, base_dir: Path) -> Path:
+def resolve_urdf(value: str, base_dir: Path, where: str = 'robot config') -> Path:
     """Resolve a config's ``urdf`` entry to an existing file.
 
     Args:
         value: a path (relative to the config file's folder, or absolute) or
             ``example-robot-data://<robot>_description/urdf/<file>.urdf``.
         base_dir: folder of the config file.
+        where: the config file, named in errors.
 
     Raises:
         ConfigError: the file does not exist.
@@ -137,14 +139,15 @@ def resolve_urdf(value: str, base_dir: Path) -> Path:
             if candidate.is_file():
                 return candidate.resolve()
         raise ConfigError(
-            f'urdf {value!r}: not found in the example-robot-data package (searched {roots or "none"}); '
-            'install it with `pip install example-robot-data` or `apt install ros-jazzy-example-robot-data`'
+            f'{where}: urdf {value!r}: not found in the example-robot-data package '
+            f'(searched {roots or "none"}); install it with `pip install example-robot-data` '
+            'or `apt install ros-jazzy-example-robot-data`'
         )
     path = Path(value)
     if not path.is_absolute():
         path = base_dir / path
     if not path.is_file():
-        raise ConfigError(f'urdf {value!r}: no such file {path}')
+        raise ConfigError(f'{where}: urdf {value!r}: no such file {path}')
     return path.resolve()
 
 
@@ -295,7 +298,7 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         raise ConfigError(f'{where}: name must be a non-empty string')
     return RobotConfig(
         name=name,
-        urdf_path=resolve_urdf(str(data['urdf']), base_dir),
+        urdf_path=resolve_urdf(str(data['urdf']), base_dir, where),
         joints=tuple(joints),
         drives=drive,
         limits=limits,

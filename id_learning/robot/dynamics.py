@@ -31,12 +31,13 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
         raise RobotModelError(
             f'{config.urdf_path}: cannot build a model from the URDF: {err}'
         ) from err
-    urdf_joints = [name for name in full.names[1:]]
+    urdf_joints = list(full.names[1:])
     missing = [name for name in config.joints if name not in urdf_joints]
     unknown_locked = [name for name in config.locked_joints if name not in urdf_joints]
     if missing or unknown_locked:
         raise RobotModelError(
-            f'{config.urdf_path}: the URDF has no joint(s) {missing + unknown_locked} named in the '
+            f'{config.urdf_path}: the URDF has no joint(s) {missing + unknown_locked} '
+            'named in the '
             f'robot config {config.source or ""}; URDF movable joints: {urdf_joints}'
         )
     extra = [
@@ -68,14 +69,44 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
         joint = model.joints[model.getJointId(name)]
         if joint.nq != 1 or joint.nv != 1:
             raise RobotModelError(
-                f'{config.urdf_path}: joint {name} has {joint.nq} position coordinates; only 1-DoF '
-                'revolute or prismatic joints are supported (declare continuous joints as revolute)'
+                f'{config.urdf_path}: joint {name} has {joint.nq} position coordinates; '
+                'only 1-DoF revolute or prismatic joints are supported '
+                '(declare continuous joints as revolute)'
             )
+    _check_limits_against_urdf(model, config)
     if not model.existFrame(config.payload_frame):
         raise RobotModelError(
             f'{config.urdf_path}: payload_frame {config.payload_frame!r} is not a URDF frame'
         )
     return model
+
+
+def _check_limits_against_urdf(model: pin.Model, config: RobotConfig) -> None:
+    """Refuse config limits wider than the URDF's (where the URDF states finite limits)."""
+    limits = config.limits
+    tolerance = 1e-9
+    for i, name in enumerate(config.joints):
+        index = model.joints[model.getJointId(name)].idx_q
+        low, high = model.lowerPositionLimit[index], model.upperPositionLimit[index]
+        checks = []
+        if np.isfinite(low) and np.isfinite(high) and high > low:
+            checks += [
+                ('position_lower', limits.position_lower[i] < low - tolerance, low),
+                ('position_upper', limits.position_upper[i] > high + tolerance, high),
+            ]
+        for key, urdf_value in (
+            ('velocity', model.velocityLimit[index]),
+            ('torque', model.effortLimit[index]),
+        ):
+            if np.isfinite(urdf_value) and urdf_value > 0:
+                checks.append((key, getattr(limits, key)[i] > urdf_value + tolerance, urdf_value))
+        for key, exceeded, urdf_value in checks:
+            if exceeded:
+                raise RobotModelError(
+                    f'{config.source or config.name}: limits.{key} of {name} '
+                    f'({getattr(limits, key)[i]:g}) lies outside the URDF limit {urdf_value:g} '
+                    f'in {config.urdf_path}'
+                )
 
 
 class RigidBodyDynamics:
@@ -130,20 +161,23 @@ class RigidBodyDynamics:
     def _batched(
         self, fn: Callable[..., np.ndarray], *arrays: np.ndarray, out_shape: tuple[int, ...]
     ) -> np.ndarray:
-        """Apply a per-sample function over (B, n) arrays (or (n,) single samples)."""
+        """Apply a per-sample function over arrays of shape (..., n); leading axes are kept."""
         inputs = [np.asarray(x, dtype=float) for x in arrays]
-        single = inputs[0].ndim == 1
-        batch = [x.reshape(-1, self.n_joints) for x in inputs]
-        if any(x.shape[-1] != self.n_joints for x in inputs) or len({len(x) for x in batch}) != 1:
+        leading = inputs[0].shape[:-1]
+        if any(x.ndim == 0 or x.shape != inputs[0].shape for x in inputs) or (
+            inputs[0].shape[-1] != self.n_joints
+        ):
             raise ValueError(
-                f'expected arrays of shape (B, {self.n_joints}), got {[x.shape for x in inputs]}'
+                f'expected arrays of one shape (..., {self.n_joints}), '
+                f'got {[x.shape for x in inputs]}'
             )
+        batch = [x.reshape(-1, self.n_joints) for x in inputs]
         out = np.empty((len(batch[0]), *out_shape))
         for k in range(len(out)):
             out[k] = fn(*[self._to_pin(x[k]) for x in batch])
-        return out[0] if single else out
+        return out.reshape(*leading, *out_shape)
 
-    # -- algorithms --------------------------------------------------------------------------------
+    # -- algorithms -------------------------------------------------------------------------------
     def rnea(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Joint torques tau = M(q) a + C(q, v) v + g(q) [N*m]; shapes (..., n)."""
         ix = self._index
@@ -187,7 +221,7 @@ class RigidBodyDynamics:
         return self._batched(one, q, out_shape=(self.n_joints, self.n_joints))
 
     def regressor(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """Joint torque regressor Y with tau = Y @ inertial_parameters(); shape (..., n, 10 * bodies)."""
+        """Torque regressor Y with tau = Y @ inertial_parameters(); shape (..., n, 10 * bodies)."""
         ix = self._index
         n_params = N_INERTIAL_PARAMETERS * self.n_bodies
         return self._batched(
@@ -206,7 +240,7 @@ class RigidBodyDynamics:
             [self.model.inertias[i].toDynamicParameters() for i in range(1, self.model.njoints)]
         )
 
-    # -- variations of the model (the digital twin's "true" robot) ---------------------------------
+    # -- variations of the model (the digital twin's "true" robot) --------------------------------
     def with_payload(
         self, frame: str, mass: float, com: np.ndarray, inertia: np.ndarray | None = None
     ) -> RigidBodyDynamics:

@@ -138,7 +138,7 @@ class LoadDependentFriction(Effect):
 
 @dataclass(frozen=True, eq=False)
 class RotorInertia(Effect):
-    """True rotor inertia = scale * datasheet value (brake and gear input stage add to the motor's)."""
+    """True rotor inertia = scale * datasheet value (brake and gear input stage add to it)."""
 
     name: ClassVar[str] = 'rotor_inertia'
     vector_fields: ClassVar[tuple[str, ...]] = ('scale',)

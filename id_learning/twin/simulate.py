@@ -1,5 +1,7 @@
-"""The digital twin: a robot that differs from its nominal model by named effects, recorded as the
-real robot would be (quantised encoders, noisy and quantised currents, optional delay).
+"""The digital twin: a robot that differs from its nominal model by named effects.
+
+It is recorded as the real robot would be (quantised encoders, noisy and quantised currents,
+optional delay).
 
 ``simulate`` is deterministic: the same config and seed give the same samples and the same bag.
 """
@@ -22,7 +24,7 @@ from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError
 from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
 from id_learning.robot.config import RobotConfig, load_robot_config
-from id_learning.robot.drives import current_from_motor_torque, motor_torque_from_current
+from id_learning.robot.drives import current_from_motor_torque
 from id_learning.robot.dynamics import RigidBodyDynamics
 from id_learning.twin.effects import (
     CoggingEffect,
@@ -121,7 +123,7 @@ _MEASUREMENT = (
 
 
 def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> TwinConfig:
-    """Build a validated TwinConfig from a parsed mapping; ``robot`` is a path relative to base_dir.
+    """Build a validated TwinConfig from a parsed mapping; ``robot`` is relative to base_dir.
 
     Raises:
         ConfigError: unknown keys or bad values, naming them.
@@ -134,7 +136,7 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
     n = robot.n_joints
     excitation_data = data.get('excitation') or {}
     check_keys(
-        excitation_data, [f for f in ExcitationConfig.__dataclass_fields__], f'{where}: excitation'
+        excitation_data, list(ExcitationConfig.__dataclass_fields__), f'{where}: excitation'
     )
     if 'home' in excitation_data and excitation_data['home'] is not None:
         excitation_data = {
@@ -298,7 +300,7 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     trajectory: ExcitationTrajectory = design_excitation(
         config.excitation, robot.limits, robot.ipo_period_s, excitation_rng
     )
-    n_samples = int(round(trajectory.duration_s / robot.ipo_period_s)) + 1
+    n_samples = round(trajectory.duration_s / robot.ipo_period_s) + 1
     t = np.arange(n_samples) * robot.ipo_period_s
     q, v, a = trajectory.evaluate(t)
 
@@ -340,8 +342,10 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
             'load_dependent_friction',
         )
     )
-    assert isinstance(viscous, ViscousFriction) and isinstance(coulomb, CoulombFriction)
-    assert isinstance(stribeck, StribeckFriction) and isinstance(load, LoadDependentFriction)
+    assert isinstance(viscous, ViscousFriction)
+    assert isinstance(coulomb, CoulombFriction)
+    assert isinstance(stribeck, StribeckFriction)
+    assert isinstance(load, LoadDependentFriction)
     if viscous.enabled:
         components['viscous_friction'] = viscous.torque(vc)
     if coulomb.enabled:

@@ -1,0 +1,447 @@
+"""Rebuild a bag whose writer was killed: ``metadata.yaml`` missing, ``.mcap`` files truncated.
+
+Each ``.mcap`` file is scanned record by record with ``mcap.stream_reader.StreamReader``; the scan
+stops at the first record that is incomplete (the torn tail) or does not decode (a chunk whose
+compressed data or CRC is damaged). Everything before it -- schemas, channels and every message of
+the complete chunks -- is written again with ``BagWriter``, message bytes and log times unchanged,
+so the recovered messages are a prefix of what was recorded.
+
+Safety: the rebuilt bag is written to a hidden sibling folder and read back (per-topic counts must
+match the scan) before anything of the original is touched. In place, the damaged files are then
+renamed to ``<file>.damaged``, the new files moved in (``metadata.yaml`` last), and the damaged
+files deleted unless ``keep_damaged``. Files other than ``.mcap`` and ``metadata.yaml`` in the
+folder are left alone. A bag that is already complete is never rewritten.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import shutil
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+import yaml
+import zstandard
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Channel, Chunk, Footer, Message, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from rosbags.typesys.base import TypesysError
+
+from id_learning.bag.messages import message_definition
+from id_learning.bag.reader import TopicInfo, bag_info
+from id_learning.bag.writer import BagWriter
+from id_learning.errors import BagError
+
+__all__ = ['FileScan', 'RecoverReport', 'recover_bag']
+
+_LOG = logging.getLogger(__name__)
+
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+DAMAGED_SUFFIX = '.damaged'
+# What a damaged record or chunk raises while being parsed or decompressed (CRC errors are
+# ValueErrors; truncated fixed-size fields are struct errors).
+_DAMAGE = (McapError, struct.error, ValueError, zstandard.ZstdError)
+
+
+@dataclass(frozen=True)
+class FileScan:
+    """What the scan of one ``.mcap`` file found.
+
+    Attributes:
+        name: file name inside the bag folder.
+        size_bytes: file size [bytes].
+        valid_bytes: offset just past the last complete record [bytes].
+        messages: complete messages found.
+        is_complete: the file ends with its footer and closing magic (the writer finished it).
+        stop_reason: why the scan stopped before the footer, or None.
+    """
+
+    name: str
+    size_bytes: int
+    valid_bytes: int
+    messages: int
+    is_complete: bool
+    stop_reason: str | None = None
+
+    @property
+    def bytes_discarded(self) -> int:
+        """Bytes after the last complete record, lost with the torn tail."""
+        return self.size_bytes - self.valid_bytes
+
+
+@dataclass(frozen=True)
+class RecoverReport:
+    """What ``recover_bag`` did.
+
+    Attributes:
+        path: the bag folder that was scanned.
+        output: the folder that now holds a valid bag (``path`` when in place or intact).
+        is_intact: the bag was complete with valid metadata; nothing was written.
+        had_metadata: ``metadata.yaml`` was present.
+        files: one scan per ``.mcap`` file, in bag order.
+        topics: recovered topics with their message counts, in first-seen order.
+        damaged_kept: the damaged originals kept as ``<file>.damaged``.
+    """
+
+    path: Path
+    output: Path
+    is_intact: bool
+    had_metadata: bool
+    files: tuple[FileScan, ...]
+    topics: tuple[TopicInfo, ...]
+    damaged_kept: tuple[Path, ...] = ()
+
+    @property
+    def messages(self) -> int:
+        """Messages recovered on all topics."""
+        return sum(topic.count for topic in self.topics)
+
+    @property
+    def bytes_discarded(self) -> int:
+        """Bytes lost at the files' torn tails."""
+        return sum(scan.bytes_discarded for scan in self.files)
+
+    def summary(self) -> str:
+        """Describe the outcome in a few lines of plain text."""
+        if self.is_intact:
+            head = f'{self.path}: bag is complete with valid metadata; nothing to recover'
+        else:
+            head = (
+                f'{self.path}: recovered {self.messages} messages into {self.output}, '
+                f'{self.bytes_discarded} bytes discarded at the tail'
+            )
+        lines = [head]
+        for scan in self.files:
+            state = 'complete' if scan.is_complete else f'torn ({scan.stop_reason})'
+            lines.append(
+                f'  file {scan.name}: {scan.size_bytes} bytes, {scan.messages} messages, '
+                f'{scan.bytes_discarded} bytes discarded, {state}'
+            )
+        lines += [f'  topic {t.name} [{t.msgtype}]: {t.count} messages' for t in self.topics]
+        lines += [f'  kept damaged original {path}' for path in self.damaged_kept]
+        return '\n'.join(lines)
+
+
+@dataclass
+class _Topics:
+    """Topics seen over all files of a bag: channel ids are per file, topic names are not."""
+
+    msgtypes: dict[str, str] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+    schema_texts: dict[str, bytes] = field(default_factory=dict)
+
+    def add(self, file: Path, topic: str, msgtype: str, schema_text: bytes) -> None:
+        known = self.msgtypes.get(topic)
+        if known is None:
+            self.msgtypes[topic] = msgtype
+            self.counts[topic] = 0
+            self.schema_texts.setdefault(msgtype, schema_text)
+        elif known != msgtype:
+            raise BagError(
+                f'{file}: topic {topic} has type {msgtype} here and {known} in an earlier file'
+            )
+
+    def infos(self) -> tuple[TopicInfo, ...]:
+        return tuple(
+            TopicInfo(name, kind, self.counts[name]) for name, kind in self.msgtypes.items()
+        )
+
+
+_MessageSink = Callable[[str, int, bytes], None]
+
+
+class _Bounded:
+    """A binary stream whose reads never ask for more than the file has left.
+
+    A damaged length field can claim exabytes; reading it as is would raise MemoryError or
+    OverflowError. Clamped, the read comes back short and the record counts as torn.
+    """
+
+    def __init__(self, stream: BinaryIO, size: int) -> None:
+        self._stream = stream
+        self._size = size
+
+    def read(self, length: int = -1) -> bytes:
+        left = self._size - self._stream.tell()
+        return self._stream.read(left if length < 0 else min(length, left))
+
+    def tell(self) -> int:
+        return self._stream.tell()
+
+
+def _scan_file(file: Path, topics: _Topics, sink: _MessageSink | None) -> FileScan:
+    """Read the complete records of one MCAP file; pass each message to sink in file order."""
+    size = file.stat().st_size
+    with file.open('rb') as stream:
+        head = stream.read(len(MCAP_MAGIC))
+        if head != MCAP_MAGIC[: len(head)]:
+            raise BagError(f'{file}: not an MCAP file (starts with {head!r})')
+        if len(head) < len(MCAP_MAGIC):
+            reason = 'empty file' if not head else 'file ends inside the MCAP magic'
+            return FileScan(file.name, size, 0, 0, is_complete=False, stop_reason=reason)
+        schemas: dict[int, Schema] = {}
+        channels: dict[int, tuple[str, str]] = {}
+        messages = 0
+        valid = stream.tell()
+        footer_seen = False
+        stop_reason: str | None = None
+
+        def take(record: object) -> None:
+            nonlocal messages
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                schema = schemas.get(record.schema_id)
+                if schema is None or record.message_encoding != 'cdr':
+                    raise BagError(
+                        f'{file}: topic {record.topic} has no schema or encoding '
+                        f'{record.message_encoding!r}; only CDR messages of ROS 2 types are '
+                        'recovered'
+                    )
+                topics.add(file, record.topic, schema.name, schema.data)
+                channels[record.id] = (record.topic, schema.name)
+            elif isinstance(record, Message):
+                channel = channels.get(record.channel_id)
+                if channel is None:
+                    raise BagError(
+                        f'{file}: message at log time {record.log_time} ns names channel '
+                        f'{record.channel_id}, which the file never declares'
+                    )
+                topics.counts[channel[0]] += 1
+                messages += 1
+                if sink is not None:
+                    sink(channel[0], record.log_time, record.data)
+
+        # Magic checked above; the closing magic after the footer is still read and checked.
+        # No record size limit: a record longer than what is left is the torn tail, and the
+        # bounded stream turns it into a short read instead of a huge allocation.
+        reader = StreamReader(
+            _Bounded(stream, size),  # type: ignore[arg-type]  # duck-typed: read() is all it uses
+            skip_magic=True,
+            emit_chunks=True,
+            record_size_limit=None,
+        )
+        records = reader.records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except _DAMAGE as err:
+                # Truncation shows as EndOfFile, or as a struct error in a short fixed-size field.
+                at_end = isinstance(err, EndOfFile) or stream.tell() >= size
+                stop_reason = (
+                    'file ends inside a record'
+                    if at_end
+                    else f'damaged record: {err or type(err).__name__}'
+                )
+                break
+            if isinstance(record, Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except _DAMAGE as err:
+                    stop_reason = f'damaged chunk: {err or type(err).__name__}'
+                    break
+                for item in inner:
+                    take(item)
+            else:
+                take(record)
+                footer_seen = footer_seen or isinstance(record, Footer)
+            valid = stream.tell()
+        if stop_reason is None:
+            valid = stream.tell()
+    return FileScan(
+        name=file.name,
+        size_bytes=size,
+        valid_bytes=valid,
+        messages=messages,
+        is_complete=footer_seen and stop_reason is None,
+        stop_reason=stop_reason,
+    )
+
+
+def _mcap_files(path: Path) -> list[Path]:
+    """The bag's ``.mcap`` files in split order (``name_2`` before ``name_10``)."""
+
+    def order(file: Path) -> tuple[str, int]:
+        match = re.fullmatch(r'(.*?)(\d+)', file.stem)
+        return (match.group(1), int(match.group(2))) if match else (file.stem, -1)
+
+    return sorted((p for p in path.iterdir() if p.suffix == '.mcap' and p.is_file()), key=order)
+
+
+def _metadata_files(path: Path) -> set[str] | None:
+    """File names ``metadata.yaml`` lists, or None when it is missing or unreadable."""
+    try:
+        data = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
+        listed = data['rosbag2_bagfile_information']['relative_file_paths']
+        return {Path(str(entry)).name for entry in listed}
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        return None
+
+
+def _is_intact(path: Path, scans: list[FileScan], topics: _Topics) -> bool:
+    """Complete files, and metadata that rosbags opens and that agrees with the scan."""
+    if not all(scan.is_complete for scan in scans):
+        return False
+    if _metadata_files(path) != {scan.name for scan in scans}:
+        return False
+    try:
+        info = bag_info(path)
+    except BagError:
+        return False
+    return {t.name: (t.msgtype, t.count) for t in info.topics} == {
+        t.name: (t.msgtype, t.count) for t in topics.infos()
+    }
+
+
+def _check_types(path: Path, topics: _Topics) -> None:
+    """Require every type to be known to the typestore BagWriter takes definitions from."""
+    for msgtype, schema_text in topics.schema_texts.items():
+        names = [name for name, kind in topics.msgtypes.items() if kind == msgtype]
+        try:
+            text, _ = message_definition(msgtype)
+        except TypesysError as err:
+            raise BagError(
+                f'{path}: topic(s) {names} have type {msgtype}, which the ROS 2 Jazzy typestore '
+                'does not know; recovery writes standard message types only'
+            ) from err
+        if text.encode() != schema_text:
+            _LOG.warning(
+                '%s: the stored definition of %s (topics %s) differs from the Jazzy one that the '
+                'recovered bag will name; message bytes are kept as they are',
+                path,
+                msgtype,
+                names,
+            )
+
+
+def _write(target: Path, files: list[Path], topics: _Topics) -> tuple[FileScan, ...]:
+    """Write the recovered messages to a new bag folder and read its metadata back."""
+    rescanned = _Topics()
+    with BagWriter(target) as writer:
+        for name, msgtype in topics.msgtypes.items():
+            writer.add_topic(name, msgtype)
+        scans = tuple(_scan_file(file, rescanned, writer.write) for file in files)
+    expected = {t.name: t.count for t in topics.infos()}
+    got = {t.name: t.count for t in bag_info(target).topics}
+    if got != expected:
+        raise BagError(
+            f'{target}: the rebuilt bag holds {got} messages per topic, the scan found '
+            f'{expected}; the original is left untouched'
+        )
+    return scans
+
+
+def _install_in_place(
+    path: Path, staged: Path, files: list[Path], keep_damaged: bool
+) -> tuple[Path, ...]:
+    """Swap the damaged files for the staged bag's, keeping ``metadata.yaml`` for last."""
+    old = [*files, *([path / 'metadata.yaml'] if (path / 'metadata.yaml').exists() else [])]
+    damaged = [file.with_name(file.name + DAMAGED_SUFFIX) for file in old]
+    clashes = [str(file) for file in damaged if file.exists()]
+    if clashes:
+        raise BagError(f'{path}: {clashes} already exist; move them away and recover again')
+    new = sorted(staged.iterdir(), key=lambda file: file.name == 'metadata.yaml')
+    for file, target in zip(old, damaged, strict=True):
+        file.replace(target)
+    for file in new:
+        file.replace(path / file.name)
+    if keep_damaged:
+        return tuple(damaged)
+    for file in damaged:
+        file.unlink()
+    return ()
+
+
+def recover_bag(
+    path: Path | str,
+    out: Path | str | None = None,
+    *,
+    keep_damaged: bool = False,
+) -> RecoverReport:
+    """Turn a torn rosbag2 MCAP folder into a valid bag, keeping every complete message.
+
+    The recovered messages are a prefix of each file's messages (file order), with their bytes and
+    log times unchanged (publish times are set to the log times, sequence numbers renumbered).
+    Split bags are merged into one ``.mcap`` file. If the bag is complete and its metadata agrees
+    with its files, nothing is written, whatever ``out`` says.
+
+    Args:
+        path: the bag folder.
+        out: where to write the recovered bag (a new folder; the original is left untouched).
+            None recovers in place (see the module docstring for the order of steps).
+        keep_damaged: in place, keep the replaced originals as ``<file>.damaged``; otherwise they
+            are deleted once the rebuilt bag has been read back. Ignored with ``out``.
+
+    Returns:
+        What was scanned, recovered and discarded.
+
+    Raises:
+        BagError: path is not a folder of ``.mcap`` files, a file is not MCAP, a type is unknown,
+            ``out`` exists, or the rebuilt bag does not read back.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        raise BagError(
+            f'{path}: no such bag folder' if not path.exists() else f'{path}: not a folder'
+        )
+    files = _mcap_files(path)
+    if not files:
+        damaged = sorted(p.name for p in path.glob(f'*.mcap{DAMAGED_SUFFIX}'))
+        hint = f'; only damaged originals {damaged} are left' if damaged else ''
+        raise BagError(f'{path}: not a rosbag2 MCAP folder (no .mcap files){hint}')
+    had_metadata = (path / 'metadata.yaml').is_file()
+    target = None if out is None or Path(out).resolve() == path.resolve() else Path(out)
+    if target is not None and target.exists():
+        raise BagError(f'{target}: already exists; give a new folder to recover into')
+
+    topics = _Topics()
+    scans = [_scan_file(file, topics, None) for file in files]
+    if had_metadata and _is_intact(path, scans, topics):
+        _LOG.info('%s: bag is complete with valid metadata; nothing to recover', path)
+        return RecoverReport(path, path, True, had_metadata, tuple(scans), topics.infos())
+    _check_types(path, topics)
+
+    # A hidden sibling: same file system (renames are atomic), and the bag inside keeps the
+    # final folder's name, which BagWriter uses for the .mcap file names.
+    parent = (target or path).parent
+    name = (target or path).name
+    staging_root = parent / f'.{name}.recovering'
+    if staging_root.exists():
+        shutil.rmtree(staging_root)  # left by an interrupted recovery; ours by its name
+    staging_root.mkdir(parents=True)
+    try:
+        staged = staging_root / name
+        written = _write(staged, files, topics)
+        if written != tuple(scans):
+            raise BagError(f'{path}: the files changed while being recovered; try again')
+        if target is not None:
+            staged.replace(target)
+            kept: tuple[Path, ...] = ()
+        else:
+            kept = _install_in_place(path, staged, files, keep_damaged)
+    finally:
+        shutil.rmtree(staging_root, ignore_errors=True)
+    report = RecoverReport(
+        path=path,
+        output=target or path,
+        is_intact=False,
+        had_metadata=had_metadata,
+        files=tuple(scans),
+        topics=topics.infos(),
+        damaged_kept=kept,
+    )
+    _LOG.info(
+        '%s: recovered %d messages on %d topics into %s, %d bytes discarded',
+        path,
+        report.messages,
+        len(report.topics),
+        report.output,
+        report.bytes_discarded,
+    )
+    return report

@@ -1,0 +1,142 @@
+"""Every bad input of the bag contract gets one clear error naming file, topic, joint or sample."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support import sine_recording, write_contract_bag
+
+from id_learning.dataset.recording import Recording, load_recording
+from id_learning.errors import BagError, DatasetError
+
+
+def broken(recording: Recording, **changes) -> Recording:
+    fields = {
+        key: getattr(recording, key)
+        for key in (
+            'joints',
+            'stamps_ns',
+            'position',
+            'velocity',
+            'current',
+            'joint_torque',
+            'source',
+        )
+    }
+    return Recording(**{**fields, **changes})
+
+
+def test_a_valid_bag_loads_in_the_robots_joint_order(tmp_path, mabi):
+    recording = sine_recording(500)
+    order = (2, 0, 1, 5, 4, 3)
+    shuffled = broken(
+        recording,
+        joints=tuple(recording.joints[i] for i in order),
+        position=recording.position[:, order],
+        velocity=recording.velocity[:, order],
+        current=recording.current[:, order],
+    )
+    loaded = load_recording(write_contract_bag(tmp_path / 'bag', shuffled), mabi)
+    assert loaded.joints == mabi.joints
+    np.testing.assert_array_equal(loaded.position, recording.position)
+    np.testing.assert_array_equal(loaded.current, recording.current)
+
+
+def test_a_missing_topic_is_named(tmp_path, mabi):
+    path = write_contract_bag(tmp_path / 'bag', sine_recording(200), topics=('/joint_states',))
+    with pytest.raises(BagError, match=r'missing topic.*/motor_currents'):
+        load_recording(path, mabi)
+
+
+def test_joint_names_that_differ_from_the_config_are_named(tmp_path, mabi):
+    names = ('joint_1', 'joint_2', 'joint_3', 'joint_4', 'joint_5', 'wrist_roll')
+    path = write_contract_bag(tmp_path / 'bag', sine_recording(200), names_js=names)
+    with pytest.raises(
+        DatasetError, match=r"/joint_states: joint names .*missing \['joint_6'\].*'wrist_roll'"
+    ):
+        load_recording(path, mabi)
+
+
+def test_joint_names_that_differ_between_topics_are_named(tmp_path, mabi):
+    names = ('joint_1', 'joint_2', 'joint_3', 'joint_4', 'joint_5', 'joint_7')
+    path = write_contract_bag(tmp_path / 'bag', sine_recording(200), names_mc=names)
+    with pytest.raises(DatasetError, match=r'/motor_currents: joint names'):
+        load_recording(path, mabi)
+
+
+@pytest.mark.parametrize('value', [np.nan, np.inf, -np.inf])
+def test_non_finite_samples_are_refused_naming_sample_and_joint(tmp_path, mabi, value):
+    recording = sine_recording(300)
+    current = recording.current.copy()
+    current[123, 4] = value
+    path = write_contract_bag(tmp_path / 'bag', broken(recording, current=current))
+    with pytest.raises(DatasetError, match=r'/motor_currents effort: sample 123 .* joint joint_5'):
+        load_recording(path, mabi)
+
+
+def test_stamps_that_go_backwards_are_refused(tmp_path, mabi):
+    recording = sine_recording(300)
+    stamps = recording.stamps_ns.copy()
+    stamps[[100, 101]] = stamps[[101, 100]]
+    path = write_contract_bag(tmp_path / 'bag', broken(recording, stamps_ns=stamps))
+    with pytest.raises(
+        DatasetError, match=r'/joint_states: time stamp goes backwards at sample 101'
+    ):
+        load_recording(path, mabi)
+
+
+def test_repeated_stamps_are_refused(tmp_path, mabi):
+    recording = sine_recording(300)
+    stamps = recording.stamps_ns.copy()
+    stamps[200] = stamps[199]
+    path = write_contract_bag(tmp_path / 'bag', broken(recording, stamps_ns=stamps))
+    with pytest.raises(DatasetError, match=r'time stamp repeats at sample 200'):
+        load_recording(path, mabi)
+
+
+def test_gaps_longer_than_a_few_ipo_periods_are_refused(tmp_path, mabi):
+    recording = sine_recording(300)
+    stamps = recording.stamps_ns.copy()
+    stamps[150:] += 5 * 8_000_000
+    path = write_contract_bag(tmp_path / 'bag', broken(recording, stamps_ns=stamps))
+    with pytest.raises(DatasetError, match=r'gap of 48.0 ms before sample 150'):
+        load_recording(path, mabi)
+    assert load_recording(path, mabi, max_gap_periods=10).n_samples == 300
+
+
+def test_current_stamps_that_do_not_match_the_joint_states_are_refused(tmp_path, mabi):
+    recording = sine_recording(300)
+    stamps_mc = recording.stamps_ns.copy()
+    stamps_mc[77:] += 1_000
+    path = write_contract_bag(tmp_path / 'bag', recording, stamps_mc=stamps_mc)
+    with pytest.raises(DatasetError, match=r'stamps differ from sample 77'):
+        load_recording(path, mabi)
+
+
+def test_a_truncated_mcap_file_is_refused_with_a_recovery_hint(tmp_path, mabi):
+    path = write_contract_bag(tmp_path / 'bag', sine_recording(3000))
+    mcap = next(path.glob('*.mcap'))
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: len(data) // 2])
+    with pytest.raises(BagError, match=r'bag.*recover'):
+        load_recording(path, mabi)
+
+
+def test_a_corrupt_chunk_is_refused(tmp_path, mabi):
+    path = write_contract_bag(tmp_path / 'bag', sine_recording(20000))
+    mcap = next(path.glob('*.mcap'))
+    data = bytearray(mcap.read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 256] = bytes(range(256))
+    mcap.write_bytes(bytes(data))
+    with pytest.raises(BagError, match=str(path)):
+        load_recording(path, mabi)
+
+
+def test_a_folder_without_metadata_is_refused(tmp_path, mabi):
+    path = write_contract_bag(tmp_path / 'bag', sine_recording(100))
+    (path / 'metadata.yaml').unlink()
+    with pytest.raises(BagError, match=r'no metadata\.yaml'):
+        load_recording(path, mabi)
+    with pytest.raises(BagError, match='no such bag'):
+        load_recording(tmp_path / 'nowhere', mabi)

@@ -1,0 +1,604 @@
+"""RigidBodyDynamics against pinocchio called directly, closed forms and the MABI URDF itself."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from id_learning.errors import RobotModelError
+from id_learning.robot import (
+    RigidBodyDynamics,
+    RobotConfig,
+    build_pinocchio_model,
+    load_robot_config,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+MABI_URDF = REPO / 'urdf/mabi_max100.urdf'
+N_STATES = 50
+G_WORLD = np.array([0.0, 0.0, -9.81])  # m/s^2, the URDF convention pinocchio follows
+
+
+# -- independent references ----------------------------------------------------------------------
+def reference_model(config: RobotConfig) -> pin.Model:
+    """Build the model straight from the URDF, locking the config's locked joints by hand."""
+    full = pin.buildModelFromUrdf(str(config.urdf_path))
+    if not config.locked_joints:
+        return full
+    reference = pin.neutral(full)
+    lock_ids = []
+    for name, value in config.locked_joints.items():
+        joint_id = full.getJointId(name)
+        reference[full.joints[joint_id].idx_q] = value
+        lock_ids.append(joint_id)
+    return pin.buildReducedModel(full, lock_ids, reference)
+
+
+def velocity_index(model: pin.Model, joints: tuple[str, ...]) -> np.ndarray:
+    """Column of each config joint (by name) in the model's q and v vectors (all 1-DoF)."""
+    index = []
+    for name in joints:
+        joint = model.joints[model.getJointId(name)]
+        assert joint.idx_q == joint.idx_v  # 1-DoF revolute joints only
+        index.append(joint.idx_v)
+    return np.array(index)
+
+
+def random_states(
+    config: RobotConfig, rng: np.random.Generator, count: int = N_STATES
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Draw q, v, a (count, n) uniformly inside the config's limits."""
+    limits = config.limits
+    shape = (count, config.n_joints)
+    q = rng.uniform(limits.position_lower, limits.position_upper, shape)
+    v = rng.uniform(-limits.velocity, limits.velocity, shape)
+    a = rng.uniform(-limits.acceleration, limits.acceleration, shape)
+    return q, v, a
+
+
+def urdf_axes(urdf_path: Path) -> dict[str, np.ndarray]:
+    """Joint axis of every movable URDF joint, in the joint frame (URDF default: x)."""
+    axes = {}
+    for joint in ET.parse(urdf_path).getroot().findall('joint'):
+        if joint.get('type') == 'fixed':
+            continue
+        axis = joint.find('axis')
+        xyz = '1 0 0' if axis is None else axis.get('xyz', '1 0 0')
+        vector = np.array([float(x) for x in xyz.split()])
+        axes[joint.get('name')] = vector / np.linalg.norm(vector)
+    return axes
+
+
+def world_axes(
+    model: pin.Model, data: pin.Data, axes: dict[str, np.ndarray], name: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Origin and unit axis in the world of joint ``name`` after forwardKinematics."""
+    placement = data.oMi[model.getJointId(name)]
+    return placement.translation.copy(), placement.rotation @ axes[name]
+
+
+# -- agreement with pinocchio, and identities between computation paths --------------------------
+def test_rnea_equals_pinocchio_rnea_on_an_independent_model(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    model = reference_model(config)
+    data = model.createData()
+    index = velocity_index(model, config.joints)
+    assert model.nv == config.n_joints
+    q, v, a = random_states(config, np.random.default_rng(11))
+
+    tau = dynamics.rnea(q, v, a)
+
+    expected = np.empty_like(q)
+    for k in range(len(q)):
+        q_pin, v_pin, a_pin = (np.zeros(model.nv) for _ in range(3))
+        q_pin[index], v_pin[index], a_pin[index] = q[k], v[k], a[k]
+        expected[k] = pin.rnea(model, data, q_pin, v_pin, a_pin)[index]
+    assert np.abs(expected).max() > 1.0  # not a vacuous comparison of zeros
+    np.testing.assert_allclose(tau, expected, rtol=1e-12, atol=1e-9)
+
+
+def test_regressor_times_inertial_parameters_equals_rnea(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, v, a = random_states(config, np.random.default_rng(12))
+
+    regressor = dynamics.regressor(q, v, a)
+    parameters = dynamics.inertial_parameters()
+
+    assert regressor.shape == (N_STATES, config.n_joints, 10 * dynamics.n_bodies)
+    assert parameters.shape == (10 * dynamics.n_bodies,)
+    tau = dynamics.rnea(q, v, a)
+    scale = np.abs(tau).max()
+    np.testing.assert_allclose(regressor @ parameters, tau, rtol=0, atol=1e-9 * scale)
+
+
+def test_mass_matrix_coriolis_and_gravity_sum_to_rnea(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, v, a = random_states(config, np.random.default_rng(13))
+
+    mass = dynamics.mass_matrix(q)
+    total = np.einsum('bij,bj->bi', mass, a) + dynamics.coriolis(q, v) + dynamics.gravity(q)
+
+    tau = dynamics.rnea(q, v, a)
+    np.testing.assert_allclose(total, tau, rtol=0, atol=1e-9 * np.abs(tau).max())
+
+
+def test_mass_matrix_columns_equal_rnea_of_unit_accelerations(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    # CRBA and RNEA are different algorithms: M e_j = rnea(q, 0, e_j) - g(q).
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, _, _ = random_states(config, np.random.default_rng(14), count=10)
+    n = config.n_joints
+    zero = np.zeros_like(q)
+
+    mass = dynamics.mass_matrix(q)
+
+    gravity = dynamics.gravity(q)
+    for j in range(n):
+        unit = np.zeros_like(q)
+        unit[:, j] = 1.0
+        column = dynamics.rnea(q, zero, unit) - gravity
+        np.testing.assert_allclose(mass[:, :, j], column, rtol=1e-10, atol=1e-10)
+
+
+def test_mass_matrix_is_symmetric_positive_definite(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, _, _ = random_states(config, np.random.default_rng(15))
+
+    mass = dynamics.mass_matrix(q)
+
+    assert mass.shape == (N_STATES, config.n_joints, config.n_joints)
+    np.testing.assert_array_equal(mass, np.swapaxes(mass, 1, 2))
+    assert np.linalg.eigvalsh(mass).min() > 0.0
+
+
+def test_zero_velocity_and_acceleration_give_gravity_torque_only(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, _, _ = random_states(config, np.random.default_rng(16))
+    zero = np.zeros_like(q)
+
+    gravity = dynamics.gravity(q)
+
+    assert np.abs(gravity).max() > 1.0
+    np.testing.assert_allclose(dynamics.rnea(q, zero, zero), gravity, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(dynamics.coriolis(q, zero), zero)
+
+
+def test_coriolis_torque_is_quadratic_in_velocity(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, v, _ = random_states(config, np.random.default_rng(17))
+
+    coriolis = dynamics.coriolis(q, v)
+
+    assert np.abs(coriolis).max() > 1e-3
+    np.testing.assert_allclose(dynamics.coriolis(q, 3.0 * v), 9.0 * coriolis, atol=1e-9)
+    np.testing.assert_allclose(dynamics.coriolis(q, -v), coriolis, atol=1e-9)
+
+
+def test_gravity_argument_scales_gravity_torque(
+    robot_configs: dict[str, RobotConfig], robot_dynamics: dict[str, RigidBodyDynamics]
+) -> None:
+    config, dynamics = robot_configs['mabi_max100'], robot_dynamics['mabi_max100']
+    q, _, _ = random_states(config, np.random.default_rng(18), count=5)
+    nominal = dynamics.gravity(q)
+
+    doubled = RigidBodyDynamics(dynamics.model, config.joints, gravity=2.0 * G_WORLD)
+
+    np.testing.assert_allclose(doubled.gravity(q), 2.0 * nominal, rtol=1e-12)
+    # The wrapped model is copied, so the nominal robot keeps its gravity.
+    np.testing.assert_array_equal(dynamics.gravity(q), nominal)
+
+
+def test_permuted_joint_order_permutes_every_output(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    rng = np.random.default_rng(19)
+    perm = rng.permutation(config.n_joints)
+    assert np.any(perm != np.arange(config.n_joints))
+    limits = replace(
+        config.limits,
+        **{key: getattr(config.limits, key)[perm] for key in config.limits.__dataclass_fields__},
+    )
+    permuted = RigidBodyDynamics.from_config(
+        replace(config, joints=tuple(config.joints[i] for i in perm), limits=limits)
+    )
+    q, v, a = random_states(config, rng, count=10)
+
+    assert permuted.joints == tuple(config.joints[i] for i in perm)
+    np.testing.assert_allclose(
+        permuted.rnea(q[:, perm], v[:, perm], a[:, perm]), dynamics.rnea(q, v, a)[:, perm]
+    )
+    np.testing.assert_allclose(permuted.gravity(q[:, perm]), dynamics.gravity(q)[:, perm])
+    np.testing.assert_allclose(
+        permuted.coriolis(q[:, perm], v[:, perm]), dynamics.coriolis(q, v)[:, perm]
+    )
+    np.testing.assert_allclose(
+        permuted.mass_matrix(q[:, perm]), dynamics.mass_matrix(q)[:, perm][:, :, perm]
+    )
+
+
+def test_single_sample_returns_single_sample_shapes(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, v, a = random_states(config, np.random.default_rng(20), count=3)
+    n = config.n_joints
+
+    assert dynamics.rnea(q[1], v[1], a[1]).shape == (n,)
+    assert dynamics.gravity(q[1]).shape == (n,)
+    assert dynamics.coriolis(q[1], v[1]).shape == (n,)
+    assert dynamics.mass_matrix(q[1]).shape == (n, n)
+    assert dynamics.regressor(q[1], v[1], a[1]).shape == (n, 10 * dynamics.n_bodies)
+    np.testing.assert_array_equal(dynamics.rnea(q[1], v[1], a[1]), dynamics.rnea(q, v, a)[1])
+    np.testing.assert_array_equal(dynamics.mass_matrix(q[1]), dynamics.mass_matrix(q)[1])
+
+
+def test_mismatched_array_shapes_are_refused(
+    robot_configs: dict[str, RobotConfig], robot_dynamics: dict[str, RigidBodyDynamics]
+) -> None:
+    dynamics = robot_dynamics['mabi_max100']
+    # 6 samples of 7 joints hold 42 values, which also reshape into 7 samples of 6 joints.
+    with pytest.raises(ValueError, match=r'expected arrays of one shape \(\.\.\., 6\)'):
+        dynamics.rnea(np.zeros((6, 7)), np.zeros((6, 7)), np.zeros((6, 7)))
+    with pytest.raises(ValueError, match=r'expected arrays of one shape \(\.\.\., 6\)'):
+        dynamics.rnea(np.zeros((4, 6)), np.zeros((3, 6)), np.zeros((4, 6)))
+
+
+def test_wrong_joint_count_is_refused_with_the_explicit_message(
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    with pytest.raises(ValueError, match=r'expected arrays of one shape \(\.\.\., 6\)'):
+        robot_dynamics['mabi_max100'].gravity(np.zeros((4, 7)))
+
+
+def test_batch_of_windows_keeps_its_leading_axes(
+    robot_configs: dict[str, RobotConfig], robot_dynamics: dict[str, RigidBodyDynamics]
+) -> None:
+    config, dynamics = robot_configs['mabi_max100'], robot_dynamics['mabi_max100']
+    q, v, a = random_states(config, np.random.default_rng(21), count=6)
+
+    tau = dynamics.rnea(q.reshape(2, 3, 6), v.reshape(2, 3, 6), a.reshape(2, 3, 6))
+
+    assert tau.shape == (2, 3, 6)
+    np.testing.assert_array_equal(tau.reshape(6, 6), dynamics.rnea(q, v, a))
+
+
+# -- URDF / config mismatch ----------------------------------------------------------------------
+def test_config_joint_missing_from_the_urdf_is_refused(
+    robot_configs: dict[str, RobotConfig],
+) -> None:
+    config = robot_configs['mabi_max100']
+    joints = (*config.joints[:5], 'joint_7')
+
+    with pytest.raises(RobotModelError, match=r"the URDF has no joint\(s\) \['joint_7'\]"):
+        RigidBodyDynamics.from_config(replace(config, joints=joints))
+
+
+def test_urdf_joint_neither_actuated_nor_locked_is_refused(
+    robot_configs: dict[str, RobotConfig],
+) -> None:
+    config = robot_configs['panda']
+
+    with pytest.raises(
+        RobotModelError, match=r"\['panda_finger_joint1', 'panda_finger_joint2'\] are neither"
+    ):
+        build_pinocchio_model(replace(config, locked_joints={}))
+    with pytest.raises(RobotModelError, match=r"\['joint_6'\] are neither"):
+        build_pinocchio_model(
+            replace(robot_configs['mabi_max100'], joints=robot_configs['mabi_max100'].joints[:5])
+        )
+
+
+def test_unknown_locked_joint_and_payload_frame_are_refused(
+    robot_configs: dict[str, RobotConfig],
+) -> None:
+    config = robot_configs['mabi_max100']
+    with pytest.raises(RobotModelError, match=r"no joint\(s\) \['gripper'\]"):
+        build_pinocchio_model(replace(config, locked_joints={'gripper': 0.0}))
+    with pytest.raises(RobotModelError, match=r"payload_frame 'spindle'"):
+        build_pinocchio_model(replace(config, payload_frame='spindle'))
+
+
+def test_dynamics_refuses_a_model_whose_joints_differ(
+    robot_configs: dict[str, RobotConfig], robot_dynamics: dict[str, RigidBodyDynamics]
+) -> None:
+    model = robot_dynamics['mabi_max100'].model
+    with pytest.raises(RobotModelError, match='do not match the config joints'):
+        RigidBodyDynamics(model, robot_configs['ur5'].joints)
+
+
+def test_panda_model_has_seven_joints_with_fingers_locked(
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    model = robot_dynamics['panda'].model
+    assert model.nq == model.nv == 7
+    assert list(model.names[1:]) == [f'panda_joint{i}' for i in range(1, 8)]
+
+
+# -- payload, masses and centres of mass ---------------------------------------------------------
+def test_point_payload_changes_gravity_by_the_closed_form_torque(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    mass, com = 7.5, np.array([0.04, -0.03, 0.11])  # kg, m in the payload frame
+    loaded = dynamics.with_payload(config.payload_frame, mass, com)
+
+    model = reference_model(config)
+    data = model.createData()
+    index = velocity_index(model, config.joints)
+    axes = urdf_axes(config.urdf_path)
+    frame_id = model.getFrameId(config.payload_frame)
+    supporting = set()
+    joint_id = model.frames[frame_id].parentJoint
+    while joint_id > 0:
+        supporting.add(model.names[joint_id])
+        joint_id = model.parents[joint_id]
+    assert supporting  # the payload hangs on at least one joint
+    q, _, _ = random_states(config, np.random.default_rng(22), count=20)
+
+    expected = np.zeros_like(q)
+    for k in range(len(q)):
+        q_pin = np.zeros(model.nq)
+        q_pin[index] = q[k]
+        pin.framesForwardKinematics(model, data, q_pin)
+        point = data.oMf[frame_id].act(com)
+        for i, name in enumerate(config.joints):
+            if name in supporting:
+                origin, axis = world_axes(model, data, axes, name)
+                # Torque needed to hold the weight m g acting at the point, about the axis.
+                expected[k, i] = -mass * G_WORLD @ np.cross(axis, point - origin)
+
+    change = loaded.gravity(q) - dynamics.gravity(q)
+    assert np.abs(expected).max() > 1.0
+    np.testing.assert_allclose(change, expected, rtol=1e-9, atol=1e-9)
+
+
+def test_payload_rotational_inertia_leaves_gravity_unchanged_but_not_inertia(
+    robot_configs: dict[str, RobotConfig], robot_dynamics: dict[str, RigidBodyDynamics]
+) -> None:
+    config, dynamics = robot_configs['mabi_max100'], robot_dynamics['mabi_max100']
+    q, v, a = random_states(config, np.random.default_rng(23), count=10)
+    com = np.array([0.16, 0.0, 0.02])
+    point = dynamics.with_payload('flange', 40.0, com)
+    solid = dynamics.with_payload('flange', 40.0, com, np.diag([0.12, 0.35, 0.35]))
+
+    np.testing.assert_allclose(solid.gravity(q), point.gravity(q), rtol=1e-12)
+    assert np.abs(solid.rnea(q, v, a) - point.rnea(q, v, a)).max() > 1e-3
+    assert solid.total_moving_mass() == pytest.approx(dynamics.total_moving_mass() + 40.0)
+
+
+def test_payload_model_obeys_the_nominal_regressor(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    # The regressor depends on kinematics only, so it must also predict the loaded robot.
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, v, a = random_states(config, np.random.default_rng(24), count=10)
+    loaded = dynamics.with_payload(config.payload_frame, 3.0, np.array([0.0, 0.05, 0.1]))
+
+    predicted = dynamics.regressor(q, v, a) @ loaded.inertial_parameters()
+
+    tau = loaded.rnea(q, v, a)
+    np.testing.assert_allclose(predicted, tau, rtol=0, atol=1e-9 * np.abs(tau).max())
+
+
+def test_unknown_payload_frame_is_refused(robot_dynamics: dict[str, RigidBodyDynamics]) -> None:
+    with pytest.raises(RobotModelError, match="payload frame 'spindle' does not exist"):
+        robot_dynamics['mabi_max100'].with_payload('spindle', 1.0, np.zeros(3))
+
+
+def test_unchanged_masses_and_coms_reproduce_rnea(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    q, v, a = random_states(config, np.random.default_rng(25), count=20)
+    masses, coms = dynamics.body_masses_and_coms()
+    assert masses.shape == (dynamics.n_bodies,)
+    assert coms.shape == (dynamics.n_bodies, 3)
+
+    same = dynamics.with_masses_and_coms(masses, coms)
+
+    tau = dynamics.rnea(q, v, a)
+    np.testing.assert_allclose(same.rnea(q, v, a), tau, rtol=0, atol=1e-10 * np.abs(tau).max())
+
+
+def test_new_masses_and_coms_are_set_and_rotational_inertia_is_kept(
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    dynamics = robot_dynamics['mabi_max100']
+    masses, coms = dynamics.body_masses_and_coms()
+    new_masses = masses * np.linspace(0.9, 1.1, len(masses))
+    new_coms = coms + 0.01
+
+    changed = dynamics.with_masses_and_coms(new_masses, new_coms)
+
+    got_masses, got_coms = changed.body_masses_and_coms()
+    np.testing.assert_allclose(got_masses, new_masses, rtol=1e-15)
+    np.testing.assert_allclose(got_coms, new_coms, rtol=1e-15)
+    for body in range(1, dynamics.n_bodies + 1):
+        np.testing.assert_allclose(
+            changed.model.inertias[body].inertia, dynamics.model.inertias[body].inertia
+        )
+    assert changed.total_moving_mass() == pytest.approx(new_masses.sum())
+
+
+def test_inertial_parameters_round_trip_through_with_inertial_parameters(
+    robot_configs: dict[str, RobotConfig], robot_dynamics: dict[str, RigidBodyDynamics]
+) -> None:
+    config, dynamics = robot_configs['ur5'], robot_dynamics['ur5']
+    q, v, a = random_states(config, np.random.default_rng(26), count=10)
+    parameters = dynamics.inertial_parameters()
+
+    rebuilt = dynamics.with_inertial_parameters(parameters)
+
+    np.testing.assert_allclose(rebuilt.inertial_parameters(), parameters, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(rebuilt.rnea(q, v, a), dynamics.rnea(q, v, a), atol=1e-9)
+
+
+# -- the MABI URDF -------------------------------------------------------------------------------
+def urdf_link_inertials() -> dict[str, tuple[float, np.ndarray]]:
+    """Mass [kg] and inertia tensor [kg*m^2] of every MABI link that has an inertial."""
+    inertials = {}
+    for link in ET.parse(MABI_URDF).getroot().findall('link'):
+        inertial = link.find('inertial')
+        if inertial is None:
+            continue
+        mass = float(inertial.find('mass').get('value'))
+        i = {key: float(value) for key, value in inertial.find('inertia').attrib.items()}
+        tensor = np.array(
+            [
+                [i['ixx'], i['ixy'], i['ixz']],
+                [i['ixy'], i['iyy'], i['iyz']],
+                [i['ixz'], i['iyz'], i['izz']],
+            ]
+        )
+        inertials[link.get('name')] = (mass, tensor)
+    return inertials
+
+
+def test_mabi_masses_match_the_design_totals(robot_dynamics: dict[str, RigidBodyDynamics]) -> None:
+    inertials = urdf_link_inertials()
+    urdf_total = sum(mass for mass, _ in inertials.values())
+    urdf_moving = urdf_total - inertials['base_link'][0]
+
+    assert len(inertials) == 8  # base, six links, flange
+    assert urdf_total == pytest.approx(1250.0, abs=1.0)
+    assert robot_dynamics['mabi_max100'].total_moving_mass() == pytest.approx(813.1, abs=0.5)
+    assert robot_dynamics['mabi_max100'].total_moving_mass() == pytest.approx(
+        urdf_moving, abs=1e-9
+    )
+
+
+def test_every_mabi_link_inertia_is_physically_consistent() -> None:
+    inertials = urdf_link_inertials()
+    assert inertials
+    for name, (mass, tensor) in inertials.items():
+        assert mass > 0.0, name
+        principal = np.linalg.eigvalsh(tensor)
+        assert principal.min() > 0.0, name
+        diagonal = np.diag(tensor)
+        for moments in (principal, diagonal):
+            for k in range(3):
+                others = moments.sum() - moments[k]
+                assert others >= moments[k] * (1.0 - 1e-9), (name, moments)
+
+
+def test_mabi_wrist_axes_meet_in_one_point(
+    robot_configs: dict[str, RobotConfig],
+) -> None:
+    config = robot_configs['mabi_max100']
+    model = reference_model(config)
+    data = model.createData()
+    axes = urdf_axes(config.urdf_path)
+    index = velocity_index(model, config.joints)
+    q, _, _ = random_states(config, np.random.default_rng(27), count=20)
+
+    for q_k in q:
+        q_pin = np.zeros(model.nq)
+        q_pin[index] = q_k
+        pin.forwardKinematics(model, data, q_pin)
+        lines = [world_axes(model, data, axes, f'joint_{i}') for i in (4, 5, 6)]
+        center = lines[1][0]  # the origin of joint_5
+        for origin, axis in lines:
+            # Distance from the wrist centre to the axis line.
+            assert np.linalg.norm(np.cross(axis, center - origin)) < 1e-12
+        # A real wrist: consecutive axes are not parallel.
+        assert np.linalg.norm(np.cross(lines[0][1], lines[1][1])) > 0.99
+        assert np.linalg.norm(np.cross(lines[1][1], lines[2][1])) > 0.99
+    # The wrist centre is not at the joint_4 origin, so the check above is not trivial.
+    assert np.linalg.norm(lines[0][0] - center) > 0.5
+
+
+def test_urdf_generator_reproduces_the_committed_urdf(tmp_path: Path) -> None:
+    output = tmp_path / 'x.urdf'
+
+    result = subprocess.run(
+        [sys.executable, str(REPO / 'tools/make_mabi_urdf.py'), '--output', str(output)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+    assert result.returncode == 0, result.stderr
+    assert 'total mass 1250 kg' in result.stdout
+    assert output.read_bytes() == MABI_URDF.read_bytes()
+
+
+@pytest.mark.parametrize(
+    'name',
+    [
+        'mabi_max100',
+        'ur5',
+        'panda',
+    ],
+)
+def test_config_limits_lie_within_the_urdf_limits(
+    name: str, robot_configs: dict[str, RobotConfig]
+) -> None:
+    config = robot_configs[name]
+    urdf_limits = {}
+    for joint in ET.parse(config.urdf_path).getroot().findall('joint'):
+        limit = joint.find('limit')
+        if limit is not None:
+            urdf_limits[joint.get('name')] = {k: float(v) for k, v in limit.attrib.items()}
+
+    for i, joint in enumerate(config.joints):
+        urdf = urdf_limits[joint]
+        assert config.limits.position_lower[i] >= urdf['lower'] - 1e-9, joint
+        assert config.limits.position_upper[i] <= urdf['upper'] + 1e-9, joint
+        assert config.limits.velocity[i] <= urdf['velocity'] + 1e-9, joint
+        assert config.limits.torque[i] <= urdf['effort'] + 1e-9, joint
+
+
+def test_config_limits_wider_than_the_urdf_are_refused(write_config: Any) -> None:
+    path = write_config('mabi_max100', set={'limits.velocity': [1.7, 1.4, 1.45, 2.35, 9.0, 3.45]})
+    config = load_robot_config(path)
+    with pytest.raises(
+        RobotModelError, match=r'limits\.velocity of joint_5 \(9\) lies outside the URDF'
+    ):
+        RigidBodyDynamics.from_config(config)

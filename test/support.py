@@ -1,0 +1,80 @@
+"""Helpers shared by tests (importable: pytest puts test/ on sys.path)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def twin_config(duration_s: float = 30.0, effects: dict | None = None, **overrides):
+    """A short twin config from config/twin_default.yaml; ``effects`` replaces the effect map."""
+    from id_learning.twin import load_twin_config
+
+    extra = dict(overrides)
+    if effects is not None:
+        extra['effects'] = effects
+    config = load_twin_config(REPO / 'config/twin_default.yaml', extra)
+    return replace(config, excitation=replace(config.excitation, duration_s=duration_s))
+
+
+def sine_recording(
+    n_samples: int = 3000, period_s: float = 0.008, joints: tuple[str, ...] | None = None
+):
+    """A smooth synthetic recording in the bag contract's quantities (6 MABI joints by default)."""
+    import numpy as np
+
+    from id_learning.dataset.recording import Recording
+
+    joints = joints or tuple(f'joint_{i}' for i in range(1, 7))
+    n = len(joints)
+    t = np.arange(n_samples) * period_s
+    freq = 0.1 + 0.05 * np.arange(n)
+    position = 0.5 * np.sin(2 * np.pi * freq * t[:, None])
+    velocity = 0.5 * 2 * np.pi * freq * np.cos(2 * np.pi * freq * t[:, None])
+    current = 2.0 * np.sin(2 * np.pi * freq * t[:, None] + 0.3)
+    stamps = 1_767_225_600_000_000_000 + np.round(t * 1e9).astype(np.int64)
+    return Recording(joints, stamps, position, velocity, current, None, source='sines')
+
+
+def write_contract_bag(
+    path: Path,
+    recording,
+    *,
+    names_js: tuple[str, ...] | None = None,
+    names_mc: tuple[str, ...] | None = None,
+    stamps_mc=None,
+    topics: tuple[str, ...] = ('/joint_states', '/motor_currents'),
+) -> Path:
+    """Write a bag sample by sample, with hooks to break the contract on purpose."""
+    import numpy as np
+
+    from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state
+
+    names_js = names_js or recording.joints
+    names_mc = names_mc or recording.joints
+    stamps_mc = recording.stamps_ns if stamps_mc is None else stamps_mc
+    empty = np.empty(0)
+    with BagWriter(path) as writer:
+        for topic in topics:
+            writer.add_topic(topic, JOINT_STATE)
+        for k, stamp in enumerate(recording.stamps_ns.tolist()):
+            # Log (receive) times advance monotonically whatever the header stamps do.
+            log_ns = int(recording.stamps_ns[0]) + k * 8_000_000
+            if '/joint_states' in topics:
+                writer.write(
+                    '/joint_states',
+                    log_ns,
+                    encode_joint_state(
+                        stamp, names_js, recording.position[k], recording.velocity[k], empty
+                    ),
+                )
+            if '/motor_currents' in topics:
+                stamp_mc = int(stamps_mc[k])
+                writer.write(
+                    '/motor_currents',
+                    log_ns,
+                    encode_joint_state(stamp_mc, names_mc, empty, empty, recording.current[k]),
+                )
+    return path
