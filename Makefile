@@ -11,7 +11,7 @@ OUT ?= out/demo
 
 venv: $(VENV)/.ready
 
-$(VENV)/.ready: tools/bootstrap_venv.sh pyproject.toml setup.py
+$(VENV)/.ready: tools/bootstrap_venv.sh requirements.txt pyproject.toml setup.py
 	bash tools/bootstrap_venv.sh $(VENV)
 	touch $@
 

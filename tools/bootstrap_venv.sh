@@ -56,8 +56,13 @@ if [[ -z "$ROS_SETUP" ]]; then
   fi
 fi
 
-# torch is pinned: an unpinned requirement pulls a multi-GB CUDA build.
-"${PIP[@]}" "torch==2.13.0"
+# torch is pinned. On Linux PyPI serves a CUDA build (several GB); TORCH_INDEX_URL (e.g.
+# https://download.pytorch.org/whl/cpu) takes a CPU build instead.
+if [[ -n "${TORCH_INDEX_URL:-}" ]]; then
+  "${PIP[@]}" --index-url "$TORCH_INDEX_URL" "torch==2.13.0"
+else
+  "${PIP[@]}" "torch==2.13.0"
+fi
 "${PIP[@]}" "${ROS_PKGS[@]}" -r requirements.txt
 "${PIP[@]}" --no-deps -e .
 echo "bootstrap: $VENV ready"

@@ -121,7 +121,7 @@ def summarise(
     summary = DataSummary(
         joints=dataset.joints,
         n_samples=len(dataset.q),
-        duration_s=float(len(dataset.q) * dataset.period_s),
+        duration_s=float((len(dataset.q) - 1) * dataset.period_s),
         n_train=dataset.n_train,
         ranges=ranges,
         rms_nm={
