@@ -8,7 +8,8 @@ same header stamps sample by sample. Topic names come from the robot config.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import logging
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,8 @@ from id_learning.bag import (
 )
 from id_learning.errors import DatasetError
 from id_learning.robot.config import RobotConfig, TopicConfig
+
+_LOG = logging.getLogger(__name__)
 
 __all__ = ['Recording', 'check_finite', 'check_stamps', 'load_recording', 'write_recording']
 
@@ -185,10 +188,13 @@ def load_recording(
     max_gap_periods: float = 3.0,
     require_current: bool = True,
     progress: bool = False,
+    trim_unpaired_tail: bool = False,
 ) -> Recording:
     """Read a bag in the contract into a Recording, validated and in the robot's joint order.
 
-    Joint columns are reordered by name when only the order differs.
+    Joint columns are reordered by name when only the order differs. A torn recording may end
+    with messages on one topic that have no partner on the other: they are refused unless
+    ``trim_unpaired_tail`` is set, in which case they are dropped with a warning.
 
     Raises:
         BagError: missing topic, wrong type, truncated or corrupt file.
@@ -222,21 +228,33 @@ def load_recording(
         if currents.effort is None:
             raise DatasetError(f'{where_mc}: messages carry no effort (the motor currents)')
         check_stamps(currents.stamps_ns, robot.ipo_period_s, max_gap_periods, where_mc)
-        if len(currents.stamps_ns) != len(states.stamps_ns) or np.any(
-            currents.stamps_ns != states.stamps_ns
-        ):
-            size = min(len(currents.stamps_ns), len(states.stamps_ns))
-            mismatch = np.flatnonzero(currents.stamps_ns[:size] != states.stamps_ns[:size])
-            sample = int(mismatch[0]) if mismatch.size else size
+        size = min(len(currents.stamps_ns), len(states.stamps_ns))
+        mismatch = np.flatnonzero(currents.stamps_ns[:size] != states.stamps_ns[:size])
+        if mismatch.size:
             raise DatasetError(
                 f'{path}: {topics.motor_currents} and {topics.joint_states} stamps differ '
-                f'from sample {sample} on '
-                f'({len(currents.stamps_ns)} vs {len(states.stamps_ns)} messages); the '
-                'bag contract requires one current message per joint state '
-                'with the same header stamp'
+                f'from sample {int(mismatch[0])} on; the bag contract requires one current '
+                'message per joint state with the same header stamp'
             )
-        current = currents.effort[:, order_mc]
-        check_finite(current, robot.joints, currents.stamps_ns, f'{where_mc} effort')
+        if len(currents.stamps_ns) != len(states.stamps_ns):
+            longer = topics.joint_states if len(states.stamps_ns) > size else topics.motor_currents
+            extra = abs(len(states.stamps_ns) - len(currents.stamps_ns))
+            if not trim_unpaired_tail:
+                raise DatasetError(
+                    f'{path}: the last {extra} message(s) of {longer} have no partner on the '
+                    f'other topic (samples {size} on), as a torn recording leaves them; pass '
+                    'trim_unpaired_tail (CLI: --trim-unpaired-tail) to drop them'
+                )
+            _LOG.warning('%s: dropped the last %d unpaired message(s) of %s', path, extra, longer)
+            states = replace(
+                states,
+                stamps_ns=states.stamps_ns[:size],
+                log_ns=states.log_ns[:size],
+            )
+            position, velocity = position[:size], velocity[:size]
+            joint_torque = None if joint_torque is None else joint_torque[:size]
+        current = currents.effort[:size, order_mc]
+        check_finite(current, robot.joints, currents.stamps_ns[:size], f'{where_mc} effort')
     return Recording(
         joints=robot.joints,
         stamps_ns=states.stamps_ns,

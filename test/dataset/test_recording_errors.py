@@ -140,3 +140,44 @@ def test_a_folder_without_metadata_is_refused(tmp_path, mabi):
         load_recording(path, mabi)
     with pytest.raises(BagError, match='no such bag'):
         load_recording(tmp_path / 'nowhere', mabi)
+
+
+def test_an_unpaired_tail_from_a_torn_recording_is_refused_or_trimmed_on_request(tmp_path, mabi):
+    recording = sine_recording(300)
+    path = write_contract_bag(tmp_path / 'bag', recording)
+    short = broken(
+        recording,
+        stamps_ns=recording.stamps_ns[:298],
+        position=recording.position[:298],
+        velocity=recording.velocity[:298],
+        current=recording.current[:298],
+    )
+    # Joint states for all 300 samples, currents for the first 298 only.
+    from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state
+
+    torn = tmp_path / 'torn'
+    with BagWriter(torn) as writer:
+        writer.add_topic('/joint_states', JOINT_STATE)
+        writer.add_topic('/motor_currents', JOINT_STATE)
+        for k, stamp in enumerate(recording.stamps_ns.tolist()):
+            writer.write(
+                '/joint_states',
+                stamp,
+                encode_joint_state(
+                    stamp, recording.joints, recording.position[k], recording.velocity[k], []
+                ),
+            )
+            if k < len(short.stamps_ns):
+                writer.write(
+                    '/motor_currents',
+                    stamp,
+                    encode_joint_state(stamp, recording.joints, [], [], recording.current[k]),
+                )
+    with pytest.raises(
+        DatasetError, match=r'last 2 message\(s\) of /joint_states have no partner'
+    ):
+        load_recording(torn, mabi)
+    trimmed = load_recording(torn, mabi, trim_unpaired_tail=True)
+    assert trimmed.n_samples == 298
+    np.testing.assert_array_equal(trimmed.current, recording.current[:298])
+    assert load_recording(path, mabi).n_samples == 300
