@@ -185,6 +185,15 @@ class BagWriter:
             [(f.path, f.first_ns or 0, f.last_ns or 0, f.count) for f in self._files],
         )
 
+    def flush(self) -> None:
+        """Finish the chunk in progress and push everything written so far to the file.
+
+        After a flush the messages survive the process being killed (a recovery rebuilds the
+        index). Each flush ends a compressed chunk, so flushing often costs compression ratio.
+        """
+        if self._mcap is not None:
+            self._mcap.flush()
+
     # -- topics and messages ----------------------------------------------------------------------
     def _register(self, topic: str, msgtype: str) -> int:
         assert self._mcap is not None

@@ -79,3 +79,18 @@ def test_splitting_by_duration_writes_several_files_that_read_back_whole(tmp_pat
     assert sum(f['message_count'] for f in metadata['files']) == 500
     logs = [log for _, log, _ in iter_raw(tmp_path / 'split', ['/joint_states'])]
     assert logs == [k * 8_000_000 for k in range(500)]
+
+
+def test_flushed_messages_survive_an_unfinished_writer(tmp_path):
+    from id_learning.bag.recover import recover_bag
+
+    writer = BagWriter(tmp_path / 'live', chunk_bytes=1 << 24).open()
+    writer.add_topic('/joint_states', JOINT_STATE)
+    for k in range(50):
+        writer.write('/joint_states', k, encode_joint_state(k, ('j',), [k], [0.0], []))
+    writer.flush()
+    writer.write('/joint_states', 50, encode_joint_state(50, ('j',), [50], [0.0], []))
+    # The process "dies" here: no close(), no metadata.yaml, the last message still buffered.
+    recover_bag(tmp_path / 'live', tmp_path / 'recovered')
+    logs = [log for _, log, _ in iter_raw(tmp_path / 'recovered', ['/joint_states'])]
+    assert logs == list(range(50))
