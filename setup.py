@@ -31,6 +31,7 @@ setup(
     entry_points={
         'console_scripts': [
             'id-learning = id_learning.cli.main:main',
+            'train = id_learning.cli.main:train_main',
         ],
     },
 )

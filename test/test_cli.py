@@ -65,7 +65,9 @@ def test_inspect_reports_topics_counts_and_rate(twin_bag, tmp_path):
 
 
 def test_demo_writes_a_summary_with_figures(twin_bag, tmp_path):
-    result = run_cli('demo', '--bag', str(twin_bag), '--out', str(tmp_path / 'demo'))
+    result = run_cli(
+        'demo', '--bag', str(twin_bag), '--out', str(tmp_path / 'demo'), '--skip-training'
+    )
     assert result.returncode == 0, result.stderr
     summary = json.loads((tmp_path / 'demo/summary.json').read_text())
     assert summary['joints'] == [f'joint_{i}' for i in range(1, 7)]

@@ -1,4 +1,4 @@
-"""``id-learning``: the offline command-line tool (simulate, import, inspect, bag, demo)."""
+"""``id-learning``: the offline tool (simulate, import, inspect, bag, train, evaluate, demo)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,13 @@ import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from id_learning import __version__
 from id_learning.cli.paths import default_bag, default_robot_config
-from id_learning.errors import IdLearningError
+from id_learning.errors import ConfigError, IdLearningError
 
-__all__ = ['build_parser', 'main']
+__all__ = ['build_parser', 'main', 'train_main']
 
 _LOG = logging.getLogger('id_learning.cli')
 
@@ -109,8 +110,128 @@ def cmd_demo(args: argparse.Namespace) -> int:
     summary = write_summary(dataset, robot, out, ground_truth=ground_truth, tau_clean=tau_clean)
     print(
         f'{summary.n_samples} samples, {summary.duration_s:.0f} s; '
-        f'summary written to {out / "summary.md"}'
+        f'summary written to {out / "summary.md"}',
+        flush=True,
     )
+    if args.skip_training:
+        return 0
+    from id_learning.training import train_run
+
+    kinds = _kinds(args.models)
+    print(
+        f'training {len(kinds)} models ({", ".join(kinds)}), at most '
+        f'{args.train_seconds:g} s each ...',
+        flush=True,
+    )
+    run = train_run(
+        [bag],
+        robot,
+        args.target,
+        kinds,
+        out / 'run',
+        max_seconds_per_model=args.train_seconds,
+        device=args.device,
+    )
+    print(_metrics_table(run.metrics))
+    print(f'report: {run.report}')
+    return 0
+
+
+def _kinds(text: str) -> list[str]:
+    """Model kinds from a comma-separated list ('all': the study's seven, in its order).
+
+    Raises:
+        ConfigError: an unknown kind (the message lists the known ones).
+    """
+    from id_learning.models.registry import MODEL_KINDS, STUDY_MODELS
+
+    if text.strip() == 'all':
+        return list(STUDY_MODELS)
+    kinds = [item.strip() for item in text.split(',') if item.strip()]
+    unknown = [kind for kind in kinds if kind not in MODEL_KINDS]
+    if unknown or not kinds:
+        raise ConfigError(
+            f'--models: unknown model kind(s) {unknown or [text]}; known kinds: '
+            f'{", ".join(STUDY_MODELS)} (or all)'
+        )
+    return kinds
+
+
+def _hyper(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
+    """Per-kind hyper-parameters from KIND.KEY=VALUE items (VALUE read as YAML: 3, 1e-3, tanh).
+
+    Raises:
+        ConfigError: an item is not of that form.
+    """
+    import yaml
+
+    hyper: dict[str, dict[str, Any]] = {}
+    for item in items or ():
+        name, sep, value = item.partition('=')
+        kind, dot, key = name.partition('.')
+        if not (sep and dot and kind and key):
+            raise ConfigError(f'--hyper {item!r}: expected KIND.KEY=VALUE, e.g. mlp.max_epochs=50')
+        try:
+            hyper.setdefault(kind, {})[key] = yaml.safe_load(value)
+        except yaml.YAMLError as err:
+            raise ConfigError(f'--hyper {item!r}: cannot read the value: {err}') from err
+    return hyper
+
+
+def _metrics_table(metrics: dict[str, Any]) -> str:
+    """Per-joint test RMSE [N*m] of every model, as a plain-text table."""
+    from id_learning.evaluation.study import MODEL_LABELS
+
+    joints = metrics['joints']
+    head = f'{"test RMSE [N*m]":<16}' + ''.join(f'{j:>10}' for j in joints) + f'{"mean norm.":>12}'
+    lines = [head]
+    for kind, entry in metrics['models'].items():
+        lines.append(
+            f'{MODEL_LABELS.get(kind, kind):<16}'
+            + ''.join(f'{x:>10.3g}' for x in entry['rmse_nm'])
+            + f'{entry["mean_rmse_normalised"]:>12.3g}'
+        )
+    return '\n'.join(lines)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train models on bags; write models, metrics.json and report.md into the run folder."""
+    from id_learning.training import train_run
+
+    robot = _robot(args)
+    run = train_run(
+        [Path(b) for b in args.bag],
+        robot,
+        args.target,
+        _kinds(args.models),
+        Path(args.out),
+        hyper=_hyper(args.hyper),
+        max_seconds_per_model=args.max_seconds_per_model,
+        progress=not args.quiet,
+        device=args.device,
+    )
+    print(_metrics_table(run.metrics))
+    print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """Evaluate every model of a run on other recordings."""
+    from id_learning.training import evaluate_run, read_run
+
+    run_dir = Path(args.run)
+    if args.robot:
+        robot = _robot(args)
+    else:
+        from id_learning.robot import load_robot_config
+
+        source = read_run(run_dir).get('robot_config')
+        robot = load_robot_config(source) if source else _robot(args)
+    result = evaluate_run(
+        run_dir, [Path(b) for b in args.bag], robot, Path(args.out), progress=not args.quiet
+    )
+    print(_metrics_table(result.metrics))
+    print(f'metrics: {result.out / "metrics.json"}; report: {result.report}')
     return 0
 
 
@@ -163,18 +284,96 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument('--out', help='write the recovered bag here instead of in place')
     r.set_defaults(func=cmd_bag_recover)
 
-    p = sub.add_parser('demo', help='the main job on a bag: preprocess and write a data summary')
+    p = sub.add_parser('train', help='train models on bags; write models, metrics and a report')
+    add_train_arguments(p)
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser('evaluate', help="evaluate a run's models on another recording")
+    p.add_argument('--run', required=True, help='run folder written by train')
+    p.add_argument(
+        '--bag', required=True, action='append', help='bag folder to evaluate on (repeatable)'
+    )
+    p.add_argument('--out', required=True, help='folder for metrics.json, report.md and figures')
+    robot_option(p, 'robot config YAML (default: the one the run was trained with)')
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser(
+        'demo',
+        help='the main job on a bag: data summary, then train all seven models with a report',
+    )
     p.add_argument('--bag', help='bag folder (default: the shipped bags/default)')
-    p.add_argument('--out', default='out/demo', help='output folder')
+    p.add_argument('--out', default='out/demo', help='output folder (the run goes to OUT/run)')
     p.add_argument(
         '--target',
         choices=('motor', 'joint'),
         default='motor',
         help='motor: tau_u from currents; joint: measured joint torque',
     )
+    p.add_argument(
+        '--models', default='all', help='comma-separated model kinds to train (default: all)'
+    )
+    p.add_argument(
+        '--train-seconds',
+        type=_positive_float,
+        default=DEMO_SECONDS_PER_MODEL,
+        help=f'wall-clock budget per model fit [s] (default {DEMO_SECONDS_PER_MODEL:g})',
+    )
+    p.add_argument('--skip-training', action='store_true', help='only write the data summary')
+    p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
     robot_option(p)
     p.set_defaults(func=cmd_demo)
     return parser
+
+
+#: Budget per model in ``demo``: seven models on the shipped bag within 10 minutes on 2 cores.
+DEMO_SECONDS_PER_MODEL = 60.0
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
+    return value
+
+
+def add_train_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``train`` (shared by ``id-learning train`` and ``ros2 run ... train``)."""
+    p.add_argument(
+        '--bag', required=True, action='append', help='bag folder to train on (repeatable)'
+    )
+    p.add_argument('--robot', help='robot config YAML (default: MABI MAX 100)')
+    p.add_argument(
+        '--target',
+        choices=('motor', 'joint'),
+        default='motor',
+        help='motor: tau_u from currents (default); joint: measured joint torque',
+    )
+    p.add_argument(
+        '--models',
+        default='all',
+        help='comma-separated model kinds: rnea_lq,rnea_mlp,delan,lnn,lnn_mlp,mlp,lstm '
+        '(default: all)',
+    )
+    p.add_argument('--out', required=True, help='run folder to write')
+    p.add_argument(
+        '--device',
+        choices=('auto', 'cpu', 'cuda'),
+        default='auto',
+        help='auto: CUDA when available',
+    )
+    p.add_argument(
+        '--max-seconds-per-model',
+        type=_positive_float,
+        help='wall-clock budget per model fit [s] (default: none, early stopping decides)',
+    )
+    p.add_argument(
+        '--hyper',
+        action='append',
+        metavar='KIND.KEY=VALUE',
+        help='hyper-parameter override, e.g. mlp.max_epochs=50 (repeatable)',
+    )
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -189,6 +388,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     except IdLearningError as err:
         print(f'id-learning {args.command}: error: {err}', file=sys.stderr)
         return 2
+
+
+def _without_ros_arguments(argv: Sequence[str]) -> list[str]:
+    """Drop the ``--ros-args ... [--]`` block that ``ros2 run`` may append."""
+    out: list[str] = []
+    inside = False
+    for item in argv:
+        if item == '--ros-args':
+            inside = True
+        elif inside and item == '--':
+            inside = False
+        elif not inside:
+            out.append(item)
+    return out
+
+
+def train_main(argv: Sequence[str] | None = None) -> int:
+    """``ros2 run id_learning train ...``: the ``train`` subcommand as its own program."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    return main(['train', *_without_ros_arguments(args)])
 
 
 if __name__ == '__main__':

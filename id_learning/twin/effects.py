@@ -210,7 +210,7 @@ class SignalDelay(Effect):
 
 @dataclass(frozen=True, eq=False)
 class CoggingEffect(Effect):
-    """Motor cogging: amplitude [N*m, joint side] * sin(periods_per_motor_turn * gear_ratio * q)."""
+    """Motor cogging: amplitude [N*m, joint side] * sin(periods_per_motor_turn * N * q)."""
 
     name: ClassVar[str] = 'cogging'
     vector_fields: ClassVar[tuple[str, ...]] = ('amplitude',)

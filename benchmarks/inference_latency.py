@@ -1,0 +1,92 @@
+"""One-sample prediction latency (median, p99) of every model of a run, as JSON.
+
+    python benchmarks/inference_latency.py [--run RUN_DIR] [--calls 1000] [--threads 1]
+
+With ``--run`` the run's models are loaded (and verified) and timed on the test part of its
+first training bag. Without it, a quick set of all seven models is trained first (one short twin
+recording, two epochs each: latency does not depend on how well a model is trained).
+A sequence model (LSTM) is timed on one window, the call the online predictor makes per cycle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import torch
+from common import DEFAULT_ROBOT, REPO, emit
+
+from id_learning.dataset.preprocess import prepare_dataset
+from id_learning.dataset.recording import load_recording
+from id_learning.models.registry import STUDY_MODELS, load_model
+from id_learning.robot import load_robot_config
+from id_learning.training.trainer import measure_inference, preprocess_from_dict, read_run
+
+
+def quick_run(out: Path, robot_path: Path) -> Path:
+    from id_learning.training import train_run
+    from id_learning.twin import load_twin_config, simulate, write_twin_output
+
+    config = load_twin_config(REPO / 'config/twin_default.yaml')
+    config = replace(config, excitation=replace(config.excitation, duration_s=60.0))
+    bag = write_twin_output(simulate(config), config, out / 'bag')
+    hyper = {kind: {'max_epochs': 2} for kind in STUDY_MODELS if kind != 'rnea_lq'}
+    train_run(
+        [bag],
+        load_robot_config(robot_path),
+        'motor',
+        STUDY_MODELS,
+        out / 'run',
+        hyper=hyper,
+        progress=False,
+        device='cpu',
+    )
+    return out / 'run'
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--run', type=Path, help='run folder (default: train a quick set)')
+    parser.add_argument('--robot', type=Path, help='robot config (default: the run one)')
+    parser.add_argument('--calls', type=int, default=1000, help='timed calls per model')
+    parser.add_argument('--threads', type=int, default=1, help='torch threads for the calls')
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as scratch:
+        run_dir = args.run or quick_run(Path(scratch), args.robot or DEFAULT_ROBOT)
+        run = read_run(run_dir)
+        robot = load_robot_config(args.robot or run['robot_config'])
+        bag = Path(run['training_data']['bags'][0]['path'])
+        dataset = prepare_dataset(
+            load_recording(bag, robot), robot, preprocess_from_dict(run['preprocessing'])
+        )
+        test = slice(dataset.n_train, None)
+        q, v, a = dataset.q[test], dataset.v[test], dataset.a[test]
+        results = {}
+        for kind in run['kinds']:
+            model = load_model(run_dir / 'models' / kind, robot, kind)
+            timing = measure_inference(
+                model, q, v, a, calls=args.calls, repeats=3, latency_threads=args.threads
+            )
+            results[kind] = {
+                'median_ms': 1e3 * timing['latency_single_sample_median_s'],
+                'p99_ms': 1e3 * timing['latency_single_sample_p99_s'],
+                'batched_us_per_sample': 1e6 * timing['inference_seconds_per_sample'],
+                'window_samples': timing['latency_window_samples'],
+            }
+        emit(
+            {
+                'benchmark': 'inference_latency',
+                'run': str(args.run) if args.run else 'quick set (2 epochs, 60 s twin bag)',
+                'calls': args.calls,
+                'latency_threads': args.threads,
+                'batched_threads': torch.get_num_threads(),
+                'ipo_period_ms': 1e3 * robot.ipo_period_s,
+                'models': results,
+            }
+        )
+
+
+if __name__ == '__main__':
+    main()

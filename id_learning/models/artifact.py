@@ -1,0 +1,148 @@
+"""Model artifacts: one folder per model with safetensors weights and JSON metadata. No pickle.
+
+Loading checks that the file is what it claims (format, kind, tensor names and shapes) and that
+it belongs to the robot it is used with (name, joints and order, URDF hash, drives, units).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from safetensors import SafetensorError
+from safetensors.numpy import load_file, save_file
+
+from id_learning import __version__
+from id_learning.errors import CheckpointError
+from id_learning.robot.config import RobotConfig
+
+__all__ = [
+    'ARTIFACT_FORMAT',
+    'METADATA_FILE',
+    'UNITS',
+    'WEIGHTS_FILE',
+    'read_artifact',
+    'robot_fingerprint',
+    'write_artifact',
+]
+
+ARTIFACT_FORMAT = 'id_learning.model/1'
+METADATA_FILE = 'model.json'
+WEIGHTS_FILE = 'weights.safetensors'
+UNITS = {'q': 'rad', 'v': 'rad/s', 'a': 'rad/s^2', 'tau': 'N*m joint side', 'current': 'A'}
+
+
+def robot_fingerprint(robot: RobotConfig) -> dict[str, Any]:
+    """What ties a model to a robot: name, joints in order, URDF hash, drives."""
+    return {
+        'name': robot.name,
+        'joints': list(robot.joints),
+        'urdf_sha256': robot.urdf_sha256(),
+        'drives': {
+            'gear_ratio': robot.drives.gear_ratio.tolist(),
+            'torque_constant_nm_per_a': robot.drives.torque_constant.tolist(),
+            'rotor_inertia_motor_side_kgm2': robot.drives.rotor_inertia.tolist(),
+        },
+    }
+
+
+def _git_commit() -> str | None:
+    try:
+        result = subprocess.run(
+            ['git', 'rev-parse', 'HEAD'],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            timeout=5,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return result.stdout.strip() or None
+
+
+def write_artifact(
+    folder: Path,
+    kind: str,
+    robot: RobotConfig,
+    tensors: dict[str, np.ndarray],
+    metadata: dict[str, Any],
+) -> Path:
+    """Write ``weights.safetensors`` and ``model.json`` into ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    contiguous = {name: np.ascontiguousarray(value) for name, value in tensors.items()}
+    save_file(contiguous, str(folder / WEIGHTS_FILE))
+    document = {
+        'format': ARTIFACT_FORMAT,
+        'kind': kind,
+        'robot': robot_fingerprint(robot),
+        'units': UNITS,
+        'tensors': {name: list(value.shape) for name, value in contiguous.items()},
+        'weights_sha256': hashlib.sha256((folder / WEIGHTS_FILE).read_bytes()).hexdigest(),
+        'package_version': __version__,
+        'git_commit': _git_commit(),
+        **metadata,
+    }
+    (folder / METADATA_FILE).write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
+    return folder
+
+
+def _check_robot(saved: dict[str, Any], robot: RobotConfig, folder: Path) -> None:
+    current = robot_fingerprint(robot)
+    if saved.get('joints') != current['joints']:
+        raise CheckpointError(
+            f'{folder}: model joints {saved.get("joints")} do not match robot {robot.name} '
+            f'joints {current["joints"]} (names and order must agree)'
+        )
+    for key in ('name', 'urdf_sha256'):
+        if saved.get(key) != current[key]:
+            raise CheckpointError(
+                f'{folder}: model was trained for robot {key} {saved.get(key)!r}, '
+                f'not {current[key]!r}'
+            )
+    for key, values in current['drives'].items():
+        if not np.allclose(saved.get('drives', {}).get(key, []), values, rtol=1e-12, atol=0):
+            raise CheckpointError(f'{folder}: drive parameter {key} differs from the robot config')
+
+
+def read_artifact(
+    folder: Path, robot: RobotConfig, kind: str | None = None
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Read and verify an artifact; returns (metadata, tensors).
+
+    Raises:
+        CheckpointError: missing files, wrong format or kind, a tensor list or hash that does not
+            match the metadata, wrong units, or a robot/joint/drive mismatch.
+    """
+    folder = Path(folder)
+    meta_path, weights_path = folder / METADATA_FILE, folder / WEIGHTS_FILE
+    if not meta_path.is_file() or not weights_path.is_file():
+        raise CheckpointError(
+            f'{folder}: not a model artifact (needs {METADATA_FILE} and {WEIGHTS_FILE})'
+        )
+    try:
+        metadata = json.loads(meta_path.read_text(encoding='utf-8'))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise CheckpointError(f'{meta_path}: not valid JSON: {err}') from err
+    if not isinstance(metadata, dict) or metadata.get('format') != ARTIFACT_FORMAT:
+        raise CheckpointError(f'{meta_path}: format is not {ARTIFACT_FORMAT!r}')
+    if kind is not None and metadata.get('kind') != kind:
+        raise CheckpointError(f'{folder}: holds a {metadata.get("kind")!r} model, not {kind!r}')
+    if metadata.get('units') != UNITS:
+        raise CheckpointError(f'{meta_path}: units {metadata.get("units")} differ from {UNITS}')
+    digest = hashlib.sha256(weights_path.read_bytes()).hexdigest()
+    if digest != metadata.get('weights_sha256'):
+        raise CheckpointError(f'{weights_path}: contents do not match the hash in {METADATA_FILE}')
+    try:
+        tensors = load_file(str(weights_path))
+    except (SafetensorError, OSError, ValueError) as err:
+        raise CheckpointError(f'{weights_path}: not a valid safetensors file: {err}') from err
+    shapes = {name: list(value.shape) for name, value in tensors.items()}
+    if shapes != metadata.get('tensors'):
+        raise CheckpointError(f'{weights_path}: tensors {shapes} differ from the metadata')
+    _check_robot(metadata.get('robot', {}), robot, folder)
+    return metadata, tensors

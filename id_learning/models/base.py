@@ -1,0 +1,97 @@
+"""The one interface every inverse-dynamics model implements, and its torque decomposition.
+
+Arrays are (B, n) in the robot's joint order: q [rad], v [rad/s], a [rad/s^2] -> tau [N*m],
+joint side; the torque is the model's target (tau_u from currents, or the measured joint torque).
+Models follow the estimator contract: the constructor stores settings and does no I/O, fit()
+returns self, fitted state lives in attributes ending in ``_``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar, Self
+
+import numpy as np
+
+from id_learning.models.data import TrainingData
+from id_learning.robot.config import RobotConfig
+
+__all__ = ['InverseDynamicsModel', 'ModelConfig', 'TorqueComponents']
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Base of the models' frozen configs; each subclass sets ``kind`` to its registry name."""
+
+    kind: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready hyper-parameters."""
+        return {item.name: getattr(self, item.name) for item in fields(self)}
+
+
+@dataclass(frozen=True, eq=False)
+class TorqueComponents:
+    """A model's torque split into physical parts, each (B, n) [N*m] or None if not separable.
+
+    ``total`` always equals the model's prediction; the parts that are not None sum to it.
+    """
+
+    total: np.ndarray
+    inertial: np.ndarray | None = None
+    coriolis: np.ndarray | None = None
+    gravity: np.ndarray | None = None
+    rotor_inertia: np.ndarray | None = None
+    friction: np.ndarray | None = None
+    residual: np.ndarray | None = None
+
+    def parts(self) -> dict[str, np.ndarray]:
+        """The parts that the model separates, by name."""
+        return {
+            item.name: getattr(self, item.name)
+            for item in fields(self)
+            if item.name != 'total' and getattr(self, item.name) is not None
+        }
+
+
+class InverseDynamicsModel(ABC):
+    """Predict the joint-side torque of a robot from (q, v, a)."""
+
+    kind: ClassVar[str]
+    #: Sequence models predict from windows of past samples: predict() takes a contiguous run.
+    is_sequence_model: ClassVar[bool] = False
+
+    def __init__(self, config: ModelConfig, robot: RobotConfig) -> None:
+        """Store the settings; no I/O, no fitting."""
+        self.config = config
+        self.robot = robot
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Joint names, the column order of every array."""
+        return self.robot.joints
+
+    @abstractmethod
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        """Fit on the training part of ``data`` (its tail is the validation part)."""
+
+    @abstractmethod
+    def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Torque (B, n) [N*m] for states (B, n); sequence models take a contiguous run."""
+
+    def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
+        """Split the prediction into physical parts; by default nothing is separable."""
+        return TorqueComponents(total=self.predict(q, v, a))
+
+    @abstractmethod
+    def state(self) -> dict[str, np.ndarray]:
+        """Fitted tensors to save (safetensors), by name."""
+
+    @abstractmethod
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        """Restore fitted tensors and the JSON-ready fitted values from ``fitted_metadata``."""
+
+    def fitted_metadata(self) -> dict[str, Any]:
+        """JSON-ready fitted values that are not tensors (scalers, identified parameters)."""
+        return {}

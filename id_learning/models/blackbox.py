@@ -1,0 +1,615 @@
+"""The study's black-box baselines: an MLP on (q, v, a) and an LSTM on windows of past samples.
+
+Both map physical inputs to the model's target torque [N*m]; the dataset's min-max scalers
+(fitted on the training part) are built into the networks as fixed buffers, so a network sees
+(q, v, a) on [-1, 1] and emits the torque on the target scaler's [-1, 1] scale. The loss is the
+study's normalised MSE: the squared error of each joint divided by that joint's half range.
+
+The settings shared by every network model (optimiser, early stopping, seed, device, row stride)
+live in :class:`NetworkConfig`; the Newtonian network in ``physics.py`` uses them too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal, Self, TypeVar
+
+import numpy as np
+import torch
+from torch import nn
+
+from id_learning.dataset.preprocess import MinMaxScaler
+from id_learning.errors import CheckpointError, ConfigError
+from id_learning.models.base import InverseDynamicsModel, ModelConfig
+from id_learning.models.data import TrainingData
+from id_learning.models.fitting import OptimConfig, TrainHistory, select_device, train_module
+from id_learning.models.torch_utils import (
+    ACTIVATIONS,
+    make_mlp,
+    normalised_mse,
+    to_numpy,
+    to_tensor,
+)
+from id_learning.robot.config import RobotConfig
+
+__all__ = [
+    'PREDICT_CHUNK',
+    'LstmConfig',
+    'LstmModel',
+    'MlpConfig',
+    'MlpModel',
+    'NetworkConfig',
+    'NormalisedLstm',
+    'NormalisedMlp',
+    'centre_and_half',
+    'check_kind',
+    'check_mlp_shape',
+    'load_module_state',
+    'load_scalers',
+    'module_state',
+    'predict_chunked',
+    'require_fitted',
+    'run_training',
+    'scalers_metadata',
+    'seeded',
+    'strided_rows',
+]
+
+_T = TypeVar('_T')
+DEVICES = ('auto', 'cpu', 'cuda')
+#: Samples per forward pass when predicting long runs (bounds memory, not results).
+PREDICT_CHUNK = 8192
+
+
+# -- configs -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class NetworkConfig(ModelConfig):
+    """Training settings shared by the network models.
+
+    Attributes:
+        learning_rate: Adam step size.
+        batch_size: samples (or windows) per mini-batch.
+        max_epochs: upper bound on epochs.
+        patience: stop after this many epochs without a better validation loss.
+        weight_decay: Adam's L2 penalty.
+        seed: seeds the initial weights and the batch order.
+        max_seconds: wall-clock budget of the fit [s]; None for none.
+        stride: use every stride-th row of the fit and validation parts. The data are low-pass
+            filtered at <= 1.2 Hz and sampled at 125 Hz, so neighbouring rows carry almost the
+            same information: striding buys a proportional speed-up for little accuracy.
+        device: 'auto' (CUDA when available), 'cpu' or 'cuda'; prediction always runs on the CPU.
+    """
+
+    learning_rate: float = 1e-3
+    batch_size: int = 256
+    max_epochs: int = 300
+    patience: int = 25
+    weight_decay: float = 0.0
+    seed: int = 0
+    max_seconds: float | None = None
+    stride: int = 4
+    device: str = 'auto'
+
+    def __post_init__(self) -> None:
+        """Check ranges, naming the key."""
+        self.optim()  # OptimConfig checks its own keys
+        if self.stride < 1:
+            raise ConfigError(f'{self.kind}: stride must be >= 1, got {self.stride}')
+        if self.device not in DEVICES:
+            raise ConfigError(f'{self.kind}: device must be one of {DEVICES}, got {self.device!r}')
+        if self.max_seconds is not None and self.max_seconds <= 0:
+            raise ConfigError(
+                f'{self.kind}: max_seconds must be > 0 or None, got {self.max_seconds}'
+            )
+        if self.weight_decay < 0:
+            raise ConfigError(f'{self.kind}: weight_decay must be >= 0, got {self.weight_decay}')
+
+    def optim(self) -> OptimConfig:
+        """The optimiser settings of train_module."""
+        return OptimConfig(
+            learning_rate=self.learning_rate,
+            batch_size=self.batch_size,
+            max_epochs=self.max_epochs,
+            patience=self.patience,
+            weight_decay=self.weight_decay,
+            seed=self.seed,
+            max_seconds=self.max_seconds,
+        )
+
+
+def check_kind(config: ModelConfig, kind: str) -> None:
+    """Refuse a config whose ``kind`` is not its class's registry name.
+
+    Raises:
+        ConfigError: names the class, the expected and the given kind.
+    """
+    if config.kind != kind:
+        raise ConfigError(f'{type(config).__name__}.kind must be {kind!r}, got {config.kind!r}')
+
+
+def check_mlp_shape(config: ModelConfig, width: int, depth: int, activation: str) -> None:
+    """Refuse an impossible MLP shape, naming the key.
+
+    Raises:
+        ConfigError: width or depth < 1, or an unknown activation.
+    """
+    if width < 1 or depth < 1:
+        raise ConfigError(f'{config.kind}: width and depth must be >= 1, got {width}, {depth}')
+    if activation not in ACTIVATIONS:
+        raise ConfigError(
+            f'{config.kind}: activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}'
+        )
+
+
+@dataclass(frozen=True)
+class MlpConfig(NetworkConfig):
+    """The study's MLP baseline: (q, v, a) -> tau through ``depth`` hidden layers.
+
+    Attributes:
+        width: units per hidden layer (study: 64).
+        depth: hidden layers (study: 2).
+        activation: hidden activation (study: tanh).
+    """
+
+    kind: Literal['mlp'] = 'mlp'
+    width: int = 64
+    depth: int = 2
+    activation: str = 'tanh'
+    # On the shipped bag (36k fit rows) an epoch at stride 2 takes ~0.15 s on one core; without
+    # weight decay the validation loss bottoms out after ~10 epochs and the test error is ~15 %
+    # higher (mean normalised RMSE 0.23 -> 0.21 with 1e-3, over two seeds).
+    stride: int = 2
+    weight_decay: float = 1e-3
+
+    def __post_init__(self) -> None:
+        """Check ranges, naming the key."""
+        check_kind(self, 'mlp')
+        super().__post_init__()
+        check_mlp_shape(self, self.width, self.depth, self.activation)
+
+
+@dataclass(frozen=True)
+class LstmConfig(NetworkConfig):
+    """The study's LSTM baseline: windows of ``sequence_length`` samples -> the last torque.
+
+    Attributes:
+        hidden_size: LSTM units per layer (study: 128).
+        num_layers: stacked LSTM layers (study: 2).
+        sequence_length: samples per window, at the IPO rate (study: 20).
+    """
+
+    kind: Literal['lstm'] = 'lstm'
+    hidden_size: int = 128
+    num_layers: int = 2
+    sequence_length: int = 20
+    # A window costs ~1.3 ms of one core per training step: at stride 16 an epoch of the shipped
+    # bag (2.3k windows) takes ~2-3 s, and 30 epochs reach the accuracy that stride 8 reaches in
+    # 60 (mean normalised test RMSE 0.20; 0.22 without weight decay, which overfits by epoch 4).
+    stride: int = 16
+    learning_rate: float = 3e-3
+    weight_decay: float = 1e-3
+    max_epochs: int = 30
+    patience: int = 10
+
+    def __post_init__(self) -> None:
+        """Check ranges, naming the key."""
+        check_kind(self, 'lstm')
+        super().__post_init__()
+        if self.hidden_size < 1 or self.num_layers < 1:
+            raise ConfigError(
+                f'lstm: hidden_size and num_layers must be >= 1, '
+                f'got {self.hidden_size}, {self.num_layers}'
+            )
+        if self.sequence_length < 1:
+            raise ConfigError(f'lstm: sequence_length must be >= 1, got {self.sequence_length}')
+
+
+# -- helpers -------------------------------------------------------------------------------------
+def seeded(seed: int, build: Callable[[], _T]) -> _T:
+    """Call ``build`` (which draws initial weights) with torch's RNG seeded, then restore it.
+
+    Module constructors draw from torch's global generator; forking it keeps library code from
+    changing the caller's random state while making the initial weights a function of ``seed``.
+    """
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return build()
+
+
+def strided_rows(rows: slice, stride: int, first: int = 0) -> np.ndarray:
+    """Every ``stride``-th row index of a contiguous slice, not before ``first``."""
+    start = max(rows.start or 0, first)
+    return np.arange(start, rows.stop, stride)
+
+
+def centre_and_half(scaler: MinMaxScaler) -> tuple[np.ndarray, np.ndarray]:
+    """A fitted scaler's centre and half range per column (z = (x - centre) / half)."""
+    half = scaler.scale()
+    return scaler.inverse_transform(np.zeros_like(half)), half
+
+
+class _Normalised(nn.Module):
+    """Fixed affine maps around a network: physical inputs in, physical outputs out.
+
+    The maps are non-persistent buffers, rebuilt from the scalers in the fitted metadata, so that
+    ``state_dict()`` holds the trained weights only.
+    """
+
+    input_centre: torch.Tensor
+    input_half: torch.Tensor
+    output_centre: torch.Tensor
+    output_half: torch.Tensor
+
+    def set_scaling(
+        self,
+        inputs: tuple[np.ndarray, np.ndarray],
+        outputs: tuple[np.ndarray, np.ndarray],
+    ) -> None:
+        """Set (centre, half) of the inputs and of the outputs, each (n_in,) / (n_out,)."""
+        for name, value in (
+            ('input_centre', inputs[0]),
+            ('input_half', inputs[1]),
+            ('output_centre', outputs[0]),
+            ('output_half', outputs[1]),
+        ):
+            self.register_buffer(name, to_tensor(value), persistent=False)
+
+
+class NormalisedMlp(_Normalised):
+    """An MLP between fixed input and output scalings; maps (B, n_in) to (B, n_out)."""
+
+    def __init__(self, n_in: int, n_out: int, width: int, depth: int, activation: str) -> None:
+        super().__init__()
+        self.net = make_mlp(n_in, n_out, width, depth, activation)
+        self.set_scaling((np.zeros(n_in), np.ones(n_in)), (np.zeros(n_out), np.ones(n_out)))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Outputs (B, n_out) in physical units for inputs (B, n_in) in physical units."""
+        z = (x - self.input_centre) / self.input_half
+        out: torch.Tensor = self.net(z) * self.output_half + self.output_centre
+        return out
+
+
+class NormalisedLstm(_Normalised):
+    """An LSTM with a linear head on its last step; maps windows (B, T, n_in) to (B, n_out)."""
+
+    def __init__(self, n_in: int, n_out: int, hidden_size: int, num_layers: int) -> None:
+        super().__init__()
+        self.lstm = nn.LSTM(n_in, hidden_size, num_layers=num_layers, batch_first=True)
+        self.head = nn.Linear(hidden_size, n_out)
+        self.set_scaling((np.zeros(n_in), np.ones(n_in)), (np.zeros(n_out), np.ones(n_out)))
+
+    def forward(self, windows: torch.Tensor) -> torch.Tensor:
+        """Torque (B, n_out) of each window's last sample; windows (B, T, n_in), oldest first."""
+        z = (windows - self.input_centre) / self.input_half
+        hidden, _ = self.lstm(z)
+        out: torch.Tensor = self.head(hidden[:, -1]) * self.output_half + self.output_centre
+        return out
+
+
+def module_state(module: nn.Module) -> dict[str, np.ndarray]:
+    """A module's weights as float32 numpy arrays, named like its state_dict keys."""
+    return {
+        name: value.detach().to('cpu').numpy().copy()
+        for name, value in module.state_dict().items()
+    }
+
+
+def load_module_state(module: nn.Module, tensors: dict[str, np.ndarray], kind: str) -> None:
+    """Load weights saved by module_state.
+
+    Raises:
+        CheckpointError: names or shapes differ from the module the hyper-parameters build.
+    """
+    expected = {name: tuple(value.shape) for name, value in module.state_dict().items()}
+    found = {name: tuple(np.shape(value)) for name, value in tensors.items()}
+    if expected != found:
+        raise CheckpointError(
+            f'{kind}: saved tensors {found} do not match the network its hyper-parameters '
+            f'build {expected}'
+        )
+    module.load_state_dict({name: torch.as_tensor(value) for name, value in tensors.items()})
+
+
+def scalers_metadata(**scalers: MinMaxScaler) -> dict[str, Any]:
+    """JSON-ready scalers by name."""
+    return {name: scaler.to_dict() for name, scaler in scalers.items()}
+
+
+def require_fitted(model: InverseDynamicsModel, value: object) -> None:
+    """Raise if a model has neither been fitted nor loaded.
+
+    Raises:
+        RuntimeError: ``value`` (the model's fitted network or parameters) is None.
+    """
+    if value is None:
+        raise RuntimeError(f'{model.kind} model is not fitted: call fit() or load_state() first')
+
+
+def run_training(
+    module: nn.Module,
+    loss_fn: Callable[..., torch.Tensor],
+    fit_tensors: list[torch.Tensor],
+    validation_tensors: list[torch.Tensor],
+    *,
+    config: NetworkConfig,
+    device: torch.device,
+    progress: bool,
+) -> TrainHistory:
+    """train_module on ``device``, leaving the module on the CPU in evaluation mode."""
+    module.to(device)
+    history = train_module(
+        module,
+        loss_fn,
+        fit_tensors,
+        validation_tensors,
+        config.optim(),
+        progress=progress,
+        description=config.kind,
+    )
+    module.to('cpu').eval()
+    return history
+
+
+def predict_chunked(module: nn.Module, inputs: np.ndarray | torch.Tensor) -> np.ndarray:
+    """A CPU module's outputs for inputs of any length, PREDICT_CHUNK samples per pass."""
+    with torch.inference_mode():
+        x = inputs if isinstance(inputs, torch.Tensor) else to_tensor(inputs)
+        if len(x) <= PREDICT_CHUNK:
+            return to_numpy(module(x))
+        return np.vstack(
+            [to_numpy(module(x[k : k + PREDICT_CHUNK])) for k in range(0, len(x), PREDICT_CHUNK)]
+        )
+
+
+def _inputs(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    return np.hstack([np.atleast_2d(q), np.atleast_2d(v), np.atleast_2d(a)])
+
+
+# -- MLP -----------------------------------------------------------------------------------------
+class MlpModel(InverseDynamicsModel):
+    """The study's MLP baseline: tau = MLP(q, v, a), each joint's torque on its [-1, 1] scale.
+
+    No physics and no memory: it separates no torque components.
+    """
+
+    kind: ClassVar[str] = 'mlp'
+
+    def __init__(self, config: MlpConfig, robot: RobotConfig) -> None:
+        """Store the settings; no I/O, no fitting."""
+        super().__init__(config, robot)
+        self.config: MlpConfig = config
+        self.network_: NormalisedMlp | None = None
+        self.input_scaler_: MinMaxScaler | None = None
+        self.target_scaler_: MinMaxScaler | None = None
+        self.history_: TrainHistory | None = None
+
+    def _build(self, input_scaler: MinMaxScaler, target_scaler: MinMaxScaler) -> NormalisedMlp:
+        n, c = self.robot.n_joints, self.config
+        network = seeded(c.seed, lambda: NormalisedMlp(3 * n, n, c.width, c.depth, c.activation))
+        network.set_scaling(centre_and_half(input_scaler), centre_and_half(target_scaler))
+        self.input_scaler_, self.target_scaler_ = input_scaler, target_scaler
+        return network
+
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        """Fit on the training part of ``data`` with early stopping on its validation tail."""
+        ds, c = data.dataset, self.config
+        device = select_device(c.device)
+        network = self._build(ds.input_scaler, ds.target_scaler)
+        inputs = _inputs(ds.q, ds.v, ds.a)
+        scale = to_tensor(ds.target_scaler.scale(), device)
+
+        def part(rows: slice) -> list[torch.Tensor]:
+            index = strided_rows(rows, c.stride)
+            return [to_tensor(inputs[index], device), to_tensor(ds.tau[index], device)]
+
+        def loss(x: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+            return normalised_mse(network(x), tau, scale)
+
+        self.history_ = run_training(
+            network,
+            loss,
+            part(data.fit_rows),
+            part(data.validation_rows),
+            config=c,
+            device=device,
+            progress=progress,
+        )
+        self.network_ = network
+        return self
+
+    def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Torque (B, n) [N*m] for q, v, a (B, n) [rad, rad/s, rad/s^2]."""
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        return predict_chunked(self.network_, _inputs(q, v, a))
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The network's weights, named like its state_dict keys ('net.0.weight', ...)."""
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        return module_state(self.network_)
+
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        """Rebuild the network from the scalers in ``fitted`` and load its weights.
+
+        Raises:
+            CheckpointError: the scalers are missing or the tensors do not fit the config.
+        """
+        network = self._build(*load_scalers(fitted, ('input_scaler', 'target_scaler'), 'mlp'))
+        load_module_state(network, tensors, self.kind)
+        self.network_ = network.eval()
+
+    def fitted_metadata(self) -> dict[str, Any]:
+        """The input and target scalers, and a summary of the fit."""
+        require_fitted(self, self.input_scaler_)
+        assert self.input_scaler_ is not None
+        assert self.target_scaler_ is not None
+        out = scalers_metadata(input_scaler=self.input_scaler_, target_scaler=self.target_scaler_)
+        if self.history_ is not None:
+            out['training'] = self.history_.to_dict()
+        return out
+
+
+def load_scalers(
+    fitted: dict[str, Any], names: tuple[str, ...], kind: str
+) -> tuple[MinMaxScaler, ...]:
+    """The named scalers of a model's fitted metadata.
+
+    Raises:
+        CheckpointError: a scaler is missing or malformed.
+    """
+    missing = [name for name in names if name not in fitted]
+    if missing:
+        raise CheckpointError(f'{kind}: fitted metadata lacks {missing}; found {sorted(fitted)}')
+    try:
+        return tuple(MinMaxScaler.from_dict(fitted[name]) for name in names)
+    except (KeyError, TypeError, ValueError) as err:
+        raise CheckpointError(f'{kind}: invalid scaler in fitted metadata: {err}') from err
+
+
+# -- LSTM ----------------------------------------------------------------------------------------
+class LstmModel(InverseDynamicsModel):
+    """The study's LSTM baseline: the torque at a sample from the window of samples up to it.
+
+    A window is (T, 3n) with T = ``sequence_length`` (20, 160 ms at the 8 ms IPO rate): rows
+    [q, v, a] in physical units, oldest first, the last row the sample whose torque is wanted.
+    Each window is processed from a zero state; nothing is carried between windows.
+
+    ``predict(q, v, a)`` takes a contiguous run in time order (B, n) and returns one torque per
+    sample (B, n). The first T - 1 samples have fewer than T predecessors in the run; their
+    windows are padded at the front by repeating the run's first sample (as if the robot had
+    rested there). The online predictor calls ``predict_window`` with its own ring buffer.
+    """
+
+    kind: ClassVar[str] = 'lstm'
+    is_sequence_model: ClassVar[bool] = True
+
+    def __init__(self, config: LstmConfig, robot: RobotConfig) -> None:
+        """Store the settings; no I/O, no fitting."""
+        super().__init__(config, robot)
+        self.config: LstmConfig = config
+        self.network_: NormalisedLstm | None = None
+        self.input_scaler_: MinMaxScaler | None = None
+        self.target_scaler_: MinMaxScaler | None = None
+        self.history_: TrainHistory | None = None
+
+    @property
+    def sequence_length(self) -> int:
+        """Samples per window."""
+        return self.config.sequence_length
+
+    def _build(self, input_scaler: MinMaxScaler, target_scaler: MinMaxScaler) -> NormalisedLstm:
+        n, c = self.robot.n_joints, self.config
+        network = seeded(c.seed, lambda: NormalisedLstm(3 * n, n, c.hidden_size, c.num_layers))
+        network.set_scaling(centre_and_half(input_scaler), centre_and_half(target_scaler))
+        self.input_scaler_, self.target_scaler_ = input_scaler, target_scaler
+        return network
+
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        """Fit on windows ending in the training part, early stopping on its validation tail.
+
+        Window end positions are strided (``stride``); the windows themselves keep every sample.
+        Only complete windows are used: the first window ends at row T - 1. Validation windows
+        may start in the fit part (inputs only; their targets lie in the validation part).
+        """
+        ds, c = data.dataset, self.config
+        device = select_device(c.device)
+        network = self._build(ds.input_scaler, ds.target_scaler)
+        inputs = to_tensor(_inputs(ds.q, ds.v, ds.a), device)
+        offsets = torch.arange(1 - c.sequence_length, 1, device=device)
+        scale = to_tensor(ds.target_scaler.scale(), device)
+
+        def part(rows: slice) -> list[torch.Tensor]:
+            ends = strided_rows(rows, c.stride, first=c.sequence_length - 1)
+            return [
+                torch.as_tensor(ends, device=device),
+                to_tensor(ds.tau[ends], device),
+            ]
+
+        def loss(ends: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+            windows = inputs[ends[:, None] + offsets]  # (B, T, 3n)
+            return normalised_mse(network(windows), tau, scale)
+
+        self.history_ = run_training(
+            network,
+            loss,
+            part(data.fit_rows),
+            part(data.validation_rows),
+            config=c,
+            device=device,
+            progress=progress,
+        )
+        self.network_ = network
+        return self
+
+    def predict_windows(self, windows: np.ndarray) -> np.ndarray:
+        """Torque (B, n) [N*m] at the last sample of each window (B, T, 3n), physical units."""
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        windows = np.asarray(windows)
+        expected = (self.sequence_length, 3 * self.robot.n_joints)
+        if windows.ndim != 3 or windows.shape[1:] != expected:
+            raise ValueError(
+                f'expected windows of shape (B, {expected[0]}, {expected[1]}), got {windows.shape}'
+            )
+        if not len(windows):
+            return np.empty((0, self.robot.n_joints))
+        return predict_chunked(self.network_, windows)
+
+    def predict_window(self, window: np.ndarray) -> np.ndarray:
+        """Torque (n,) [N*m] at the last sample of a window (T, 3n): rows [q, v, a], oldest first.
+
+        Raises:
+            ValueError: the window is not (T, 3n).
+        """
+        window = np.asarray(window)
+        expected = (self.sequence_length, 3 * self.robot.n_joints)
+        if window.shape != expected:
+            raise ValueError(f'expected a window of shape {expected}, got {window.shape}')
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        with torch.inference_mode():
+            torque: np.ndarray = to_numpy(self.network_(to_tensor(window)[None]))[0]
+        return torque
+
+    def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Torque (B, n) [N*m] of each sample of a contiguous run q, v, a (B, n), in time order.
+
+        The first T - 1 windows are padded by repeating the run's first sample.
+        """
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        inputs = _inputs(q, v, a)
+        pad = np.repeat(inputs[:1], self.sequence_length - 1, axis=0)
+        padded = to_tensor(np.vstack([pad, inputs]))
+        # unfold: (B, 3n, T) views of consecutive rows; transpose to (B, T, 3n).
+        windows = padded.unfold(0, self.sequence_length, 1).transpose(1, 2)
+        return predict_chunked(self.network_, windows)
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The network's weights, named like its state_dict keys ('lstm.weight_ih_l0', ...)."""
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        return module_state(self.network_)
+
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        """Rebuild the network from the scalers in ``fitted`` and load its weights.
+
+        Raises:
+            CheckpointError: the scalers are missing or the tensors do not fit the config.
+        """
+        network = self._build(*load_scalers(fitted, ('input_scaler', 'target_scaler'), 'lstm'))
+        load_module_state(network, tensors, self.kind)
+        self.network_ = network.eval()
+
+    def fitted_metadata(self) -> dict[str, Any]:
+        """The input and target scalers, and a summary of the fit."""
+        require_fitted(self, self.input_scaler_)
+        assert self.input_scaler_ is not None
+        assert self.target_scaler_ is not None
+        out = scalers_metadata(input_scaler=self.input_scaler_, target_scaler=self.target_scaler_)
+        if self.history_ is not None:
+            out['training'] = self.history_.to_dict()
+        return out

@@ -1,0 +1,79 @@
+"""Training data shared by all models: the preprocessed dataset plus nominal physics features."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from id_learning.dataset.preprocess import Dataset
+from id_learning.robot.config import RobotConfig
+from id_learning.robot.dynamics import RigidBodyDynamics
+
+__all__ = ['PhysicsFeatures', 'TrainingData', 'nominal_rnea']
+
+
+def nominal_rnea(robot: RobotConfig, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """RNEA with the URDF's (manufacturer's) parameters, (B, n) [N*m]."""
+    return RigidBodyDynamics.from_config(robot).rnea(q, v, a)
+
+
+@dataclass(frozen=True, eq=False)
+class PhysicsFeatures:
+    """Nominal-model quantities per sample, computed once and shared by the physics models.
+
+    Attributes:
+        rnea: (N, n) URDF rigid-body torque [N*m].
+        rotor_basis: (N, n) gear_ratio**2 * a: rotor torque per unit motor-side inertia.
+    """
+
+    rnea: np.ndarray
+    rotor_basis: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class TrainingData:
+    """A preprocessed dataset with its robot, split into fit / validation / test parts.
+
+    The training part (the first ``dataset.n_train`` samples) is split again in time: its last
+    ``validation_fraction`` is the validation part used for early stopping.
+    """
+
+    dataset: Dataset
+    robot: RobotConfig
+    validation_fraction: float = 0.15
+
+    @cached_property
+    def physics(self) -> PhysicsFeatures:
+        """Nominal physics features of every sample (computed on first use)."""
+        ds = self.dataset
+        return PhysicsFeatures(
+            rnea=nominal_rnea(self.robot, ds.q, ds.v, ds.a),
+            rotor_basis=ds.a * self.robot.drives.gear_ratio**2,
+        )
+
+    @property
+    def n_fit(self) -> int:
+        """Samples used for fitting: the training part minus its validation tail."""
+        return round(self.dataset.n_train * (1.0 - self.validation_fraction))
+
+    @property
+    def fit_rows(self) -> slice:
+        """Rows of the fitting part."""
+        return slice(0, self.n_fit)
+
+    @property
+    def validation_rows(self) -> slice:
+        """Rows of the validation part (tail of the training part)."""
+        return slice(self.n_fit, self.dataset.n_train)
+
+    @property
+    def train_rows(self) -> slice:
+        """Rows of the whole training part (fit + validation)."""
+        return slice(0, self.dataset.n_train)
+
+    @property
+    def test_rows(self) -> slice:
+        """Rows of the test part."""
+        return slice(self.dataset.n_train, None)

@@ -1,0 +1,443 @@
+"""Newtonian models: the URDF's rigid-body dynamics (RNEA) plus drive terms identified from data.
+
+Both models start from the manufacturer's model, RNEA_URDF(q, v, a), and the rotor inertia seen
+through the gearbox, I_M * gear_ratio**2 * a (I_M motor side [kg*m^2]):
+
+- RNEA+LQ (``rnea_lq``) fits I_M and a friction model per joint by linear least squares;
+- RNEA+MLP (``rnea_mlp``, the study's Newtonian network) keeps the datasheet I_M and learns the
+  rest with an MLP h(q, v).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, ClassVar, Literal, Self
+
+import numpy as np
+import torch
+
+from id_learning.dataset.preprocess import MinMaxScaler, lowpass
+from id_learning.errors import CheckpointError, ConfigError
+from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
+from id_learning.models.blackbox import (
+    NetworkConfig,
+    NormalisedMlp,
+    centre_and_half,
+    check_kind,
+    check_mlp_shape,
+    load_module_state,
+    load_scalers,
+    module_state,
+    predict_chunked,
+    require_fitted,
+    run_training,
+    scalers_metadata,
+    seeded,
+    strided_rows,
+)
+from id_learning.models.data import TrainingData
+from id_learning.models.fitting import TrainHistory, select_device
+from id_learning.models.torch_utils import normalised_mse, to_tensor
+from id_learning.robot.config import RobotConfig
+from id_learning.robot.dynamics import RigidBodyDynamics
+
+__all__ = [
+    'FRICTION_MODELS',
+    'RneaLqConfig',
+    'RneaLqModel',
+    'RneaMlpConfig',
+    'RneaMlpModel',
+]
+
+_LOG = logging.getLogger(__name__)
+
+FRICTION_MODELS = ('viscous', 'viscous_coulomb', 'viscous_coulomb_offset')
+#: The RNEA+LQ parameters per joint, in regressor column order, with their units.
+LQ_PARAMETERS = {
+    'rotor_inertia_motor_side': 'kg*m^2',
+    'viscous': 'N*m*s/rad',
+    'coulomb': 'N*m',
+    'offset': 'N*m',
+}
+
+
+class _NominalPhysics(InverseDynamicsModel):
+    """The URDF's rigid-body dynamics, built on first use (the constructor does no I/O)."""
+
+    @cached_property
+    def dynamics(self) -> RigidBodyDynamics:
+        """The nominal (URDF) rigid-body model of the robot."""
+        return RigidBodyDynamics.from_config(self.robot)
+
+    def rigid_body_parts(
+        self, q: np.ndarray, v: np.ndarray, a: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """M(q) a, C(q, v) v and g(q), each (B, n) [N*m]; they sum to RNEA(q, v, a)."""
+        mass = self.dynamics.mass_matrix(q)
+        return {
+            'inertial': np.einsum('bij,bj->bi', mass, a),
+            'coriolis': self.dynamics.coriolis(q, v),
+            'gravity': self.dynamics.gravity(q),
+        }
+
+
+def _states(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, ...]:
+    return tuple(np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, v, a))
+
+
+# -- RNEA + least squares ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RneaLqConfig(ModelConfig):
+    """RNEA+LQ settings.
+
+    Attributes:
+        friction: per-joint friction model fitted with the rotor inertia:
+            'viscous' (the study's: theta_D * v), 'viscous_coulomb' (+ F_c * tanh(v / v_eps)) or
+            'viscous_coulomb_offset' (+ a constant per joint).
+        coulomb_velocity: v_eps of the Coulomb term [rad/s], the speed below which friction
+            turns smoothly through zero.
+        filter_regressors: low-pass each regressor column (and the RNEA torque) with the filter
+            that produced the labels before solving. The labels are zero-phase filtered torques,
+            so a column must see the same filter to be comparable: without it, the filter's smear
+            of the Coulomb step at every velocity reversal biases F_c and theta_D by 10-40 %, and
+            the filter's attenuation of the gravity torque's harmonics (joints 2 and 3, 0.3 Hz)
+            leaks into the rotor inertia. Prediction always uses the unfiltered model. The
+            dataset's rows must be one contiguous recording, as prepare_dataset makes them.
+    """
+
+    kind: Literal['rnea_lq'] = 'rnea_lq'
+    friction: str = 'viscous'
+    coulomb_velocity: float = 0.01
+    filter_regressors: bool = True
+
+    def __post_init__(self) -> None:
+        """Check ranges, naming the key."""
+        check_kind(self, 'rnea_lq')
+        if self.friction not in FRICTION_MODELS:
+            raise ConfigError(
+                f'rnea_lq: friction must be one of {FRICTION_MODELS}, got {self.friction!r}'
+            )
+        if not self.coulomb_velocity > 0:
+            raise ConfigError(
+                f'rnea_lq: coulomb_velocity must be > 0 rad/s, got {self.coulomb_velocity}'
+            )
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The per-joint parameters this friction model fits, in regressor column order."""
+        names: tuple[str, ...] = ('rotor_inertia_motor_side', 'viscous')
+        if self.friction != 'viscous':
+            names += ('coulomb',)
+        if self.friction == 'viscous_coulomb_offset':
+            names += ('offset',)
+        return names
+
+
+class RneaLqModel(_NominalPhysics):
+    """The study's RNEA+LQ: the URDF model plus per-joint drive terms fitted by least squares.
+
+    Per joint j, on the training part (fit + validation rows):
+
+        tau_j = RNEA_URDF(q, v, a)_j + I_M,j * gear_ratio_j**2 * a_j + friction_j(v_j)
+        friction_j = theta_D,j * v_j [+ F_c,j * tanh(v_j / v_eps)] [+ offset_j]
+
+    The study's viscous-only friction leaves most friction unexplained: real gearboxes add
+    Coulomb (and Stribeck, load-dependent) friction that a linear viscous term cannot follow,
+    so 'viscous_coulomb' or 'viscous_coulomb_offset' are offered as options. The rigid-body
+    parameters stay the URDF's; nothing here corrects a wrong mass or centre of mass.
+
+    Components: inertial M(q) a, coriolis C(q, v) v and gravity g(q) of the nominal model,
+    rotor_inertia I_M N**2 a, friction the velocity-dependent terms; the constant offset, which
+    cannot be told apart from a current-sensor offset, is the residual (None without it).
+    """
+
+    kind: ClassVar[str] = 'rnea_lq'
+
+    def __init__(self, config: RneaLqConfig, robot: RobotConfig) -> None:
+        """Store the settings; no I/O, no fitting."""
+        super().__init__(config, robot)
+        self.config: RneaLqConfig = config
+        self.parameters_: dict[str, np.ndarray] | None = None
+        self.training_rmse_: np.ndarray | None = None
+
+    def _columns(self, v: np.ndarray, rotor_basis: np.ndarray) -> dict[str, np.ndarray]:
+        """Regressor columns (N, n) per parameter: tau_model = rnea + sum(theta * column)."""
+        names = self.config.parameter_names
+        columns = {'rotor_inertia_motor_side': rotor_basis, 'viscous': v}
+        if 'coulomb' in names:
+            columns['coulomb'] = np.tanh(v / self.config.coulomb_velocity)
+        if 'offset' in names:
+            columns['offset'] = np.ones_like(v)
+        return columns
+
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        """Solve the per-joint least-squares problems on the training part of ``data``."""
+        del progress  # a few small solves
+        ds, physics, rows = data.dataset, data.physics, data.train_rows
+        columns = self._columns(ds.v, physics.rotor_basis)
+        rnea = physics.rnea
+        if self.config.filter_regressors:
+            # Filter the whole recording, as preprocessing filtered the labels, then take the
+            # training rows: a slice filtered alone would add start-up transients at its ends.
+            def label_filter(x: np.ndarray) -> np.ndarray:
+                return lowpass(x, ds.cutoff_hz, ds.period_s, ds.filter_order)
+
+            rnea = label_filter(rnea)
+            columns = {
+                name: column if name == 'offset' else label_filter(column)
+                for name, column in columns.items()
+            }
+        target = ds.tau[rows] - rnea[rows]
+        names = list(columns)
+        n = self.robot.n_joints
+        theta = np.zeros((len(names), n))
+        rmse = np.zeros(n)
+        for j in range(n):
+            regressor = np.stack([columns[name][rows, j] for name in names], axis=1)
+            # Scale columns to unit RMS so that rotor (~1e4 * a) and offset columns are
+            # equally well conditioned.
+            norm = np.sqrt(np.mean(regressor**2, axis=0))
+            norm = np.where(norm > 0, norm, 1.0)
+            solution, *_ = np.linalg.lstsq(regressor / norm, target[:, j], rcond=None)
+            theta[:, j] = solution / norm
+            rmse[j] = np.sqrt(np.mean((regressor @ theta[:, j] - target[:, j]) ** 2))
+        self.parameters_ = {name: np.zeros(n) for name in LQ_PARAMETERS}
+        for name, values in zip(names, theta, strict=True):
+            self.parameters_[name] = values
+        self.training_rmse_ = rmse
+        _LOG.info('rnea_lq: %s, training RMSE %s N*m', self.parameters_, np.round(rmse, 3))
+        return self
+
+    def _parameters(self) -> dict[str, np.ndarray]:
+        require_fitted(self, self.parameters_)
+        assert self.parameters_ is not None
+        return self.parameters_
+
+    def _drive_terms(self, v: np.ndarray, a: np.ndarray) -> dict[str, np.ndarray]:
+        """Rotor inertia, velocity-dependent friction and offset torques, (B, n) [N*m]."""
+        p = self._parameters()
+        gear = self.robot.drives.gear_ratio
+        friction = p['viscous'] * v
+        if 'coulomb' in self.config.parameter_names:
+            friction = friction + p['coulomb'] * np.tanh(v / self.config.coulomb_velocity)
+        return {
+            'rotor_inertia': p['rotor_inertia_motor_side'] * gear**2 * a,
+            'friction': friction,
+            'offset': np.broadcast_to(p['offset'], v.shape),
+        }
+
+    def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Torque (B, n) [N*m] for q, v, a (B, n) [rad, rad/s, rad/s^2]."""
+        q, v, a = _states(q, v, a)
+        drive = self._drive_terms(v, a)
+        rigid_body = self.dynamics.rnea(q, v, a)
+        torque: np.ndarray = (
+            rigid_body + drive['rotor_inertia'] + drive['friction'] + drive['offset']
+        )
+        return torque
+
+    def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
+        """Nominal rigid-body parts, fitted rotor inertia and friction; offset as residual."""
+        q, v, a = _states(q, v, a)
+        drive = self._drive_terms(v, a)
+        has_offset = 'offset' in self.config.parameter_names
+        return TorqueComponents(
+            total=self.predict(q, v, a),
+            **self.rigid_body_parts(q, v, a),
+            rotor_inertia=drive['rotor_inertia'],
+            friction=drive['friction'],
+            residual=drive['offset'].copy() if has_offset else None,
+        )
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The fitted parameters, (n,) each, named as in LQ_PARAMETERS (zeros where not fitted)."""
+        return {name: values.copy() for name, values in self._parameters().items()}
+
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        """Restore the fitted parameters.
+
+        Raises:
+            CheckpointError: a parameter is missing or has the wrong shape.
+        """
+        n = self.robot.n_joints
+        shapes = {name: np.shape(value) for name, value in tensors.items()}
+        if shapes != dict.fromkeys(LQ_PARAMETERS, (n,)):
+            raise CheckpointError(
+                f'rnea_lq: expected tensors {sorted(LQ_PARAMETERS)} of shape ({n},), got {shapes}'
+            )
+        self.parameters_ = {name: np.asarray(tensors[name], dtype=float) for name in LQ_PARAMETERS}
+        rmse = fitted.get('training_rmse_nm')
+        self.training_rmse_ = None if rmse is None else np.asarray(rmse, dtype=float)
+
+    def fitted_metadata(self) -> dict[str, Any]:
+        """The identified parameters per joint with their units, and the fit's RMSE.
+
+        ``training_rmse_nm`` is the least-squares residual on the training rows, measured on the
+        filtered regressors when ``filter_regressors`` is set.
+        """
+        p = self._parameters()
+        out: dict[str, Any] = {
+            'parameters': {name: p[name].tolist() for name in self.config.parameter_names},
+            'units': {name: LQ_PARAMETERS[name] for name in self.config.parameter_names},
+        }
+        if self.training_rmse_ is not None:
+            out['training_rmse_nm'] = self.training_rmse_.tolist()
+        return out
+
+
+# -- RNEA + MLP ----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RneaMlpConfig(NetworkConfig):
+    """The Newtonian network's settings: the MLP h(q, v) and its training.
+
+    Attributes:
+        width: units per hidden layer of h.
+        depth: hidden layers of h.
+        activation: hidden activation of h.
+    """
+
+    kind: Literal['rnea_mlp'] = 'rnea_mlp'
+    width: int = 64
+    depth: int = 2
+    activation: str = 'tanh'
+    stride: int = 2
+
+    def __post_init__(self) -> None:
+        """Check ranges, naming the key."""
+        check_kind(self, 'rnea_mlp')
+        super().__post_init__()
+        check_mlp_shape(self, self.width, self.depth, self.activation)
+
+
+class RneaMlpModel(_NominalPhysics):
+    """The study's Newtonian network: tau = RNEA_URDF(q, v, a) + I_M N**2 a + h(q, v).
+
+    The physics parameters are fixed (URDF and the robot config's datasheet rotor inertia); the
+    MLP h learns the remainder from (q, v), both scaled with the dataset's input scaler. Its
+    output is scaled by the training residual's own range, and it is trained on the study's
+    normalised MSE of the whole torque (each joint divided by the target's half range).
+
+    Components: the nominal rigid-body parts and the datasheet rotor inertia, then h split in
+    two. friction is h's velocity-dependent part, h(q, v) - h(q, 0): the dissipation the study
+    attributes h to, plus any velocity-dependent model error. residual is h(q, 0), the part that
+    does not vanish at rest: gravity and payload errors, offsets. Calling all of h friction would
+    attribute those to friction; h takes q as well, and learns them too.
+    """
+
+    kind: ClassVar[str] = 'rnea_mlp'
+
+    def __init__(self, config: RneaMlpConfig, robot: RobotConfig) -> None:
+        """Store the settings; no I/O, no fitting."""
+        super().__init__(config, robot)
+        self.config: RneaMlpConfig = config
+        self.network_: NormalisedMlp | None = None
+        self.state_scaler_: MinMaxScaler | None = None
+        self.residual_scaler_: MinMaxScaler | None = None
+        self.history_: TrainHistory | None = None
+
+    def _build(self, state_scaler: MinMaxScaler, residual_scaler: MinMaxScaler) -> NormalisedMlp:
+        n, c = self.robot.n_joints, self.config
+        network = seeded(c.seed, lambda: NormalisedMlp(2 * n, n, c.width, c.depth, c.activation))
+        network.set_scaling(centre_and_half(state_scaler), centre_and_half(residual_scaler))
+        self.state_scaler_, self.residual_scaler_ = state_scaler, residual_scaler
+        return network
+
+    def physics_torque(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """RNEA_URDF(q, v, a) + I_M N**2 a with datasheet I_M: (B, n) [N*m]."""
+        q, v, a = _states(q, v, a)
+        torque: np.ndarray = self.dynamics.rnea(q, v, a) + self._rotor_torque(a)
+        return torque
+
+    def _rotor_torque(self, a: np.ndarray) -> np.ndarray:
+        drives = self.robot.drives
+        torque: np.ndarray = drives.rotor_inertia * drives.gear_ratio**2 * a
+        return torque
+
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        """Fit h on the training residual, with early stopping on the validation tail."""
+        ds, c, n = data.dataset, self.config, self.robot.n_joints
+        device = select_device(c.device)
+        physics = data.physics.rnea + data.physics.rotor_basis * self.robot.drives.rotor_inertia
+        residual = ds.tau - physics
+        assert ds.input_scaler.low_ is not None
+        assert ds.input_scaler.high_ is not None
+        state_scaler = MinMaxScaler(ds.input_scaler.low_[: 2 * n], ds.input_scaler.high_[: 2 * n])
+        network = self._build(state_scaler, MinMaxScaler().fit(residual[data.train_rows]))
+        states = np.hstack([ds.q, ds.v])
+        scale = to_tensor(ds.target_scaler.scale(), device)
+
+        def part(rows: slice) -> list[torch.Tensor]:
+            index = strided_rows(rows, c.stride)
+            return [to_tensor(states[index], device), to_tensor(residual[index], device)]
+
+        def loss(x: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+            return normalised_mse(network(x), target, scale)
+
+        self.history_ = run_training(
+            network,
+            loss,
+            part(data.fit_rows),
+            part(data.validation_rows),
+            config=c,
+            device=device,
+            progress=progress,
+        )
+        self.network_ = network
+        return self
+
+    def residual_torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The learned remainder h(q, v): (B, n) [N*m]."""
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        return predict_chunked(self.network_, np.hstack([np.atleast_2d(q), np.atleast_2d(v)]))
+
+    def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Torque (B, n) [N*m] for q, v, a (B, n) [rad, rad/s, rad/s^2]."""
+        q, v, a = _states(q, v, a)
+        torque: np.ndarray = self.physics_torque(q, v, a) + self.residual_torque(q, v)
+        return torque
+
+    def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
+        """Nominal rigid-body parts, datasheet rotor inertia, h split into friction + residual."""
+        q, v, a = _states(q, v, a)
+        h = self.residual_torque(q, v)
+        h_rest = self.residual_torque(q, np.zeros_like(v))
+        return TorqueComponents(
+            total=self.physics_torque(q, v, a) + h,
+            **self.rigid_body_parts(q, v, a),
+            rotor_inertia=self._rotor_torque(a),
+            friction=h - h_rest,
+            residual=h_rest,
+        )
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The weights of h, named like its state_dict keys ('net.0.weight', ...)."""
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        return module_state(self.network_)
+
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        """Rebuild h from the scalers in ``fitted`` and load its weights.
+
+        Raises:
+            CheckpointError: the scalers are missing or the tensors do not fit the config.
+        """
+        scalers = load_scalers(fitted, ('state_scaler', 'residual_scaler'), self.kind)
+        network = self._build(*scalers)
+        load_module_state(network, tensors, self.kind)
+        self.network_ = network.eval()
+
+    def fitted_metadata(self) -> dict[str, Any]:
+        """The scalers of h's inputs (q, v) and output, the physics constants, a fit summary."""
+        require_fitted(self, self.state_scaler_)
+        assert self.state_scaler_ is not None
+        assert self.residual_scaler_ is not None
+        out = scalers_metadata(
+            state_scaler=self.state_scaler_, residual_scaler=self.residual_scaler_
+        )
+        out['rotor_inertia_motor_side_kgm2'] = self.robot.drives.rotor_inertia.tolist()
+        if self.history_ is not None:
+            out['training'] = self.history_.to_dict()
+        return out

@@ -1,0 +1,94 @@
+"""Model kinds by name, and saving/loading any of them as an artifact folder."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+from id_learning.errors import CheckpointError, ConfigError
+from id_learning.models.artifact import read_artifact, write_artifact
+from id_learning.models.base import InverseDynamicsModel, ModelConfig
+from id_learning.models.blackbox import LstmConfig, LstmModel, MlpConfig, MlpModel
+from id_learning.models.lagrangian import (
+    DelanConfig,
+    DelanModel,
+    LnnConfig,
+    LnnMlpConfig,
+    LnnMlpModel,
+    LnnModel,
+)
+from id_learning.models.physics import RneaLqConfig, RneaLqModel, RneaMlpConfig, RneaMlpModel
+from id_learning.robot.config import RobotConfig
+
+__all__ = ['MODEL_KINDS', 'STUDY_MODELS', 'load_model', 'make_config', 'make_model', 'save_model']
+
+MODEL_KINDS: dict[str, tuple[type[ModelConfig], type[InverseDynamicsModel]]] = {
+    'rnea_lq': (RneaLqConfig, RneaLqModel),
+    'rnea_mlp': (RneaMlpConfig, RneaMlpModel),
+    'delan': (DelanConfig, DelanModel),
+    'lnn': (LnnConfig, LnnModel),
+    'lnn_mlp': (LnnMlpConfig, LnnMlpModel),
+    'mlp': (MlpConfig, MlpModel),
+    'lstm': (LstmConfig, LstmModel),
+}
+
+#: The reference study's seven models, in its table order.
+STUDY_MODELS = ('rnea_lq', 'rnea_mlp', 'delan', 'lnn', 'lnn_mlp', 'mlp', 'lstm')
+
+
+def make_config(kind: str, **overrides: Any) -> ModelConfig:
+    """The default config of a model kind, with overrides.
+
+    Raises:
+        ConfigError: unknown kind (lists the known ones) or unknown hyper-parameter.
+    """
+    if kind not in MODEL_KINDS:
+        raise ConfigError(f'unknown model kind {kind!r}; known kinds: {sorted(MODEL_KINDS)}')
+    config_class = MODEL_KINDS[kind][0]
+    names = {item.name for item in fields(config_class)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ConfigError(
+            f'{kind}: unknown hyper-parameter(s) {unknown}; known: {sorted(names - {"kind"})}'
+        )
+    return config_class(**{**overrides, 'kind': kind})
+
+
+def make_model(kind: str, robot: RobotConfig, **overrides: Any) -> InverseDynamicsModel:
+    """An unfitted model of a kind for a robot."""
+    config = make_config(kind, **overrides)
+    return MODEL_KINDS[kind][1](config, robot)
+
+
+def save_model(
+    model: InverseDynamicsModel, folder: Path, extra: dict[str, Any] | None = None
+) -> Path:
+    """Write a fitted model as an artifact folder (safetensors + JSON)."""
+    metadata = {
+        'hyperparameters': model.config.to_dict(),
+        'fitted': model.fitted_metadata(),
+        **(extra or {}),
+    }
+    return write_artifact(Path(folder), model.kind, model.robot, model.state(), metadata)
+
+
+def load_model(folder: Path, robot: RobotConfig, kind: str | None = None) -> InverseDynamicsModel:
+    """Load and verify an artifact for a robot.
+
+    Raises:
+        CheckpointError: the folder is not a valid artifact of this robot (see read_artifact).
+    """
+    metadata, tensors = read_artifact(Path(folder), robot, kind)
+    found = metadata['kind']
+    if found not in MODEL_KINDS:
+        raise CheckpointError(f'{folder}: unknown model kind {found!r}')
+    try:
+        config = make_config(
+            found, **{k: v for k, v in metadata['hyperparameters'].items() if k != 'kind'}
+        )
+    except (ConfigError, TypeError) as err:
+        raise CheckpointError(f'{folder}: hyper-parameters do not fit {found}: {err}') from err
+    model = MODEL_KINDS[found][1](config, robot)
+    model.load_state(tensors, metadata.get('fitted', {}))
+    return model

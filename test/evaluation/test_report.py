@@ -1,0 +1,232 @@
+"""The report: the findings' rules on known numbers, the friction share, and the written files."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Self
+
+import numpy as np
+import pytest
+
+from id_learning.dataset.preprocess import prepare_dataset
+from id_learning.evaluation import report as report_module
+from id_learning.evaluation.metrics import error_metrics
+from id_learning.evaluation.report import (
+    HIGH_FRICTION_SHARE,
+    ReportInput,
+    check_findings,
+    friction_share,
+    high_friction_axes,
+    write_report,
+)
+from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
+from id_learning.models.data import TrainingData, nominal_rnea
+
+JOINTS = ('j1', 'j2', 'j3')
+# Friction carries 80 % of j1's label, 20 % of j2's, 60 % of j3's: j1 and j3 are high-friction.
+SHARE = np.array([0.8, 0.2, 0.6])
+
+
+def errors(**by_kind: list[float]) -> dict[str, np.ndarray]:
+    return {kind: np.array(values) for kind, values in by_kind.items()}
+
+
+def by_key(findings):
+    return {f.key: f for f in findings}
+
+
+def test_high_friction_axes_are_those_above_the_threshold_or_else_the_largest():
+    assert HIGH_FRICTION_SHARE == 0.5
+    assert high_friction_axes(SHARE) == [0, 2]
+    assert high_friction_axes(np.array([0.1, 0.3, 0.2])) == [1]
+
+
+def test_motor_findings_hold_when_rnea_mlp_wins_on_friction_axes_and_lnn_mlp_closes_the_gap():
+    rmse = errors(
+        rnea_mlp=[0.10, 0.30, 0.10],
+        delan=[0.40, 0.10, 0.30],  # better than RNEA+MLP on j2, which is not a friction axis
+        lnn=[0.30, 0.10, 0.30],
+        lnn_mlp=[0.12, 0.10, 0.14],  # closes (0.3 - 0.13) / (0.3 - 0.1) = 85 % of the gap
+    )
+    found = by_key(check_findings('motor', JOINTS, rmse, SHARE, {'delan': 'time_budget'}))
+    assert found['rnea_mlp_beats_lagrangian'].holds is True
+    assert 'j1, j3' in found['rnea_mlp_beats_lagrangian'].evidence
+    # A verdict that rests on an under-trained model says so.
+    assert 'DeLaN stopped at its time budget' in found['rnea_mlp_beats_lagrangian'].caveat
+    assert found['lnn_mlp_recovers_gap'].holds is True
+    assert 'gap recovered 85%' in found['lnn_mlp_recovers_gap'].evidence
+    assert not found['lnn_mlp_recovers_gap'].why
+    assert not found['lnn_mlp_recovers_gap'].caveat
+
+
+def test_motor_finding_fails_and_names_the_axis_where_a_lagrangian_network_wins():
+    rmse = errors(
+        rnea_mlp=[0.10, 0.30, 0.20],
+        delan=[0.40, 0.10, 0.30],
+        lnn=[0.30, 0.10, 0.15],  # LNN beats RNEA+MLP on j3, a friction axis
+        lnn_mlp=[0.28, 0.10, 0.16],
+        mlp=[0.05, 0.3, 0.1],
+    )
+    stopped = {'rnea_mlp': 'time_budget', 'lnn_mlp': 'early_stopping'}
+    found = by_key(check_findings('motor', JOINTS, rmse, SHARE, stopped))
+    first = found['rnea_mlp_beats_lagrangian']
+    assert first.holds is False
+    assert 'on j3 a Lagrangian network is at or below RNEA+MLP' in first.why
+    assert 'RNEA+MLP stopped at its time budget' in first.why
+    assert 'worse than the plain MLP on j3' in first.why
+    second = found['lnn_mlp_recovers_gap']
+    # mean over j1, j3: LNN 0.225, LNN+MLP 0.22, RNEA+MLP 0.15: 0.005 / 0.075 recovered
+    assert second.holds is False
+    assert 'closes only 7%' in second.why
+
+
+def test_gap_finding_fails_when_lnn_is_not_worse_than_rnea_mlp():
+    rmse = errors(rnea_mlp=[0.3, 0.3, 0.3], delan=[0.2] * 3, lnn=[0.2] * 3, lnn_mlp=[0.2] * 3)
+    found = by_key(check_findings('motor', JOINTS, rmse, SHARE))
+    assert found['lnn_mlp_recovers_gap'].holds is False
+    assert 'no gap to recover' in found['lnn_mlp_recovers_gap'].why
+
+
+def test_findings_are_not_checked_when_a_model_is_missing():
+    found = by_key(check_findings('motor', JOINTS, errors(rnea_mlp=[0.1] * 3), SHARE))
+    assert found['rnea_mlp_beats_lagrangian'].holds is None
+    assert 'lacks DeLaN, LNN' in found['rnea_mlp_beats_lagrangian'].why
+    assert found['lnn_mlp_recovers_gap'].holds is None
+
+
+def test_joint_label_finding_holds_within_the_competitive_ratio_and_explains_a_miss():
+    competitive = errors(rnea_mlp=[0.1, 0.1, 0.1], delan=[0.12] * 3, lnn=[0.3] * 3)
+    (finding,) = check_findings('joint', JOINTS, competitive, SHARE)
+    assert finding.key == 'lagrangian_competitive'
+    assert finding.holds is True
+    assert 'DeLaN / RNEA+MLP = 1.20' in finding.evidence
+
+    losing = errors(rnea_mlp=[0.1, 0.1, 0.1], delan=[0.2, 0.2, 0.5], lnn=[0.3] * 3)
+    (finding,) = check_findings('joint', JOINTS, losing, SHARE, {'delan': 'time_budget'})
+    assert finding.holds is False
+    assert 'largest relative gap is on j3' in finding.why
+    assert 'DeLaN stopped at its time budget' in finding.why
+    assert 'still holds dissipation on j3 (friction share 60%)' in finding.why
+
+    # A dissipation-free label, and a plain MLP that loses as much: the gap is the URDF prior.
+    losing['mlp'] = np.array([0.3, 0.3, 0.3])
+    (finding,) = check_findings('joint', JOINTS, losing, np.array([0.01, 0.02, 0.03]))
+    assert finding.holds is False
+    assert 'friction share below 10% on every axis' in finding.why
+    assert 'the plain MLP is 3.00 x RNEA+MLP too' in finding.why
+
+
+def test_friction_share_recovers_the_viscous_and_coulomb_part_of_a_known_label():
+    t = np.arange(0.0, 100.0, 0.008)
+    q = np.column_stack([np.sin(0.5 * t), 0.8 * np.sin(0.3 * t)])
+    v = np.column_stack([0.5 * np.cos(0.5 * t), 0.24 * np.cos(0.3 * t)])
+    friction = np.array([40.0, 2.0]) * v + np.array([15.0, 1.0]) * np.tanh(v / 0.01)
+    gravity = np.array([50.0, 200.0]) * np.cos(q)
+    tau = gravity + friction + 3.0
+    # The nominal model knows 80 % of gravity: the rest and the offset stay in the remainder.
+    remainder = tau - 0.8 * gravity
+    expected = np.sqrt(np.mean(friction**2, axis=0) / np.mean(tau**2, axis=0))
+    share = friction_share(tau, remainder, v)
+    assert expected[0] > 0.2 > expected[1]  # one friction-dominated axis, one gravity axis
+    np.testing.assert_allclose(share, expected, rtol=0.02, atol=1e-3)
+
+
+class NominalPlusViscous(InverseDynamicsModel):
+    """A stand-in model: the nominal RNEA plus a viscous friction term it reports as friction."""
+
+    kind: ClassVar[str] = 'rnea_lq'
+
+    def __init__(self, robot, gain: float) -> None:
+        super().__init__(ModelConfig(kind='rnea_lq'), robot)
+        self.gain = gain
+
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        return self
+
+    def predict(self, q, v, a):
+        return nominal_rnea(self.robot, q, v, a) + self.gain * v
+
+    def components(self, q, v, a):
+        rigid = nominal_rnea(self.robot, q, v, a)
+        return TorqueComponents(
+            total=rigid + self.gain * v, residual=rigid, friction=self.gain * v
+        )
+
+    def state(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        return None
+
+
+@pytest.fixture(scope='module')
+def report_input(mabi, short_twin):
+    _, result = short_twin
+    dataset = prepare_dataset(result.recording, mabi)
+    rows = [(dataset.n_train, len(dataset.q))]
+    test = slice(*rows[0])
+    scale = dataset.target_scaler.scale()
+    models = {
+        'rnea_lq': NominalPlusViscous(mabi, 300.0),
+        'rnea_mlp': NominalPlusViscous(mabi, 100.0),
+    }
+    metrics = {}
+    for kind, model in models.items():
+        prediction = model.predict(dataset.q[test], dataset.v[test], dataset.a[test])
+        metrics[kind] = {
+            **error_metrics(prediction, dataset.tau[test], scale).to_dict(),
+            'train_seconds': 1.5,
+            'history': {'epochs': 4, 'stopped_by': 'early_stopping'},
+            'inference_seconds_per_sample': 2e-6,
+            'latency_single_sample_median_s': 1e-4,
+            'latency_single_sample_p99_s': 2e-4,
+        }
+    return ReportInput(
+        title='A test report',
+        robot=mabi,
+        dataset=dataset,
+        rows=rows,
+        evaluated_on='the test part',
+        target_scale=scale,
+        models=models,
+        metrics=metrics,
+    )
+
+
+def test_the_report_has_both_rmse_tables_timings_findings_and_four_png_figures(
+    report_input, tmp_path
+):
+    path, findings = write_report(report_input, tmp_path)
+    text = path.read_text()
+    assert text.startswith('# A test report')
+    assert '| RNEA+LQ |' in text
+    assert '| RNEA+MLP |' in text
+    assert 'Per-joint test RMSE [N·m]' in text
+    assert 'normalised [-1, 1] scale' in text
+    assert "**The study's Table 1 is not bundled**" in text
+    assert 'arXiv:2506.17994' in text
+    # Two models cannot decide the motor-label findings: they are listed as not checked.
+    assert [f['holds'] for f in findings] == [None, None]
+    assert 'not checked' in text
+    for name in (
+        'rmse_per_joint.png',
+        'abs_error_boxplot.png',
+        'dissipative_axis1.png',
+        'torque_shares.png',
+    ):
+        data = (tmp_path / name).read_bytes()
+        assert data[:8] == b'\x89PNG\r\n\x1a\n'
+        assert len(data) > 20_000
+        assert f']({name})' in text
+
+
+def test_the_report_places_a_bundled_study_table_beside_ours(report_input, tmp_path, monkeypatch):
+    # Placeholder values, not the study's: they only exercise the table's layout.
+    monkeypatch.setattr(report_module, 'STUDY_TABLE_1', {'rnea_lq': (0.5,) * 6})
+    monkeypatch.setattr(report_module, 'STUDY_TABLE_1_CAPTION', 'Table 1 (test placeholder)')
+    path, _ = write_report(report_input, tmp_path)
+    text = path.read_text()
+    assert 'not bundled' not in text
+    assert 'joint_1 ours / study' in text
+    assert '/ 0.5 |' in text
+    assert '/ – |' in text  # RNEA+MLP has no study row in the placeholder
+    assert 'Table 1 (test placeholder)' in text

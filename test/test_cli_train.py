@@ -1,0 +1,158 @@
+"""``id-learning train`` and ``evaluate`` end to end, run as a user would (subprocesses, files)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from support import REPO, twin_config
+
+from id_learning.cli.main import _without_ros_arguments
+from id_learning.dataset.preprocess import prepare_dataset
+from id_learning.dataset.recording import load_recording
+from id_learning.models.registry import STUDY_MODELS, load_model
+from id_learning.twin import simulate, write_twin_output
+
+# Tiny budgets: this checks the plumbing of all seven models, not their accuracy.
+ONE_EPOCH = [
+    item
+    for kind in STUDY_MODELS
+    if kind != 'rnea_lq'
+    for item in ('--hyper', f'{kind}.max_epochs=1')
+]
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, '-m', 'id_learning.cli', *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=600,
+        check=False,
+    )
+
+
+@pytest.fixture(scope='module')
+def twin_bags(tmp_path_factory):
+    folder = tmp_path_factory.mktemp('cli_train')
+    paths = []
+    for seed, duration in ((5, 45.0), (6, 30.0)):
+        config = twin_config(duration, seed=seed)
+        paths.append(write_twin_output(simulate(config), config, folder / f'twin_{seed}'))
+    return paths
+
+
+@pytest.fixture(scope='module')
+def trained(twin_bags, tmp_path_factory):
+    out = tmp_path_factory.mktemp('cli_run') / 'run'
+    result = run_cli(
+        'train',
+        '--bag',
+        str(twin_bags[0]),
+        '--robot',
+        str(REPO / 'config/mabi_max100.yaml'),
+        '--target',
+        'motor',
+        '--models',
+        ','.join(STUDY_MODELS),
+        '--out',
+        str(out),
+        '--device',
+        'cpu',
+        '--max-seconds-per-model',
+        '30',
+        '--quiet',
+        *ONE_EPOCH,
+    )
+    assert result.returncode == 0, result.stderr
+    return out, result.stdout
+
+
+def test_train_writes_metrics_report_and_one_artifact_per_model(trained):
+    out, stdout = trained
+    metrics = json.loads((out / 'metrics.json').read_text())
+    assert list(metrics['models']) == list(STUDY_MODELS)
+    for kind, entry in metrics['models'].items():
+        assert len(entry['rmse_nm']) == 6, kind
+        assert np.all(np.isfinite(entry['rmse_nm'])), kind
+        assert (out / 'models' / kind / 'weights.safetensors').is_file()
+        assert (out / 'models' / kind / 'model.json').is_file()
+    assert metrics['models']['lstm']['latency_window_samples'] == 20
+    report = (out / 'report.md').read_text()
+    assert '| LNN+MLP |' in report
+    assert "## (e) Do the study's findings hold on this data?" in report
+    assert f'report: {out / "report.md"}' in stdout
+    assert 'RNEA+MLP' in stdout  # the printed RMSE table
+
+
+def test_every_trained_model_loads_back_and_predicts_exactly_the_same(trained, twin_bags, mabi):
+    out, _ = trained
+    dataset = prepare_dataset(load_recording(twin_bags[0], mabi), mabi)
+    test = slice(dataset.n_train, None)
+    metrics = json.loads((out / 'metrics.json').read_text())
+    for kind in STUDY_MODELS:
+        model = load_model(out / 'models' / kind, mabi)
+        again = load_model(out / 'models' / kind, mabi)
+        prediction = model.predict(dataset.q[test], dataset.v[test], dataset.a[test])
+        np.testing.assert_allclose(
+            prediction,
+            again.predict(dataset.q[test], dataset.v[test], dataset.a[test]),
+            rtol=0,
+            atol=0,
+        )
+        # The loaded model reproduces the run's own test RMSE.
+        rmse = np.sqrt(np.mean((prediction - dataset.tau[test]) ** 2, axis=0))
+        np.testing.assert_allclose(rmse, metrics['models'][kind]['rmse_nm'], rtol=1e-6)
+
+
+def test_evaluate_writes_the_same_metrics_and_report_for_another_recording(
+    trained, twin_bags, tmp_path
+):
+    out, _ = trained
+    result = run_cli(
+        'evaluate',
+        '--run',
+        str(out),
+        '--bag',
+        str(twin_bags[1]),
+        '--out',
+        str(tmp_path),
+        '--quiet',
+    )
+    assert result.returncode == 0, result.stderr
+    metrics = json.loads((tmp_path / 'metrics.json').read_text())
+    assert metrics['kind'] == 'evaluation'
+    assert 'whole recording' in metrics['evaluated_on']
+    assert list(metrics['models']) == list(STUDY_MODELS)
+    assert (tmp_path / 'report.md').is_file()
+    assert (tmp_path / 'abs_error_boxplot.png').stat().st_size > 20_000
+
+
+def test_an_unknown_model_kind_exits_with_status_two_and_lists_the_known_ones(tmp_path):
+    result = run_cli(
+        'train', '--bag', str(tmp_path), '--models', 'mlp,gpr', '--out', str(tmp_path / 'r')
+    )
+    assert result.returncode == 2
+    assert result.stderr.startswith('id-learning train: error: --models: unknown model kind')
+    assert 'rnea_lq, rnea_mlp, delan, lnn, lnn_mlp, mlp, lstm' in result.stderr
+
+
+def test_a_malformed_hyper_parameter_is_refused(tmp_path):
+    result = run_cli(
+        'train', '--bag', str(tmp_path), '--hyper', 'max_epochs=3', '--out', str(tmp_path / 'r')
+    )
+    assert result.returncode == 2
+    assert 'expected KIND.KEY=VALUE' in result.stderr
+
+
+def test_the_ros2_run_entry_point_drops_ros_arguments():
+    argv = ['--bag', 'b', '--ros-args', '-r', '__node:=x', '--', '--out', 'o', '--ros-args']
+    assert _without_ros_arguments(argv) == ['--bag', 'b', '--out', 'o']
+
+
+def test_setup_declares_the_train_console_script_for_ros2_run():
+    assert "'train = id_learning.cli.main:train_main'" in (REPO / 'setup.py').read_text()
