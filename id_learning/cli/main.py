@@ -97,7 +97,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     bag = Path(args.bag or default_bag())
     out = Path(args.out)
     print(f'loading {bag} ...', flush=True)
-    recording = load_recording(bag, robot, progress=True)
+    recording = load_recording(bag, robot, require_current=args.target == 'motor', progress=True)
     dataset = prepare_dataset(recording, robot, PreprocessConfig(target=args.target))
     ground_truth = tau_clean = None
     if (bag / GROUND_TRUTH_JSON).is_file():
