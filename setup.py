@@ -32,6 +32,9 @@ setup(
         'console_scripts': [
             'id-learning = id_learning.cli.main:main',
             'train = id_learning.cli.main:train_main',
+            'recorder = id_learning.nodes.recorder:main',
+            'replay = id_learning.nodes.replay:main',
+            'predictor = id_learning.nodes.predictor:main',
         ],
     },
 )

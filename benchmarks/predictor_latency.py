@@ -1,0 +1,300 @@
+"""Predictor node latency per model at 125 Hz and 1 kHz, over loopback DDS, as JSON.
+
+    python benchmarks/predictor_latency.py [--artifacts DIR] [--kinds mlp lstm ...]
+        [--rates 125 1000] [--seconds 8 2] [--executor single_threaded]
+
+For each model kind and rate a predictor node is started in its own process; this process
+publishes one-point JointTrajectory references at the rate (absolute deadlines) and listens to
+tau_u. Reported per kind and rate:
+
+- ``node_receive_to_publish_ms``: the node's own figure, from the middleware's receive timestamp
+  of a sample to just after tau_u is published (its /diagnostics over the phase);
+- ``round_trip_ms``: from this process's publish to its receipt of tau_u (two DDS hops, two
+  executors), per sample;
+- ``sent``, ``received``, ``missed`` (no tau_u at all) and ``late`` (round trip > one period).
+
+The node runs with its default input queue (KEEP_LAST 10): a node slower than the rate drops the
+oldest samples (missed) instead of building up an ever longer delay.
+
+Without ``--artifacts`` a set of all seven kinds with the study's network sizes is fitted for one
+epoch on a short synthetic recording: latency does not depend on how well a model is trained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from common import DEFAULT_ROBOT, REPO, emit
+
+STUDY_SIZE_QUICK = {'max_epochs': 1, 'device': 'cpu', 'stride': 16}
+
+
+def fit_quick_artifacts(folder: Path, robot_path: Path, kinds: list[str]) -> dict[str, Path]:
+    """One-epoch models of the study's sizes on a 10 s sine recording."""
+    sys.path.insert(0, str(REPO / 'test'))
+    from support import sine_recording
+
+    from id_learning.dataset import prepare_dataset
+    from id_learning.models.data import TrainingData
+    from id_learning.models.registry import make_model, save_model
+    from id_learning.robot import load_robot_config
+
+    robot = load_robot_config(robot_path)
+    data = TrainingData(prepare_dataset(sine_recording(1250), robot), robot)
+    out = {}
+    for kind in kinds:
+        hyper = {} if kind == 'rnea_lq' else STUDY_SIZE_QUICK
+        out[kind] = save_model(make_model(kind, robot, **hyper).fit(data), folder / kind)
+    return out
+
+
+def node_environment(domain_id: int) -> dict[str, str]:
+    env = dict(os.environ)
+    env.update(
+        ROS_DOMAIN_ID=str(domain_id),
+        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+        PYTHONUNBUFFERED='1',
+        PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), env.get('PYTHONPATH')])),
+    )
+    env.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+    return env
+
+
+class Bench:
+    """This process's ROS side: publisher of the reference, subscriber of tau_u and diagnostics."""
+
+    def __init__(self, domain_id: int) -> None:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.context import Context
+        from rclpy.experimental import EventsExecutor
+        from sensor_msgs.msg import JointState
+        from trajectory_msgs.msg import JointTrajectory
+
+        from id_learning.nodes.qos import DIAGNOSTICS_QOS, TORQUE_QOS, reference_qos
+
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node('latency_bench', context=self.context)
+        self.publisher = self.node.create_publisher(
+            JointTrajectory, '/reference', reference_qos(100)
+        )
+        self.received: dict[int, int] = {}  # stamp -> receive time [ns, monotonic]
+        self.diagnostics: dict[str, str] = {}
+        # Raw bytes and the C++ events executor: this process must not be the bottleneck at
+        # 1 kHz. The stamp is read straight from the CDR (after the 4-byte encapsulation).
+        self.node.create_subscription(JointState, '/tau_u', self._on_tau, TORQUE_QOS, raw=True)
+        self.node.create_subscription(
+            DiagnosticArray, '/diagnostics', self._on_diagnostics, DIAGNOSTICS_QOS
+        )
+        self.executor = EventsExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while not self._stop.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def _on_tau(self, data: bytes) -> None:
+        now = time.monotonic_ns()
+        sec, nanosec = struct.unpack_from('<iI', data, 4)
+        self.received[sec * 1_000_000_000 + nanosec] = now
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        for status in msg.status:
+            if status.name.startswith('id_learning/predictor'):
+                self.diagnostics = {kv.key: kv.value for kv in status.values}
+
+    def wait(self, condition, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if condition():
+                return True
+            time.sleep(0.01)
+        return condition()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(5)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def run_phase(bench: Bench, rate_hz: float, seconds: float, robot) -> dict[str, Any]:
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    count = round(rate_hz * seconds)
+    period_ns = round(1e9 / rate_hz)
+    t = np.arange(count) / rate_hz
+    q = 0.3 * np.sin(2 * np.pi * 0.2 * t[:, None] + np.arange(robot.n_joints))
+    v = np.gradient(q, 1 / rate_hz, axis=0)
+    a = np.gradient(v, 1 / rate_hz, axis=0)
+    messages = []
+    for k in range(count):
+        msg = JointTrajectory(joint_names=list(robot.joints))
+        msg.points = [
+            JointTrajectoryPoint(
+                positions=q[k].tolist(), velocities=v[k].tolist(), accelerations=a[k].tolist()
+            )
+        ]
+        messages.append(msg)
+    bench.received.clear()
+    sent: dict[int, int] = {}
+    start = time.monotonic_ns() + 50_000_000
+    wall_offset = time.time_ns() - time.monotonic_ns()
+    for k, msg in enumerate(messages):
+        deadline = start + k * period_ns
+        delay = deadline - time.monotonic_ns()
+        if delay > 0:
+            time.sleep(delay * 1e-9)
+        now = time.monotonic_ns()
+        stamp = now + wall_offset  # wall-clock stamps, strictly increasing
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        bench.publisher.publish(msg)
+        sent[stamp] = now
+    bench.wait(lambda: len(bench.received) >= count, 10.0)
+    # The node's diagnostics cover the phase once they count every sample.
+    bench.wait(lambda: int(bench.diagnostics.get('latency_samples', 0)) >= count, 5.0)
+    round_trip = np.array(
+        [(bench.received[s] - t0) * 1e-6 for s, t0 in sent.items() if s in bench.received]
+    )
+    diag = bench.diagnostics
+    return {
+        'rate_hz': rate_hz,
+        'sent': count,
+        'received': len(round_trip),
+        'missed': count - len(round_trip),
+        'late': int(np.sum(round_trip > period_ns * 1e-6)),
+        'node_receive_to_publish_ms': {
+            'median': float(diag.get('latency_median_ms', 'nan')),
+            'p99': float(diag.get('latency_p99_ms', 'nan')),
+            'max': float(diag.get('latency_max_ms', 'nan')),
+            'samples': int(diag.get('latency_samples', 0)),
+        },
+        'node_compute_ms': {
+            'median': float(diag.get('compute_median_ms', 'nan')),
+            'p99': float(diag.get('compute_p99_ms', 'nan')),
+        },
+        'round_trip_ms': {
+            'median': float(np.median(round_trip)) if len(round_trip) else None,
+            'p99': float(np.percentile(round_trip, 99)) if len(round_trip) else None,
+            'max': float(round_trip.max()) if len(round_trip) else None,
+        },
+        'node_rejected': int(diag.get('rejected', 0)),
+    }
+
+
+def main() -> None:
+    from id_learning.models.registry import STUDY_MODELS
+    from id_learning.robot import load_robot_config
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--artifacts', type=Path, help='folder with one artifact per kind')
+    parser.add_argument('--robot', type=Path, default=DEFAULT_ROBOT)
+    parser.add_argument('--kinds', nargs='+', default=list(STUDY_MODELS))
+    parser.add_argument('--rates', nargs='+', type=float, default=[125.0, 1000.0])
+    parser.add_argument('--seconds', nargs='+', type=float, default=[8.0, 2.0])
+    parser.add_argument('--executor', default='single_threaded')
+    parser.add_argument('--domain', type=int, default=int(time.time()) % 100 + 120)
+    args = parser.parse_args()
+    robot = load_robot_config(args.robot)
+    results: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as scratch:
+        if args.artifacts:
+            artifacts = {kind: args.artifacts / kind for kind in args.kinds}
+        else:
+            artifacts = fit_quick_artifacts(Path(scratch), args.robot, args.kinds)
+        bench = Bench(args.domain)
+        try:
+            for kind in args.kinds:
+                results[kind] = []
+                for rate, seconds in zip(args.rates, args.seconds, strict=True):
+                    results[kind].append(
+                        measure(
+                            bench,
+                            artifacts[kind],
+                            args,
+                            robot,
+                            rate=rate,
+                            seconds=seconds,
+                            scratch=scratch,
+                        )
+                    )
+                    print(kind, results[kind][-1], file=sys.stderr)
+        finally:
+            bench.close()
+    emit(
+        {
+            'benchmark': 'predictor_latency',
+            'executor': args.executor,
+            'target': 'p99 receive-to-publish < 1 ms at 125 Hz, no missed cycle',
+            'results': results,
+        }
+    )
+
+
+def measure(
+    bench: Bench, artifact: Path, args, robot, *, rate: float, seconds: float, scratch: str
+):
+    count = round(rate * seconds)
+    log = Path(scratch) / f'predictor_{artifact.name}_{rate:g}.log'
+    with log.open('wb') as output:
+        process = subprocess.Popen(
+            [
+                sys.executable,
+                '-m',
+                'id_learning.nodes.predictor',
+                '--ros-args',
+                '-p',
+                f'artifact:={artifact}',
+                '-p',
+                'input_topic:=/reference',
+                '-p',
+                f'latency_window:={count}',
+                '-p',
+                'diagnostics_period_s:=0.2',
+                '-p',
+                f'executor:={args.executor}',
+                '-p',
+                'stale_after_cycles:=1000',
+            ],
+            env=node_environment(args.domain),
+            stdout=output,
+            stderr=subprocess.STDOUT,
+        )
+        try:
+            connected = bench.wait(
+                lambda: (
+                    bench.publisher.get_subscription_count() >= 1
+                    and bench.node.count_publishers('/tau_u') >= 1
+                ),
+                120.0,
+            )
+            if not connected:
+                raise RuntimeError(f'predictor did not connect: {log.read_text()[-2000:]}')
+            bench.diagnostics = {}
+            return run_phase(bench, rate, seconds, robot)
+        finally:
+            process.send_signal(signal.SIGINT)
+            try:
+                process.wait(30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,348 @@
+"""predictor: feed-forward tau_u for every reference sample, from a model artifact of any kind.
+
+For each reference sample (``input_type``: a one-point trajectory_msgs/JointTrajectory, or a
+sensor_msgs/JointState) the node converts the message (``msg_conversions``), lets the core
+``FeedForwardPredictor`` guard it and predict, and publishes tau_u on ``output_topic`` as a
+sensor_msgs/JointState (names in the artifact's order, effort = tau_u [N*m, joint side], header
+stamp = the input's stamp) and, when ``command_topic`` is set, as a std_msgs/Float64MultiArray for
+a ros2_control forward command controller.
+
+Accelerations come from the reference when it carries them; otherwise the core estimates them
+causally: the backward difference of the velocity over the stamps, optionally low-passed
+(``acceleration_cutoff_hz``; see ``predictor.acceleration``). The LSTM keeps its own window of the
+last 20 samples.
+
+Safety (all decided in the core, logged here throttled): nothing non-finite is published;
+outputs are clamped to the robot's torque limits (times ``torque_limit_scale``) and counted;
+samples with wrong joints, NaN or Inf, or stamps that do not advance are rejected with an error
+and the node keeps running; inputs outside the training range are counted and warned about. When
+no valid sample has arrived for ``stale_after_cycles`` IPO cycles the reference is stale: a
+watchdog says so (throttled), nothing is published, and with ``command_topic`` one zero command
+is sent (a forward command controller holds its last command). The history is reset when the
+reference resumes.
+
+Diagnostics (/diagnostics, every ``diagnostics_period_s``): input rate, receive-to-publish
+latency (from the middleware's receive timestamp to after the publish) and compute latency
+(median, p99, max), counts of predictions, clamps per joint, rejects per reason, out-of-range
+samples, stale episodes.
+
+Usage: ``ros2 run id_learning predictor --ros-args -p artifact:=out/demo/run/models/mlp``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
+
+from id_learning.nodes.msg_conversions import (
+    diagnostic_array,
+    joint_state_message,
+    joint_state_to_sample,
+    torque_command,
+    trajectory_to_sample,
+)
+from id_learning.nodes.params import (
+    PredictorNodeConfig,
+    declare_parameters,
+    read_snapshot,
+    resolve_robot_config,
+    validate_change,
+)
+from id_learning.nodes.qos import DIAGNOSTICS_QOS, TORQUE_QOS, reference_qos
+from id_learning.nodes.runtime import run_node
+from id_learning.predictor import (
+    FeedForwardPredictor,
+    GuardConfig,
+    ReferenceSample,
+    Reject,
+    RollingStats,
+    StepResult,
+    configure_inference_threads,
+)
+from id_learning.robot.config import RobotConfig, load_robot_config
+
+__all__ = ['Predictor', 'guard_config', 'main']
+
+NODE_NAME = 'predictor'
+
+
+def guard_config(config: PredictorNodeConfig, robot: RobotConfig) -> GuardConfig:
+    """The core's guard settings from the node parameters and the robot's IPO period."""
+    return GuardConfig(
+        period_s=robot.ipo_period_s,
+        stale_after_cycles=config.stale_after_cycles,
+        max_age_s=config.max_age_s,
+        acceleration_cutoff_hz=config.acceleration_cutoff_hz,
+        torque_limit_scale=config.torque_limit_scale,
+        range_margin=config.range_margin,
+        out_of_range=config.out_of_range,  # type: ignore[arg-type]
+    )
+
+
+class Predictor(Node):
+    """Publishes guarded tau_u for every reference sample.
+
+    Args:
+        input_qos: QoS of the reference subscription; None: ``reference_qos(input_depth)``.
+        output_qos: QoS of the tau_u and command publishers (match the consumer).
+        **kwargs: passed to rclpy's Node (context, parameter_overrides, ...).
+    """
+
+    def __init__(
+        self,
+        input_qos: QoSProfile | None = None,
+        output_qos: QoSProfile = TORQUE_QOS,
+        **kwargs: Any,
+    ) -> None:
+        """Declare parameters, load the artifact, subscribe and advertise."""
+        super().__init__(NODE_NAME, **kwargs)
+        declare_parameters(self, PredictorNodeConfig)
+        self.config = read_snapshot(self, PredictorNodeConfig)
+        config = self.config
+        self.robot = load_robot_config(resolve_robot_config(config.robot_config))
+        configure_inference_threads(config.torch_threads)
+        self.core = FeedForwardPredictor.from_artifact(
+            config.artifact, self.robot, guard_config(config, self.robot)
+        )
+        self.done: Future = Future()  # never completes: runs until shut down
+        self.names = list(self.core.joint_names)
+        self.latency_s = RollingStats(config.latency_window)
+        self.callback_errors = 0
+        self._window_start = (time.monotonic(), 0)
+        self._stale_logged_ns = 0
+        self._is_closed = False
+        self._tau_u: Publisher = self.create_publisher(JointState, config.output_topic, output_qos)
+        self._command: Publisher | None = (
+            self.create_publisher(Float64MultiArray, config.command_topic, output_qos)
+            if config.command_topic
+            else None
+        )
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        kind: type = JointTrajectory if config.input_type == 'trajectory' else JointState
+        self._convert: Callable[[Any], ReferenceSample] = (
+            trajectory_to_sample if config.input_type == 'trajectory' else joint_state_to_sample
+        )
+        # rclpy's executors hand the middleware's receive timestamp to a two-argument callback;
+        # the events executor (Jazzy) cannot, so latency is then taken from the callback start.
+        callback = self._on_reference if config.executor == 'events' else self._on_reference_info
+        self._subscription = self.create_subscription(
+            kind, config.input_topic, callback, input_qos or reference_qos(config.input_depth)
+        )
+        # Half the stale threshold: a stale reference is noticed within 1.5 thresholds.
+        self._watchdog = self.create_timer(
+            max(self.core.config.stale_after_ns * 0.5e-9, 0.002), self._check_stale
+        )
+        self._diagnostics_timer = self.create_timer(
+            config.diagnostics_period_s, self._publish_diagnostics
+        )
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        source = self.core.range.source if self.core.range else 'none'
+        self.get_logger().info(
+            f'{self.core.model.kind} model from {Path(config.artifact).resolve()}: '
+            f'{config.input_type} on {self._subscription.topic_name} -> tau_u on '
+            f'{self._tau_u.topic_name}'
+            + (f' and {self._command.topic_name}' if self._command else '')
+            + f'; input range check: {source}'
+        )
+
+    # -- the hot path -----------------------------------------------------------------------------
+    def _on_reference_info(self, msg: Any, info: Any) -> None:
+        self._on_reference(msg, info.get('received_timestamp', 0) if isinstance(info, dict) else 0)
+
+    def _on_reference(self, msg: Any, received_wall_ns: int = 0) -> None:
+        receive_ns = time.monotonic_ns()
+        try:
+            sample = self._convert(msg)
+            clock_ns = (
+                self.get_clock().now().nanoseconds if self.core.config.max_age_s > 0 else None
+            )
+            result = self.core.step(sample, receive_ns, clock_ns)
+            if result.tau is None:
+                self._log_reject(result)
+                return
+            self._tau_u.publish(
+                joint_state_message(result.stamp_ns, self.names, effort=result.tau)
+            )
+            if self._command is not None:
+                self._command.publish(torque_command(result.tau))
+            if received_wall_ns:
+                self.latency_s.add((time.time_ns() - received_wall_ns) * 1e-9)
+            else:  # no middleware timestamp: from the callback's start
+                self.latency_s.add((time.monotonic_ns() - receive_ns) * 1e-9)
+            self._log_result(result)
+        except Exception as err:  # the edge of the callback: report and keep running
+            self.callback_errors += 1
+            self.get_logger().error(
+                f'reference callback failed: {type(err).__name__}: {err}',
+                throttle_duration_sec=self.config.log_throttle_s,
+            )
+
+    def _log_reject(self, result: StepResult) -> None:
+        throttle = self.config.log_throttle_s
+        text = f'sample at {result.stamp_ns} ns rejected ({result.reject.value}): {result.detail}'  # type: ignore[union-attr]
+        if result.reject == Reject.OUT_OF_RANGE:
+            self.get_logger().warning(text, throttle_duration_sec=throttle)
+        else:
+            self.get_logger().error(text, throttle_duration_sec=throttle)
+
+    def _log_result(self, result: StepResult) -> None:
+        throttle = self.config.log_throttle_s
+        if result.resumed_after_stale:
+            self.get_logger().info(
+                'reference resumed: publishing again (history reset)',
+                throttle_duration_sec=throttle,
+            )
+        if result.is_out_of_range:
+            self.get_logger().warning(
+                f'input outside the training range: {result.detail}',
+                throttle_duration_sec=throttle,
+            )
+        if result.is_clamped:
+            self.get_logger().warning(
+                f'tau_u clamped to the torque limits ({self.core.counters.clamped_samples} '
+                'samples so far)',
+                throttle_duration_sec=throttle,
+            )
+
+    def _check_stale(self) -> None:
+        now = time.monotonic_ns()
+        became_stale = self.core.check_stale(now)
+        if not self.core.is_stale:
+            return
+        silence = self.core.silence_ns(now) or 0
+        text = (
+            f'reference stale: no valid sample for {silence * 1e-6:.0f} ms (> '
+            f'{self.core.config.stale_after_cycles} cycles of '
+            f'{self.core.config.period_s * 1e3:g} ms): not publishing tau_u'
+        )
+        if became_stale or now - self._stale_logged_ns >= self.config.log_throttle_s * 1e9:
+            self._stale_logged_ns = now
+            self.get_logger().error(text)
+        if became_stale and self._command is not None and self.config.zero_command_on_stale:
+            self._command.publish(torque_command(np.zeros(len(self.names))))
+
+    # -- parameters and reports -------------------------------------------------------------------
+    def _on_set_parameters(self, parameters: Sequence[Any]) -> SetParametersResult:
+        changed, reason = validate_change(self.config, {p.name: p.value for p in parameters})
+        if changed is None:
+            return SetParametersResult(successful=False, reason=reason)
+        self.core.update_config(guard_config(changed, self.robot))
+        if changed.diagnostics_period_s != self.config.diagnostics_period_s:
+            self._diagnostics_timer.timer_period_ns = round(changed.diagnostics_period_s * 1e9)
+        self.config = changed
+        return SetParametersResult(successful=True)
+
+    def report_values(self) -> dict[str, object]:
+        """The diagnostics key-values (counts since start; latencies over the last window)."""
+        counters = self.core.counters
+        now = time.monotonic()
+        start, received_then = self._window_start
+        rate = (counters.received - received_then) / max(now - start, 1e-9)
+        self._window_start = (now, counters.received)
+        latency = self.latency_s.summary()
+        compute = self.core.compute_s.summary()
+        values: dict[str, object] = {
+            'model': self.core.model.kind,
+            'artifact': self.config.artifact,
+            'input_rate_hz': rate,
+            'received': counters.received,
+            'published': counters.predicted,
+            'rejected': counters.rejected,
+        }
+        values.update({f'rejected_{reason.value}': counters.rejects[reason] for reason in Reject})
+        values.update(
+            {
+                'clamped_samples': counters.clamped_samples,
+                'out_of_range_samples': counters.out_of_range,
+                'stale': self.core.is_stale,
+                'stale_episodes': counters.stale_episodes,
+                'history_resets': counters.history_resets,
+                'callback_errors': self.callback_errors,
+                # Matched on the writer side: a consumer listed here receives every tau_u.
+                'tau_u_subscriptions': self._tau_u.get_subscription_count(),
+                'latency_median_ms': latency.median * 1e3,
+                'latency_p99_ms': latency.p99 * 1e3,
+                'latency_max_ms': latency.max * 1e3,
+                'latency_samples': latency.count,
+                'compute_median_ms': compute.median * 1e3,
+                'compute_p99_ms': compute.p99 * 1e3,
+                'compute_max_ms': compute.max * 1e3,
+            }
+        )
+        values.update(
+            {
+                f'clamped_{name}': int(count)
+                for name, count in zip(self.names, counters.clamped_per_joint, strict=True)
+            }
+        )
+        return values
+
+    def _publish_diagnostics(self) -> None:
+        values = self.report_values()
+        counters = self.core.counters
+        if self.core.is_stale:
+            level, message = 'error', 'reference stale: not publishing'
+        elif counters.received == 0:
+            level, message = 'ok', 'waiting for the reference'
+        elif counters.rejected or counters.clamped_samples or counters.out_of_range:
+            level = 'warn'
+            message = (
+                f'{counters.rejected} rejected, {counters.clamped_samples} clamped, '
+                f'{counters.out_of_range} out of range'
+            )
+        else:
+            level, message = 'ok', f'{counters.predicted} published'
+        self._diagnostics.publish(
+            diagnostic_array(
+                time.time_ns(),
+                name=f'id_learning{self.get_fully_qualified_name()}',
+                hardware_id=self.core.model.kind,
+                level=level,
+                message=message,
+                values=values,
+            )
+        )
+
+    def close(self) -> None:
+        """Log the final counts and latencies."""
+        if self._is_closed:
+            return
+        self._is_closed = True
+        counters = self.core.counters
+        latency = self.latency_s.summary()
+        self.get_logger().info(
+            f'{counters.received} samples received, {counters.predicted} published, '
+            f'{counters.rejected} rejected '
+            f'{ {r.value: c for r, c in counters.rejects.items() if c} }, '
+            f'{counters.clamped_samples} clamped, {counters.out_of_range} out of range, '
+            f'{counters.stale_episodes} stale episodes; receive-to-publish latency median '
+            f'{latency.median * 1e3:.3f} ms, p99 {latency.p99 * 1e3:.3f} ms'
+        )
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the predictor until SIGINT/SIGTERM; returns the exit status."""
+    return run_node(
+        Predictor,
+        lambda node: node.config.executor,  # type: ignore[attr-defined]
+        args,
+        name='predictor',
+        config_class=PredictorNodeConfig,
+    )
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,288 @@
+"""recorder: write the bag contract's topics to a rosbag2 MCAP bag, crash-safe.
+
+Subscriptions are raw: the serialized CDR bytes as received are stored unchanged (never
+re-serialized; rclpy's serializer pads messages that end in an empty array, which rosbags then
+refuses). The log time of a message is its receive time on the node clock (the replay's /clock
+when use_sim_time is set).
+
+Crash safety: a timer flushes the writer every ``flush_period_s`` (<= 0.5 s), which ends the
+MCAP chunk in progress and pushes it to the file. After a SIGKILL the bag lacks its summary and
+``metadata.yaml`` but holds every message received up to one flush period before the kill;
+``id-learning bag recover PATH`` rebuilds it. On a clean shutdown (SIGINT, SIGTERM) the bag is
+finished with ``metadata.yaml`` and the counts are logged.
+
+Counts, per topic and in total: received (callbacks run), written (in the bag), dropped (lost on
+the way -- gaps in the publisher's sequence numbers while a topic has one publisher, which
+include messages a full subscription queue overwrote; with the events executor, the middleware's
+message-lost events -- or not written because the writer failed). They are published on
+/diagnostics every ``diagnostics_period_s``.
+
+Usage: ``ros2 run id_learning recorder --ros-args -p output:=runs/excitation_01``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.task import Future
+
+from id_learning.bag import BagWriter
+from id_learning.errors import BagError
+from id_learning.nodes.msg_conversions import diagnostic_array, message_class
+from id_learning.nodes.params import (
+    RecorderConfig,
+    declare_parameters,
+    read_snapshot,
+    validate_change,
+)
+from id_learning.nodes.qos import DIAGNOSTICS_QOS, sensor_qos
+from id_learning.nodes.runtime import run_node
+
+__all__ = ['Recorder', 'TopicCounts', 'main']
+
+NODE_NAME = 'recorder'
+MIB = 1 << 20
+#: Messages taken from a subscription's queue per callback, beyond the one the executor hands.
+DRAIN_LIMIT = 256
+
+
+@dataclass
+class TopicCounts:
+    """Messages of one topic: received by the callback, written to the bag, dropped."""
+
+    received: int = 0
+    written: int = 0
+    dropped: int = 0
+
+
+class Recorder(Node):
+    """Records raw messages of configured topics into a rosbag2 MCAP bag.
+
+    Args:
+        qos: the subscriptions' QoS; None builds it from the parameters (qos_depth,
+            reliability) with ``nodes.qos.sensor_qos``.
+        **kwargs: passed to rclpy's Node (context, parameter_overrides, ...).
+    """
+
+    def __init__(self, qos: QoSProfile | None = None, **kwargs: Any) -> None:
+        """Declare parameters, open the bag and subscribe."""
+        super().__init__(NODE_NAME, **kwargs)
+        declare_parameters(self, RecorderConfig)
+        self.config = read_snapshot(self, RecorderConfig)
+        config = self.config
+        self.done: Future = Future()  # never completes: the recorder runs until shut down
+        self.path = config.bag_path()
+        self.writer = BagWriter(
+            self.path,
+            overwrite=config.overwrite,
+            chunk_bytes=config.chunk_kib * 1024,
+            split_duration_ns=round(config.split_duration_s * 1e9) or None,
+            split_bytes=round(config.split_size_mib * MIB) or None,
+        ).open()
+        self.counts = {topic: TopicCounts() for topic in config.topics}
+        self.flushes = 0
+        self._is_closed = False
+        qos = qos or sensor_qos(config.qos_depth, config.reliability)
+        # rclpy's executors pass message info (the publisher's sequence number) to a
+        # two-argument callback: a gap in the sequence is a message lost on the way, including
+        # one the middleware dropped from a full subscription queue without telling. The events
+        # executor cannot; there only the middleware's message-lost events count.
+        self._has_sequence = config.executor != 'events'
+        self._last_sequence: dict[str, int] = {}
+        self._is_single_publisher = dict.fromkeys(config.topics, False)
+        receive = self._on_message_info if self._has_sequence else self._on_message
+        self._uses_system_time = not self.get_clock().ros_time_is_active
+        self._by_topic: dict[str, Any] = {}
+        for topic, msg_type in zip(config.topics, config.msg_types, strict=True):
+            msg_class = message_class(msg_type)
+            self.writer.add_topic(topic, msg_type)
+            events = SubscriptionEventCallbacks(
+                message_lost=functools.partial(self._on_lost, topic)
+            )
+            self._by_topic[topic] = self.create_subscription(
+                msg_class,
+                topic,
+                functools.partial(receive, topic),
+                qos,
+                raw=True,
+                event_callbacks=events,
+            )
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self._flush_timer = self.create_timer(config.flush_period_s, self._flush)
+        self._diagnostics_timer = self.create_timer(
+            config.diagnostics_period_s, self._publish_diagnostics
+        )
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.get_logger().info(
+            f'recording {list(config.topics)} to {self.path} (flush every '
+            f'{config.flush_period_s:g} s, QoS {config.reliability} depth {config.qos_depth})'
+        )
+
+    # -- callbacks --------------------------------------------------------------------------------
+    def _on_message(self, topic: str, data: bytes, log_time_ns: int = 0) -> None:
+        log_time_ns = log_time_ns or self.get_clock().now().nanoseconds
+        counts = self.counts[topic]
+        counts.received += 1
+        try:
+            self.writer.write(topic, log_time_ns, data)
+        except (BagError, OSError, ValueError) as err:
+            counts.dropped += 1
+            self.get_logger().error(
+                f'{topic}: message not written to {self.path}: {err}', throttle_duration_sec=1.0
+            )
+            return
+        counts.written += 1
+
+    def _on_message_info(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
+        self._receive(topic, data, info)
+        # Then drain what else is queued on this subscription: rclpy's executor costs several
+        # times more per callback than writing a message does. Bounded, so timers still run.
+        subscription = self._by_topic[topic]
+        for _ in range(DRAIN_LIMIT):
+            with subscription.handle:
+                taken = subscription.handle.take_message(subscription.msg_type, True)
+            if taken is None:
+                return
+            self._receive(topic, taken[0], taken[1])
+
+    def _receive(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
+        sequence = info.get('publication_sequence_number')
+        if sequence is not None:
+            last = self._last_sequence.get(topic)
+            self._last_sequence[topic] = sequence
+            if last is None:  # first message: the flush timer refreshes this afterwards
+                self._is_single_publisher[topic] = self.count_publishers(topic) == 1
+            # Sequence numbers are per publisher: gaps only mean loss with a single one, and a
+            # smaller number means a new publisher.
+            if last is not None and sequence > last + 1 and self._is_single_publisher[topic]:
+                self.counts[topic].dropped += sequence - last - 1
+                self.get_logger().warning(
+                    f'{topic}: {sequence - last - 1} message(s) lost before reception '
+                    f'(publisher sequence {last} -> {sequence}): raise qos_depth?',
+                    throttle_duration_sec=1.0,
+                )
+        # The middleware's receive time is the true log time (a drained message waited in the
+        # queue); under use_sim_time the node clock (the replay's /clock) is used instead.
+        received = info.get('received_timestamp') or 0
+        self._on_message(topic, data, received if self._uses_system_time else 0)
+
+    def _on_lost(self, topic: str, info: QoSMessageLostInfo) -> None:
+        if not self._has_sequence:  # else the sequence gap counts the same messages
+            self.counts[topic].dropped += int(info.total_count_change)
+        self.get_logger().warning(
+            f'{topic}: the middleware lost {info.total_count_change} message(s) '
+            f'({info.total_count} in all): subscription queue full? raise qos_depth',
+            throttle_duration_sec=1.0,
+        )
+
+    def _flush(self) -> None:
+        self._uses_system_time = not self.get_clock().ros_time_is_active
+        for topic in self._is_single_publisher:
+            self._is_single_publisher[topic] = self.count_publishers(topic) == 1
+        try:
+            self.writer.flush()
+        except (OSError, ValueError) as err:
+            self.get_logger().error(
+                f'flush of {self.path} failed: {err}', throttle_duration_sec=1.0
+            )
+            return
+        self.flushes += 1
+
+    def _on_set_parameters(self, parameters: Sequence[Any]) -> SetParametersResult:
+        changed, reason = validate_change(self.config, {p.name: p.value for p in parameters})
+        if changed is None:
+            return SetParametersResult(successful=False, reason=reason)
+        if changed.diagnostics_period_s != self.config.diagnostics_period_s:
+            self._diagnostics_timer.timer_period_ns = round(changed.diagnostics_period_s * 1e9)
+        self.config = changed
+        return SetParametersResult(successful=True)
+
+    # -- reports ----------------------------------------------------------------------------------
+    def totals(self) -> TopicCounts:
+        """Counts summed over topics."""
+        return TopicCounts(
+            received=sum(c.received for c in self.counts.values()),
+            written=sum(c.written for c in self.counts.values()),
+            dropped=sum(c.dropped for c in self.counts.values()),
+        )
+
+    def report_values(self) -> dict[str, object]:
+        """The diagnostics key-values: totals, then per topic."""
+        total = self.totals()
+        values: dict[str, object] = {
+            'bag': str(self.path),
+            'received': total.received,
+            'written': total.written,
+            'dropped': total.dropped,
+            'flushes': self.flushes,
+        }
+        for topic, counts in self.counts.items():
+            values[f'{topic} received'] = counts.received
+            values[f'{topic} written'] = counts.written
+            values[f'{topic} dropped'] = counts.dropped
+        return values
+
+    def _publish_diagnostics(self) -> None:
+        total = self.totals()
+        level = 'warn' if total.dropped else 'ok'
+        message = (
+            f'{total.written} written, {total.dropped} dropped'
+            if total.received
+            else 'waiting for messages'
+        )
+        self._diagnostics.publish(
+            diagnostic_array(
+                self.get_clock().now().nanoseconds,
+                name=f'id_learning{self.get_fully_qualified_name()}',
+                hardware_id=str(self.path),
+                level=level,
+                message=message,
+                values=self.report_values(),
+            )
+        )
+
+    def close(self) -> None:
+        """Finish the bag (summary, ``metadata.yaml``) and log the counts."""
+        if self._is_closed:
+            return
+        self._is_closed = True
+        try:
+            self.writer.close()
+        except (OSError, ValueError) as err:
+            self.get_logger().error(
+                f'closing {self.path} failed: {err}; run id-learning bag recover'
+            )
+        total = self.totals()
+        lines = [
+            f'recorded to {Path(self.path).resolve()}: received {total.received}, written '
+            f'{total.written}, dropped {total.dropped}'
+        ]
+        lines += [
+            f'  {topic}: received {c.received}, written {c.written}, dropped {c.dropped}'
+            for topic, c in self.counts.items()
+        ]
+        self.get_logger().info('\n'.join(lines))
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the recorder until SIGINT/SIGTERM; returns the exit status."""
+    return run_node(
+        Recorder,
+        lambda node: node.config.executor,  # type: ignore[attr-defined]
+        args,
+        name='recorder',
+        config_class=RecorderConfig,
+    )
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,143 @@
+"""How every node's main() runs: init, build the node, spin until done or shut down, clean up.
+
+On Jazzy ``rclpy.init()`` is no context manager: init, spin inside try, catch
+``KeyboardInterrupt`` and ``ExternalShutdownException``, and ``rclpy.try_shutdown()`` in finally.
+SIGINT and SIGTERM end the spin through our own handler (see _StopOnSignal). A node's ``close()``
+runs before the node is destroyed, so that the recorder finishes its bag and every node logs its
+final report.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import MISSING, fields
+from typing import Protocol
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
+
+from id_learning.errors import IdLearningError
+
+__all__ = ['ClosableNode', 'make_executor', 'run_node']
+
+SPIN_SLICE_S = 0.1
+
+
+class ClosableNode(Protocol):
+    """What run_node needs of a node."""
+
+    done: Future
+
+    def close(self) -> None:
+        """Finish work (files, reports); called once, before destroy_node."""
+
+    def destroy_node(self) -> None:
+        """Release the node's ROS resources."""
+
+
+def make_executor(name: str) -> rclpy.executors.Executor:
+    """'single_threaded' (rclpy's) or 'events' (the experimental C++ events executor)."""
+    if name == 'events':
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    return SingleThreadedExecutor()
+
+
+class _StopOnSignal:
+    """SIGINT/SIGTERM end the spin while the context is still valid, so close() can log.
+
+    rclpy's own handlers would shut the context down first; the node's final report would then
+    fail to reach /rosout. Further signals are ignored while the node closes (a recorder must
+    finish its bag); SIGKILL remains the way to end a node that hangs.
+    """
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self._previous = {
+            number: signal.signal(number, self._handle)
+            for number in (signal.SIGINT, signal.SIGTERM)
+        }
+
+    def _handle(self, number: int, frame: object) -> None:
+        self.event.set()
+
+    def restore(self) -> None:
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+
+
+def print_usage(name: str, config_class: type) -> None:
+    """Print how to run a node and its parameters with defaults and descriptions."""
+    print(
+        f'usage: ros2 run id_learning {name} --ros-args [-p NAME:=VALUE ...] [--params-file FILE]'
+    )
+    print(f'\nparameters of {name} (see config/nodes.yaml):')
+    for item in fields(config_class):
+        default = item.default if item.default is not MISSING else '(required)'
+        if item.default is MISSING and item.default_factory is not MISSING:
+            default = item.default_factory()
+        description = item.metadata.get('description', '')
+        print(f'  {item.name} = {default!r}\n      {description}')
+
+
+def wants_help(args: Sequence[str] | None) -> bool:
+    """Whether -h/--help comes before any --ros-args."""
+    words = list(sys.argv[1:] if args is None else args)
+    if '--ros-args' in words:
+        words = words[: words.index('--ros-args')]
+    return '-h' in words or '--help' in words
+
+
+def run_node(
+    make_node: Callable[[], ClosableNode],
+    executor: Callable[[ClosableNode], str],
+    args: Sequence[str] | None,
+    *,
+    name: str = '',
+    config_class: type | None = None,
+) -> int:
+    """Create a node and spin it until its ``done`` future completes or a signal arrives.
+
+    Returns:
+        The process exit status: 0, or 2 when the node could not start (bad parameters,
+        missing files), with the reason logged.
+    """
+    if config_class is not None and wants_help(args):
+        print_usage(name, config_class)
+        return 0
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = _StopOnSignal()
+    node: ClosableNode | None = None
+    status = 0
+    try:
+        node = make_node()
+        spinner = make_executor(executor(node))
+        spinner.add_node(node)  # type: ignore[arg-type]
+        # Short waits: Python runs signal handlers only between them. (Not
+        # spin_until_future_complete with a timeout: each call adds a callback to the future.)
+        while not (node.done.done() or stop.event.is_set()) and rclpy.ok():
+            spinner.spin_once(timeout_sec=SPIN_SLICE_S)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except IdLearningError as err:
+        logging.getLogger('id_learning.nodes').critical('%s', err)
+        print(f'error: {err}', file=sys.stderr)
+        status = 2
+    finally:
+        try:
+            if node is not None:
+                try:
+                    node.close()
+                finally:
+                    node.destroy_node()
+        finally:
+            stop.restore()
+            rclpy.try_shutdown()
+    return status

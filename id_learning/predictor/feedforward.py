@@ -1,0 +1,415 @@
+"""FeedForwardPredictor: one reference sample in, one guarded feed-forward torque tau_u out.
+
+Guards, in the order they run (the first that fails decides; nothing is returned then):
+
+1. joints: the sample's names must be the model's joints (any order: columns are reordered by
+   name), with one value per joint in q and v (and a, when given);
+2. finite: no NaN or Inf in q, v or a;
+3. age (optional): not older than ``max_age_s`` against the caller's clock;
+4. stamp: strictly newer than the last accepted sample;
+5. range: inside the training range widened by ``range_margin``; 'warn' counts and predicts,
+   'reject' drops the sample;
+6. output: a non-finite prediction is dropped; a finite one is clamped to the torque limits.
+
+A rejected sample leaves the history untouched. A gap of more than ``stale_after_cycles``
+periods between accepted samples, in stamps or in receive time, marks a stale episode. A gap in
+the stamps (a hole in the trajectory) also resets the history: the acceleration estimate starts
+again and the LSTM window is refilled with the first new sample, as the offline ``predict`` pads
+a run. Samples that arrive late but with contiguous stamps keep the history.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from id_learning.models.base import InverseDynamicsModel
+from id_learning.predictor.acceleration import CausalAccelerationEstimator
+from id_learning.predictor.config import GuardConfig
+from id_learning.predictor.ranges import TrainingRange, training_range
+from id_learning.predictor.sample import ReferenceSample
+from id_learning.predictor.timing import RollingStats
+from id_learning.robot.config import RobotConfig
+
+__all__ = [
+    'FeedForwardPredictor',
+    'PredictorCounters',
+    'ReferenceSample',
+    'Reject',
+    'StepResult',
+    'configure_inference_threads',
+]
+
+_LOG = logging.getLogger(__name__)
+
+
+def configure_inference_threads(threads: int) -> None:
+    """Fix torch's intra- and inter-op thread counts (one sample per call gains nothing from more).
+
+    Raises:
+        ValueError: threads < 1.
+    """
+    if threads < 1:
+        raise ValueError(f'threads must be >= 1, got {threads}')
+    torch.set_num_threads(threads)
+    # The inter-op pool can be sized once per process only, before any parallel work.
+    try:
+        torch.set_num_interop_threads(threads)
+    except RuntimeError:
+        _LOG.debug('inter-op thread count already fixed; left as it is')
+
+
+class Reject(enum.Enum):
+    """Why a sample produced no torque."""
+
+    JOINT_COUNT = 'joint_count'
+    JOINT_NAMES = 'joint_names'
+    SHAPE = 'shape'
+    NON_FINITE = 'non_finite'
+    STAMP_ORDER = 'stamp_order'
+    TOO_OLD = 'too_old'
+    OUT_OF_RANGE = 'out_of_range'
+    NON_FINITE_OUTPUT = 'non_finite_output'
+
+
+@dataclass(frozen=True, eq=False)
+class StepResult:
+    """The outcome of one sample.
+
+    Attributes:
+        stamp_ns: the sample's stamp [ns] (stamp the output with it).
+        tau: (n,) clamped torque [N*m] in the model's joint order, or None when rejected.
+        reject: why there is no torque, or None.
+        detail: a human-readable reason (reject or range warning), or None.
+        is_clamped: at least one joint was clamped.
+        is_out_of_range: the input left the training range.
+        resumed_after_stale: this sample ended a stale episode (the history was reset if the
+            stamps jumped).
+    """
+
+    stamp_ns: int
+    tau: np.ndarray | None
+    reject: Reject | None = None
+    detail: str | None = None
+    is_clamped: bool = False
+    is_out_of_range: bool = False
+    resumed_after_stale: bool = False
+
+
+@dataclass
+class PredictorCounters:
+    """What happened since start.
+
+    Attributes:
+        received: samples passed to step().
+        predicted: samples that produced a torque.
+        clamped_samples: predictions with at least one clamped joint.
+        clamped_per_joint: (n,) clamps per joint.
+        rejects: count per reject reason.
+        out_of_range: samples outside the training range (warned or rejected).
+        stale_episodes: times the reference went stale after having been live.
+        history_resets: times the history was reset (after a stale episode or a stamp gap).
+    """
+
+    n_joints: int
+    received: int = 0
+    predicted: int = 0
+    clamped_samples: int = 0
+    clamped_per_joint: np.ndarray = field(init=False)
+    rejects: Counter[Reject] = field(default_factory=Counter)
+    out_of_range: int = 0
+    stale_episodes: int = 0
+    history_resets: int = 0
+
+    def __post_init__(self) -> None:
+        self.clamped_per_joint = np.zeros(self.n_joints, dtype=np.int64)
+
+    @property
+    def rejected(self) -> int:
+        """All rejected samples."""
+        return sum(self.rejects.values())
+
+
+class FeedForwardPredictor:
+    """Guarded tau_u prediction from reference samples, one sample per call.
+
+    Args:
+        model: a fitted model; its joint_names fix the output order.
+        torque_limit: (n,) the robot's symmetric torque limits [N*m]; the output is clamped to
+            ``config.torque_limit_scale`` times these.
+        config: guard settings.
+        training_range: bounds to warn about (None: no range check).
+        compute_stats: capacity of the compute-latency window.
+    """
+
+    def __init__(
+        self,
+        model: InverseDynamicsModel,
+        torque_limit: np.ndarray,
+        config: GuardConfig | None = None,
+        training_range: TrainingRange | None = None,
+        *,
+        compute_stats: int = 4096,
+    ) -> None:
+        """Keep the model and prepare the per-stream state."""
+        self.model = model
+        self.config = config or GuardConfig()
+        self.joint_names: tuple[str, ...] = tuple(model.joint_names)
+        n = len(self.joint_names)
+        limit = np.asarray(torque_limit, dtype=float)
+        if limit.shape != (n,) or not np.all(limit > 0):
+            raise ValueError(f'torque_limit must be ({n},) positive values, got {limit}')
+        self._robot_limit = limit
+        self._training_range = training_range
+        self.torque_limit = limit * self.config.torque_limit_scale
+        self.range = (
+            None if training_range is None else training_range.widened(self.config.range_margin)
+        )
+        self.counters = PredictorCounters(n)
+        self.compute_s = RollingStats(compute_stats)
+        self._n = n
+        self._index = {name: k for k, name in enumerate(self.joint_names)}
+        self._orders: dict[tuple[str, ...], np.ndarray | None] = {}
+        self._estimator = CausalAccelerationEstimator(self.config.acceleration_cutoff_hz)
+        self.is_sequence_model = bool(getattr(model, 'is_sequence_model', False))
+        self.sequence_length = int(getattr(model, 'sequence_length', 0) or 0)
+        if self.is_sequence_model and self.sequence_length < 1:
+            self.sequence_length = int(model.config.sequence_length)  # type: ignore[attr-defined]
+        self._window: np.ndarray | None = None
+        self._last_stamp_ns: int | None = None
+        self._last_receive_ns: int | None = None
+        self._is_stale = False
+
+    # -- construction -----------------------------------------------------------------------------
+    @classmethod
+    def from_artifact(
+        cls, folder: Path | str, robot: RobotConfig, config: GuardConfig | None = None
+    ) -> FeedForwardPredictor:
+        """Load an artifact of any model kind for a robot and guard it with its training range.
+
+        Raises:
+            CheckpointError: the artifact is invalid or belongs to another robot.
+        """
+        from id_learning.models.registry import load_model
+
+        config = config or GuardConfig(period_s=robot.ipo_period_s)
+        model = load_model(Path(folder), robot)
+        return cls(
+            model, robot.limits.torque, config, training_range(model.fitted_metadata(), robot)
+        )
+
+    def update_config(self, config: GuardConfig) -> None:
+        """Apply new guard settings to the running stream (limits, margins, age, cut-off).
+
+        The history is kept; a new acceleration cut-off applies from the next sample.
+        """
+        self.config = config
+        self.torque_limit = self._robot_limit * config.torque_limit_scale
+        self.range = (
+            None
+            if self._training_range is None
+            else self._training_range.widened(config.range_margin)
+        )
+        self._estimator.cutoff_hz = config.acceleration_cutoff_hz
+
+    # -- state ------------------------------------------------------------------------------------
+    @property
+    def is_stale(self) -> bool:
+        """The reference is stale: no valid sample for more than the threshold."""
+        return self._is_stale
+
+    def reset(self) -> None:
+        """Forget the history (acceleration estimate, LSTM window, last stamp)."""
+        self._estimator.reset()
+        self._window = None
+        self._last_stamp_ns = None
+        self.counters.history_resets += 1
+
+    def check_stale(self, now_ns: int) -> bool:
+        """Update the stale flag at time ``now_ns`` (same clock as step's receive_ns).
+
+        Returns:
+            True when the reference has just become stale (once per episode).
+        """
+        last = self._last_receive_ns
+        if self._is_stale or last is None or now_ns - last <= self.config.stale_after_ns:
+            return False
+        self._is_stale = True
+        self.counters.stale_episodes += 1
+        return True
+
+    def silence_ns(self, now_ns: int) -> int | None:
+        """Time since the last accepted sample [ns], or None before the first one."""
+        return None if self._last_receive_ns is None else now_ns - self._last_receive_ns
+
+    # -- the step ---------------------------------------------------------------------------------
+    def _order(self, names: tuple[str, ...]) -> np.ndarray | None:
+        order = self._orders.get(names)
+        if order is None and names not in self._orders:
+            if len(names) == self._n and set(names) == set(self.joint_names):
+                order = np.array([names.index(name) for name in self.joint_names])
+            if len(self._orders) < 64:  # a bounded cache: a bad sender cannot grow it forever
+                self._orders[names] = order
+        return order
+
+    def _reject(self, sample: ReferenceSample, reason: Reject, detail: str) -> StepResult:
+        self.counters.rejects[reason] += 1
+        return StepResult(sample.stamp_ns, None, reason, detail)
+
+    def _validate(
+        self, sample: ReferenceSample, clock_ns: int | None
+    ) -> tuple[np.ndarray, ...] | StepResult:
+        names = tuple(sample.names)
+        if len(names) != self._n:
+            return self._reject(
+                sample,
+                Reject.JOINT_COUNT,
+                f'{len(names)} joints {list(names)}, the model has {self._n}: '
+                f'{list(self.joint_names)}',
+            )
+        order = self._order(names)
+        if order is None:
+            missing = [name for name in self.joint_names if name not in names]
+            extra = [name for name in names if name not in self._index]
+            return self._reject(
+                sample,
+                Reject.JOINT_NAMES,
+                f'joint names {list(names)} do not match the model '
+                f'{list(self.joint_names)} (missing {missing}, unexpected {extra})',
+            )
+        arrays = [sample.q, sample.v] + ([] if sample.a is None else [sample.a])
+        for label, values in zip(('q', 'v', 'a'), arrays, strict=False):
+            if np.shape(values) != (self._n,):
+                return self._reject(
+                    sample,
+                    Reject.SHAPE,
+                    f'{label} has {np.size(values)} values for {self._n} joints',
+                )
+        q, v = np.asarray(sample.q, float)[order], np.asarray(sample.v, float)[order]
+        a = None if sample.a is None else np.asarray(sample.a, float)[order]
+        for label, values in (('q', q), ('v', v), ('a', a)):
+            if values is not None and not np.isfinite(values).all():
+                j = int(np.argmax(~np.isfinite(values)))
+                return self._reject(
+                    sample,
+                    Reject.NON_FINITE,
+                    f'{label} of {self.joint_names[j]} is {values[j]}',
+                )
+        if self.config.max_age_s > 0 and clock_ns is not None:
+            age_ns = clock_ns - sample.stamp_ns
+            if age_ns > self.config.max_age_s * 1e9:
+                return self._reject(
+                    sample,
+                    Reject.TOO_OLD,
+                    f'stamp is {age_ns * 1e-6:.1f} ms old (max_age_s {self.config.max_age_s:g} s)',
+                )
+        if self._last_stamp_ns is not None and sample.stamp_ns <= self._last_stamp_ns:
+            return self._reject(
+                sample,
+                Reject.STAMP_ORDER,
+                f'stamp {sample.stamp_ns} ns is not after the last accepted '
+                f'{self._last_stamp_ns} ns',
+            )
+        return (q, v) if a is None else (q, v, a)
+
+    def step(
+        self, sample: ReferenceSample, receive_ns: int, clock_ns: int | None = None
+    ) -> StepResult:
+        """Guard one sample and predict its torque.
+
+        Args:
+            sample: the reference sample as received.
+            receive_ns: when it arrived, on a monotonic clock [ns] (stale detection).
+            clock_ns: the current time in the stamps' time base [ns], for the age check; None
+                skips it.
+
+        Returns:
+            The torque in the model's joint order, or the reason there is none.
+        """
+        counters = self.counters
+        counters.received += 1
+        checked = self._validate(sample, clock_ns)
+        if isinstance(checked, StepResult):
+            return checked
+        config = self.config
+
+        # Silence in arrival ends a stale episode; only a hole in the stamps breaks the
+        # trajectory, so only that resets the history (late but contiguous samples keep it).
+        stamp_gap = (
+            self._last_stamp_ns is not None
+            and sample.stamp_ns - self._last_stamp_ns > config.stale_after_ns
+        )
+        receive_gap = (
+            self._last_receive_ns is not None
+            and receive_ns - self._last_receive_ns > config.stale_after_ns
+        )
+        if (stamp_gap or receive_gap) and not self._is_stale:
+            counters.stale_episodes += 1
+        resumed = self._is_stale or stamp_gap or receive_gap
+        if stamp_gap:
+            self.reset()
+        self._is_stale = False
+        self._last_stamp_ns = sample.stamp_ns
+        self._last_receive_ns = receive_ns
+
+        start = time.perf_counter()
+        q, v = checked[0], checked[1]
+        a = checked[2] if len(checked) == 3 else self._estimator.update(sample.stamp_ns, v)
+        out_of_range = False
+        detail = None
+        if self.range is not None:
+            violation = self.range.first_violation(q, v, a)
+            if violation is not None:
+                out_of_range = True
+                counters.out_of_range += 1
+                detail = f'{violation.describe()} ({self.range.source})'
+        if out_of_range and config.out_of_range == 'reject':
+            self._push_window(q, v, a)  # the motion happened: keep the history continuous
+            return self._reject(sample, Reject.OUT_OF_RANGE, detail or '')
+        tau = self._predict(q, v, a)
+        self.compute_s.add(time.perf_counter() - start)
+        if not np.isfinite(tau).all():
+            return self._reject(
+                sample, Reject.NON_FINITE_OUTPUT, f'model returned non-finite torque {tau}'
+            )
+        over = np.abs(tau) > self.torque_limit
+        is_clamped = bool(over.any())
+        if is_clamped:
+            tau = np.clip(tau, -self.torque_limit, self.torque_limit)
+            counters.clamped_samples += 1
+            counters.clamped_per_joint += over
+        counters.predicted += 1
+        return StepResult(
+            sample.stamp_ns,
+            tau,
+            detail=detail,
+            is_clamped=is_clamped,
+            is_out_of_range=out_of_range,
+            resumed_after_stale=resumed,
+        )
+
+    def _push_window(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray | None:
+        if not self.is_sequence_model:
+            return None
+        row = np.concatenate([q, v, a])
+        if self._window is None:
+            # As the offline predict pads a run: the first sample repeated over the window.
+            self._window = np.repeat(row[None], self.sequence_length, axis=0)
+        else:
+            self._window[:-1] = self._window[1:]
+            self._window[-1] = row
+        return self._window
+
+    def _predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            window = self._push_window(q, v, a)
+            if window is not None:
+                return np.asarray(self.model.predict_window(window), dtype=float)  # type: ignore[attr-defined]
+            return np.asarray(self.model.predict(q[None], v[None], a[None]), dtype=float)[0]

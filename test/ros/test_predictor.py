@@ -1,0 +1,264 @@
+"""predictor, in its own process: online tau_u equals the offline prediction; guards hold."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
+
+from predictor.tiny_artifacts import reference_run
+from ros.ros_helpers import STARTUP_S
+from support import sine_recording
+
+from id_learning.bag import read_joint_states
+from id_learning.dataset.recording import write_recording
+from id_learning.models.registry import STUDY_MODELS, load_model
+from id_learning.predictor import causal_acceleration
+
+pytestmark = pytest.mark.ros
+
+N_SAMPLES = 80
+
+
+def tau_u_subscriptions(listener, name: str) -> int:
+    """Subscriptions matched by a predictor's tau_u publisher, from its diagnostics."""
+    return int((listener.diagnostics(name) or {}).get('tau_u_subscriptions', 0))
+
+
+def stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def test_replay_to_predictor_gives_the_offline_prediction_for_every_model_kind(
+    tmp_path, nodes, listener, tiny_artifacts, mabi
+):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory
+
+    bag = write_recording(sine_recording(N_SAMPLES), tmp_path / 'bag')
+    namespaces = {kind: f'/{kind}' for kind in STUDY_MODELS}
+    listener.subscribe(JointTrajectory, '/reference')
+    for kind in STUDY_MODELS:
+        listener.subscribe(JointState, f'/{kind}/tau_u')
+    listener.subscribe(JointState, '/mlp_js/tau_u')
+    common = {'input_depth': 100, 'input_topic': '/reference', 'diagnostics_period_s': 0.2}
+    for kind, namespace in namespaces.items():
+        nodes(
+            'predictor',
+            {'artifact': str(tiny_artifacts[kind]), **common},
+            name=f'predictor_{kind}',
+            remaps={'__ns': namespace},
+        )
+    # The same MLP on the raw joint states: accelerations estimated causally.
+    nodes(
+        'predictor',
+        {
+            'artifact': str(tiny_artifacts['mlp']),
+            'input_type': 'joint_state',
+            'input_topic': '/joint_states',
+            'input_depth': 100,
+            'diagnostics_period_s': 0.2,
+        },
+        name='predictor_mlp_js',
+        remaps={'__ns': '/mlp_js'},
+    )
+    listener.subscribe(DiagnosticArray, '/diagnostics')
+    # Every predictor's tau_u publisher has matched the listener (writer side): none of its
+    # outputs can be lost to discovery. The replay waits for its own subscribers.
+    for namespace in [*namespaces.values(), '/mlp_js']:
+        listener.wait_for(
+            lambda ns=namespace: tau_u_subscriptions(listener, f'id_learning{ns}/predictor') >= 1,
+            STARTUP_S,
+            f'the predictor in {namespace} to connect',
+        )
+    replay = nodes(
+        'replay',
+        {
+            'bag': str(bag),
+            'rate': 0.5,
+            'reference_topic': '/reference',
+            'wait_for_subscribers': len(STUDY_MODELS) + 2,
+        },
+    )
+    assert replay.wait(120) == 0
+
+    topics = [f'/{kind}/tau_u' for kind in STUDY_MODELS] + ['/mlp_js/tau_u']
+    listener.wait_for(
+        lambda: (
+            all(len(listener.messages[t]) >= N_SAMPLES for t in topics)
+            and len(listener.messages['/reference']) >= N_SAMPLES
+        ),
+        60,
+        f'{N_SAMPLES} tau_u messages from each predictor',
+    )
+    with listener.condition:
+        reference = sorted(listener.messages['/reference'], key=stamp_ns)
+        outputs = {t: list(listener.messages[t]) for t in topics}
+
+    states = read_joint_states(bag, '/joint_states')
+    assert [stamp_ns(m) for m in reference] == states.stamps_ns.tolist()
+    names = list(reference[0].joint_names)
+    assert names == list(mabi.joints)
+    q = np.array([m.points[0].positions for m in reference])
+    v = np.array([m.points[0].velocities for m in reference])
+    a = np.array([m.points[0].accelerations for m in reference])
+    limit = mabi.limits.torque
+
+    def check(topic: str, expected: np.ndarray, stamps: list[int]) -> None:
+        got = outputs[topic]
+        assert len(got) == N_SAMPLES, topic  # one tau_u per input sample
+        assert [stamp_ns(m) for m in got] == stamps, topic  # stamped with the input stamps
+        assert all(list(m.name) == names for m in got), topic
+        effort = np.array([m.effort for m in got])
+        scale = np.abs(expected).max()
+        assert scale > 0
+        np.testing.assert_allclose(effort, expected, rtol=1e-5, atol=1e-6 * scale, err_msg=topic)
+
+    stamps = [stamp_ns(m) for m in reference]
+    for kind in STUDY_MODELS:
+        model = load_model(tiny_artifacts[kind], mabi)
+        check(f'/{kind}/tau_u', np.clip(model.predict(q, v, a), -limit, limit), stamps)
+    a_causal = causal_acceleration(states.stamps_ns, states.velocity)
+    mlp = load_model(tiny_artifacts['mlp'], mabi)
+    expected = np.clip(mlp.predict(states.position, states.velocity, a_causal), -limit, limit)
+    check('/mlp_js/tau_u', expected, states.stamps_ns.tolist())
+
+
+def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
+    nodes, listener, tiny_artifacts, mabi
+):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from id_learning.nodes.qos import reference_qos
+
+    kind = 'rnea_lq'
+    listener.subscribe(JointState, '/tau_u')
+    listener.subscribe(Float64MultiArray, '/ff/commands')
+    listener.subscribe(DiagnosticArray, '/diagnostics')
+    publisher = listener.node.create_publisher(JointTrajectory, '/reference', reference_qos(100))
+    predictor = nodes(
+        'predictor',
+        {
+            'artifact': str(tiny_artifacts[kind]),
+            'input_topic': '/reference',
+            'input_depth': 100,
+            'stale_after_cycles': 25,
+            'max_age_s': 0.5,
+            'diagnostics_period_s': 0.1,
+            'log_throttle_s': 0.2,
+            'command_topic': '/ff/commands',
+        },
+    )
+    listener.wait_for(
+        lambda: (
+            publisher.get_subscription_count() >= 1
+            and tau_u_subscriptions(listener, 'id_learning/predictor') >= 1
+        ),
+        STARTUP_S,
+        'the predictor to connect (both ways)',
+    )
+    joints = list(mabi.joints)
+    _, q, v, a = reference_run(20)
+    a_big = np.full(6, 1e4)  # far beyond the robot's acceleration limits
+    raw = load_model(tiny_artifacts[kind], mabi).predict(q[:1], v[:1], a_big[None])[0]
+    assert np.any(np.abs(raw) > mabi.limits.torque)  # precondition: these will be clamped
+    sent_ok: list[int] = []
+
+    def send(k, *, names=joints, q_k=None, v_k=None, a_k=None, age_s=0.0, valid=True):
+        msg = JointTrajectory(joint_names=list(names))
+        stamp = time.time_ns() - round(age_s * 1e9)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        msg.points = [
+            JointTrajectoryPoint(
+                positions=list(q[k] if q_k is None else q_k),
+                velocities=list(v[k] if v_k is None else v_k),
+                accelerations=list(a[k] if a_k is None else a_k),
+            )
+        ]
+        publisher.publish(msg)
+        if valid:
+            sent_ok.append(stamp)
+        time.sleep(0.008)  # the stream's own pace (8 ms IPO), not synchronisation
+
+    for k in range(10):
+        send(k)
+    for k in range(3):
+        send(k, q_k=[np.nan, *q[k][1:]], valid=False)
+    for k in range(2):
+        send(k, v_k=[*v[k][:5], np.inf], valid=False)
+    for k in range(3):
+        send(k, names=joints[:5], q_k=q[k][:5], v_k=v[k][:5], a_k=a[k][:5], valid=False)
+    for k in range(3):
+        send(k, names=[*joints[:5], 'joint_7'], valid=False)
+    for k in range(4):
+        send(10 + k, a_k=a_big)
+    for k in range(3):
+        send(k, age_s=5.0, valid=False)
+
+    def diagnostics():
+        return listener.diagnostics('id_learning/predictor') or {}
+
+    listener.wait_for(lambda: diagnostics().get('stale') == 'True', 30, 'the stale report')
+    published_while_stale = len(listener.messages['/tau_u'])
+    for k in range(10, 20):
+        send(k)
+
+    expected = {
+        'received': 38,
+        'published': 24,
+        'rejected_non_finite': 5,
+        'rejected_joint_count': 3,
+        'rejected_joint_names': 3,
+        'rejected_too_old': 3,
+        'rejected': 14,
+        'clamped_samples': 4,
+        'out_of_range_samples': 4,
+    }
+    listener.wait_for(
+        lambda: (
+            all(diagnostics().get(key) == str(value) for key, value in expected.items())
+            and diagnostics().get('stale') == 'False'
+            and len(listener.messages['/tau_u']) >= 24
+        ),
+        30,
+        f'diagnostics to count {expected}',
+    )
+    assert predictor.is_running
+    values = diagnostics()
+    assert int(values['stale_episodes']) >= 1
+    assert int(values['history_resets']) >= 1
+    assert values['rejected_stamp_order'] == '0'
+    assert values['callback_errors'] == '0'
+    assert published_while_stale == 14
+
+    with listener.condition:
+        published = list(listener.messages['/tau_u'])
+    assert len(published) == 24
+    assert [stamp_ns(m) for m in published] == sent_ok
+    for msg in published:
+        assert list(msg.name) == joints
+        effort = np.array(msg.effort)
+        assert np.isfinite(effort).all()
+        assert np.all(np.abs(effort) <= mabi.limits.torque)
+    clamped = np.array([m.effort for m in published[10:14]])
+    assert np.any(np.isclose(np.abs(clamped), mabi.limits.torque), axis=1).all()
+    # The forward-command copy: the same torques, plus one zero command when it went stale.
+    listener.wait_for(
+        lambda: len(listener.messages['/ff/commands']) >= 25, 10, 'the command copies'
+    )
+    with listener.condition:
+        commands = [list(m.data) for m in listener.messages['/ff/commands']]
+    zeros = [c for c in commands if not any(c)]
+    assert 1 <= len(zeros) <= int(values['stale_episodes'])
+    assert [c for c in commands if any(c)] == [list(m.effort) for m in published]
+    assert predictor.stop() == 0
+    log = predictor.log()
+    assert 'rejected (non_finite)' in log
+    assert 'reference stale' in log

@@ -1,0 +1,105 @@
+"""The replay's plan: cycles on the IPO grid, the span, and the reference built from the bag."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
+
+from support import sine_recording
+
+from id_learning.bag import iter_raw
+from id_learning.dataset.recording import write_recording
+from id_learning.errors import BagError, ConfigError
+from id_learning.nodes.params import ReplayConfig
+from id_learning.nodes.replay import build_plan
+from id_learning.predictor import reference_from_states
+
+pytestmark = pytest.mark.ros
+
+PERIOD_NS = 8_000_000
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory):
+    return write_recording(sine_recording(400), tmp_path_factory.mktemp('plan') / 'bag')
+
+
+def test_each_cycle_holds_the_recorded_bytes_of_its_stamp_then_the_reference(bag, mabi):
+    from rclpy.serialization import deserialize_message
+    from trajectory_msgs.msg import JointTrajectory
+
+    plan = build_plan(ReplayConfig(bag=str(bag), reference_lowpass=False), mabi)
+    assert len(plan.cycles) == 400
+    assert plan.message_count == 800
+    assert plan.period_ns == PERIOD_NS
+    offsets = np.array([cycle.offset_ns for cycle in plan.cycles])
+    np.testing.assert_array_equal(offsets, np.arange(400) * PERIOD_NS)
+    recorded = {topic: [data for _, _, data in iter_raw(bag, [topic])] for topic in plan.topics}
+    recording = sine_recording(400)
+    for k, cycle in enumerate(plan.cycles):
+        (i0, first), (i1, second), (i2, reference) = cycle.messages
+        assert (i0, i1, i2) == (0, 1, -1)
+        assert first == recorded['/joint_states'][k]
+        assert second == recorded['/motor_currents'][k]
+        msg = deserialize_message(reference, JointTrajectory)
+        assert msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == cycle.stamp_ns
+        np.testing.assert_array_equal(msg.points[0].positions, recording.position[k])
+    # Accelerations: central differences of the recorded velocities over the stamps.
+    expected = reference_from_states(
+        recording.joints,
+        recording.stamps_ns,
+        recording.position,
+        recording.velocity,
+        period_s=0.008,
+    )
+    last = deserialize_message(plan.cycles[-1].messages[2][1], JointTrajectory)
+    np.testing.assert_allclose(last.points[0].accelerations, expected.a[-1], rtol=1e-12)
+
+
+def test_start_offset_and_duration_select_the_span(bag, mabi):
+    plan = build_plan(
+        ReplayConfig(bag=str(bag), start_offset_s=1.0, duration_s=0.5, reference_mode='none'),
+        mabi,
+    )
+    stamps = sine_recording(400).stamps_ns
+    assert [c.stamp_ns for c in plan.cycles] == stamps[125:188].tolist()  # 1.0 s .. 1.5 s
+    assert plan.cycles[0].offset_ns == 0
+    assert all(len(cycle.messages) == 2 for cycle in plan.cycles)
+
+
+def test_the_low_passed_reference_of_a_span_is_filtered_over_padding_around_it(bag, mabi):
+    whole = build_plan(ReplayConfig(bag=str(bag)), mabi)
+    span = build_plan(ReplayConfig(bag=str(bag), start_offset_s=1.0, duration_s=0.5), mabi)
+    # The span's first sample was filtered with the same samples around it as in the whole bag.
+    np.testing.assert_allclose(velocity_at(span, 0), velocity_at(whole, 125), rtol=1e-9)
+
+
+def velocity_at(plan, k):
+    from rclpy.serialization import deserialize_message
+    from trajectory_msgs.msg import JointTrajectory
+
+    msg = deserialize_message(plan.cycles[k].messages[-1][1], JointTrajectory)
+    return np.array(msg.points[0].velocities)
+
+
+def test_log_time_scheduling_and_joint_state_references(bag, mabi):
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    plan = build_plan(
+        ReplayConfig(bag=str(bag), timing='log_time', reference_mode='joint_state'), mabi
+    )
+    assert len(plan.cycles) == 400
+    msg = deserialize_message(plan.cycles[3].messages[-1][1], JointState)
+    assert len(msg.position) == 6
+    assert len(msg.velocity) == 6
+    assert len(msg.effort) == 0
+
+
+def test_a_plan_refuses_an_empty_span_or_a_missing_topic(bag, mabi):
+    with pytest.raises(ConfigError, match='nothing to play'):
+        build_plan(ReplayConfig(bag=str(bag), start_offset_s=100.0, reference_mode='none'), mabi)
+    with pytest.raises(BagError, match='/wrench'):
+        build_plan(ReplayConfig(bag=str(bag), topics=('/wrench',)), mabi)
