@@ -1,0 +1,301 @@
+"""The diagnosis report: DIR/report.md with figures and DIR/effects.json."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from id_learning.diagnosis.locate import LOCATION_VARIABLES
+from id_learning.diagnosis.pipeline import DiagnosisResult
+
+__all__ = ['EFFECTS_JSON', 'REPORT_MD', 'write_report']
+
+_LOG = logging.getLogger(__name__)
+EFFECTS_JSON = 'effects.json'
+REPORT_MD = 'report.md'
+
+
+def write_report(result: DiagnosisResult, out: Path) -> Path:
+    """Write report.md, effects.json and the PNG figures into ``out``; return report.md's path."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / EFFECTS_JSON).write_text(result.to_json(), encoding='utf-8')
+    figures = _plot(result, out)
+    path = out / REPORT_MD
+    path.write_text(render_markdown(result, figures), encoding='utf-8')
+    _LOG.info('diagnosis: wrote %s and %s', path, out / EFFECTS_JSON)
+    return path
+
+
+def _row(cells: list[str]) -> str:
+    return '| ' + ' | '.join(cells) + ' |'
+
+
+def _table(head: list[str], rows: list[list[str]], align: str = '---') -> list[str]:
+    return [_row(head), _row([align] * len(head)), *[_row(r) for r in rows]]
+
+
+def _parameter_text(parameter: dict[str, Any]) -> str:
+    value = parameter['value']
+    if parameter['ci'] is None:
+        return f'{parameter["name"]} = {value} {parameter["unit"]}'
+    low, high = parameter['ci']
+    return f'{parameter["name"]} = {value:.4g} [{low:.4g}, {high:.4g}] {parameter["unit"]}'
+
+
+def render_markdown(result: DiagnosisResult, figures: list[str]) -> str:
+    """The report's Markdown text."""
+    joints = list(result.joints)
+    noise = result.noise
+    lines = [
+        f'# Diagnosis: {", ".join(result.sources)}',
+        '',
+        f'Robot {result.robot.name}, {result.duration_s:.1f} s recorded, target '
+        f'{"tau_u from motor currents" if result.target == "motor" else "joint torque"}. '
+        'Nominal model: URDF rigid-body dynamics (RNEA) plus the datasheet rotor inertia. '
+        'Every torque below is joint side [N·m], filtered like the label; RMSEs are on the '
+        'held-out (last 30 %, contiguous) part.',
+        '',
+        '## Verdict',
+        '',
+    ]
+    named = result.named_effects()
+    if named:
+        for effect in named:
+            where = f' on {effect.spec.joint_name}' if effect.spec.joint_name else ''
+            lines.append(
+                f'- **{effect.name}**{where}: '
+                + '; '.join(_parameter_text(p) for p in effect.parameters)
+                + f' (explains {100 * effect.variance_explained_total:.0f} % of the '
+                f'disagreement, confidence {effect.confidence})'
+            )
+    else:
+        lines.append('- No named effect is needed to explain the data.')
+    for alias in result.alias_sets:
+        lines.append(
+            '- **Alias set** (this excitation cannot tell them apart): '
+            + ', '.join(alias.members)
+            + f'; the model keeps {alias.representative}.'
+        )
+    structured = result.structured_joints()
+    if structured:
+        lines.append(
+            '- **Unexplained remainder** on '
+            + ', '.join(structured)
+            + ': structure no candidate explains (see the remainder table).'
+        )
+    lines += [
+        f'- Selection stopped: {result.stop_reason}.',
+        '',
+        '## Held-out RMSE before and after [N·m]',
+        '',
+        *_table(
+            ['model', *joints],
+            [
+                ['nominal', *[f'{x:.3g}' for x in result.rmse_before_nm]],
+                *[[f'+ {label}', *[f'{x:.3g}' for x in rmse]] for label, rmse in result.waterfall],
+                ['noise level (estimate)', *[f'{x:.3g}' for x in noise.filtered_std_nm]],
+            ],
+        ),
+        '',
+    ]
+    if result.effects:
+        lines += ['## Effects in the refit model', '']
+        rows = []
+        for effect in result.effects:
+            rows.append(
+                [
+                    effect.label,
+                    effect.status,
+                    effect.confidence,
+                    '<br>'.join(_parameter_text(p) for p in effect.parameters),
+                    ', '.join(f'{100 * x:.0f}' for x in effect.variance_explained),
+                    f'F = {effect.selection["f_statistic"]:.1f}, '
+                    f'p = {effect.selection["p_value"]:.2g}, '
+                    f'ΔBIC = {effect.selection["delta_bic"]:.1f}',
+                ]
+            )
+        lines += _table(
+            [
+                'effect',
+                'status',
+                'confidence',
+                'parameters [95 % interval]',
+                'variance explained per joint [%]',
+                'selection',
+            ],
+            rows,
+        )
+        lines.append('')
+    if result.alias_sets:
+        lines += ['## Alias sets', '']
+        for alias in result.alias_sets:
+            detail = ', '.join(
+                f'{m} (canonical correlation {alias.canonical_correlation.get(m, 1.0):.3f})'
+                for m in alias.members[1:]
+            )
+            lines.append(f'- {alias.representative} ≈ {detail}')
+        lines.append('')
+    lines += ['## Untestable on this recording', '']
+    if result.untestable:
+        lines += _table(
+            ['effect', 'joint', 'all variants', 'reason'],
+            [
+                [u['name'], u['joint'] or '-', 'yes' if u['all_variants'] else 'some', u['reason']]
+                for u in result.untestable
+            ],
+        )
+    else:
+        lines.append('Every candidate is testable.')
+    lines += [
+        '',
+        '## Remainder after the refit',
+        '',
+        *_table(
+            [
+                'joint',
+                'RMS [N·m]',
+                'noise [N·m]',
+                'ratio',
+                'p (variance)',
+                'corr. time ratio',
+                'structured',
+            ],
+            [
+                [
+                    r.joint,
+                    f'{r.rms_nm:.3g}',
+                    f'{r.noise_nm:.3g}',
+                    f'{r.ratio:.2f}',
+                    f'{r.p_value:.2g}',
+                    f'{r.correlation_ratio:.1f}',
+                    'yes' if r.structured else 'no',
+                ]
+                for r in result.remainder
+            ],
+        ),
+        '',
+        f'Noise: raw label {", ".join(f"{x:.3g}" for x in noise.raw_std_nm)} N·m white level '
+        f'(median spectrum {noise.band_hz[0]:g}–{noise.band_hz[1]:g} Hz); after the filter '
+        f'{", ".join(f"{x:.3g}" for x in noise.filtered_std_nm)} N·m with correlation times '
+        f'{", ".join(f"{x:.0f}" for x in noise.correlation_samples)} samples; effective '
+        f'samples train {", ".join(f"{x:.0f}" for x in result.effective_samples["train"])}, '
+        f'test {", ".join(f"{x:.0f}" for x in result.effective_samples["test"])}.',
+        '',
+        '## Where the nominal residual lives (share of its variance organised by each variable)',
+        '',
+        *_table(
+            ['joint', 'RMS [N·m]', *[LOCATION_VARIABLES[k][0] for k in LOCATION_VARIABLES]],
+            [
+                [
+                    loc.joint,
+                    f'{loc.rms_nm:.3g}',
+                    *[f'{100 * loc.explained_share[k]:.0f} %' for k in LOCATION_VARIABLES],
+                ]
+                for loc in result.location
+            ],
+        ),
+        '',
+        '## Figures',
+        '',
+        *[f'![{name}]({name})' for name in figures],
+        '',
+    ]
+    return '\n'.join(lines)
+
+
+def _plot(result: DiagnosisResult, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    files = []
+    joints = list(result.joints)
+    n = len(joints)
+
+    # Waterfall: held-out RMSE per joint after each added effect.
+    steps = ['nominal', *[label for label, _ in result.waterfall]]
+    values = np.vstack([result.rmse_before_nm, *[rmse for _, rmse in result.waterfall]])
+    cols = min(n, 3)
+    rows = int(np.ceil(n / cols))
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(4.2 * cols, 2.8 * rows + 0.6 * len(steps) / 3), squeeze=False,
+        constrained_layout=True,
+    )  # fmt: skip
+    colours = plt.get_cmap('viridis')(np.linspace(0.1, 0.9, len(steps)))
+    for j in range(rows * cols):
+        ax = axes[j // cols][j % cols]
+        if j >= n:
+            ax.axis('off')
+            continue
+        ax.bar(range(len(steps)), values[:, j], color=colours)
+        ax.axhline(result.noise.filtered_std_nm[j], color='k', ls='--', lw=0.8, label='noise')
+        ax.set_title(joints[j], fontsize=9)
+        ax.set_ylabel('held-out RMSE [N·m]', fontsize=8)
+        if values[:, j].min() > 0 and values[:, j].max() > 20 * values[:, j].min():
+            ax.set_yscale('log')  # many effects of very different sizes
+        every = max(1, len(steps) // 12)
+        ax.set_xticks(range(0, len(steps), every))
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3, axis='y')
+    legend = '\n'.join(f'{k}: {s}' for k, s in enumerate(steps))
+    fig.suptitle('Waterfall: held-out RMSE after each added effect (dashed: noise level)')
+    # The key goes below the panels (bbox_inches='tight' keeps it in the file).
+    fig.text(0.01, -0.01, legend, fontsize=7, va='top', family='monospace')
+    fig.savefig(out / 'waterfall.png', dpi=110, bbox_inches='tight')
+    plt.close(fig)
+    files.append('waterfall.png')
+
+    # Location: binned residual against each variable, per joint.
+    keys = list(LOCATION_VARIABLES)
+    fig, axes = plt.subplots(
+        n, len(keys), figsize=(2.3 * len(keys), 1.7 * n), squeeze=False, constrained_layout=True
+    )
+    for j, loc in enumerate(result.location):
+        for c, key in enumerate(keys):
+            ax = axes[j][c]
+            centres, means, stds = loc.bins[key]
+            if centres:
+                centre = np.asarray(centres)
+                mean, std = np.asarray(means), np.asarray(stds)
+                ax.fill_between(centre, mean - std, mean + std, color='C0', alpha=0.2, lw=0)
+                ax.plot(centre, mean, 'o-', ms=2, lw=1, color='C0')
+            ax.axhline(0, color='k', lw=0.5)
+            ax.tick_params(labelsize=6)
+            if j == 0:
+                label, unit = LOCATION_VARIABLES[key]
+                ax.set_title(f'{label} [{unit}]', fontsize=7)
+            if c == 0:
+                ax.set_ylabel(f'{loc.joint}\nresidual [N·m]', fontsize=7)
+            ax.text(
+                0.02, 0.9, f'{100 * loc.explained_share[key]:.0f} %', transform=ax.transAxes,
+                fontsize=6,
+            )  # fmt: skip
+    fig.suptitle(
+        'Nominal residual (measured minus nominal) against each variable: binned mean ± std'
+    )
+    fig.savefig(out / 'residual_location.png', dpi=100)
+    plt.close(fig)
+    files.append('residual_location.png')
+
+    if result.series:
+        t = result.series['time_s']
+        before, after = result.series['residual_before'], result.series['residual_after']
+        fig, axes = plt.subplots(n, 1, figsize=(11, 1.7 * n), sharex=True, squeeze=False,
+                                 constrained_layout=True)  # fmt: skip
+        for j in range(n):
+            ax = axes[j][0]
+            ax.plot(t, before[:, j], '.', ms=1, color='0.6', label='nominal')
+            ax.plot(t, after[:, j], '.', ms=1, color='C3', label='refit model')
+            ax.set_ylabel(f'{joints[j]}\n[N·m]', fontsize=7)
+            ax.grid(alpha=0.3)
+        axes[0][0].legend(loc='upper right', fontsize=7, markerscale=6)
+        axes[-1][0].set_xlabel('time in the recording [s] (train and held-out parts)')
+        fig.suptitle('Residual torque before and after the refit')
+        fig.savefig(out / 'residual_time.png', dpi=100)
+        plt.close(fig)
+        files.append('residual_time.png')
+    return files

@@ -1,0 +1,509 @@
+"""Forward group selection with statistical stopping, alias sets and the final refit.
+
+Every candidate is a group of filtered regressor columns. Rows are joint-samples; each joint's
+rows are weighted by d / (sigma_j^2 tau_j) (noise variance sigma_j^2 of the filtered label,
+correlation time tau_j samples, every d-th sample kept), so a residual sum of squares is in units
+of independent noise samples and the effective sample size is sum_j N_j d / tau_j. A candidate
+enters when, given the effects already in,
+
+1. its gain is significant: F test with the effective sample size, at the family-wise level split
+   among the candidates of the step (Bonferroni);
+2. the information criterion improves: n_eff ln(RSS' / RSS) + k ln(n_eff) < 0 (BIC);
+3. the held-out (contiguous, later) part improves;
+4. every fitted value is physically plausible.
+
+Selection stops when no candidate passes, or when the residual is consistent with the noise level
+and no candidate is overwhelmingly significant. An effect whose contribution another candidate
+reproduces as well (its replacement is not significantly worse) forms an alias set with it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from id_learning.diagnosis.statistics import f_test
+
+__all__ = [
+    'AliasSet',
+    'Design',
+    'Fit',
+    'GroupEvaluation',
+    'SelectionResult',
+    'find_aliases',
+    'forward_select',
+]
+
+_LOG = logging.getLogger(__name__)
+
+PARTS = ('train', 'test')
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """A least-squares fit of some groups on the training part.
+
+    Attributes:
+        groups: group labels in the fit, in order.
+        theta: coefficients of the normalised columns, concatenated in group order.
+        rank: numerical rank of the fitted columns.
+        rss: {'train', 'test'} -> effective residual sums of squares.
+        covariance: covariance of ``theta`` (normalised columns), scaled by the residual variance
+            per effective sample (what the confidence intervals use).
+        noise_covariance: the same for residuals of pure label noise (unit variance per
+            effective sample): what estimation noise alone allows, whatever else is missing.
+    """
+
+    groups: tuple[str, ...]
+    theta: np.ndarray
+    rank: int
+    rss: dict[str, float]
+    covariance: np.ndarray
+    noise_covariance: np.ndarray
+
+
+class Design:
+    """The weighted, normalised regression problem over every candidate group.
+
+    Args:
+        y: {'train', 'test'} -> (M, n) residual torques to explain [N*m] (filtered, kept rows).
+        columns: group label -> {'train', 'test'} -> (M, n, k) filtered columns.
+        weights: (n,) row weight of each joint (d / (sigma_j^2 tau_j)).
+        n_effective: {'train', 'test'} -> (n,) effective samples per joint.
+    """
+
+    def __init__(
+        self,
+        y: dict[str, np.ndarray],
+        columns: dict[str, dict[str, np.ndarray]],
+        weights: np.ndarray,
+        n_effective: dict[str, np.ndarray],
+    ) -> None:
+        """Stack, weight and normalise the columns; precompute the Gram matrices."""
+        self.weights = np.asarray(weights, dtype=float)
+        self.n_effective = {part: np.asarray(n_effective[part], dtype=float) for part in PARTS}
+        root = np.sqrt(self.weights)
+        self.y = {part: np.asarray(y[part], dtype=float) for part in PARTS}
+        self._yw = {part: (self.y[part] * root).reshape(-1) for part in PARTS}
+        self.slices: dict[str, slice] = {}
+        blocks: dict[str, list[np.ndarray]] = {part: [] for part in PARTS}
+        start = 0
+        for label, parts in columns.items():
+            k = parts['train'].shape[2]
+            self.slices[label] = slice(start, start + k)
+            start += k
+            for part in PARTS:
+                x = parts[part] * root[None, :, None]
+                blocks[part].append(x.reshape(-1, k))
+        n_columns = start
+        self.matrix = {
+            part: (np.hstack(blocks[part]) if blocks[part] else np.zeros((len(self._yw[part]), 0)))
+            for part in PARTS
+        }
+        norms = np.linalg.norm(self.matrix['train'], axis=0)
+        self.column_norm = np.where(norms > 0, norms, 1.0)
+        for part in PARTS:
+            self.matrix[part] = self.matrix[part] / self.column_norm
+        self.gram = {part: self.matrix[part].T @ self.matrix[part] for part in PARTS}
+        self.cross = {part: self.matrix[part].T @ self._yw[part] for part in PARTS}
+        self.yy = {part: float(self._yw[part] @ self._yw[part]) for part in PARTS}
+        self.n_columns = n_columns
+
+    @property
+    def labels(self) -> list[str]:
+        """Group labels in column order."""
+        return list(self.slices)
+
+    @property
+    def n_eff_train(self) -> float:
+        """Total effective samples of the training part."""
+        return float(self.n_effective['train'].sum())
+
+    def indices(self, groups: Sequence[str]) -> np.ndarray:
+        """Column indices of the groups, in order."""
+        if not groups:
+            return np.zeros(0, dtype=int)
+        return np.concatenate([np.arange(self.n_columns)[self.slices[g]] for g in groups])
+
+    def fit(self, groups: Sequence[str]) -> Fit:
+        """Least squares of the training part on the groups' columns (minimum norm if singular)."""
+        idx = self.indices(groups)
+        if not idx.size:
+            rss = {part: self.yy[part] for part in PARTS}
+            return Fit(tuple(groups), np.zeros(0), 0, rss, np.zeros((0, 0)), np.zeros((0, 0)))
+        gram = self.gram['train'][np.ix_(idx, idx)]
+        values, vectors = np.linalg.eigh(gram)
+        keep = values > 1e-10 * max(values.max(), 1e-300)
+        inverse = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
+        theta = inverse @ self.cross['train'][idx]
+        rank = int(keep.sum())
+        rss = {}
+        for part in PARTS:
+            g = self.gram[part][np.ix_(idx, idx)]
+            value = self.yy[part] - 2.0 * theta @ self.cross[part][idx] + theta @ g @ theta
+            rss[part] = max(float(value), 0.0)
+        dof = max(self.n_eff_train - rank, 1.0)
+        covariance = inverse * (rss['train'] / dof)
+        return Fit(tuple(groups), theta, rank, rss, covariance, inverse)
+
+    def physical(self, fit: Fit, group: str) -> np.ndarray:
+        """A group's coefficients in the columns' physical units."""
+        position = self._position(fit, group)
+        k = self.slices[group].stop - self.slices[group].start
+        return fit.theta[position : position + k] / self.column_norm[self.slices[group]]
+
+    def _position(self, fit: Fit, group: str) -> int:
+        position = 0
+        for g in fit.groups:
+            if g == group:
+                return position
+            position += self.slices[g].stop - self.slices[g].start
+        raise KeyError(f'{group} is not in the fit {fit.groups}')
+
+    def physical_covariance(self, fit: Fit, group: str, *, noise_only: bool = False) -> np.ndarray:
+        """Covariance of a group's physical coefficients (``Fit.noise_covariance`` if asked)."""
+        position = self._position(fit, group)
+        k = self.slices[group].stop - self.slices[group].start
+        norm = self.column_norm[self.slices[group]]
+        source = fit.noise_covariance if noise_only else fit.covariance
+        block = source[position : position + k, position : position + k]
+        return block / np.outer(norm, norm)
+
+    def residual(self, fit: Fit, part: str) -> np.ndarray:
+        """(M, n) residual torque [N*m] (unweighted) of a fit on one part."""
+        idx = self.indices(fit.groups)
+        root = np.sqrt(self.weights)
+        prediction = (self.matrix[part][:, idx] @ fit.theta).reshape(self.y[part].shape)
+        return self.y[part] - prediction / root
+
+    def contribution(self, fit: Fit, group: str, part: str) -> np.ndarray:
+        """(M, n) filtered torque [N*m] one group adds in a fit."""
+        root = np.sqrt(self.weights)
+        position = self._position(fit, group)
+        k = self.slices[group].stop - self.slices[group].start
+        theta = fit.theta[position : position + k]
+        prediction = self.matrix[part][:, self.slices[group]] @ theta
+        return prediction.reshape(self.y[part].shape) / root
+
+    def weighted_columns(self, group: str, part: str = 'train') -> np.ndarray:
+        """A group's weighted, normalised columns (rows = joint-samples)."""
+        return self.matrix[part][:, self.indices([group])]
+
+
+@dataclass(frozen=True)
+class GroupEvaluation:
+    """The tests of adding one group to the current model.
+
+    Attributes:
+        label: the group.
+        extra_rank: independent columns it adds.
+        f_statistic, p_value: the F test with effective samples.
+        delta_bic: change of the information criterion (negative: better).
+        rss_train, rss_test: effective residual sums of squares with the group.
+        held_out_gain: decrease of the held-out effective RSS (positive: better).
+        plausible, reason: the plausibility rule's verdict.
+        eligible: whether every test passed.
+    """
+
+    label: str
+    extra_rank: int
+    f_statistic: float
+    p_value: float
+    delta_bic: float
+    rss_train: float
+    rss_test: float
+    held_out_gain: float
+    plausible: bool
+    reason: str
+    eligible: bool
+
+
+@dataclass(frozen=True, eq=False)
+class SelectionResult:
+    """Forward selection's outcome.
+
+    Attributes:
+        selected: group labels in the order they entered.
+        steps: the accepted step's evaluation, per selected group.
+        rejected: the best candidate at the stop and why it did not enter (or None).
+        stop_reason: why the selection stopped.
+        level: the per-candidate significance level used.
+    """
+
+    selected: list[str]
+    steps: list[GroupEvaluation]
+    rejected: GroupEvaluation | None
+    stop_reason: str
+    level: float
+
+
+#: plausibility(fit, labels) -> {label: (ok, reason)} for the groups of a fit.
+PlausibilityCheck = Callable[[Design, Fit], dict[str, tuple[bool, str]]]
+#: which candidates exclude each other (e.g. two Stribeck velocities of one joint).
+ConflictCheck = Callable[[str, Sequence[str]], bool]
+
+
+def _bic_change(rss_old: float, rss_new: float, extra: int, n_eff: float) -> float:
+    if rss_new <= 0 or rss_old <= 0:
+        return -math.inf if rss_new < rss_old else 0.0
+    return n_eff * math.log(rss_new / rss_old) + extra * math.log(n_eff)
+
+
+def noise_consistency(
+    design: Design, fit: Fit, significance: float, tolerance: float
+) -> tuple[bool, np.ndarray, np.ndarray]:
+    """Whether each joint's residual (train and test) is consistent with the noise level.
+
+    Returns:
+        (all joints consistent, per-joint RMS / noise ratio, per-joint p-values of the chi^2
+        variance test with effective samples).
+    """
+    n = design.y['train'].shape[1]
+    chi2 = np.zeros(n)
+    n_eff = np.zeros(n)
+    for part in PARTS:
+        residual = design.residual(fit, part)
+        chi2 += design.weights * np.sum(residual**2, axis=0)
+        n_eff += design.n_effective[part]
+    ratio = np.sqrt(chi2 / np.maximum(n_eff, 1e-12))
+    p_values = stats.chi2.sf(chi2, np.maximum(n_eff, 1.0))
+    consistent = (p_values > significance) | (ratio <= tolerance)
+    return bool(consistent.all()), ratio, p_values
+
+
+def forward_select(
+    design: Design,
+    candidates: Sequence[str],
+    plausibility: PlausibilityCheck,
+    *,
+    significance: float = 0.01,
+    max_groups: int = 12,
+    conflicts: ConflictCheck | None = None,
+    noise_significance: float = 0.001,
+    noise_tolerance: float = 1.25,
+) -> SelectionResult:
+    """Add candidate groups one at a time while each passes every test (see the module doc)."""
+    n_eff = design.n_eff_train
+    level = significance / max(len(candidates), 1)
+    strict = level / 100.0
+    selected: list[str] = []
+    steps: list[GroupEvaluation] = []
+    current = design.fit(selected)
+    stop_reason = 'reached the maximum number of effects'
+    rejected: GroupEvaluation | None = None
+    for _ in range(max_groups):
+        evaluations = []
+        for label in candidates:
+            if label in selected or (conflicts is not None and conflicts(label, selected)):
+                continue
+            evaluations.append(
+                _evaluate(design, current, label, plausibility, level=level, n_eff=n_eff)
+            )
+        eligible = [e for e in evaluations if e.eligible]
+        for e in sorted(evaluations, key=lambda e: e.p_value)[:8]:
+            _LOG.debug(
+                'diagnosis: step %d: %s F = %.1f p = %.2g dBIC = %.1f held-out %+.1f %s',
+                len(selected) + 1,
+                e.label,
+                e.f_statistic,
+                e.p_value,
+                e.delta_bic,
+                e.held_out_gain,
+                e.reason,
+            )
+        quiet, _, _ = noise_consistency(design, current, noise_significance, noise_tolerance)
+        best = min(eligible, key=lambda e: e.delta_bic) if eligible else None
+        if best is None:
+            rejected = min(evaluations, key=lambda e: e.p_value) if evaluations else None
+            stop_reason = 'no remaining candidate passes every test'
+            break
+        if quiet and best.p_value > strict:
+            rejected = best
+            stop_reason = 'the residual is consistent with the noise level'
+            break
+        selected.append(best.label)
+        steps.append(best)
+        current = design.fit(selected)
+        _LOG.info(
+            'diagnosis: added %s (F = %.1f, p = %.2g, dBIC = %.1f)',
+            best.label,
+            best.f_statistic,
+            best.p_value,
+            best.delta_bic,
+        )
+    return SelectionResult(selected, steps, rejected, stop_reason, level)
+
+
+def _evaluate(
+    design: Design,
+    current: Fit,
+    label: str,
+    plausibility: PlausibilityCheck,
+    *,
+    level: float,
+    n_eff: float,
+) -> GroupEvaluation:
+    trial = design.fit([*current.groups, label])
+    extra = trial.rank - current.rank
+    f_stat, p_value = f_test(current.rss['train'], trial.rss['train'], extra, n_eff, trial.rank)
+    delta_bic = _bic_change(current.rss['train'], trial.rss['train'], extra, n_eff)
+    gain = current.rss['test'] - trial.rss['test']
+    verdicts = plausibility(design, trial) if extra > 0 else {}
+    bad = [(g, reason) for g, (ok, reason) in verdicts.items() if not ok]
+    plausible = not bad
+    reason = '; '.join(f'{g}: {r}' for g, r in bad)
+    eligible = extra > 0 and p_value < level and delta_bic < 0 and gain > 0 and plausible
+    return GroupEvaluation(
+        label,
+        extra,
+        f_stat,
+        p_value,
+        delta_bic,
+        trial.rss['train'],
+        trial.rss['test'],
+        gain,
+        plausible,
+        reason,
+        eligible,
+    )
+
+
+@dataclass(frozen=True)
+class AliasSet:
+    """Effects this excitation cannot tell apart.
+
+    Attributes:
+        representative: the selected group kept in the model.
+        members: every group that explains the same part equally well (representative first).
+        canonical_correlation: canonical correlation of the representative's contribution with
+            each member's filtered columns, after the other selected effects are projected out.
+        unexplained: what a member leaves of the representative's contribution, in units of the
+            residual variance per effective sample (0: reproduced exactly).
+    """
+
+    representative: str
+    members: list[str]
+    canonical_correlation: dict[str, float] = field(default_factory=dict)
+    unexplained: dict[str, float] = field(default_factory=dict)
+
+
+def find_aliases(
+    design: Design,
+    selected: Sequence[str],
+    candidates: Sequence[str],
+    plausibility: PlausibilityCheck,
+    *,
+    significance: float = 0.01,
+    variants: Callable[[str, str], bool] | None = None,
+) -> list[AliasSet]:
+    """For each selected group, the candidates that reproduce what it explains.
+
+    Let c be the torque a selected group A contributes (filtered, weighted). A candidate B is an
+    alias of A when B's columns, together with the other selected groups, reproduce c so closely
+    that the difference is not significant: ||(I - P_{others, B}) c||^2 / s^2 below k_A times the
+    F quantile (s^2 the residual variance per effective sample), on the training part and, with
+    the same coefficients, on the held-out part; and the coefficients B needs for it are
+    plausible, with the uncertainty that A's contribution carries. Only c is projected, never
+    the noise: a large group earns nothing for the noise it could fit. The canonical
+    correlation of c with B's columns (others projected out) is kept.
+    ``variants(a, b)`` marks variants of one effect (two Stribeck velocities of one joint), which
+    are no aliases of each other.
+    """
+    full = design.fit(list(selected))
+    n_eff = design.n_eff_train
+    n_eff_test = float(design.n_effective['test'].sum())
+    dof = max(n_eff - full.rank, 1.0)
+    scale = {
+        'train': max(full.rss['train'] / dof, 1e-300),
+        'test': max(full.rss['test'] / max(n_eff_test, 1.0), 1e-300),
+    }
+    out = []
+    for a in selected:
+        others = [g for g in selected if g != a]
+        k_a = max(design.fit([*others, a]).rank - design.fit(others).rank, 1)
+        critical = k_a * float(stats.f.isf(significance, k_a, dof))
+        position_a = _positions(design, full, a)
+        theta_a = full.theta[position_a]
+        idx_a, idx_o = design.indices([a]), design.indices(others)
+        members, correlations, unexplained = [a], {}, {}
+        for b in candidates:
+            if b in selected or (variants is not None and variants(a, b)):
+                continue
+            idx_b = design.indices([b])
+            idx_s = np.concatenate([idx_o, idx_b])
+            beta, kept = _mimic(design.gram['train'], idx_s, idx_a, theta_a)
+            residual = {
+                part: _mimic_residual(design.gram[part], idx_s, idx_a, theta_a, beta)
+                for part in PARTS
+            }
+            if any(residual[part] / scale[part] > critical for part in PARTS):
+                continue
+            # B would need exactly these coefficients to show what the data show; they are
+            # as uncertain as A's contribution is.
+            k_b = len(idx_b)
+            gram = design.gram['train']
+            mapping = (_inverse(gram[np.ix_(idx_s, idx_s)]) @ gram[np.ix_(idx_s, idx_a)])[-k_b:]
+            covariance = mapping @ full.noise_covariance[position_a, position_a] @ mapping.T
+            mimic = Fit((b,), beta[-k_b:], int(kept), {}, covariance, covariance)
+            if not plausibility(design, mimic).get(b, (True, ''))[0]:
+                continue
+            beta_o, _ = _mimic(design.gram['train'], idx_o, idx_a, theta_a)
+            total = _mimic_residual(design.gram['train'], idx_o, idx_a, theta_a, beta_o)
+            members.append(b)
+            unexplained[b] = float(residual['train'] / scale['train'])
+            correlations[b] = (
+                float(math.sqrt(max(0.0, 1.0 - residual['train'] / total))) if total > 0 else 1.0
+            )
+        if len(members) > 1:
+            out.append(AliasSet(a, members, correlations, unexplained))
+    return out
+
+
+def _positions(design: Design, fit: Fit, group: str) -> slice:
+    position = 0
+    for g in fit.groups:
+        k = design.slices[g].stop - design.slices[g].start
+        if g == group:
+            return slice(position, position + k)
+        position += k
+    raise KeyError(group)
+
+
+def _inverse(gram: np.ndarray) -> np.ndarray:
+    if not gram.size:
+        return gram
+    values, vectors = np.linalg.eigh(gram)
+    keep = values > 1e-10 * max(values.max(), 1e-300)
+    return (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
+
+
+def _mimic(
+    gram: np.ndarray, idx_s: np.ndarray, idx_a: np.ndarray, theta_a: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """Coefficients of the columns idx_s that best reproduce the contribution X_a theta_a."""
+    if not idx_s.size:
+        return np.zeros(0), 0
+    g_ss = gram[np.ix_(idx_s, idx_s)]
+    inverse = _inverse(g_ss)
+    rank = int(np.linalg.matrix_rank(g_ss)) if g_ss.size else 0
+    return inverse @ (gram[np.ix_(idx_s, idx_a)] @ theta_a), rank
+
+
+def _mimic_residual(
+    gram: np.ndarray,
+    idx_s: np.ndarray,
+    idx_a: np.ndarray,
+    theta_a: np.ndarray,
+    beta: np.ndarray,
+) -> float:
+    """||X_a theta_a - X_s beta||^2 from a Gram matrix."""
+    value = theta_a @ gram[np.ix_(idx_a, idx_a)] @ theta_a
+    if idx_s.size:
+        value += -2.0 * beta @ (gram[np.ix_(idx_s, idx_a)] @ theta_a)
+        value += beta @ gram[np.ix_(idx_s, idx_s)] @ beta
+    return max(float(value), 0.0)

@@ -1,0 +1,167 @@
+"""The diagnosis on twin recordings whose hidden effects it is not told (a fast subset of the
+scoring in benchmarks/diagnosis_scoring.py), its report, and its failure paths."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from support import twin_config
+
+from id_learning.diagnosis import (
+    AugmentedModel,
+    DiagnosisConfig,
+    augmented_torque,
+    diagnose,
+    filtered_prediction,
+    run_diagnosis,
+)
+from id_learning.errors import ConfigError, DatasetError, RobotModelError
+from id_learning.twin import simulate
+
+DURATION_S = 150.0  # five excitation segments: enough independent samples in the held-out part
+SEED = 11
+
+
+def hidden(effects: dict) -> tuple:
+    config = twin_config(DURATION_S, effects, seed=SEED)
+    return config, simulate(config)
+
+
+def named(result) -> set[tuple[str, str | None]]:
+    return {(e.name, e.spec.joint_name or None) for e in result.named_effects()}
+
+
+@pytest.fixture(scope='module')
+def viscous_joint_1(tmp_path_factory):
+    """Viscous friction hidden on joint 1, diagnosed with the report written."""
+    config, twin = hidden({'viscous_friction': {'enabled': True, 'coefficient': [35.0] + [0] * 5}})
+    out = tmp_path_factory.mktemp('diagnosis')
+    return config, twin, diagnose(twin.recording, config.robot, out_dir=out), out
+
+
+def test_nothing_hidden_names_nothing():
+    config, twin = hidden({})
+    result = run_diagnosis(twin.recording, config.robot)
+    assert result.effects == []
+    assert result.structured_joints() == []
+    ratios = [r.ratio for r in result.remainder]
+    assert max(ratios) < 1.25  # the residual is the label noise, at its estimated level
+
+
+def test_viscous_friction_on_joint_1_is_named_with_its_coefficient(viscous_joint_1):
+    _, _, result, _ = viscous_joint_1
+    truth = 35.0
+    assert named(result) == {('viscous_friction', 'joint_1')}
+    (effect,) = result.named_effects()
+    assert effect.coefficients[0] == pytest.approx(truth, rel=0.1)
+    low, high = effect.parameters[0]['ci']
+    assert low < effect.coefficients[0] < high
+    assert result.rmse_after_nm[0] < 0.6 * result.rmse_before_nm[0]
+
+
+def test_augmented_torque_is_the_nominal_model_plus_the_found_effect(viscous_joint_1):
+    _, twin, result, _ = viscous_joint_1
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-0.5, 0.5, (5, 6))
+    v = rng.uniform(-1.0, 1.0, (5, 6))
+    a = rng.uniform(-1.0, 1.0, (5, 6))
+    nominal = result.nominal_model.evaluate(q, v, a).tau_nominal
+    expected = nominal.copy()
+    expected[:, 0] += result.effects[0].coefficients[0] * v[:, 0]
+    np.testing.assert_allclose(augmented_torque(result, q, v, a), expected, rtol=1e-12)
+    # what a model artifact stores: effects.json's model rebuilds the same torque
+    saved = json.loads(result.to_json())['model']
+    again = AugmentedModel.from_dict(saved, result.robot)
+    np.testing.assert_allclose(again.torque(q, v, a), expected, rtol=0, atol=0)
+    with pytest.raises(RobotModelError, match='identified for joints'):
+        AugmentedModel.from_dict({**saved, 'joints': ['a', 'b']}, result.robot)
+    dataset, model = filtered_prediction(result, twin.recording)
+    assert model.shape == dataset.tau.shape
+
+
+def test_report_and_effects_json_hold_what_the_issue_asks_for(viscous_joint_1):
+    _, _, result, tmp_path = viscous_joint_1
+    report = (tmp_path / 'report.md').read_text(encoding='utf-8')
+    assert 'viscous_friction' in report
+    for figure in ('waterfall.png', 'residual_location.png', 'residual_time.png'):
+        assert (tmp_path / figure).stat().st_size > 1000
+        assert f'({figure})' in report
+    data = json.loads((tmp_path / 'effects.json').read_text(encoding='utf-8'))
+    for key in (
+        'effects',
+        'alias_sets',
+        'untestable',
+        'unexplained_remainder',
+        'held_out_rmse_nm',
+    ):
+        assert key in data
+    (effect,) = data['effects']
+    assert effect['name'] == 'viscous_friction'
+    assert effect['joint'] == 'joint_1'
+    assert effect['parameters'][0]['ci'][0] < effect['parameters'][0]['value']
+    assert len(data['held_out_rmse_nm']['before']) == 6
+    assert data['held_out_rmse_nm']['waterfall'][0]['added'] == result.effects[0].label
+
+
+def test_a_torque_offset_is_named_from_two_recordings_together():
+    effects = {'torque_offset': {'enabled': True, 'offset': [0.0, 0.0, 0.0, 3.0, 0.0, 0.0]}}
+    configs = [twin_config(80.0, effects, seed=seed) for seed in (21, 22)]
+    recordings = [simulate(config).recording for config in configs]
+    with pytest.raises(DatasetError, match='too short'):
+        run_diagnosis(recordings[0], configs[0].robot)  # one alone holds too little
+    result = run_diagnosis(recordings, configs[0].robot)
+    assert len(result.sources) == 2
+    assert named(result) == {('torque_offset', 'joint_4')}
+    assert result.effects[0].coefficients[0] == pytest.approx(3.0, rel=0.1)
+
+
+def test_a_seven_joint_robot_is_diagnosed_too(repo):
+    effects = {'viscous_friction': {'enabled': True, 'coefficient': [0, 0.5, 0, 0, 0, 0, 0]}}
+    config = twin_config(
+        15.0,
+        effects,
+        seed=SEED,
+        robot=str(repo / 'config/panda.yaml'),
+        measurement={'current_noise_std_a': 0.05, 'velocity_noise_std': 0.001},
+    )
+    twin = simulate(config)
+    settings = DiagnosisConfig(effects=('viscous_friction', 'coulomb_friction', 'torque_offset'))
+    result = run_diagnosis(twin.recording, config.robot, settings)
+    assert len(result.joints) == 7
+    assert named(result) == {('viscous_friction', 'panda_joint2')}
+    assert result.effects[0].coefficients[0] == pytest.approx(0.5, rel=0.1)
+
+
+def test_cogging_above_the_cut_off_is_untestable_not_absent():
+    amplitude = [6.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    config, twin = hidden({'cogging': {'enabled': True, 'amplitude': amplitude}})
+    result = run_diagnosis(twin.recording, config.robot)
+    assert ('cogging', 'joint_1') in result.untestable_effects()
+    entry = next(
+        u for u in result.untestable if u['name'] == 'cogging' and u['joint'] == 'joint_1'
+    )
+    assert 'cut-off' in entry['reason']
+    assert named(result) == set()
+
+
+def test_a_too_short_recording_is_refused(short_twin):
+    config, twin = short_twin
+    with pytest.raises(DatasetError, match='too short'):
+        run_diagnosis(twin.recording, config.robot)
+
+
+def test_a_recording_of_another_robot_is_refused(short_twin):
+    config, twin = short_twin
+    renamed = replace(twin.recording, joints=tuple(f'axis_{k}' for k in range(6)))
+    with pytest.raises(DatasetError, match='do not match the robot config'):
+        run_diagnosis(renamed, config.robot)
+
+
+def test_unknown_effects_in_the_config_are_refused():
+    with pytest.raises(ConfigError, match='unknown effect'):
+        DiagnosisConfig(effects=('viscous_friction', 'magic_friction'))
+    with pytest.raises(ConfigError, match='significance'):
+        DiagnosisConfig(significance=0.0)

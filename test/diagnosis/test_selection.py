@@ -1,0 +1,98 @@
+"""Forward selection, alias sets and the noise-level stop on small synthetic designs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from id_learning.diagnosis.selection import Design, find_aliases, forward_select
+
+M, N = 400, 2
+
+
+def design_with(y_signal: np.ndarray, columns: dict[str, np.ndarray], seed: int = 0) -> Design:
+    """A design whose train/test parts are the two halves of the rows, unit noise per sample."""
+    rng = np.random.default_rng(seed)
+    y = y_signal + rng.standard_normal(y_signal.shape)
+    half = len(y) // 2
+    split = {'train': slice(0, half), 'test': slice(half, None)}
+    return Design(
+        {part: y[rows] for part, rows in split.items()},
+        {label: {part: x[rows] for part, rows in split.items()} for label, x in columns.items()},
+        np.ones(N),
+        {part: np.full(N, float(len(y[rows]))) for part, rows in split.items()},
+    )
+
+
+def on_joint(x: np.ndarray, joint: int) -> np.ndarray:
+    out = np.zeros((len(x), N, 1))
+    out[:, joint, 0] = x
+    return out
+
+
+def always_plausible(design, fit):
+    return dict.fromkeys(fit.groups, (True, ''))
+
+
+@pytest.fixture
+def signals():
+    rng = np.random.default_rng(1)
+    t = np.linspace(0, 20, 2 * M)
+    return {
+        'a': on_joint(np.sin(t), 0),
+        'a_copy': on_joint(np.sin(t), 0),
+        'c': on_joint(rng.standard_normal(2 * M), 1),
+        'd': on_joint(np.cos(3 * t), 1),
+    }
+
+
+def test_two_identical_candidates_form_an_alias_set(signals):
+    design = design_with(3.0 * signals['a'][:, :, 0], signals)
+    labels = list(signals)
+    selection = forward_select(design, labels, always_plausible)
+    assert len(selection.selected) == 1
+    assert selection.selected[0] in ('a', 'a_copy')
+    aliases = find_aliases(design, selection.selected, labels, always_plausible)
+    assert len(aliases) == 1
+    assert set(aliases[0].members) == {'a', 'a_copy'}
+    other = next(m for m in aliases[0].members if m != aliases[0].representative)
+    assert aliases[0].canonical_correlation[other] == pytest.approx(1.0)
+
+
+def test_distinct_candidates_are_no_aliases(signals):
+    columns = {k: signals[k] for k in ('a', 'c', 'd')}
+    design = design_with(3.0 * signals['a'][:, :, 0] + 2.0 * signals['d'][:, :, 0], columns)
+    selection = forward_select(design, list(columns), always_plausible)
+    assert sorted(selection.selected) == ['a', 'd']
+    assert find_aliases(design, selection.selected, list(columns), always_plausible) == []
+
+
+def test_pure_noise_selects_nothing(signals):
+    columns = {k: signals[k] for k in ('a', 'c', 'd')}
+    design = design_with(np.zeros((2 * M, N)), columns, seed=5)
+    selection = forward_select(design, list(columns), always_plausible)
+    assert selection.selected == []
+    assert selection.rejected is not None
+    assert selection.rejected.p_value > selection.level
+
+
+def test_an_implausible_value_keeps_a_significant_candidate_out(signals):
+    design = design_with(-3.0 * signals['a'][:, :, 0], {'a': signals['a']})
+
+    def positive_only(design_, fit):
+        return {g: (bool(design_.physical(fit, g)[0] >= 0), 'must be >= 0') for g in fit.groups}
+
+    selection = forward_select(design, ['a'], positive_only)
+    assert selection.selected == []
+    assert selection.rejected is not None
+    assert selection.rejected.p_value < 1e-10
+    assert 'must be >= 0' in selection.rejected.reason
+
+
+def test_fit_recovers_the_coefficient_with_an_honest_interval(signals):
+    design = design_with(3.0 * signals['a'][:, :, 0], {'a': signals['a']})
+    fit = design.fit(['a'])
+    theta = design.physical(fit, 'a')[0]
+    sd = float(np.sqrt(design.physical_covariance(fit, 'a')[0, 0]))
+    assert abs(theta - 3.0) < 4 * sd
+    assert 0.01 < sd < 0.2
