@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -78,3 +80,15 @@ def write_contract_bag(
                     encode_joint_state(stamp_mc, names_mc, empty, empty, recording.current[k]),
                 )
     return path
+
+
+def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    """``python -m id_learning.cli ARGS`` in the checkout, as a user runs it; never raises."""
+    return subprocess.run(
+        [sys.executable, '-m', 'id_learning.cli', *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=timeout,
+        check=False,
+    )

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from support import REPO, twin_config
+from support import REPO, run_cli, twin_config
 
 from id_learning.cli.main import _without_ros_arguments
 from id_learning.dataset.preprocess import prepare_dataset
@@ -23,17 +21,6 @@ ONE_EPOCH = [
     if kind != 'rnea_lq'
     for item in ('--hyper', f'{kind}.max_epochs=1')
 ]
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, '-m', 'id_learning.cli', *args],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=600,
-        check=False,
-    )
 
 
 @pytest.fixture(scope='module')

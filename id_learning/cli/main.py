@@ -12,7 +12,7 @@ from typing import Any
 
 from id_learning import __version__
 from id_learning.cli.paths import default_bag, default_robot_config
-from id_learning.errors import ConfigError, IdLearningError
+from id_learning.errors import ConfigError, DatasetError, IdLearningError
 
 __all__ = ['build_parser', 'main', 'train_main']
 
@@ -113,6 +113,21 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f'summary written to {out / "summary.md"}',
         flush=True,
     )
+    if not args.skip_diagnosis:
+        from id_learning.diagnosis.report import render_summary
+
+        diagnosis_out = out / 'diagnosis'
+        try:
+            result = diagnose_bags([bag], robot, args.target, diagnosis_out, progress=False)
+        except DatasetError as err:  # e.g. too short: the rest of the demo still runs
+            print(f'diagnosis not run: {err}', flush=True)
+        else:
+            print(render_summary(result))
+            print(
+                f'diagnosis report: {diagnosis_out / "report.md"}; waterfall plot: '
+                f'{diagnosis_out / "waterfall.png"}',
+                flush=True,
+            )
     if args.skip_training:
         return 0
     from id_learning.training import train_run
@@ -140,19 +155,23 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def _kinds(text: str) -> list[str]:
     """Model kinds from a comma-separated list ('all': the study's seven, in its order).
 
+    'all' mixes with other kinds: 'all,rnea_effects' is the seven plus the diagnosed model.
+
     Raises:
         ConfigError: an unknown kind (the message lists the known ones).
     """
     from id_learning.models.registry import MODEL_KINDS, STUDY_MODELS
 
-    if text.strip() == 'all':
-        return list(STUDY_MODELS)
-    kinds = [item.strip() for item in text.split(',') if item.strip()]
+    kinds: list[str] = []
+    for item in (item.strip() for item in text.split(',')):
+        for kind in STUDY_MODELS if item == 'all' else (item,) if item else ():
+            if kind not in kinds:
+                kinds.append(kind)
     unknown = [kind for kind in kinds if kind not in MODEL_KINDS]
     if unknown or not kinds:
         raise ConfigError(
             f'--models: unknown model kind(s) {unknown or [text]}; known kinds: '
-            f'{", ".join(STUDY_MODELS)} (or all)'
+            f'{", ".join(MODEL_KINDS)} (or all: the seven of the study)'
         )
     return kinds
 
@@ -192,6 +211,71 @@ def _metrics_table(metrics: dict[str, Any]) -> str:
             + f'{entry["mean_rmse_normalised"]:>12.3g}'
         )
     return '\n'.join(lines)
+
+
+def diagnose_bags(
+    bags: Sequence[Path],
+    robot: Any,
+    target: str,
+    out: Path,
+    *,
+    effects: Sequence[str] | None = None,
+    progress: bool = True,
+) -> Any:
+    """Diagnose bags; write report.md, effects.json, figures and the rnea_effects model to ``out``.
+
+    Returns:
+        the ``DiagnosisResult``.
+    """
+    from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.dataset.recording import load_recording
+    from id_learning.diagnosis import DiagnosisConfig, diagnose
+    from id_learning.models.effects import RneaEffectsModel
+    from id_learning.models.registry import save_model
+
+    settings: dict[str, Any] = {'preprocess': PreprocessConfig(target=target)}
+    if effects:
+        settings['effects'] = tuple(effects)
+    config = DiagnosisConfig(**settings)
+    recordings = []
+    for bag in bags:
+        print(f'loading {bag} ...', flush=True)
+        recordings.append(
+            load_recording(Path(bag), robot, require_current=target == 'motor', progress=progress)
+        )
+    print('diagnosing: nominal model vs measurements, forward selection of named effects ...',
+          flush=True)  # fmt: skip
+    result = diagnose(recordings, robot, config, out_dir=out)
+    model = RneaEffectsModel.from_augmented(
+        result.augmented_model, source=str(out / 'effects.json')
+    )
+    save_model(model, out / 'model', extra={'diagnosis': {'sources': result.sources}})
+    return result
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """Find the effects the nominal model misses; report, effects.json and a model artifact."""
+    from id_learning.diagnosis.report import render_summary
+
+    out = Path(args.out)
+    result = diagnose_bags(
+        [Path(b) for b in args.bag],
+        _robot(args),
+        args.target,
+        out,
+        effects=_names(args.effects) if args.effects else None,
+        progress=not args.quiet,
+    )
+    print(render_summary(result))
+    print(
+        f'report: {out / "report.md"}; effects: {out / "effects.json"}; waterfall: '
+        f'{out / "waterfall.png"}; model (rnea_effects): {out / "model"}'
+    )
+    return 0
+
+
+def _names(text: str) -> list[str]:
+    return [item.strip() for item in text.split(',') if item.strip()]
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -284,6 +368,23 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument('--out', help='write the recovered bag here instead of in place')
     r.set_defaults(func=cmd_bag_recover)
 
+    p = sub.add_parser(
+        'diagnose',
+        help='name the physical effects the nominal model misses, add them, show the gap shrink',
+    )
+    p.add_argument('--bag', required=True, action='append', help='bag folder (repeatable)')
+    p.add_argument(
+        '--out', required=True, help='folder for report.md, effects.json, figures and model/'
+    )
+    target_option(p)
+    p.add_argument(
+        '--effects',
+        help='comma-separated candidate effects to try (default: the whole library)',
+    )
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
+    robot_option(p)
+    p.set_defaults(func=cmd_diagnose)
+
     p = sub.add_parser('train', help='train models on bags; write models, metrics and a report')
     add_train_arguments(p)
     p.set_defaults(func=cmd_train)
@@ -304,14 +405,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument('--bag', help='bag folder (default: the shipped bags/default)')
     p.add_argument('--out', default='out/demo', help='output folder (the run goes to OUT/run)')
+    target_option(p)
     p.add_argument(
-        '--target',
-        choices=('motor', 'joint'),
-        default='motor',
-        help='motor: tau_u from currents; joint: measured joint torque',
-    )
-    p.add_argument(
-        '--models', default='all', help='comma-separated model kinds to train (default: all)'
+        '--models',
+        default=DEMO_MODELS,
+        help=f'comma-separated model kinds to train (default: {DEMO_MODELS})',
     )
     p.add_argument(
         '--train-seconds',
@@ -320,12 +418,15 @@ def build_parser() -> argparse.ArgumentParser:
         help=f'wall-clock budget per model fit [s] (default {DEMO_SECONDS_PER_MODEL:g})',
     )
     p.add_argument('--skip-training', action='store_true', help='only write the data summary')
+    p.add_argument('--skip-diagnosis', action='store_true', help='do not run the diagnosis')
     p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
     robot_option(p)
     p.set_defaults(func=cmd_demo)
     return parser
 
 
+#: The demo trains the study's seven and the model of a diagnosis of the training part.
+DEMO_MODELS = 'all,rnea_effects'
 #: Budget per model in ``demo``: seven models on the shipped bag within 10 minutes on 2 cores.
 DEMO_SECONDS_PER_MODEL = 60.0
 
@@ -337,18 +438,23 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def add_train_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of ``train`` (shared by ``id-learning train`` and ``ros2 run ... train``)."""
-    p.add_argument(
-        '--bag', required=True, action='append', help='bag folder to train on (repeatable)'
-    )
-    p.add_argument('--robot', help='robot config YAML (default: MABI MAX 100)')
+def target_option(p: argparse.ArgumentParser) -> None:
+    """The --target option: which torque is the label."""
     p.add_argument(
         '--target',
         choices=('motor', 'joint'),
         default='motor',
         help='motor: tau_u from currents (default); joint: measured joint torque',
     )
+
+
+def add_train_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``train`` (shared by ``id-learning train`` and ``ros2 run ... train``)."""
+    p.add_argument(
+        '--bag', required=True, action='append', help='bag folder to train on (repeatable)'
+    )
+    p.add_argument('--robot', help='robot config YAML (default: MABI MAX 100)')
+    target_option(p)
     p.add_argument(
         '--models',
         default='all',

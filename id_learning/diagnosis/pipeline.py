@@ -642,8 +642,9 @@ class _Problem:
             n_eff = count * self.step / self.noise.correlation_samples
             if n_eff.min() >= self.config.min_effective_samples:
                 continue
-            train = self.config.preprocess.train_fraction
-            share = 1.0 - train if part == 'test' else train
+            n_total = sum(len(d.q) for d in self.datasets)
+            n_train = sum(d.n_train for d in self.datasets)
+            share = (n_total - n_train if part == 'test' else n_train) / n_total
             needed = (
                 self.config.min_effective_samples
                 * self.noise.correlation_samples.max()

@@ -11,7 +11,7 @@ import numpy as np
 from id_learning.diagnosis.locate import LOCATION_VARIABLES
 from id_learning.diagnosis.pipeline import DiagnosisResult
 
-__all__ = ['EFFECTS_JSON', 'REPORT_MD', 'write_report']
+__all__ = ['EFFECTS_JSON', 'REPORT_MD', 'render_summary', 'write_report']
 
 _LOG = logging.getLogger(__name__)
 EFFECTS_JSON = 'effects.json'
@@ -299,3 +299,35 @@ def _plot(result: DiagnosisResult, out: Path) -> list[str]:
         plt.close(fig)
         files.append('residual_time.png')
     return files
+
+
+def render_summary(result: DiagnosisResult) -> str:
+    """A terminal summary: the verdict in one line per finding, then the waterfall as a table."""
+    joints = list(result.joints)
+    lines = ['effects found:' if result.named_effects() else 'no named effect is needed']
+    for effect in result.named_effects():
+        where = f' on {effect.spec.joint_name}' if effect.spec.joint_name else ''
+        lines.append(
+            f'  {effect.name}{where}: '
+            + '; '.join(_parameter_text(p) for p in effect.parameters)
+            + f' ({effect.confidence} confidence)'
+        )
+    for alias in result.alias_sets:
+        lines.append(f'  alias set (cannot be told apart here): {", ".join(alias.members)}')
+    untestable = result.untestable_effects()
+    if untestable:
+        lines.append(
+            '  untestable on this excitation: '
+            + ', '.join(f'{name}[{joint}]' if joint else name for name, joint in untestable)
+        )
+    structured = result.structured_joints()
+    if structured:
+        lines.append(f'  unexplained structured remainder on: {", ".join(structured)}')
+    width = max([24, *(len(label) + 2 for label, _ in result.waterfall)])
+    head = f'{"held-out RMSE [N*m]":<{width}}' + ''.join(f'{j:>10}' for j in joints)
+    rows = [('nominal', result.rmse_before_nm)]
+    rows += [(f'+ {label}', rmse) for label, rmse in result.waterfall]
+    rows.append(('noise level (estimate)', result.noise.filtered_std_nm))
+    lines += ['waterfall:', head]
+    lines += [f'{name:<{width}}' + ''.join(f'{x:>10.3g}' for x in rmse) for name, rmse in rows]
+    return '\n'.join(lines)

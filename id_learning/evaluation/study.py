@@ -41,6 +41,8 @@ MODEL_LABELS = {
     'lnn_mlp': 'LNN+MLP',
     'mlp': 'MLP',
     'lstm': 'LSTM',
+    'rnea_effects': 'RNEA+effects',
+    'rnea_effects_mlp': 'RNEA+effects+MLP',
 }
 
 #: The study's findings the report checks, by finding (from its abstract and issue 3).

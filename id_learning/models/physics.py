@@ -355,12 +355,18 @@ class RneaMlpModel(_NominalPhysics):
         torque: np.ndarray = drives.rotor_inertia * drives.gear_ratio**2 * a
         return torque
 
+    def training_physics(self, data: TrainingData) -> np.ndarray:
+        """The physics part's torque on every sample of ``data``; h learns the rest."""
+        torque: np.ndarray = (
+            data.physics.rnea + data.physics.rotor_basis * self.robot.drives.rotor_inertia
+        )
+        return torque
+
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Fit h on the training residual, with early stopping on the validation tail."""
         ds, c, n = data.dataset, self.config, self.robot.n_joints
         device = select_device(c.device)
-        physics = data.physics.rnea + data.physics.rotor_basis * self.robot.drives.rotor_inertia
-        residual = ds.tau - physics
+        residual = ds.tau - self.training_physics(data)
         assert ds.input_scaler.low_ is not None
         assert ds.input_scaler.high_ is not None
         state_scaler = MinMaxScaler(ds.input_scaler.low_[: 2 * n], ds.input_scaler.high_[: 2 * n])

@@ -10,6 +10,12 @@ from id_learning.errors import CheckpointError, ConfigError
 from id_learning.models.artifact import read_artifact, write_artifact
 from id_learning.models.base import InverseDynamicsModel, ModelConfig
 from id_learning.models.blackbox import LstmConfig, LstmModel, MlpConfig, MlpModel
+from id_learning.models.effects import (
+    RneaEffectsConfig,
+    RneaEffectsMlpConfig,
+    RneaEffectsMlpModel,
+    RneaEffectsModel,
+)
 from id_learning.models.lagrangian import (
     DelanConfig,
     DelanModel,
@@ -31,6 +37,8 @@ MODEL_KINDS: dict[str, tuple[type[ModelConfig], type[InverseDynamicsModel]]] = {
     'lnn_mlp': (LnnMlpConfig, LnnMlpModel),
     'mlp': (MlpConfig, MlpModel),
     'lstm': (LstmConfig, LstmModel),
+    'rnea_effects': (RneaEffectsConfig, RneaEffectsModel),
+    'rnea_effects_mlp': (RneaEffectsMlpConfig, RneaEffectsMlpModel),
 }
 
 #: The reference study's seven models, in its table order.

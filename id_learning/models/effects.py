@@ -1,0 +1,310 @@
+"""The diagnosed physics model as a model kind: nominal RNEA plus named effects, optionally + MLP.
+
+``rnea_effects`` is the augmented analytic model of ``id_learning.diagnosis``: the URDF's
+rigid-body dynamics and datasheet drives (the nominal model) plus the physically named effects a
+diagnosis found (friction laws, rotor inertia, balancer spring, payload, ...), each a group of
+regressor columns with identified coefficients. ``rnea_effects_mlp`` puts the Newtonian
+network's MLP h(q, v) on top of it, so the network only learns what the named effects leave.
+
+Where the effects come from (``effects``):
+
+- a diagnosis' ``effects.json`` (or its output folder): the terms are taken as identified there;
+- empty (the default): the trainer diagnoses the training part itself (its last 30 % are the
+  diagnosis' held-out part) and adopts what it finds. The test part is never seen.
+
+The signal-delay term needs the jerk, which the (q, v, a) interface does not carry: predictions
+use zero jerk, i.e. keep the term's d tau / dq v + d tau / dv a part.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, ClassVar, Literal, Self
+
+import numpy as np
+
+from id_learning.errors import CheckpointError, ConfigError
+from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
+from id_learning.models.blackbox import check_kind
+from id_learning.models.data import TrainingData
+from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
+from id_learning.robot.config import RobotConfig
+
+__all__ = [
+    'RneaEffectsConfig',
+    'RneaEffectsMlpConfig',
+    'RneaEffectsMlpModel',
+    'RneaEffectsModel',
+    'load_effects_file',
+]
+
+_LOG = logging.getLogger(__name__)
+
+#: Tensor-name prefix of the effect coefficients in an artifact.
+TERM_PREFIX = 'effects.term.'
+
+
+def load_effects_file(path: str | Path) -> dict[str, Any]:
+    """The JSON of a diagnosis' effects.json, given the file or the diagnosis' output folder.
+
+    Raises:
+        ConfigError: the file is missing or is not a diagnosis' effects.json.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / 'effects.json'
+    try:
+        data = json.loads(path.read_text(encoding='utf-8'))
+    except FileNotFoundError as err:
+        raise ConfigError(f'effects: {path} does not exist (run `id-learning diagnose`)') from err
+    except json.JSONDecodeError as err:
+        raise ConfigError(f'effects: {path} is not valid JSON: {err}') from err
+    if not isinstance(data, dict) or 'effects' not in data or 'joints' not in data:
+        raise ConfigError(f'effects: {path} is not an effects.json written by a diagnosis')
+    return data
+
+
+def _training_part(data: TrainingData) -> Any:
+    """The training part as a dataset of its own, split like a recording the diagnosis reads.
+
+    The diagnosis holds out the training part's tail (its default share, 30 %) to check that
+    an effect improves data the fit did not see; the test part stays unseen.
+    """
+    from id_learning.diagnosis import DiagnosisConfig
+
+    ds = data.dataset
+    rows = data.train_rows
+    n_train = round(DiagnosisConfig().preprocess.train_fraction * ds.n_train)
+    return replace(
+        ds,
+        stamps_ns=ds.stamps_ns[rows],
+        q=ds.q[rows],
+        v=ds.v[rows],
+        a=ds.a[rows],
+        tau=ds.tau[rows],
+        tau_raw=ds.tau_raw[rows],
+        n_train=n_train,
+    )
+
+
+def _effects_model(
+    effects: str, data: TrainingData, robot: RobotConfig
+) -> tuple[Any, dict[str, Any]]:
+    """The augmented model from a diagnosis file, or from diagnosing the training part."""
+    from id_learning.diagnosis import AugmentedModel, run_diagnosis
+
+    target = data.dataset.target
+    if effects:
+        saved = load_effects_file(effects)
+        if saved.get('target', target) != target:
+            raise ConfigError(
+                f'effects: {effects} was diagnosed on the {saved["target"]!r} torque, but the '
+                f'training target is {target!r}'
+            )
+        try:
+            model = AugmentedModel.from_dict(saved.get('model', saved), robot)
+        except Exception as err:  # a RobotModelError or a malformed entry
+            raise ConfigError(f'effects: {effects} does not fit {robot.name}: {err}') from err
+        return model, {'source': str(effects)}
+    result = run_diagnosis(_training_part(data), robot)
+    summary = {
+        'source': 'diagnosis of the training part (its last 30 % held out)',
+        'effects': [effect.label for effect in result.named_effects()],
+        'alias_sets': [list(alias.members) for alias in result.alias_sets],
+        'untestable': [list(item) for item in result.untestable_effects()],
+    }
+    return result.augmented_model, summary
+
+
+def _terms_state(model: Any) -> dict[str, np.ndarray]:
+    return {f'{TERM_PREFIX}{i}': theta.copy() for i, (_, theta) in enumerate(model.terms)}
+
+
+def _terms_metadata(model: Any) -> dict[str, Any]:
+    return {
+        'target': model.target,
+        'terms': [spec.to_dict() for spec, _ in model.terms],
+    }
+
+
+def _load_terms(
+    tensors: dict[str, np.ndarray], fitted: dict[str, Any], robot: RobotConfig, kind: str
+) -> Any:
+    """Rebuild the augmented model from an artifact's tensors and fitted metadata.
+
+    Raises:
+        CheckpointError: the terms and the tensors do not match.
+    """
+    from id_learning.diagnosis import AugmentedModel
+
+    specs = fitted.get('terms')
+    if not isinstance(specs, list) or 'target' not in fitted:
+        raise CheckpointError(f'{kind}: the metadata lacks the effect terms and target')
+    names = sorted((n for n in tensors if n.startswith(TERM_PREFIX)), key=len)
+    expected = [f'{TERM_PREFIX}{i}' for i in range(len(specs))]
+    if sorted(names) != sorted(expected):
+        raise CheckpointError(f'{kind}: effect tensors {names} do not match {len(specs)} terms')
+    data = {
+        'robot': robot.name,
+        'joints': list(robot.joints),
+        'target': fitted['target'],
+        'terms': [
+            {'spec': spec, 'coefficients': np.asarray(tensors[name], dtype=float)}
+            for spec, name in zip(specs, expected, strict=True)
+        ],
+    }
+    try:
+        return AugmentedModel.from_dict(data, robot)
+    except (KeyError, ValueError, TypeError) as err:
+        raise CheckpointError(f'{kind}: an effect term cannot be rebuilt: {err}') from err
+
+
+# -- rnea_effects ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RneaEffectsConfig(ModelConfig):
+    """Settings of the diagnosed analytic model.
+
+    Attributes:
+        effects: a diagnosis' effects.json or output folder; empty: diagnose the training part.
+    """
+
+    kind: Literal['rnea_effects'] = 'rnea_effects'
+    effects: str = ''
+
+    def __post_init__(self) -> None:
+        """Check the kind."""
+        check_kind(self, 'rnea_effects')
+
+
+class RneaEffectsModel(InverseDynamicsModel):
+    """tau = RNEA_URDF(q, v, a) [+ datasheet rotor inertia for tau_u] + sum of named effects."""
+
+    kind: ClassVar[str] = 'rnea_effects'
+
+    def __init__(self, config: RneaEffectsConfig, robot: RobotConfig) -> None:
+        """Store the settings; no I/O, no fitting."""
+        super().__init__(config, robot)
+        self.config: RneaEffectsConfig = config
+        self.model_: Any = None
+        self.diagnosis_: dict[str, Any] = {}
+
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        """Take the effects of a diagnosis, or diagnose the training part."""
+        del progress  # the diagnosis prints nothing; it takes seconds to a minute
+        self.model_, self.diagnosis_ = _effects_model(self.config.effects, data, self.robot)
+        _LOG.info('rnea_effects: %d effect terms', len(self.model_.terms))
+        return self
+
+    @classmethod
+    def from_augmented(cls, model: Any, source: str = '') -> RneaEffectsModel:
+        """Wrap a diagnosis' ``AugmentedModel`` (e.g. ``DiagnosisResult.augmented_model``)."""
+        out = cls(RneaEffectsConfig(), model.robot)
+        out.model_ = model
+        out.diagnosis_ = {'source': source} if source else {}
+        return out
+
+    def _model(self) -> Any:
+        if self.model_ is None:
+            raise CheckpointError(f'{self.kind}: the model is not fitted')
+        return self.model_
+
+    def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Torque (B, n) [N*m] for q, v, a (B, n) [rad, rad/s, rad/s^2]."""
+        torque: np.ndarray = self._model().torque(q, v, a)
+        return torque
+
+    def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
+        """The nominal model's torque, and what the named effects add to it as the residual."""
+        model = self._model()
+        total = model.torque(q, v, a)
+        nominal = model.nominal.evaluate(
+            np.atleast_2d(q), np.atleast_2d(v), np.atleast_2d(a)
+        ).tau_nominal
+        return TorqueComponents(total=total, residual=total - nominal)
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The coefficients of every effect term, ``effects.term.<i>``."""
+        return _terms_state(self._model())
+
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        """Rebuild the terms from their specs (metadata) and coefficients (tensors)."""
+        self.model_ = _load_terms(tensors, fitted, self.robot, self.kind)
+        self.diagnosis_ = dict(fitted.get('diagnosis', {}))
+
+    def fitted_metadata(self) -> dict[str, Any]:
+        """The target, each term's effect spec, and where the effects came from."""
+        return {**_terms_metadata(self._model()), 'diagnosis': self.diagnosis_}
+
+
+# -- rnea_effects_mlp -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RneaEffectsMlpConfig(RneaMlpConfig):
+    """The Newtonian network's settings, on top of the diagnosed model.
+
+    Attributes:
+        effects: as in ``RneaEffectsConfig``.
+    """
+
+    kind: Literal['rnea_effects_mlp'] = 'rnea_effects_mlp'  # type: ignore[assignment]
+    effects: str = ''
+
+    def __post_init__(self) -> None:
+        """Check ranges, naming the key."""
+        check_kind(self, 'rnea_effects_mlp')
+        super(RneaMlpConfig, self).__post_init__()
+        from id_learning.models.blackbox import check_mlp_shape
+
+        check_mlp_shape(self, self.width, self.depth, self.activation)
+
+
+class RneaEffectsMlpModel(RneaMlpModel):
+    """tau = rnea_effects(q, v, a) + h(q, v): the MLP learns what the named effects leave."""
+
+    kind: ClassVar[str] = 'rnea_effects_mlp'
+
+    def __init__(self, config: RneaEffectsMlpConfig, robot: RobotConfig) -> None:
+        """Store the settings; no I/O, no fitting."""
+        super().__init__(config, robot)
+        self.config: RneaEffectsMlpConfig = config
+        self.effects_: Any = None
+        self.diagnosis_: dict[str, Any] = {}
+
+    def training_physics(self, data: TrainingData) -> np.ndarray:
+        """The diagnosed model's torque on every sample; the MLP fits the rest."""
+        self.effects_, self.diagnosis_ = _effects_model(self.config.effects, data, self.robot)
+        ds = data.dataset
+        torque: np.ndarray = self.effects_.torque(ds.q, ds.v, ds.a)
+        return torque
+
+    def physics_torque(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """The diagnosed model's torque (B, n) [N*m]."""
+        if self.effects_ is None:
+            raise CheckpointError(f'{self.kind}: the model is not fitted')
+        torque: np.ndarray = self.effects_.torque(q, v, a)
+        return torque
+
+    def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
+        """The total, with everything beyond the diagnosed model (h) as the residual."""
+        physics = self.physics_torque(q, v, a)
+        h = self.residual_torque(q, v)
+        return TorqueComponents(total=physics + h, residual=h)
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The weights of h and the coefficients of every effect term."""
+        return {**super().state(), **_terms_state(self.effects_)}
+
+    def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
+        """Rebuild h and the effect terms."""
+        network = {k: v for k, v in tensors.items() if not k.startswith(TERM_PREFIX)}
+        super().load_state(network, fitted)
+        self.effects_ = _load_terms(tensors, fitted, self.robot, self.kind)
+        self.diagnosis_ = dict(fitted.get('diagnosis', {}))
+
+    def fitted_metadata(self) -> dict[str, Any]:
+        """The scalers and fit summary of h, the effect terms and where they came from."""
+        out = super().fitted_metadata()
+        out.pop('rotor_inertia_motor_side_kgm2', None)
+        return {**out, **_terms_metadata(self.effects_), 'diagnosis': self.diagnosis_}
