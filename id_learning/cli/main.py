@@ -148,8 +148,34 @@ def cmd_demo(args: argparse.Namespace) -> int:
         device=args.device,
     )
     print(_metrics_table(run.metrics))
-    print(f'report: {run.report}')
+    print(f'report: {run.report}', flush=True)
+    if args.online_seconds > 0:
+        _demo_online_check(args, bag, run, out)
     return 0
+
+
+def _demo_online_check(args: argparse.Namespace, bag: Path, run: Any, out: Path) -> None:
+    """Replay the test part's start through the predictor node with the run's best model."""
+    from id_learning.nodes.online_check import has_ros, online_check
+
+    if not has_ros():
+        print('online check not run: rclpy (ROS 2 Jazzy) is not installed', flush=True)
+        return
+    models = run.metrics['models']
+    kind = min(models, key=lambda k: models[k]['mean_rmse_normalised'])
+    print(
+        f'online check: replaying {args.online_seconds:g} s of the test part in real time '
+        f'through the predictor node with the best model ({kind}) ...',
+        flush=True,
+    )
+    check = online_check(
+        bag,
+        Path(args.robot or default_robot_config()),
+        run.models[kind].folder,
+        seconds=args.online_seconds,
+        out=out / 'online_check.json',
+    )
+    print(check.summary(), flush=True)
 
 
 def _kinds(text: str) -> list[str]:
@@ -419,6 +445,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument('--skip-training', action='store_true', help='only write the data summary')
     p.add_argument('--skip-diagnosis', action='store_true', help='do not run the diagnosis')
+    p.add_argument(
+        '--online-seconds',
+        type=float,
+        default=30.0,
+        help='seconds of the test part replayed through the predictor node (0: skip)',
+    )
     p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
     robot_option(p)
     p.set_defaults(func=cmd_demo)

@@ -1,0 +1,87 @@
+"""online_check: a bag excerpt replayed through the predictor node matches the offline model."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
+
+from support import REPO
+
+from id_learning.errors import CheckpointError
+from id_learning.nodes.online_check import online_check
+
+pytestmark = pytest.mark.ros
+
+#: The study's MLP at its smallest, one epoch: the check needs a model, not a good one.
+TINY_MLP = {'width': 8, 'depth': 1, 'max_epochs': 1, 'device': 'cpu', 'stride': 16}
+SECONDS = 4.0
+
+
+@pytest.fixture(scope='module')
+def trained(tmp_path_factory, short_twin):
+    """A 26 s twin bag and a training run on it (tiny MLP), as ``make demo`` makes them."""
+    from id_learning.dataset.recording import write_recording
+    from id_learning.training.trainer import train_run
+
+    config, result = short_twin
+    folder = tmp_path_factory.mktemp('online_check')
+    bag = write_recording(result.recording, folder / 'bag', config.robot.topics)
+    run = train_run(
+        [bag], config.robot, 'motor', ['mlp'], folder / 'run', hyper={'mlp': TINY_MLP},
+        progress=False,
+    )  # fmt: skip
+    return bag, run.models['mlp'].folder
+
+
+def test_online_check_gives_the_offline_prediction_for_every_replayed_sample(
+    trained, domain_id, tmp_path
+):
+    bag, artifact = trained
+    out = tmp_path / 'online_check.json'
+    result = online_check(
+        bag,
+        REPO / 'config/mabi_max100.yaml',
+        artifact,
+        seconds=SECONDS,
+        out=out,
+        domain_id=domain_id,
+        progress=False,
+    )
+    expected = round(SECONDS / 0.008)
+    assert not result.is_clipped
+    assert result.test_s > SECONDS  # precondition: the excerpt lies inside the test part
+    assert result.n_samples == expected
+    # Every input got an output, stamped so that it matches its sample.
+    assert result.n_inputs == expected
+    assert result.n_outputs == expected
+    assert result.n_missing == 0
+    assert result.predictor['published'] == str(expected)
+    assert result.predictor['rejected'] == '0'
+    assert result.predictor['clamped_samples'] == '0'
+    # Same inputs, same artifact: the node's torque is the model's (float32 networks).
+    scale = np.max(result.rmse_offline_nm)
+    assert scale > 0
+    np.testing.assert_array_less(result.max_abs_node_error_nm, 1e-5 * scale)
+    # The replay's reference is filtered over a shorter span than the training data: close,
+    # not equal; and |RMSE(x) - RMSE(y)| <= max |x - y| whatever the inputs.
+    assert np.max(result.max_input_diff['q']) < 1e-3
+    gap = np.abs(result.rmse_online_nm - result.rmse_offline_nm)
+    assert np.all(gap <= result.max_abs_online_offline_nm + 1e-9)
+    assert float(result.predictor['latency_median_ms']) > 0
+    assert int(result.predictor['latency_samples']) == expected
+    assert json.loads(out.read_text())['n_outputs'] == expected
+    assert 'missing' in result.summary()
+
+
+def test_online_check_refuses_a_folder_that_is_no_artifact_before_starting_nodes(
+    trained, tmp_path
+):
+    bag, _ = trained
+    with pytest.raises(CheckpointError, match='no_artifact'):
+        online_check(
+            bag, REPO / 'config/mabi_max100.yaml', tmp_path / 'no_artifact', progress=False
+        )
