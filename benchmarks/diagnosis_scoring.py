@@ -17,6 +17,7 @@ the affected joint, measured on the twin's ground truth):
 
     python benchmarks/diagnosis_scoring.py [--seeds 10] [--duration 200] [--magnitude 3]
         [--jobs 2] [--scenarios nothing,single,large,pair,aliased,untestable,outside]
+        [--effects payload_mass,rotor_inertia]
         [--out out/benchmarks/diagnosis_scoring.json]
 
 Prints per-scenario rates and timing, and writes the JSON document (per-run details included).
@@ -388,6 +389,8 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
             cases.append({**common, 'scenario': 'nothing', 'seed': seed, 'hidden': []})
         if 'single' in wanted:
             for name, joints in SINGLE.items():
+                if args.effects and name not in args.effects:
+                    continue
                 joint = None if joints is None else joints[seed % len(joints)]
                 cases.append(
                     {**common, 'scenario': f'single:{name}', 'seed': seed,
@@ -397,6 +400,8 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
             # Effects nested in a plausible inertial parameter error at --magnitude: named once
             # they are larger than any plausible error of the link data.
             for name in LARGE:
+                if args.effects and name not in args.effects:
+                    continue
                 joints = SINGLE[name]
                 joint = None if joints is None else joints[seed % len(joints)]
                 cases.append(
@@ -499,6 +504,12 @@ def main() -> int:
     )
     parser.add_argument(
         '--scenarios', default='nothing,single,large,pair,aliased,untestable,outside'
+    )
+    parser.add_argument(
+        '--effects',
+        type=lambda text: text.split(','),
+        default=None,
+        help='comma-separated effects the single and large scenarios hide (default: all)',
     )
     parser.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
     parser.add_argument(

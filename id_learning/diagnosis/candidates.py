@@ -30,6 +30,7 @@ from id_learning.robot.dynamics import N_INERTIAL_PARAMETERS, RigidBodyDynamics
 
 __all__ = [
     'PARAMETERS',
+    'SPECIAL_CASES',
     'CandidateSpec',
     'NominalModel',
     'NominalQuantities',
@@ -61,6 +62,18 @@ PARAMETERS: dict[str, tuple[tuple[str, str], ...]] = {
 }  # fmt: skip
 
 ROBOT_WIDE = ('payload_mass', 'signal_delay', 'inertial_parameter_error')
+
+#: Effects that are special cases of a more general one: the same physics with fewer columns. A
+#: payload is a mass at the flange and a rotor inertia the inertia of a moving part, both errors
+#: of the mass distribution that ``inertial_parameter_error`` (every link's base parameters) can
+#: also take. The general effect is then no alternative explanation but the same one with more
+#: freedom: where the special case explains what the data show, it is named and the general
+#: effect is not listed as its alias (parsimony; a kinematic joint offset or a balancer spring,
+#: which the link parameters can only mimic, stay aliases).
+SPECIAL_CASES = {
+    'payload_mass': 'inertial_parameter_error',
+    'rotor_inertia': 'inertial_parameter_error',
+}
 
 
 @dataclass(frozen=True, eq=False)

@@ -29,6 +29,7 @@ from scipy import optimize, signal, stats
 from id_learning.dataset.preprocess import Dataset, differentiate, prepare_dataset, regularise
 from id_learning.dataset.recording import Recording
 from id_learning.diagnosis.candidates import (
+    SPECIAL_CASES,
     CandidateSpec,
     ExcitationFacts,
     NominalModel,
@@ -794,14 +795,24 @@ def run_diagnosis(
     )
     selected = candidates.refine(selection.selected, y, n_eff)
     design = candidates.design(y, n_eff)
-    aliases = find_aliases(
-        design,
-        selected,
-        candidates.testable,
-        candidates.plausible,
-        significance=config.alias_significance,
-        variants=candidates.variants,
-    )
+
+    def aliases_of(groups: list[str]) -> list[AliasSet]:
+        return find_aliases(
+            design,
+            groups,
+            candidates.testable,
+            candidates.plausible,
+            significance=config.alias_significance,
+            variants=candidates.variants,
+        )
+
+    aliases = aliases_of(selected)
+    specific = candidates.special_cases(selected, aliases)
+    if specific != selected:
+        selected = candidates.refine(specific, y, n_eff)
+        design = candidates.design(y, n_eff)
+        aliases = aliases_of(selected)
+    aliases = candidates.without_generalisations(aliases)
     return _assemble(
         problem, candidates, design, selection=selection, selected=selected, aliases=aliases
     )
@@ -891,6 +902,39 @@ class _Candidates:
                 new if t == label else t for t in self.testable if t != new or t == label
             ]
         return selected
+
+    def _general_of(self, special: str, general: str) -> bool:
+        return SPECIAL_CASES.get(self.specs[special].name) == self.specs[general].name
+
+    def special_cases(self, selected: Sequence[str], aliases: Sequence[AliasSet]) -> list[str]:
+        """``selected`` with each general effect replaced by a special case that mimics it.
+
+        Of several, the one that leaves least of the general effect's contribution.
+        """
+        out = list(selected)
+        for alias in aliases:
+            special = [m for m in alias.members[1:] if self._general_of(m, alias.representative)]
+            if special:
+                best = min(special, key=lambda m: alias.unexplained.get(m, math.inf))
+                out[out.index(alias.representative)] = best
+        return out
+
+    def without_generalisations(self, aliases: Sequence[AliasSet]) -> list[AliasSet]:
+        """Alias sets without the general effects of their (special-case) representatives."""
+        out = []
+        for alias in aliases:
+            members = [m for m in alias.members if not self._general_of(alias.representative, m)]
+            if len(members) > 1:
+                keep = set(members)
+                out.append(
+                    AliasSet(
+                        alias.representative,
+                        members,
+                        {k: v for k, v in alias.canonical_correlation.items() if k in keep},
+                        {k: v for k, v in alias.unexplained.items() if k in keep},
+                    )
+                )
+        return out
 
     def untestable_summary(self) -> list[dict[str, Any]]:
         """Untestable candidates grouped by effect and joint, with the reason."""
