@@ -6,21 +6,29 @@ With ``--run`` the run's models are loaded (and verified) and timed on the test 
 first training bag. Without it, a quick set of all seven models is trained first (one short twin
 recording, two epochs each: latency does not depend on how well a model is trained).
 A sequence model (LSTM) is timed on one window, the call the online predictor makes per cycle.
+
+``numpy_median_ms`` / ``numpy_p99_ms`` time the float64 one-sample path the predictor node runs
+by default (``sample_predictor``; the LSTM's ``sequence_predictor``, one sample pushed per call)
+over the same samples, in the same process and thread settings.
 """
 
 from __future__ import annotations
 
 import argparse
 import tempfile
+import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import torch
 from common import DEFAULT_ROBOT, REPO, emit
 
 from id_learning.dataset.preprocess import prepare_dataset
 from id_learning.dataset.recording import load_recording
+from id_learning.models.base import InverseDynamicsModel
 from id_learning.models.registry import STUDY_MODELS, load_model
+from id_learning.predictor import set_openblas_threads
 from id_learning.robot import load_robot_config
 from id_learning.training.trainer import measure_inference, preprocess_from_dict, read_run
 
@@ -46,6 +54,50 @@ def quick_run(out: Path, robot_path: Path) -> Path:
     return out / 'run'
 
 
+def numpy_path_latency(
+    model: InverseDynamicsModel,
+    q: np.ndarray,
+    v: np.ndarray,
+    a: np.ndarray,
+    *,
+    calls: int,
+    threads: int,
+) -> tuple[float, float]:
+    """Median and p99 [s] of one call of the model's float64 one-sample path."""
+    torch_threads = torch.get_num_threads()
+    torch.set_num_threads(threads)  # the LSTM's products run through torch
+    set_openblas_threads(threads)
+    try:
+        return _time_calls(model, q, v, a, calls)
+    finally:
+        torch.set_num_threads(torch_threads)
+
+
+def _time_calls(
+    model: InverseDynamicsModel, q: np.ndarray, v: np.ndarray, a: np.ndarray, calls: int
+) -> tuple[float, float]:
+    if model.is_sequence_model:
+        streams = model.sequence_predictor()  # type: ignore[attr-defined]
+        rows = np.hstack([q, v, a])
+
+        def call(k: int) -> None:
+            streams.push(rows[k])
+    else:
+        predict_one = model.sample_predictor()
+
+        def call(k: int) -> None:
+            predict_one(q[k], v[k], a[k])
+
+    for k in range(min(50, len(q))):  # warm-up (and the LSTM's padded start)
+        call(k)
+    times = []
+    for k in range(calls):
+        start = time.perf_counter()
+        call(k % len(q))
+        times.append(time.perf_counter() - start)
+    return float(np.median(times)), float(np.percentile(times, 99))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--run', type=Path, help='run folder (default: train a quick set)')
@@ -69,9 +121,14 @@ def main() -> None:
             timing = measure_inference(
                 model, q, v, a, calls=args.calls, repeats=3, latency_threads=args.threads
             )
+            numpy_median, numpy_p99 = numpy_path_latency(
+                model, q, v, a, calls=args.calls, threads=args.threads
+            )
             results[kind] = {
                 'median_ms': 1e3 * timing['latency_single_sample_median_s'],
                 'p99_ms': 1e3 * timing['latency_single_sample_p99_s'],
+                'numpy_median_ms': 1e3 * numpy_median,
+                'numpy_p99_ms': 1e3 * numpy_p99,
                 'batched_us_per_sample': 1e6 * timing['inference_seconds_per_sample'],
                 'window_samples': timing['latency_window_samples'],
             }

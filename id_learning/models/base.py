@@ -9,6 +9,7 @@ returns self, fitted state lives in attributes ending in ``_``.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Self
 
@@ -17,7 +18,10 @@ import numpy as np
 from id_learning.models.data import TrainingData
 from id_learning.robot.config import RobotConfig
 
-__all__ = ['InverseDynamicsModel', 'ModelConfig', 'TorqueComponents']
+__all__ = ['InverseDynamicsModel', 'ModelConfig', 'SamplePredictor', 'TorqueComponents']
+
+#: One sample's torque: q, v, a (n,) [rad, rad/s, rad/s^2] -> tau (n,) [N*m], float64.
+SamplePredictor = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -79,6 +83,20 @@ class InverseDynamicsModel(ABC):
     @abstractmethod
     def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Torque (B, n) [N*m] for states (B, n); sequence models take a contiguous run."""
+
+    def sample_predictor(self) -> SamplePredictor:
+        """A function of one sample for the online predictor, built once from the fitted state.
+
+        Models override this with a float64 numpy path that equals ``predict`` on a batch of one
+        (up to the float32 rounding of the torch networks); the default calls ``predict``. Not
+        for sequence models, whose torque depends on past samples.
+        """
+
+        def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            tau: np.ndarray = self.predict(q[None], v[None], a[None])[0]
+            return tau
+
+        return predict_one
 
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """Split the prediction into physical parts; by default nothing is separable."""

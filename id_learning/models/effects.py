@@ -27,7 +27,12 @@ from typing import Any, ClassVar, Literal, Self
 import numpy as np
 
 from id_learning.errors import CheckpointError, ConfigError
-from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
+from id_learning.models.base import (
+    InverseDynamicsModel,
+    ModelConfig,
+    SamplePredictor,
+    TorqueComponents,
+)
 from id_learning.models.blackbox import check_kind
 from id_learning.models.data import TrainingData
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
@@ -285,6 +290,10 @@ class RneaEffectsMlpModel(RneaMlpModel):
             raise CheckpointError(f'{self.kind}: the model is not fitted')
         torque: np.ndarray = self.effects_.torque(q, v, a)
         return torque
+
+    def sample_predictor(self) -> SamplePredictor:
+        """One sample through ``predict``: the effect terms need the nominal model's quantities."""
+        return InverseDynamicsModel.sample_predictor(self)
 
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """The total, with everything beyond the diagnosed model (h) as the residual."""

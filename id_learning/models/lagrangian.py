@@ -51,11 +51,27 @@ from torch.nn import functional
 
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
-from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
+from id_learning.models.base import (
+    InverseDynamicsModel,
+    ModelConfig,
+    SamplePredictor,
+    TorqueComponents,
+)
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import OptimConfig, select_device, train_module
-from id_learning.models.nets import SMOOTH_ACTIVATIONS, AnalyticMLP
-from id_learning.models.torch_utils import normalised_mse, to_numpy, to_tensor
+from id_learning.models.nets import (
+    SMOOTH_ACTIVATIONS,
+    AnalyticMLP,
+    NumpyAnalyticMLP,
+    numpy_sigmoid,
+)
+from id_learning.models.torch_utils import (
+    float64_array,
+    normalised_mse,
+    numpy_softplus,
+    to_numpy,
+    to_tensor,
+)
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
@@ -196,6 +212,15 @@ class LagrangianNetwork(nn.Module):
     @abstractmethod
     def forward(self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         """Torque (B, n) [N*m] from q, v, a (B, n) in SI units."""
+
+    @abstractmethod
+    def sample_predictor(self) -> SamplePredictor:
+        """forward() for one sample in float64 numpy, from a copy of the current weights."""
+
+    def numpy_scaling(self) -> dict[str, np.ndarray]:
+        """The scaling buffers as float64 numpy arrays, by name (energy as a 0-d array)."""
+        names = ('q_centre', 'q_half', 'v_centre', 'v_half', 'tau_half', 'energy')
+        return {name: float64_array(getattr(self, name)) for name in names}
 
     @abstractmethod
     def components(
@@ -354,6 +379,40 @@ class DelanNetwork(LagrangianNetwork):
         parts = self.components(q, v, a)
         return parts['inertial'] + parts['coriolis'] + parts['gravity']
 
+    def sample_predictor(self) -> SamplePredictor:
+        """forward() for one sample, q, v, a (n,) -> tau (n,), in float64 numpy."""
+        n = self.n_dof
+        scaling = self.numpy_scaling()
+        q_centre, q_half, energy = scaling['q_centre'], scaling['q_half'], scaling['energy']
+        q_half_col = q_half[:, None]
+        cholesky_net = NumpyAnalyticMLP(self.cholesky_net)
+        potential_net = NumpyAnalyticMLP(self.potential_net)
+        placement_t = np.ascontiguousarray(float64_array(self.placement).T)
+        shift, epsilon = self.diagonal_shift, self.diagonal_epsilon
+
+        def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            q_scaled = (q - q_centre) / q_half
+            entries, jac_t = cholesky_net.jacobian_transposed(q_scaled)
+            raw_diagonal = entries[:n] + shift
+            entries[:n] = numpy_softplus(raw_diagonal) + epsilon
+            jac_t[:, :n] *= numpy_sigmoid(raw_diagonal)
+            jac_t /= q_half_col
+            cholesky = (entries @ placement_t).reshape(n, n)
+            derivative = (jac_t @ placement_t).reshape(n, n, n)  # (k, i, j): dL_ij / dq_k
+            # As euler_lagrange_torque, for one sample.
+            inertial = cholesky @ (a @ cholesky)
+            cholesky_dot = v @ derivative.reshape(n, n * n)
+            cholesky_dot = cholesky_dot.reshape(n, n)
+            y = v @ cholesky
+            mass_dot_v = cholesky_dot @ y + cholesky @ (v @ cholesky_dot)
+            kinetic_gradient = (derivative @ y) @ v
+            _, gradient = potential_net.gradient(q_scaled)
+            gravity = energy * gradient / q_half
+            tau: np.ndarray = inertial + (mass_dot_v - kinetic_gradient) + gravity
+            return tau
+
+        return predict_one
+
 
 # --------------------------------------------------------------------------------------------
 # LNN
@@ -400,6 +459,24 @@ class LnnNetwork(LagrangianNetwork):
         """Torque (B, n) [N*m]: (d2L/dv2) a + (d2L/dq dv) v - dL/dq, one analytic pass."""
         hvp, gradient_q = self._parts(q, v, v, a)
         return hvp - gradient_q
+
+    def sample_predictor(self) -> SamplePredictor:
+        """forward() for one sample, q, v, a (n,) -> tau (n,), in float64 numpy."""
+        n = self.n_dof
+        s = self.numpy_scaling()
+        centre = np.concatenate([s['q_centre'], s['v_centre']])
+        half = np.concatenate([s['q_half'], s['v_half']])
+        hvp_scale, gradient_scale = s['energy'] / s['v_half'], s['energy'] / s['q_half']
+        net = NumpyAnalyticMLP(self.lagrangian_net)
+        concatenate = np.concatenate
+
+        def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            state = (concatenate((q, v)) - centre) / half
+            _, gradient, hvp = net.gradient_and_hvp(state, concatenate((v, a)) / half)
+            tau: np.ndarray = hvp_scale * hvp[n:] - gradient_scale * gradient[:n]
+            return tau
+
+        return predict_one
 
     def components(
         self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor
@@ -456,6 +533,23 @@ class LnnMlpNetwork(LagrangianNetwork):
     def forward(self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         """Torque (B, n) [N*m]: the LNN's plus the dissipative torque."""
         return self.lnn(q, v, a) + self.dissipation(q, v)
+
+    def sample_predictor(self) -> SamplePredictor:
+        """forward() for one sample, q, v, a (n,) -> tau (n,), in float64 numpy."""
+        lnn = self.lnn.sample_predictor()
+        s = self.numpy_scaling()
+        centre = np.concatenate([s['q_centre'], s['v_centre']])
+        half = np.concatenate([s['q_half'], s['v_half']])
+        tau_half = s['tau_half']
+        net = NumpyAnalyticMLP(self.dissipation_net)
+        concatenate = np.concatenate
+
+        def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            dissipation = tau_half * net((concatenate((q, v)) - centre) / half)
+            tau: np.ndarray = lnn(q, v, a) + dissipation
+            return tau
+
+        return predict_one
 
     def components(
         self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor
@@ -719,6 +813,10 @@ class _LagrangianModel(InverseDynamicsModel):
     def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Torque (B, n) [N*m] for q [rad], v [rad/s], a [rad/s^2], each (B, n)."""
         return self._evaluate(q, v, a, parts=False)['total']
+
+    def sample_predictor(self) -> SamplePredictor:
+        """One sample's torque in float64 numpy (the networks' analytic derivatives)."""
+        return self._network().sample_predictor()
 
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """Inertial, Coriolis/centrifugal and gravity parts (and friction where modelled)."""

@@ -14,6 +14,9 @@ per sample; here the derivatives are propagated layer by layer instead:
 
 Everything is ordinary differentiable tensor algebra, so autograd can still differentiate the
 results with respect to the weights for training.
+
+``NumpyAnalyticMLP`` is a float64 numpy copy of a fitted net with the same derivatives, for
+one sample at a time (the online predictor), where torch's per-operator overhead dominates.
 """
 
 from __future__ import annotations
@@ -22,11 +25,14 @@ import itertools
 import math
 from collections.abc import Callable
 
+import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional
 
-__all__ = ['SMOOTH_ACTIVATIONS', 'AnalyticMLP']
+from id_learning.models.torch_utils import float64_array, numpy_softplus
+
+__all__ = ['SMOOTH_ACTIVATIONS', 'AnalyticMLP', 'NumpyAnalyticMLP']
 
 # Each activation returns (s(z), s'(z)); s''(z) is then a cheap function of those two.
 _ValueSlope = tuple[torch.Tensor, torch.Tensor]
@@ -232,3 +238,110 @@ class AnalyticMLP(nn.Module):
     def _require_scalar(self) -> None:
         if self.n_out != 1:
             raise ValueError(f'gradients need a scalar-output net, this one has {self.n_out}')
+
+
+# -- numpy twin ----------------------------------------------------------------------------------
+_NumpyValueSlope = tuple[np.ndarray, np.ndarray]
+
+
+def _numpy_tanh(z: np.ndarray) -> _NumpyValueSlope:
+    value = np.tanh(z)
+    return value, 1.0 - value * value
+
+
+def _numpy_tanh_curvature(value: np.ndarray, slope: np.ndarray) -> np.ndarray:
+    result: np.ndarray = -2.0 * value * slope
+    return result
+
+
+def numpy_sigmoid(z: np.ndarray) -> np.ndarray:
+    """The logistic function, as (1 + tanh(z / 2)) / 2 (no overflow for any z)."""
+    result: np.ndarray = 0.5 + 0.5 * np.tanh(0.5 * z)
+    return result
+
+
+def _numpy_softplus(z: np.ndarray) -> _NumpyValueSlope:
+    return numpy_softplus(z), numpy_sigmoid(z)
+
+
+def _numpy_softplus_curvature(value: np.ndarray, slope: np.ndarray) -> np.ndarray:
+    del value
+    result: np.ndarray = slope - slope * slope
+    return result
+
+
+_NUMPY_SMOOTH = {
+    'tanh': (_numpy_tanh, _numpy_tanh_curvature, np.tanh),
+    'softplus': (_numpy_softplus, _numpy_softplus_curvature, numpy_softplus),
+}
+
+
+class NumpyAnalyticMLP:
+    """A float64 numpy copy of a fitted AnalyticMLP, for one input x (n_in,) at a time.
+
+    Same formulas as AnalyticMLP (see there), each with a single sample: vectors instead of
+    (B, ...) batches.
+    """
+
+    def __init__(self, net: AnalyticMLP) -> None:
+        """Copy the weights; later changes to ``net`` are not seen."""
+        self.n_in, self.n_out = net.n_in, net.n_out
+        self.layers = [
+            (float64_array(layer.weight), float64_array(layer.bias)) for layer in net.layers
+        ]
+        self._value_slope, self._curvature, self._plain = _NUMPY_SMOOTH[net.activation]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """Output (n_out,) for x (n_in,)."""
+        *hidden, (weight, bias) = self.layers
+        for w, b in hidden:
+            x = self._plain(w @ x + b)
+        out: np.ndarray = weight @ x + bias
+        return out
+
+    def jacobian_transposed(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Output (n_out,) and the transposed Jacobian d output / d x, (n_in, n_out)."""
+        (w, b), *hidden, (weight, bias) = self.layers
+        a, slope = self._value_slope(w @ x + b)
+        jac_t = w.T * slope
+        for w, b in hidden:
+            a, slope = self._value_slope(w @ a + b)
+            jac_t = (jac_t @ w.T) * slope
+        return weight @ a + bias, jac_t @ weight.T
+
+    def gradient(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """Value and input gradient (n_in,) of a scalar-output net."""
+        *hidden, (weight, bias) = self.layers
+        slopes = []
+        a = x
+        for w, b in hidden:
+            a, slope = self._value_slope(w @ a + b)
+            slopes.append(slope)
+        g = weight[0]
+        for (w, _), slope in zip(reversed(hidden), reversed(slopes), strict=True):
+            g = (g * slope) @ w
+        return float(weight[0] @ a + bias[0]), g
+
+    def gradient_and_hvp(
+        self, x: np.ndarray, u: np.ndarray
+    ) -> tuple[float, np.ndarray, np.ndarray]:
+        """Value, input gradient (n_in,) and Hessian-vector product H u (n_in,) (scalar net)."""
+        *hidden, (weight, bias) = self.layers
+        saved = []
+        a, a_dot = x, u
+        for w, b in hidden:
+            a, slope = self._value_slope(w @ a + b)
+            z_dot = w @ a_dot
+            saved.append((a, slope, z_dot))
+            a_dot = slope * z_dot
+        g = weight[0]
+        g_dot: np.ndarray | None = None
+        for (w, _), (value, slope, z_dot) in zip(reversed(hidden), reversed(saved), strict=True):
+            delta = g * slope
+            delta_dot = g * self._curvature(value, slope) * z_dot
+            if g_dot is not None:
+                delta_dot += g_dot * slope
+            g = delta @ w
+            g_dot = delta_dot @ w
+        assert g_dot is not None  # there is at least one hidden layer
+        return float(weight[0] @ a + bias[0]), g, g_dot

@@ -16,14 +16,21 @@ from functools import cached_property
 from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
+import pinocchio as pin
 import torch
 
 from id_learning.dataset.preprocess import MinMaxScaler, lowpass
 from id_learning.errors import CheckpointError, ConfigError
-from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
+from id_learning.models.base import (
+    InverseDynamicsModel,
+    ModelConfig,
+    SamplePredictor,
+    TorqueComponents,
+)
 from id_learning.models.blackbox import (
     NetworkConfig,
     NormalisedMlp,
+    NumpyNormalisedMlp,
     centre_and_half,
     check_kind,
     check_mlp_shape,
@@ -70,6 +77,26 @@ class _NominalPhysics(InverseDynamicsModel):
     def dynamics(self) -> RigidBodyDynamics:
         """The nominal (URDF) rigid-body model of the robot."""
         return RigidBodyDynamics.from_config(self.robot)
+
+    def sample_rnea(self) -> SamplePredictor:
+        """RNEA_URDF(q, v, a) of one sample (n,) -> (n,) [N*m], with its own scratch data.
+
+        Calls pinocchio directly when its joint order is the config's (the usual case):
+        ``RigidBodyDynamics.rnea`` reshapes and reorders for batches, which costs more than the
+        recursion itself for one sample.
+        """
+        model = self.dynamics.model
+        index = [model.joints[model.getJointId(name)].idx_v for name in self.joint_names]
+        if index != list(range(len(index))):
+            return self.dynamics.rnea
+        data = model.createData()
+
+        def rnea(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            # pinocchio returns a view of data.tau: the caller's arithmetic copies it.
+            tau: np.ndarray = pin.rnea(model, data, q, v, a)
+            return tau
+
+        return rnea
 
     def rigid_body_parts(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray
@@ -238,6 +265,23 @@ class RneaLqModel(_NominalPhysics):
         )
         return torque
 
+    def sample_predictor(self) -> SamplePredictor:
+        """One sample's torque, the terms of ``predict`` folded: q, v, a (n,) -> tau (n,)."""
+        p = self._parameters()
+        rotor = p['rotor_inertia_motor_side'] * self.robot.drives.gear_ratio**2
+        viscous, coulomb, offset = p['viscous'], p['coulomb'], p['offset']
+        has_coulomb = 'coulomb' in self.config.parameter_names
+        inverse_velocity = 1.0 / self.config.coulomb_velocity
+        rnea, tanh = self.sample_rnea(), np.tanh
+
+        def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            tau: np.ndarray = rnea(q, v, a) + rotor * a + viscous * v + offset
+            if has_coulomb:
+                tau += coulomb * tanh(v * inverse_velocity)
+            return tau
+
+        return predict_one
+
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """Nominal rigid-body parts, fitted rotor inertia and friction; offset as residual."""
         q, v, a = _states(q, v, a)
@@ -404,6 +448,20 @@ class RneaMlpModel(_NominalPhysics):
         q, v, a = _states(q, v, a)
         torque: np.ndarray = self.physics_torque(q, v, a) + self.residual_torque(q, v)
         return torque
+
+    def sample_predictor(self) -> SamplePredictor:
+        """One sample's torque, with h in float64 numpy: q, v, a (n,) -> tau (n,) [N*m]."""
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        h = NumpyNormalisedMlp(self.network_)
+        rotor = self.robot.drives.rotor_inertia * self.robot.drives.gear_ratio**2
+        rnea, concatenate = self.sample_rnea(), np.concatenate
+
+        def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            tau: np.ndarray = rnea(q, v, a) + rotor * a + h(concatenate((q, v)))
+            return tau
+
+        return predict_one
 
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """Nominal rigid-body parts, datasheet rotor inertia, h split into friction + residual."""

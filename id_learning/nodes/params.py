@@ -294,7 +294,16 @@ class PredictorNodeConfig:
         read_only=False,
         choices=('warn', 'reject'),
     )
-    torch_threads: int = param(1, 'torch intra-op and inter-op threads.')
+    torch_threads: int = param(
+        1, 'torch intra-op and inter-op threads, and numpy OpenBLAS threads [threads].'
+    )
+    inference: str = param(
+        'numpy',
+        'Model evaluation per sample: numpy = the float64 one-sample path built from the '
+        'fitted weights (equal to torch up to float32 rounding, several times faster), '
+        'torch = the model predict().',
+        choices=('numpy', 'torch'),
+    )
     log_throttle_s: float = param(
         1.0, 'Minimum interval between repeated warnings and errors [s].', read_only=False
     )
@@ -305,7 +314,11 @@ class PredictorNodeConfig:
         1.0, 'Period of the report on /diagnostics [s].', read_only=False
     )
     executor: str = param(
-        'single_threaded', 'rclpy executor that runs the callbacks.', choices=EXECUTORS
+        'events',
+        'rclpy executor that runs the callbacks: events (C++, about half the per-sample '
+        'overhead; latency is then measured from the callback start) or single_threaded '
+        '(latency from the middleware receive timestamp).',
+        choices=EXECUTORS,
     )
 
     def __post_init__(self) -> None:

@@ -14,6 +14,7 @@ import importlib
 from typing import Any
 
 __all__ = [
+    'INFERENCE_BACKENDS',
     'CausalAccelerationEstimator',
     'FeedForwardPredictor',
     'GuardConfig',
@@ -29,6 +30,7 @@ __all__ = [
     'causal_acceleration',
     'configure_inference_threads',
     'reference_from_states',
+    'set_openblas_threads',
     'training_range',
 ]
 
@@ -42,6 +44,8 @@ _MODULES = {
     'Reject': 'feedforward',
     'StepResult': 'feedforward',
     'configure_inference_threads': 'feedforward',
+    'set_openblas_threads': 'feedforward',
+    'INFERENCE_BACKENDS': 'feedforward',
     'RangeViolation': 'ranges',
     'TrainingRange': 'ranges',
     'training_range': 'ranges',

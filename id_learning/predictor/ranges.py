@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -66,10 +67,23 @@ class TrainingRange:
             out[name] = (low - pad, high + pad)
         return TrainingRange(self.joints, out, self.source)
 
+    @cached_property
+    def _stacked(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+        names = tuple(name for name in QUANTITIES if name in self.bounds)
+        low = np.concatenate([self.bounds[name][0] for name in names]) if names else np.empty(0)
+        high = np.concatenate([self.bounds[name][1] for name in names]) if names else low
+        return names, low, high
+
     def first_violation(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray
     ) -> RangeViolation | None:
         """The first value of (n,) q, v, a outside its bounds, or None."""
+        # One comparison of all bounded values first: the common case (inside) per sample.
+        names, low, high = self._stacked
+        given = {'q': q, 'v': v, 'a': a}
+        values = np.concatenate([given[name] for name in names]) if names else low
+        if not ((values < low) | (values > high)).any():
+            return None
         for name, values in (('q', q), ('v', v), ('a', a)):
             limits = self.bounds.get(name)
             if limits is None:

@@ -147,3 +147,16 @@ def test_the_feed_forward_predictor_serves_the_diagnosed_model(fitted, hidden_vi
             fitted.predict(q[k], v[k], a[k])[0], *predictor.torque_limit * [[-1], [1]]
         )
         np.testing.assert_allclose(result.tau, expected, rtol=1e-12)
+
+
+def test_one_sample_prediction_is_the_batch_prediction(effects_file, hidden_viscous):
+    _, out = effects_file
+    robot, _, data = hidden_viscous
+    q, v, a = states(robot.n_joints, seed=5)
+    for kind, extra in (('rnea_effects', {}), ('rnea_effects_mlp', {'max_epochs': 1})):
+        model = make_model(kind, robot, effects=str(out), **extra).fit(data)
+        one = model.sample_predictor()
+        for k in range(len(q)):
+            np.testing.assert_allclose(
+                one(q[k], v[k], a[k]), model.predict(q[k : k + 1], v[k : k + 1], a[k : k + 1])[0]
+            )

@@ -91,6 +91,55 @@ def test_online_torque_equals_the_offline_prediction_for_every_model_kind(
     np.testing.assert_allclose(np.array(online), offline, rtol=1e-5, atol=1e-6 * scale)
 
 
+@pytest.mark.parametrize('kind', STUDY_MODELS)
+def test_numpy_and_torch_inference_give_the_same_torque_across_a_history_reset(
+    kind, tiny_artifacts, mabi
+):
+    stamps, q, v, a = reference_run(50)
+    stamps = stamps.copy()
+    stamps[30:] += 100 * PERIOD_NS  # a hole in the trajectory: the history restarts there
+    outputs = {}
+    for inference in ('numpy', 'torch'):
+        predictor = FeedForwardPredictor.from_artifact(
+            tiny_artifacts[kind], mabi, inference=inference
+        )
+        results = [
+            predictor.step(ReferenceSample(int(stamps[k]), JOINTS, q[k], v[k], a[k]), receive(k))
+            for k in range(len(stamps))
+        ]
+        assert predictor.counters.history_resets == 1
+        outputs[inference] = np.array([result.tau for result in results])
+    scale = np.abs(outputs['torch']).max()
+    assert scale > 0
+    np.testing.assert_allclose(outputs['numpy'], outputs['torch'], rtol=1e-5, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize('kind', ['lstm', 'delan'])
+def test_warm_up_leaves_no_trace_in_the_output_or_the_counters(kind, tiny_artifacts, mabi):
+    stamps, q, v, a = reference_run(25)
+    outputs = []
+    for warm in (False, True):
+        predictor = FeedForwardPredictor.from_artifact(tiny_artifacts[kind], mabi)
+        if warm:
+            predictor.warm_up()
+            assert predictor.counters.received == 0
+            assert predictor.compute_s.total == 0
+        outputs.append(
+            [
+                predictor.step(
+                    ReferenceSample(int(stamps[k]), JOINTS, q[k], v[k], a[k]), receive(k)
+                ).tau
+                for k in range(len(stamps))
+            ]
+        )
+    np.testing.assert_array_equal(np.array(outputs[1]), np.array(outputs[0]))
+
+
+def test_predictor_refuses_an_unknown_inference_backend(mabi):
+    with pytest.raises(ValueError, match="inference must be one of \\('numpy', 'torch'\\)"):
+        FeedForwardPredictor(LinearModel(mabi), mabi.limits.torque, inference='onnx')
+
+
 @pytest.mark.parametrize('kind', ['mlp', 'lstm'])
 def test_estimated_accelerations_match_the_batch_estimate_offline(kind, tiny_artifacts, mabi):
     stamps, q, v, _ = reference_run(30)
