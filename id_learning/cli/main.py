@@ -118,7 +118,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
         diagnosis_out = out / 'diagnosis'
         try:
-            result = diagnose_bags([bag], robot, args.target, diagnosis_out, progress=False)
+            result = diagnose_bags(
+                [bag], robot, args.target, diagnosis_out, progress=False, recordings=[recording]
+            )
         except DatasetError as err:  # e.g. too short: the rest of the demo still runs
             print(f'diagnosis not run: {err}', flush=True)
         else:
@@ -247,8 +249,11 @@ def diagnose_bags(
     *,
     effects: Sequence[str] | None = None,
     progress: bool = True,
+    recordings: Sequence[Any] | None = None,
 ) -> Any:
     """Diagnose bags; write report.md, effects.json, figures and the rnea_effects model to ``out``.
+
+    ``recordings``: the bags already loaded (same order), to skip reading them again.
 
     Returns:
         the ``DiagnosisResult``.
@@ -263,12 +268,15 @@ def diagnose_bags(
     if effects:
         settings['effects'] = tuple(effects)
     config = DiagnosisConfig(**settings)
-    recordings = []
-    for bag in bags:
-        print(f'loading {bag} ...', flush=True)
-        recordings.append(
-            load_recording(Path(bag), robot, require_current=target == 'motor', progress=progress)
-        )
+    if recordings is None:
+        recordings = []
+        for bag in bags:
+            print(f'loading {bag} ...', flush=True)
+            recordings.append(
+                load_recording(
+                    Path(bag), robot, require_current=target == 'motor', progress=progress
+                )
+            )
     print('diagnosing: nominal model vs measurements, forward selection of named effects ...',
           flush=True)  # fmt: skip
     result = diagnose(recordings, robot, config, out_dir=out)

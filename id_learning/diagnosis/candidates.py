@@ -14,7 +14,7 @@ The nominal model is the URDF's rigid-body dynamics plus the datasheet rotor ine
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -176,6 +176,14 @@ class NominalModel:
             [model.joints[model.getJointId(name)].idx_v for name in robot.joints]
         )
         self._data = model.createData()
+        self._payload_maps: dict[tuple[str, tuple[float, ...]], tuple[int, np.ndarray]] = {}
+
+    def payload_map(self, frame: str, com_guess_m: Sequence[float]) -> tuple[int, np.ndarray]:
+        """``payload_parameter_map`` of this model, computed once per frame and COM guess."""
+        key = (frame, tuple(float(x) for x in com_guess_m))
+        if key not in self._payload_maps:
+            self._payload_maps[key] = payload_parameter_map(self, frame, np.asarray(key[1]))
+        return self._payload_maps[key]
 
     @property
     def rotor_inertia_joint_side(self) -> np.ndarray:
@@ -502,9 +510,7 @@ def candidate_columns(
     if name == 'payload_mass':
         if qs.regressor is None:
             raise ValueError('payload_mass needs quantities evaluated with regressor=True')
-        body, mapping = payload_parameter_map(
-            model, str(settings['frame']), np.asarray(settings['com_guess_m'])
-        )
+        body, mapping = model.payload_map(str(settings['frame']), settings['com_guess_m'])
         block = qs.regressor[
             :, :, N_INERTIAL_PARAMETERS * body : N_INERTIAL_PARAMETERS * (body + 1)
         ]
