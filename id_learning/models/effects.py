@@ -195,11 +195,14 @@ class RneaEffectsModel(InverseDynamicsModel):
         self.config: RneaEffectsConfig = config
         self.model_: Any = None
         self.diagnosis_: dict[str, Any] = {}
+        #: The training part's (q, v, a) range, for the predictor's out-of-range warning.
+        self.input_range_: dict[str, Any] | None = None
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Take the effects of a diagnosis, or diagnose the training part."""
         del progress  # the diagnosis prints nothing; it takes seconds to a minute
         self.model_, self.diagnosis_ = _effects_model(self.config.effects, data, self.robot)
+        self.input_range_ = data.dataset.input_scaler.to_dict()
         _LOG.info('rnea_effects: %d effect terms', len(self.model_.terms))
         return self
 
@@ -238,10 +241,14 @@ class RneaEffectsModel(InverseDynamicsModel):
         """Rebuild the terms from their specs (metadata) and coefficients (tensors)."""
         self.model_ = _load_terms(tensors, fitted, self.robot, self.kind)
         self.diagnosis_ = dict(fitted.get('diagnosis', {}))
+        self.input_range_ = fitted.get('input_scaler')
 
     def fitted_metadata(self) -> dict[str, Any]:
-        """The target, each term's effect spec, and where the effects came from."""
-        return {**_terms_metadata(self._model()), 'diagnosis': self.diagnosis_}
+        """The target, each term's effect spec, where the effects came from, the input range."""
+        out = {**_terms_metadata(self._model()), 'diagnosis': self.diagnosis_}
+        if self.input_range_ is not None:
+            out['input_scaler'] = self.input_range_
+        return out
 
 
 # -- rnea_effects_mlp -----------------------------------------------------------------------------

@@ -137,6 +137,9 @@ def test_the_feed_forward_predictor_serves_the_diagnosed_model(fitted, hidden_vi
     robot = hidden_viscous[0]
     folder = save_model(fitted, tmp_path / 'effects')
     predictor = FeedForwardPredictor.from_artifact(folder, robot)
+    # it warns outside the (q, v, a) range of the training part, not of the joint limits
+    assert predictor.range is not None
+    assert predictor.range.source == 'training range (input_scaler)'
     q, v, a = states(robot.n_joints, seed=4)
     q *= 0.2  # inside the joint limits the predictor guards
     for k in range(len(q)):
