@@ -34,7 +34,6 @@ import importlib.util
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -50,6 +49,7 @@ import numpy as np
 
 import id_learning
 from id_learning.errors import ConfigError, DatasetError, IdLearningError
+from id_learning.nodes.process import NodeProcess
 
 __all__ = ['OnlineCheckError', 'OnlineCheckResult', 'has_ros', 'online_check']
 
@@ -192,68 +192,11 @@ def _jsonable(value: object) -> object:
 
 
 # -- node processes -------------------------------------------------------------------------------
-def _ros_value(value: object) -> str:
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, (list, tuple)):
-        return '[' + ', '.join(f"'{item}'" for item in value) + ']'
-    return str(value)
-
-
-class _NodeProcess:
-    """One node in a child process; stdout and stderr go to a log file."""
-
-    def __init__(
-        self,
-        module: str,
-        parameters: dict[str, object],
-        remaps: dict[str, str],
-        log_path: Path,
-        env: dict[str, str],
-    ) -> None:
-        command = [sys.executable, '-m', f'id_learning.nodes.{module}', '--ros-args']
-        for old, new in remaps.items():
-            command += ['-r', f'{old}:={new}']
-        for name, value in parameters.items():
-            command += ['-p', f'{name}:={_ros_value(value)}']
-        self.module = module
-        self.log_path = log_path
-        self._log = log_path.open('wb')
-        self.process = subprocess.Popen(
-            command, env=env, stdout=self._log, stderr=subprocess.STDOUT, cwd=log_path.parent
-        )
-        self.was_killed = False
-
-    @property
-    def is_running(self) -> bool:
-        return self.process.poll() is None
-
-    def log_tail(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        text = self.log_path.read_text(errors='replace')
-        return text[-LOG_TAIL_CHARS:]
-
-    def failure(self, what: str) -> OnlineCheckError:
-        return OnlineCheckError(
-            f'{self.module} node {what} (exit status {self.process.poll()}); its log ends with:\n'
-            f'{self.log_tail()}'
-        )
-
-    def interrupt(self) -> None:
-        if self.is_running:
-            self.process.send_signal(signal.SIGINT)
-
-    def stop(self) -> None:
-        """SIGINT, wait, then SIGKILL."""
-        self.interrupt()
-        try:
-            self.process.wait(STOP_S)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.was_killed = True
-            self.process.wait(STOP_S)
-        self._log.close()
+def _failure(node: NodeProcess, what: str) -> OnlineCheckError:
+    return OnlineCheckError(
+        f'{node.module} node {what} (exit status {node.process.poll()}); its log ends with:\n'
+        f'{node.log()[-LOG_TAIL_CHARS:]}'
+    )
 
 
 def _node_environment(domain_id: int) -> dict[str, str]:
@@ -272,16 +215,16 @@ def _node_environment(domain_id: int) -> dict[str, str]:
 @contextmanager
 def _node_processes(
     log_dir: Path, domain_id: int
-) -> Iterator[Callable[[str, dict[str, object], dict[str, str]], _NodeProcess]]:
+) -> Iterator[Callable[[str, dict[str, object], dict[str, str]], NodeProcess]]:
     """Start nodes with ``start(module, parameters, remaps)``.
 
     Every node started is stopped on exit, also on an error or Ctrl-C.
     """
-    started: list[_NodeProcess] = []
+    started: list[NodeProcess] = []
     env = _node_environment(domain_id)
 
-    def start(module: str, parameters: dict[str, object], remaps: dict[str, str]) -> _NodeProcess:
-        node = _NodeProcess(module, parameters, remaps, log_dir / f'{module}.log', env)
+    def start(module: str, parameters: dict[str, object], remaps: dict[str, str]) -> NodeProcess:
+        node = NodeProcess(module, parameters, log_dir / f'{module}.log', env, remaps)
         started.append(node)
         return node
 
@@ -291,7 +234,7 @@ def _node_processes(
         for node in started:  # all at once: each needs a moment to close
             node.interrupt()
         for node in started:
-            node.stop()
+            node.stop(STOP_S)
         if any(node.was_killed for node in started):
             # A killed node leaves Fast DDS shared-memory files behind.
             fastdds = shutil.which('fastdds') or str(Path(sys.executable).parent / 'fastdds')
@@ -385,7 +328,7 @@ class _Listener:
         predicate: Callable[[], bool],
         timeout: float,
         what: str,
-        watched: list[_NodeProcess],
+        watched: list[NodeProcess],
     ) -> bool:
         """Wait until predicate() holds; False on timeout; a node that exited raises."""
         deadline = time.monotonic() + timeout
@@ -393,7 +336,7 @@ class _Listener:
             while not predicate():
                 for node in watched:
                     if not node.is_running:
-                        raise node.failure(f'exited while waiting for {what}')
+                        raise _failure(node, f'exited while waiting for {what}')
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
@@ -588,7 +531,7 @@ def online_check(
                 'the predictor to connect',
                 [predictor],
             ):
-                raise predictor.failure(f'did not connect within {STARTUP_S:g} s')
+                raise _failure(predictor, f'did not connect within {STARTUP_S:g} s')
             _say(
                 progress,
                 f'replaying {excerpt_s:.1f} s of the test part from {excerpt_start_s:.1f} s in '
@@ -620,13 +563,13 @@ def online_check(
             deadline = time.monotonic() + STARTUP_S + excerpt_s * 1.5
             while replay.is_running:
                 if not predictor.is_running:
-                    raise predictor.failure('exited during the replay')
+                    raise _failure(predictor, 'exited during the replay')
                 if time.monotonic() > deadline:
-                    raise replay.failure('did not finish in time')
+                    raise _failure(replay, 'did not finish in time')
                 with suppress(subprocess.TimeoutExpired):
                     replay.process.wait(0.2)
             if replay.process.returncode != 0:
-                raise replay.failure('failed')
+                raise _failure(replay, 'failed')
             n_inputs = len(listener.references)
             _say(progress, f'replay done: {n_inputs} references; waiting for the last outputs')
             with listener.condition:

@@ -11,7 +11,6 @@ import contextlib
 import os
 import random
 import shutil
-import signal
 import subprocess
 import sys
 import threading
@@ -22,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from support import REPO
+
+from id_learning.nodes.process import NodeProcess
 
 #: Deadline of a wait on a node that has to start first (imports torch on a loaded machine).
 STARTUP_S = 90.0
@@ -42,76 +43,6 @@ def node_environment(domain_id: int) -> dict[str, str]:
 def random_domain() -> int:
     """A DDS domain for one test (Fast DDS ports allow ids up to 232)."""
     return random.SystemRandom().randint(101, 230)
-
-
-def ros_value(value: Any) -> str:
-    """A parameter value as ``-p name:=value`` text (YAML)."""
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, (list, tuple)):
-        return '[' + ', '.join(f"'{item}'" for item in value) + ']'
-    return str(value)
-
-
-class NodeProcess:
-    """One node in a child process, its output going to a log file."""
-
-    def __init__(
-        self,
-        module: str,
-        parameters: dict[str, Any],
-        log_path: Path,
-        env: dict[str, str],
-        remaps: dict[str, str] | None = None,
-    ) -> None:
-        command = [sys.executable, '-m', f'id_learning.nodes.{module}', '--ros-args']
-        for name, value in parameters.items():
-            command += ['-p', f'{name}:={ros_value(value)}']
-        for old, new in (remaps or {}).items():
-            command += ['-r', f'{old}:={new}']
-        self.module = module
-        self.log_path = log_path
-        self._log = log_path.open('wb')
-        self.process = subprocess.Popen(
-            command, env=env, stdout=self._log, stderr=subprocess.STDOUT, cwd=log_path.parent
-        )
-        self.was_killed = False
-
-    @property
-    def is_running(self) -> bool:
-        return self.process.poll() is None
-
-    def log(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        return self.log_path.read_text(errors='replace')
-
-    def interrupt(self) -> None:
-        """Send SIGINT without waiting."""
-        if self.is_running:
-            self.process.send_signal(signal.SIGINT)
-
-    def stop(self, timeout: float = 20.0) -> int | None:
-        """SIGINT, wait, then SIGKILL; returns the exit status."""
-        if self.is_running:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.kill()
-        self._log.close()
-        return self.process.returncode
-
-    def kill(self) -> None:
-        """SIGKILL now (leaves Fast DDS shared-memory files behind)."""
-        if self.is_running:
-            self.process.kill()
-            self.was_killed = True
-        self.process.wait(10)
-
-    def wait(self, timeout: float) -> int:
-        """Wait for the process to end by itself."""
-        return self.process.wait(timeout)
 
 
 @contextlib.contextmanager
