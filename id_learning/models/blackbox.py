@@ -711,6 +711,16 @@ class LstmStreams:
             stacked = np.vstack([weight_t(f'weight_ih_l{layer}'), weight_t(f'weight_hh_l{layer}')])
             self._weights.append(torch.from_numpy(np.ascontiguousarray(stacked)))
             self._biases.append(torch.from_numpy(bias(layer)))
+        # The same weights split for the online step (see ``prepare``): W_hh^T per layer, and
+        # W_ih^T of the layers above the first.
+        self._recurrent = [
+            torch.from_numpy(np.ascontiguousarray(weight_t(f'weight_hh_l{layer}')))
+            for layer in range(layers)
+        ]
+        self._upward = [
+            torch.from_numpy(np.ascontiguousarray(weight_t(f'weight_ih_l{layer}')))
+            for layer in range(1, layers)
+        ]
         self._head_t = np.ascontiguousarray(float64_array(network.head.weight).T)
         self._head_bias = float64_array(network.head.bias)
         self._input_centre = float64_array(network.input_centre)
@@ -725,12 +735,32 @@ class LstmStreams:
         self._h = np.zeros((sequence_length, layers * hidden), dtype=dtype)
         self._c = np.zeros_like(self._h)
         self._gates = np.empty((sequence_length, 4 * hidden), dtype=dtype)
+        # Per layer, b + h W_hh^T of every window, computed ahead by ``prepare``.
+        self._ahead = np.empty((layers, sequence_length, 4 * hidden), dtype=dtype)
+        self._is_prepared = False
         self._oldest = 0
         self._is_empty = True
 
     def reset(self) -> None:
         """Start a new run: the next sample is padded as a run's first."""
         self._is_empty = True
+        self._is_prepared = False
+
+    def prepare(self) -> None:
+        """Compute what the next step needs of the current state alone, ahead of the sample.
+
+        Each layer's gates are b + x W_ih^T + h W_hh^T; the recurrent part h W_hh^T of every
+        window is known before the next sample arrives, so calling this after a torque has
+        been published (the predictor does) takes two thirds of the products off the path from
+        sample to torque. ``push`` calls it itself when it was not called.
+        """
+        if self._is_empty or self._is_prepared:
+            return
+        n = self._hidden
+        h_t, ahead_t = torch.from_numpy(self._h), torch.from_numpy(self._ahead)
+        for layer, (weight, bias) in enumerate(zip(self._recurrent, self._biases, strict=True)):
+            torch.addmm(bias, h_t[:, layer * n : (layer + 1) * n], weight, out=ahead_t[layer])
+        self._is_prepared = True
 
     def push(self, row: np.ndarray) -> np.ndarray:
         """Torque (n,) [N*m] at a new sample, row (3n,) = [q, v, a] in physical units."""
@@ -741,7 +771,9 @@ class LstmStreams:
             self._fill(z)
             self._is_empty = False
         else:
-            self._advance(z, self._h, self._c, self._gates)
+            self.prepare()
+            self._step(z)
+        self._is_prepared = False
         oldest = self._oldest
         out = self._h[oldest, -self._hidden :].astype(float) @ self._head_t + self._head_bias
         # The oldest window is complete; its row starts a new one (from zero) at the next sample.
@@ -750,6 +782,30 @@ class LstmStreams:
         self._oldest = (oldest + 1) % self.sequence_length
         tau: np.ndarray = out * self._output_half + self._output_centre
         return tau
+
+    def _step(self, z: np.ndarray) -> None:
+        """One LSTM step of every window from the prepared recurrent parts; input z (3n,)."""
+        n, h, c, gates = self._hidden, self._h, self._c, self._gates
+        gates_t, h_t = torch.from_numpy(gates), torch.from_numpy(h)
+        for layer in range(len(self._recurrent)):
+            columns = slice(layer * n, (layer + 1) * n)
+            if layer == 0:
+                np.add(self._ahead[0], z @ self._input_weight_t, out=gates)
+            else:
+                below = h_t[:, (layer - 1) * n : layer * n]
+                ahead = torch.from_numpy(self._ahead[layer])
+                torch.addmm(ahead, below, self._upward[layer - 1], out=gates_t)
+            self._cell_update(gates, c[:, columns], h[:, columns])
+
+    def _cell_update(self, gates: np.ndarray, c_layer: np.ndarray, h_layer: np.ndarray) -> None:
+        """In place: c = f c + i g, h = o tanh(c), from the pre-activations (i, f, o, g)."""
+        n = self._hidden
+        torch.from_numpy(gates)[:, : 3 * n].sigmoid_()
+        cell = gates[:, 3 * n :]
+        np.tanh(cell, out=cell)
+        c_layer *= gates[:, n : 2 * n]
+        c_layer += gates[:, :n] * cell
+        np.multiply(gates[:, 2 * n : 3 * n], np.tanh(c_layer), out=h_layer)
 
     def _advance(self, z: np.ndarray, h: np.ndarray, c: np.ndarray, gates: np.ndarray) -> None:
         """One LSTM step of every row of h, c (W, layers * hidden), in place; input z (3n,)."""
@@ -763,13 +819,7 @@ class LstmStreams:
                 torch.addmm(pre, h_t[:, columns], weight, out=gates_t)
             else:
                 torch.addmm(bias, h_t[:, (layer - 1) * n : (layer + 1) * n], weight, out=gates_t)
-            gates_t[:, : 3 * n].sigmoid_()
-            cell = gates[:, 3 * n :]
-            np.tanh(cell, out=cell)
-            c_layer = c[:, columns]
-            c_layer *= gates[:, n : 2 * n]
-            c_layer += gates[:, :n] * cell
-            np.multiply(gates[:, 2 * n : 3 * n], np.tanh(c_layer), out=h[:, columns])
+            self._cell_update(gates, c[:, columns], h[:, columns])
 
     def _fill(self, z: np.ndarray) -> None:
         """States after a padded start: the window i-th oldest has seen T - i copies of z."""

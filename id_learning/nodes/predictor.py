@@ -287,6 +287,7 @@ class Predictor(Node):
                 self.latency_s.add((time.monotonic_ns() - receive_ns) * 1e-9)
             if result.resumed_after_stale or result.is_out_of_range or result.is_clamped:
                 self._log_result(result)
+            self.core.prepare_next()  # off the path from sample to torque
         except Exception as err:  # the edge of the callback: report and keep running
             self.callback_errors += 1
             self.get_logger().error(

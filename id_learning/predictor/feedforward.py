@@ -513,6 +513,15 @@ class FeedForwardPredictor:
             resumed_after_stale=resumed,
         )
 
+    def prepare_next(self) -> None:
+        """Do ahead of the next sample what depends on the past alone (after a publish).
+
+        The LSTM's recurrent products of every window in flight; nothing for other models. The
+        next ``step`` does it itself when this was not called, with the same result.
+        """
+        if self._sequence is not None:
+            self._sequence.prepare()
+
     def _push_window(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray | None:
         """Append a sample to the sequence model's history; the numpy path returns its torque."""
         if not self.is_sequence_model:
