@@ -14,7 +14,7 @@ The nominal model is the URDF's rigid-body dynamics plus the datasheet rotor ine
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +29,7 @@ from id_learning.robot.drives import rotor_inertia_torque
 from id_learning.robot.dynamics import N_INERTIAL_PARAMETERS, RigidBodyDynamics
 
 __all__ = [
+    'JOINT_COLUMNS',
     'PARAMETERS',
     'SPECIAL_CASES',
     'CandidateSpec',
@@ -454,6 +455,49 @@ def build_library(
     return specs
 
 
+def _friction_sign(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -> np.ndarray:
+    sign: np.ndarray = np.tanh(qs.v[:, j] / settings['smoothing_velocity'])
+    return sign
+
+
+def _gravity_spring(
+    qs: NominalQuantities, j: Any, settings: Mapping[str, Any], model: NominalModel
+) -> tuple[np.ndarray, ...]:
+    dq = qs.q[:, j] - settings['reference_rad']
+    return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
+
+
+def _cogging(
+    qs: NominalQuantities, j: Any, settings: Mapping[str, Any], model: NominalModel
+) -> tuple[np.ndarray, ...]:
+    phase = settings['periods_per_motor_turn'] * model.robot.drives.gear_ratio[j] * qs.q[:, j]
+    return np.sin(phase), np.cos(phase)
+
+
+JointColumns = Callable[
+    [NominalQuantities, Any, Mapping[str, Any], NominalModel], tuple[np.ndarray, ...]
+]
+
+#: Effects that sit on one joint and act on it alone: their columns as functions of the nominal
+#: quantities, the joint index j and the spec's settings. Written with numpy broadcasting, so j
+#: may also be an index array with settings arrays of its length: all joints of an effect at once.
+JOINT_COLUMNS: dict[str, JointColumns] = {
+    'viscous_friction': lambda qs, j, s, model: (qs.v[:, j],),
+    'coulomb_friction': lambda qs, j, s, model: (_friction_sign(qs, j, s),),
+    'stribeck_friction': lambda qs, j, s, model: (
+        np.exp(-((qs.v[:, j] / s['velocity']) ** 2)) * _friction_sign(qs, j, s),
+    ),
+    'load_dependent_friction': lambda qs, j, s, model: (
+        np.abs(qs.tau_rigid[:, j]) * _friction_sign(qs, j, s),
+    ),
+    'rotor_inertia': lambda qs, j, s, model: (model.robot.drives.gear_ratio[j] ** 2 * qs.a[:, j],),
+    'gravity_spring': _gravity_spring,
+    'torque_constant_scale': lambda qs, j, s, model: (qs.tau_nominal[:, j],),
+    'cogging': _cogging,
+    'torque_offset': lambda qs, j, s, model: (np.ones_like(qs.q[:, j]),),
+}
+
+
 def candidate_columns(
     spec: CandidateSpec, quantities: NominalQuantities, model: NominalModel
 ) -> np.ndarray:
@@ -474,32 +518,8 @@ def candidate_columns(
         return out
 
     name = spec.name
-    if name == 'viscous_friction':
-        return on_joint(qs.v[:, j])
-    if name == 'coulomb_friction':
-        return on_joint(np.tanh(qs.v[:, j] / settings['smoothing_velocity']))
-    if name == 'stribeck_friction':
-        v = qs.v[:, j]
-        return on_joint(
-            np.exp(-((v / settings['velocity']) ** 2))
-            * np.tanh(v / settings['smoothing_velocity'])
-        )
-    if name == 'load_dependent_friction':
-        v = qs.v[:, j]
-        return on_joint(np.abs(qs.tau_rigid[:, j]) * np.tanh(v / settings['smoothing_velocity']))
-    if name == 'rotor_inertia':
-        gear = model.robot.drives.gear_ratio[j]
-        return on_joint(gear**2 * qs.a[:, j])
-    if name == 'gravity_spring':
-        dq = qs.q[:, j] - settings['reference_rad']
-        return on_joint(*[dq**k for k in range(1, int(settings['degree']) + 1)])
-    if name == 'torque_constant_scale':
-        return on_joint(qs.tau_nominal[:, j])
-    if name == 'cogging':
-        phase = settings['periods_per_motor_turn'] * model.robot.drives.gear_ratio[j] * qs.q[:, j]
-        return on_joint(np.sin(phase), np.cos(phase))
-    if name == 'torque_offset':
-        return on_joint(np.ones(n_samples))
+    if name in JOINT_COLUMNS:
+        return on_joint(*JOINT_COLUMNS[name](qs, j, settings, model))
     if name == 'joint_offset':
         if qs.dtau_dq is None:
             raise ValueError('joint_offset needs quantities evaluated with derivatives=True')

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -29,6 +29,7 @@ from scipy import optimize, signal, stats
 from id_learning.dataset.preprocess import Dataset, differentiate, prepare_dataset, regularise
 from id_learning.dataset.recording import Recording
 from id_learning.diagnosis.candidates import (
+    JOINT_COLUMNS,
     SPECIAL_CASES,
     CandidateSpec,
     ExcitationFacts,
@@ -361,6 +362,45 @@ class AugmentedModel:
         for spec, theta in self.terms:
             tau += candidate_columns(spec, quantities, self.nominal) @ theta
         return tau
+
+    def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.
+
+        The single-joint effects (``JOINT_COLUMNS``) of one name and one column are folded: all
+        their joints in one vectorised call with their settings as arrays; the rest go through
+        ``candidate_columns`` as in ``torque``.
+        """
+        groups: dict[str, list[tuple[CandidateSpec, np.ndarray]]] = {}
+        rest: list[tuple[CandidateSpec, np.ndarray]] = []
+        for spec, theta in self.terms:
+            scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
+            if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar:
+                groups.setdefault(spec.name, []).append((spec, theta))
+            else:
+                rest.append((spec, theta))
+        folded = []
+        for name, members in groups.items():
+            joints = np.array([spec.joint for spec, _ in members])
+            keys = members[0][0].settings.keys()
+            settings = {k: np.array([spec.settings[k] for spec, _ in members]) for k in keys}
+            theta = np.array([theta[0] for _, theta in members])
+            folded.append((JOINT_COLUMNS[name], joints, settings, theta))
+        specs = [spec for spec, _ in rest]
+        derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
+        nominal = self.nominal
+
+        def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            qs = nominal.evaluate(
+                q[None], v[None], a[None], derivatives=derivatives, regressor=regressor
+            )
+            tau: np.ndarray = qs.tau_nominal[0].copy()
+            for columns, joints, settings, theta in folded:
+                np.add.at(tau, joints, columns(qs, joints, settings, nominal)[0][0] * theta)
+            for spec, theta in rest:
+                tau += candidate_columns(spec, qs, nominal)[0] @ theta
+            return tau
+
+        return torque_one
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form; ``from_dict`` rebuilds it for the same robot."""

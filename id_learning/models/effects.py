@@ -33,7 +33,7 @@ from id_learning.models.base import (
     SamplePredictor,
     TorqueComponents,
 )
-from id_learning.models.blackbox import check_kind
+from id_learning.models.blackbox import NumpyNormalisedMlp, check_kind, require_fitted
 from id_learning.models.data import TrainingData
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
 from id_learning.robot.config import RobotConfig
@@ -224,6 +224,11 @@ class RneaEffectsModel(InverseDynamicsModel):
         torque: np.ndarray = self._model().torque(q, v, a)
         return torque
 
+    def sample_predictor(self) -> SamplePredictor:
+        """One sample's torque, the single-joint effects folded into vectorised calls."""
+        sample_torque: SamplePredictor = self._model().sample_function()
+        return sample_torque
+
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """The nominal model's torque, and what the named effects add to it as the residual."""
         model = self._model()
@@ -299,8 +304,19 @@ class RneaEffectsMlpModel(RneaMlpModel):
         return torque
 
     def sample_predictor(self) -> SamplePredictor:
-        """One sample through ``predict``: the effect terms need the nominal model's quantities."""
-        return InverseDynamicsModel.sample_predictor(self)
+        """One sample's torque: the diagnosed model's folded path plus h in float64 numpy."""
+        if self.effects_ is None:
+            raise CheckpointError(f'{self.kind}: the model is not fitted')
+        require_fitted(self, self.network_)
+        assert self.network_ is not None
+        physics = self.effects_.sample_function()
+        h = NumpyNormalisedMlp(self.network_)
+
+        def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            tau: np.ndarray = physics(q, v, a) + h(np.concatenate((q, v)))
+            return tau
+
+        return predict_one
 
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """The total, with everything beyond the diagnosed model (h) as the residual."""

@@ -12,6 +12,7 @@ from support import twin_config
 
 from id_learning.diagnosis import (
     AugmentedModel,
+    CandidateSpec,
     DiagnosisConfig,
     augmented_torque,
     diagnose,
@@ -165,3 +166,41 @@ def test_unknown_effects_in_the_config_are_refused():
         DiagnosisConfig(effects=('viscous_friction', 'magic_friction'))
     with pytest.raises(ConfigError, match='significance'):
         DiagnosisConfig(significance=0.0)
+
+
+def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
+    """Every kind of term at once, several per effect, against AugmentedModel.torque."""
+    rng = np.random.default_rng(3)
+    joints = mabi.joints
+    terms = []
+    for j, joint in enumerate(joints):
+        terms += [
+            (CandidateSpec('viscous_friction', j, joint), rng.normal(size=1)),
+            (CandidateSpec('coulomb_friction', j, joint, {'smoothing_velocity': 0.005}),
+             rng.normal(size=1)),
+            (CandidateSpec('stribeck_friction', j, joint,
+                           {'velocity': 0.02 + 0.01 * j, 'smoothing_velocity': 0.005}),
+             rng.normal(size=1)),
+            (CandidateSpec('load_dependent_friction', j, joint, {'smoothing_velocity': 0.004}),
+             rng.normal(size=1)),
+            (CandidateSpec('rotor_inertia', j, joint), rng.normal(size=1) * 1e-4),
+            (CandidateSpec('torque_constant_scale', j, joint), rng.normal(size=1) * 0.01),
+            (CandidateSpec('torque_offset', j, joint), rng.normal(size=1)),
+            (CandidateSpec('cogging', j, joint, {'periods_per_motor_turn': 6}),
+             rng.normal(size=2)),
+        ]  # fmt: skip
+    terms += [
+        (CandidateSpec('gravity_spring', 1, joints[1], {'reference_rad': 0.0, 'degree': 3}),
+         rng.normal(size=3)),
+        (CandidateSpec('joint_offset', 2, joints[2]), rng.normal(size=1) * 1e-3),
+        (CandidateSpec('signal_delay'), np.array([0.004])),
+        (CandidateSpec('payload_mass', settings={'frame': mabi.payload_frame,
+                                                 'com_guess_m': [0.1, 0.0, 0.05]}),
+         np.array([20.0, 2.0, 0.0, 1.0])),
+    ]  # fmt: skip
+    model = AugmentedModel(mabi, 'motor', terms)
+    one = model.sample_function()
+    q, v, a = (rng.uniform(-1.0, 1.0, (6, len(joints))) for _ in range(3))
+    batch = model.torque(q, v, a)
+    for k in range(len(q)):
+        np.testing.assert_allclose(one(q[k], v[k], a[k]), batch[k], rtol=1e-12, atol=1e-9)
