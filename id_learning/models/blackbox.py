@@ -669,7 +669,7 @@ class LstmStreams:
     window after ``reset`` is padded with the run's first sample. Instead of recomputing each
     window (T sequential steps of one state), T windows are kept in flight: window k starts from
     zero at sample k and ends at sample k + T - 1, so each new sample advances T states at once,
-    one matrix product per layer over all of them. The arithmetic of each window is the same as
+    the products of each layer over all of them at once. The arithmetic of each window is the same as
     a recomputation; only the summation order of the products may differ. The products and the
     sigmoids run through torch on float64 views of numpy arrays (its DGEMM takes ~50 us here
     against ~90 us for numpy's OpenBLAS); the rest is numpy. Inputs and outputs are float64.
@@ -701,18 +701,10 @@ class LstmStreams:
                 )[order]
             ).astype(dtype)
 
-        # Layer 0: the input projection of one sample (numpy) and W_hh^T (hidden, 4 hidden).
-        # Layers above: [W_ih^T; W_hh^T] (2 hidden, 4 hidden), applied to [h_below, h] at once.
+        # Layer 0's input projection of one sample (numpy); per layer b and W_hh^T (the part
+        # ``prepare`` computes ahead), and W_ih^T of the layers above the first.
         self._input_weight_t = np.ascontiguousarray(weight_t('weight_ih_l0'))
-        self._input_bias = bias(0)
-        self._weights = [torch.from_numpy(np.ascontiguousarray(weight_t('weight_hh_l0')))]
-        self._biases = [torch.from_numpy(self._input_bias)]
-        for layer in range(1, layers):
-            stacked = np.vstack([weight_t(f'weight_ih_l{layer}'), weight_t(f'weight_hh_l{layer}')])
-            self._weights.append(torch.from_numpy(np.ascontiguousarray(stacked)))
-            self._biases.append(torch.from_numpy(bias(layer)))
-        # The same weights split for the online step (see ``prepare``): W_hh^T per layer, and
-        # W_ih^T of the layers above the first.
+        self._biases = [torch.from_numpy(bias(layer)) for layer in range(layers)]
         self._recurrent = [
             torch.from_numpy(np.ascontiguousarray(weight_t(f'weight_hh_l{layer}')))
             for layer in range(layers)
@@ -756,10 +748,7 @@ class LstmStreams:
         """
         if self._is_empty or self._is_prepared:
             return
-        n = self._hidden
-        h_t, ahead_t = torch.from_numpy(self._h), torch.from_numpy(self._ahead)
-        for layer, (weight, bias) in enumerate(zip(self._recurrent, self._biases, strict=True)):
-            torch.addmm(bias, h_t[:, layer * n : (layer + 1) * n], weight, out=ahead_t[layer])
+        self._recur(self._h, self._ahead)
         self._is_prepared = True
 
     def push(self, row: np.ndarray) -> np.ndarray:
@@ -772,7 +761,7 @@ class LstmStreams:
             self._is_empty = False
         else:
             self.prepare()
-            self._step(z)
+            self._step(z, self._h, self._c, self._gates, self._ahead)
         self._is_prepared = False
         oldest = self._oldest
         out = self._h[oldest, -self._hidden :].astype(float) @ self._head_t + self._head_bias
@@ -783,18 +772,27 @@ class LstmStreams:
         tau: np.ndarray = out * self._output_half + self._output_centre
         return tau
 
-    def _step(self, z: np.ndarray) -> None:
-        """One LSTM step of every window from the prepared recurrent parts; input z (3n,)."""
-        n, h, c, gates = self._hidden, self._h, self._c, self._gates
+    def _recur(self, h: np.ndarray, ahead: np.ndarray) -> None:
+        """ahead[l] = b_l + h_l W_hh_l^T for every row of h (rows, layers * hidden)."""
+        n = self._hidden
+        h_t, ahead_t = torch.from_numpy(h), torch.from_numpy(ahead)
+        for layer, (weight, bias) in enumerate(zip(self._recurrent, self._biases, strict=True)):
+            torch.addmm(bias, h_t[:, layer * n : (layer + 1) * n], weight, out=ahead_t[layer])
+
+    def _step(
+        self, z: np.ndarray, h: np.ndarray, c: np.ndarray, gates: np.ndarray, ahead: np.ndarray
+    ) -> None:
+        """One LSTM step of every row of h, c in place, from ``_recur``'s parts; input z (3n,)."""
+        n = self._hidden
         gates_t, h_t = torch.from_numpy(gates), torch.from_numpy(h)
         for layer in range(len(self._recurrent)):
             columns = slice(layer * n, (layer + 1) * n)
             if layer == 0:
-                np.add(self._ahead[0], z @ self._input_weight_t, out=gates)
+                np.add(ahead[0], z @ self._input_weight_t, out=gates)
             else:
                 below = h_t[:, (layer - 1) * n : layer * n]
-                ahead = torch.from_numpy(self._ahead[layer])
-                torch.addmm(ahead, below, self._upward[layer - 1], out=gates_t)
+                ahead_t = torch.from_numpy(ahead[layer])
+                torch.addmm(ahead_t, below, self._upward[layer - 1], out=gates_t)
             self._cell_update(gates, c[:, columns], h[:, columns])
 
     def _cell_update(self, gates: np.ndarray, c_layer: np.ndarray, h_layer: np.ndarray) -> None:
@@ -807,28 +805,16 @@ class LstmStreams:
         c_layer += gates[:, :n] * cell
         np.multiply(gates[:, 2 * n : 3 * n], np.tanh(c_layer), out=h_layer)
 
-    def _advance(self, z: np.ndarray, h: np.ndarray, c: np.ndarray, gates: np.ndarray) -> None:
-        """One LSTM step of every row of h, c (W, layers * hidden), in place; input z (3n,)."""
-        n = self._hidden
-        gates_t = torch.from_numpy(gates)
-        h_t = torch.from_numpy(h)
-        for layer, (weight, bias) in enumerate(zip(self._weights, self._biases, strict=True)):
-            columns = slice(layer * n, (layer + 1) * n)
-            if layer == 0:
-                pre = torch.from_numpy(z @ self._input_weight_t + self._input_bias)
-                torch.addmm(pre, h_t[:, columns], weight, out=gates_t)
-            else:
-                torch.addmm(bias, h_t[:, (layer - 1) * n : (layer + 1) * n], weight, out=gates_t)
-            self._cell_update(gates, c[:, columns], h[:, columns])
-
     def _fill(self, z: np.ndarray) -> None:
         """States after a padded start: the window i-th oldest has seen T - i copies of z."""
         length = self.sequence_length
         h = np.zeros((1, self._h.shape[1]), dtype=self._dtype)
         c = np.zeros_like(h)
         gates = np.empty((1, self._gates.shape[1]), dtype=self._dtype)
+        ahead = np.empty((self._ahead.shape[0], 1, self._ahead.shape[2]), dtype=self._dtype)
         for steps in range(1, length + 1):
-            self._advance(z, h, c, gates)
+            self._recur(h, ahead)
+            self._step(z, h, c, gates, ahead)
             row = (self._oldest + length - steps) % length
             self._h[row] = h[0]
             self._c[row] = c[0]
