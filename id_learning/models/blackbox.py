@@ -669,9 +669,9 @@ class LstmStreams:
     window after ``reset`` is padded with the run's first sample. Instead of recomputing each
     window (T sequential steps of one state), T windows are kept in flight: window k starts from
     zero at sample k and ends at sample k + T - 1, so each new sample advances T states at once,
-    the products of each layer over all of them at once. The arithmetic of each window is the same as
-    a recomputation; only the summation order of the products may differ. The products and the
-    sigmoids run through torch on float64 views of numpy arrays (its DGEMM takes ~50 us here
+    each layer's products over all of them together. The arithmetic of each window is the same
+    as a recomputation; only the summation order of the products may differ. The products and
+    the sigmoids run through torch on numpy arrays (its GEMM takes ~50 us here
     against ~90 us for numpy's OpenBLAS); the rest is numpy. Inputs and outputs are float64.
 
     Attributes:
