@@ -32,9 +32,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import struct
-import subprocess
 import sys
 import tempfile
 import threading
@@ -283,51 +281,33 @@ def measure(
     bench: Bench, artifact: Path, args, robot, *, rate: float, seconds: float, scratch: str
 ):
     count = round(rate * seconds)
+    from id_learning.nodes.process import NodeProcess
+
+    parameters = {
+        'artifact': artifact,
+        'input_topic': '/reference',
+        'latency_window': count,  # the measured phase, after the warm-up
+        'diagnostics_period_s': 0.2,
+        'executor': args.executor,
+        'inference': args.inference,
+        'stale_after_cycles': 1000,
+    }
     log = Path(scratch) / f'predictor_{artifact.name}_{rate:g}.log'
-    with log.open('wb') as output:
-        process = subprocess.Popen(
-            [
-                sys.executable,
-                '-m',
-                'id_learning.nodes.predictor',
-                '--ros-args',
-                '-p',
-                f'artifact:={artifact}',
-                '-p',
-                'input_topic:=/reference',
-                '-p',
-                f'latency_window:={count}',  # the measured phase, after the warm-up
-                '-p',
-                'diagnostics_period_s:=0.2',
-                '-p',
-                f'executor:={args.executor}',
-                '-p',
-                f'inference:={args.inference}',
-                '-p',
-                'stale_after_cycles:=1000',
-            ],
-            env=node_environment(args.domain),
-            stdout=output,
-            stderr=subprocess.STDOUT,
+    node = NodeProcess('predictor', parameters, log, node_environment(args.domain))
+    try:
+        connected = bench.wait(
+            lambda: (
+                bench.publisher.get_subscription_count() >= 1
+                and bench.node.count_publishers('/tau_u') >= 1
+            ),
+            120.0,
         )
-        try:
-            connected = bench.wait(
-                lambda: (
-                    bench.publisher.get_subscription_count() >= 1
-                    and bench.node.count_publishers('/tau_u') >= 1
-                ),
-                120.0,
-            )
-            if not connected:
-                raise RuntimeError(f'predictor did not connect: {log.read_text()[-2000:]}')
-            bench.diagnostics = {}
-            return run_phase(bench, rate, seconds, robot, args.warm_up_seconds)
-        finally:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.wait(30)
-            except subprocess.TimeoutExpired:
-                process.kill()
+        if not connected:
+            raise RuntimeError(f'predictor did not connect: {node.log()[-2000:]}')
+        bench.diagnostics = {}
+        return run_phase(bench, rate, seconds, robot, args.warm_up_seconds)
+    finally:
+        node.stop(30)
 
 
 if __name__ == '__main__':

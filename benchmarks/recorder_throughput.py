@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -114,53 +112,35 @@ class Publisher:
 
 def measure(bench: Publisher, rate: float, args, scratch: Path) -> dict[str, Any]:
     from id_learning.bag import bag_info
+    from id_learning.nodes.process import NodeProcess
 
     bag = scratch / f'bag_{rate:g}'
     log = scratch / f'recorder_{rate:g}.log'
-    with log.open('wb') as output:
-        process = subprocess.Popen(
-            [
-                sys.executable,
-                '-m',
-                'id_learning.nodes.recorder',
-                '--ros-args',
-                '-p',
-                f'output:={bag}',
-                '-p',
-                f'executor:={args.executor}',
-                '-p',
-                'diagnostics_period_s:=0.2',
-            ],
-            env=node_environment(args.domain),
-            stdout=output,
-            stderr=subprocess.STDOUT,
-        )
-        try:
-            deadline = time.monotonic() + 120
-            while not all(p.get_subscription_count() for p in bench.publishers.values()):
-                if time.monotonic() > deadline or process.poll() is not None:
-                    raise RuntimeError(f'recorder did not subscribe: {log.read_text()[-2000:]}')
-                time.sleep(0.01)
-            bench.diagnostics = {}
-            cpu_before, wall_before = cpu_seconds(process.pid), time.monotonic()
-            sent = bench.stream(rate, args.seconds)
-            streamed_s = time.monotonic() - wall_before
-            cpu = cpu_seconds(process.pid) - cpu_before
-            # Let the recorder drain its queue: until it has everything or stops progressing.
-            last, still = -1, 0
-            while still < 10:
-                written = int(bench.diagnostics.get('written', 0))
-                if written >= 2 * sent:
-                    break
-                still = still + 1 if written == last else 0
-                last = written
-                time.sleep(0.2)
-        finally:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.wait(60)
-            except subprocess.TimeoutExpired:
-                process.kill()
+    parameters = {'output': bag, 'executor': args.executor, 'diagnostics_period_s': 0.2}
+    node = NodeProcess('recorder', parameters, log, node_environment(args.domain))
+    process = node.process
+    try:
+        deadline = time.monotonic() + 120
+        while not all(p.get_subscription_count() for p in bench.publishers.values()):
+            if time.monotonic() > deadline or process.poll() is not None:
+                raise RuntimeError(f'recorder did not subscribe: {node.log()[-2000:]}')
+            time.sleep(0.01)
+        bench.diagnostics = {}
+        cpu_before, wall_before = cpu_seconds(process.pid), time.monotonic()
+        sent = bench.stream(rate, args.seconds)
+        streamed_s = time.monotonic() - wall_before
+        cpu = cpu_seconds(process.pid) - cpu_before
+        # Let the recorder drain its queue: until it has everything or stops progressing.
+        last, still = -1, 0
+        while still < 10:
+            written = int(bench.diagnostics.get('written', 0))
+            if written >= 2 * sent:
+                break
+            still = still + 1 if written == last else 0
+            last = written
+            time.sleep(0.2)
+    finally:
+        node.stop(60)
     counts = {t.name: t.count for t in bag_info(bag).topics}
     lost = {topic: sent - counts.get(topic, 0) for topic in TOPICS}
     return {
