@@ -122,12 +122,16 @@ class NetworkConfig(ModelConfig):
         )
 
 
-def check_kind(config: ModelConfig, kind: str) -> None:
+def check_kind(config: ModelConfig, kind: str | None = None) -> None:
     """Refuse a config whose ``kind`` is not its class's registry name.
+
+    ``kind`` defaults to the default of the class's own ``kind`` field, so a subclass with its
+    own kind passes the check its parent's ``__post_init__`` makes.
 
     Raises:
         ConfigError: names the class, the expected and the given kind.
     """
+    kind = kind or type(config).__dataclass_fields__['kind'].default
     if config.kind != kind:
         raise ConfigError(f'{type(config).__name__}.kind must be {kind!r}, got {config.kind!r}')
 

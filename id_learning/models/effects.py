@@ -58,9 +58,11 @@ def load_effects_file(path: str | Path) -> dict[str, Any]:
     Raises:
         ConfigError: the file is missing or is not a diagnosis' effects.json.
     """
+    from id_learning.diagnosis.report import EFFECTS_JSON
+
     path = Path(path)
     if path.is_dir():
-        path = path / 'effects.json'
+        path = path / EFFECTS_JSON
     try:
         data = json.loads(path.read_text(encoding='utf-8'))
     except FileNotFoundError as err:
@@ -267,14 +269,6 @@ class RneaEffectsMlpConfig(RneaMlpConfig):
 
     kind: Literal['rnea_effects_mlp'] = 'rnea_effects_mlp'  # type: ignore[assignment]
     effects: str = ''
-
-    def __post_init__(self) -> None:
-        """Check ranges, naming the key."""
-        check_kind(self, 'rnea_effects_mlp')
-        super(RneaMlpConfig, self).__post_init__()
-        from id_learning.models.blackbox import check_mlp_shape
-
-        check_mlp_shape(self, self.width, self.depth, self.activation)
 
 
 class RneaEffectsMlpModel(RneaMlpModel):

@@ -350,7 +350,7 @@ class RneaMlpConfig(NetworkConfig):
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
-        check_kind(self, 'rnea_mlp')
+        check_kind(self)  # 'rnea_mlp', or a subclass's own kind
         super().__post_init__()
         check_mlp_shape(self, self.width, self.depth, self.activation)
 
