@@ -150,9 +150,9 @@ def _load_terms(
     specs = fitted.get('terms')
     if not isinstance(specs, list) or 'target' not in fitted:
         raise CheckpointError(f'{kind}: the metadata lacks the effect terms and target')
-    names = sorted((n for n in tensors if n.startswith(TERM_PREFIX)), key=len)
+    names = sorted(n for n in tensors if n.startswith(TERM_PREFIX))
     expected = [f'{TERM_PREFIX}{i}' for i in range(len(specs))]
-    if sorted(names) != sorted(expected):
+    if names != sorted(expected):
         raise CheckpointError(f'{kind}: effect tensors {names} do not match {len(specs)} terms')
     data = {
         'robot': robot.name,
