@@ -404,6 +404,7 @@ def online_check(
     seconds: float = 30.0,
     out: Path | None = None,
     domain_id: int | None = None,
+    input_depth: int | None = None,
     progress: bool = True,
 ) -> OnlineCheckResult:
     """Replay ``seconds`` of the bag's test part through the predictor node and compare offline.
@@ -415,6 +416,9 @@ def online_check(
         seconds: length of the excerpt [s], from the start of the test part; clipped to it.
         out: also write the result as JSON here.
         domain_id: ROS domain; None: ``ROS_DOMAIN_ID`` from the environment (else 0).
+        input_depth: the predictor's reference queue depth; None: the node's default, with
+            which a machine stall longer than that many cycles drops samples (reported as
+            missing), as it would in production. A depth of the excerpt's length loses none.
         progress: print what is happening.
 
     Returns:
@@ -477,6 +481,7 @@ def online_check(
                 'output_topic': 'tau_u',
                 'diagnostics_period_s': 0.25,
                 'latency_window': max(4096, round(seconds * NS_PER_S / period_ns) + 64),
+                **({} if input_depth is None else {'input_depth': input_depth}),
             },
             {'__ns': namespace, '/diagnostics': f'{namespace}/diagnostics'},
         )
