@@ -32,6 +32,9 @@ EXAMPLE_ROBOT_DATA_SCHEME = 'example-robot-data://'
 
 # The reference study's per-axis cut-offs, used when a config gives none (6-axis robots only).
 STUDY_CUTOFF_HZ = (1.2, 0.3, 0.3, 0.7, 0.5, 0.7)
+#: Default smoothing of recorded velocities into model inputs [Hz]: far above the excitation's
+#: band (the study's harmonics reach 0.12 Hz), far below the IPO rate's Nyquist frequency.
+DEFAULT_INPUT_SMOOTHING_HZ = 10.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,7 +84,12 @@ class RobotConfig:
         drives: gear ratios, torque constants and rotor inertias.
         limits: joint-side limits.
         ipo_period_s: controller interpolation (IPO) cycle [s].
-        lowpass_cutoff_hz: (n,) zero-phase low-pass cut-off per joint [Hz].
+        lowpass_cutoff_hz: (n,) zero-phase low-pass cut-off of the torque labels per joint [Hz]
+            (the study's label filter).
+        input_smoothing_hz: (n,) zero-phase low-pass cut-off per joint [Hz] that turns recorded
+            velocities into model inputs, as a controller's smooth reference would carry them:
+            well above the motion's band and the label cut-offs, so the inputs keep the motion
+            as it happened (accelerations are differentiated from the smoothed velocity).
         payload_frame: URDF frame at which a payload is attached.
         topics: topic names of the bag contract.
         source: the YAML file this was read from, if any.
@@ -94,6 +102,7 @@ class RobotConfig:
     limits: JointLimits
     ipo_period_s: float
     lowpass_cutoff_hz: np.ndarray
+    input_smoothing_hz: np.ndarray
     payload_frame: str
     locked_joints: dict[str, float] = field(default_factory=dict)
     topics: TopicConfig = field(default_factory=TopicConfig)
@@ -160,6 +169,7 @@ _TOP_KEYS = (
     'limits',
     'ipo_period_s',
     'lowpass_cutoff_hz',
+    'input_smoothing_hz',
     'payload_frame',
     'topics',
 )
@@ -261,24 +271,7 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
     period = data['ipo_period_s']
     if not isinstance(period, (int, float)) or not 1e-5 <= float(period) <= 1.0:
         raise ConfigError(f'{where}: ipo_period_s must be in [1e-5, 1] s, got {period!r}')
-    nyquist = 0.5 / float(period)
-    if 'lowpass_cutoff_hz' in data:
-        cutoff = float_vector(
-            data['lowpass_cutoff_hz'],
-            f'{where}: lowpass_cutoff_hz',
-            n,
-            minimum=0.0,
-            exclusive_minimum=True,
-        )
-    elif n == len(STUDY_CUTOFF_HZ):
-        cutoff = float_vector(list(STUDY_CUTOFF_HZ), f'{where}: lowpass_cutoff_hz', n)
-    else:
-        raise ConfigError(f'{where}: lowpass_cutoff_hz is required for a {n}-joint robot')
-    if np.any(cutoff >= nyquist):
-        raise ConfigError(
-            f'{where}: lowpass_cutoff_hz must be below the Nyquist frequency {nyquist:g} Hz, '
-            f'got {cutoff.tolist()}'
-        )
+    cutoff, smoothing = _cutoffs(data, n, float(period), where)
 
     locked = data.get('locked_joints') or {}
     if not isinstance(locked, dict) or not all(
@@ -304,10 +297,62 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         limits=limits,
         ipo_period_s=float(period),
         lowpass_cutoff_hz=cutoff,
+        input_smoothing_hz=smoothing,
         payload_frame=str(data['payload_frame']),
         locked_joints={key: float(value) for key, value in locked.items()},
         topics=topics,
     )
+
+
+def _cutoffs(
+    data: dict[str, Any], n: int, period_s: float, where: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """The label filter's and the input smoothing's cut-offs [Hz], per joint, checked.
+
+    Raises:
+        ConfigError: a cut-off at or above the Nyquist frequency, label cut-offs missing for a
+            robot without study defaults, or an input smoothing not above the label cut-off.
+    """
+    nyquist = 0.5 / period_s
+    if 'lowpass_cutoff_hz' in data:
+        cutoff = float_vector(
+            data['lowpass_cutoff_hz'],
+            f'{where}: lowpass_cutoff_hz',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        )
+    elif n == len(STUDY_CUTOFF_HZ):
+        cutoff = float_vector(list(STUDY_CUTOFF_HZ), f'{where}: lowpass_cutoff_hz', n)
+    else:
+        raise ConfigError(f'{where}: lowpass_cutoff_hz is required for a {n}-joint robot')
+    if np.any(cutoff >= nyquist):
+        raise ConfigError(
+            f'{where}: lowpass_cutoff_hz must be below the Nyquist frequency {nyquist:g} Hz, '
+            f'got {cutoff.tolist()}'
+        )
+    # The default, or halfway between the label cut-off and Nyquist where that cut-off is higher.
+    default = min(DEFAULT_INPUT_SMOOTHING_HZ, 0.4 * nyquist)
+    default_vector = np.where(cutoff < default, default, 0.5 * (cutoff + nyquist)).tolist()
+    smoothing = float_vector(
+        data.get('input_smoothing_hz', default_vector),
+        f'{where}: input_smoothing_hz',
+        n,
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    if np.any(smoothing >= nyquist):
+        raise ConfigError(
+            f'{where}: input_smoothing_hz must be below the Nyquist frequency {nyquist:g} Hz, '
+            f'got {smoothing.tolist()}'
+        )
+    if np.any(smoothing <= cutoff):
+        raise ConfigError(
+            f'{where}: input_smoothing_hz {smoothing.tolist()} must lie above the label '
+            f'cut-offs lowpass_cutoff_hz {cutoff.tolist()}: the inputs keep the motion the '
+            'labels smear'
+        )
+    return cutoff, smoothing
 
 
 def load_robot_config(path: Path | str) -> RobotConfig:

@@ -339,9 +339,47 @@ def test_invalid_config_raises_config_error_naming_file_and_key(
 
 
 def test_cutoff_just_below_nyquist_is_accepted(write_config: Any) -> None:
-    path = write_config('mabi_max100', set={'lowpass_cutoff_hz': [1.2, 0.3, 0.3, 0.7, 0.5, 62.4]})
+    path = write_config(
+        'mabi_max100',
+        set={'lowpass_cutoff_hz': [1.2, 0.3, 0.3, 0.7, 0.5, 62.4]},
+        delete=['input_smoothing_hz'],
+    )
 
-    assert load_robot_config(path).lowpass_cutoff_hz[5] == 62.4
+    robot = load_robot_config(path)
+
+    assert robot.lowpass_cutoff_hz[5] == 62.4
+    # The default input smoothing lies between a label cut-off that high and Nyquist.
+    assert 62.4 < robot.input_smoothing_hz[5] < 62.5
+    np.testing.assert_array_equal(robot.input_smoothing_hz[:5], 10.0)
+
+
+def test_input_smoothing_defaults_to_10_hz_and_is_per_joint(write_config: Any) -> None:
+    default = load_robot_config(write_config('mabi_max100', delete=['input_smoothing_hz']))
+    given = load_robot_config(
+        write_config('mabi_max100', set={'input_smoothing_hz': [5, 6, 7, 8, 9, 10]})
+    )
+
+    np.testing.assert_array_equal(default.input_smoothing_hz, np.full(6, 10.0))
+    np.testing.assert_array_equal(given.input_smoothing_hz, [5, 6, 7, 8, 9, 10])
+
+
+@pytest.mark.parametrize(
+    ('value', 'match'),
+    [
+        (0.3, 'must lie above the label cut-offs'),
+        (62.5, 'below the Nyquist frequency'),
+        (-1.0, 'input_smoothing_hz'),
+    ],
+)
+def test_input_smoothing_outside_label_cutoff_and_nyquist_is_refused(
+    write_config: Any, value: float, match: str
+) -> None:
+    path = write_config('mabi_max100', set={'input_smoothing_hz': value})
+
+    with pytest.raises(ConfigError, match=match) as excinfo:
+        load_robot_config(path)
+
+    assert 'input_smoothing_hz' in str(excinfo.value)
 
 
 def test_zero_rotor_inertia_is_accepted(write_config: Any) -> None:
