@@ -229,7 +229,7 @@ def torque_error(
     if not effects:
         return None
     dataset, _ = filtered_prediction(result, recording, with_effects=False)
-    q, v, a, jerk = column_motion(dataset, recording)
+    q, v, a, jerk = column_motion(dataset)
     quantities = result.nominal_model.evaluate(q, v, a, jerk, derivatives=True, regressor=True)
     fitted = sum(
         candidate_columns(e.spec, quantities, result.nominal_model) @ e.coefficients

@@ -17,6 +17,9 @@ from id_learning.errors import ConfigError, DatasetError, IdLearningError
 __all__ = ['build_parser', 'main', 'train_main']
 
 _LOG = logging.getLogger('id_learning.cli')
+#: ``--preprocessing`` values (``dataset.preprocess.PREPROCESS_MODES``; not imported here, so
+#: that ``--help`` stays fast).
+PREPROCESSING_CHOICES = ('through_filter', 'study')
 
 
 def _robot(args: argparse.Namespace):
@@ -98,7 +101,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     print(f'loading {bag} ...', flush=True)
     recording = load_recording(bag, robot, require_current=args.target == 'motor', progress=True)
-    dataset = prepare_dataset(recording, robot, PreprocessConfig(target=args.target))
+    preprocess = PreprocessConfig(target=args.target, mode=args.preprocessing)
+    dataset = prepare_dataset(recording, robot, preprocess)
     ground_truth = tau_clean = None
     if (bag / GROUND_TRUTH_JSON).is_file():
         ground_truth = json.loads((bag / GROUND_TRUTH_JSON).read_text(encoding='utf-8'))
@@ -119,7 +123,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
         diagnosis_out = out / 'diagnosis'
         try:
             result = diagnose_bags(
-                [bag], robot, args.target, diagnosis_out, progress=False, recordings=[recording]
+                [bag],
+                robot,
+                preprocess,
+                diagnosis_out,
+                progress=False,
+                recordings=[recording],
             )
         except DatasetError as err:  # e.g. too short: the rest of the demo still runs
             print(f'diagnosis not run: {err}', flush=True)
@@ -148,6 +157,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         out / 'run',
         max_seconds_per_model=args.train_seconds,
         device=args.device,
+        preprocess=preprocess,
     )
     print(_metrics_table(run.metrics))
     print(f'report: {run.report}', flush=True)
@@ -226,17 +236,42 @@ def _hyper(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
 
 
 def _metrics_table(metrics: dict[str, Any]) -> str:
-    """Per-joint test RMSE [N*m] of every model, as a plain-text table."""
+    """Per-joint test RMSE through the label filter [N*m], with the floor, as plain text."""
     from id_learning.evaluation.study import MODEL_LABELS
 
     joints = metrics['joints']
-    head = f'{"test RMSE [N*m]":<16}' + ''.join(f'{j:>10}' for j in joints) + f'{"mean norm.":>12}'
-    lines = [head]
+    floor = metrics.get('label_noise_floor_nm')
+    width = 24
+
+    def row(label: str, values: Sequence[float], last: str = '') -> str:
+        return f'{label:<{width}}' + ''.join(f'{x:>10.3g}' for x in values) + last
+
+    head = f'{"test RMSE through filter":<{width}}' + ''.join(f'{j:>10}' for j in joints)
+    lines = [head + f'{"mean norm.":>12}']
     for kind, entry in metrics['models'].items():
+        label = MODEL_LABELS.get(kind, kind)
+        lines.append(row(label, entry['rmse_nm'], f'{entry["mean_rmse_normalised"]:>12.3g}'))
+    if floor is not None:
+        lines.append(row('label-noise floor', floor))
+        lines += ['', f'{"x label-noise floor":<{width}}' + ''.join(f'{j:>10}' for j in joints)]
+        for kind, entry in metrics['models'].items():
+            ratio = entry.get('rmse_through_filter_over_floor')
+            if ratio is not None:
+                lines.append(row(MODEL_LABELS.get(kind, kind), ratio))
+    lines += [
+        '',
+        f'{"study way [N*m]":<{width}}'
+        + ''.join(f'{j:>10}' for j in joints)
+        + f'{"mean norm.":>12}',
+    ]
+    for kind, entry in metrics['models'].items():
+        study = entry['study_way']
         lines.append(
-            f'{MODEL_LABELS.get(kind, kind):<16}'
-            + ''.join(f'{x:>10.3g}' for x in entry['rmse_nm'])
-            + f'{entry["mean_rmse_normalised"]:>12.3g}'
+            row(
+                MODEL_LABELS.get(kind, kind),
+                study['rmse_nm'],
+                f'{study["mean_rmse_normalised"]:>12.3g}',
+            )
         )
     return '\n'.join(lines)
 
@@ -244,7 +279,7 @@ def _metrics_table(metrics: dict[str, Any]) -> str:
 def diagnose_bags(
     bags: Sequence[Path],
     robot: Any,
-    target: str,
+    preprocess: Any,
     out: Path,
     *,
     effects: Sequence[str] | None = None,
@@ -253,18 +288,19 @@ def diagnose_bags(
 ) -> Any:
     """Diagnose bags; write report.md, effects.json, figures and the rnea_effects model to ``out``.
 
-    ``recordings``: the bags already loaded (same order), to skip reading them again.
+    ``preprocess``: the ``PreprocessConfig`` (target and mode). ``recordings``: the bags already
+    loaded (same order), to skip reading them again.
 
     Returns:
         the ``DiagnosisResult``.
     """
-    from id_learning.dataset.preprocess import PreprocessConfig
     from id_learning.dataset.recording import load_recording
     from id_learning.diagnosis import DiagnosisConfig, diagnose
     from id_learning.models.effects import RneaEffectsModel
     from id_learning.models.registry import save_model
 
-    settings: dict[str, Any] = {'preprocess': PreprocessConfig(target=target)}
+    target = preprocess.target
+    settings: dict[str, Any] = {'preprocess': preprocess}
     if effects:
         settings['effects'] = tuple(effects)
     config = DiagnosisConfig(**settings)
@@ -289,13 +325,14 @@ def diagnose_bags(
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """Find the effects the nominal model misses; report, effects.json and a model artifact."""
+    from id_learning.dataset.preprocess import PreprocessConfig
     from id_learning.diagnosis.report import render_summary
 
     out = Path(args.out)
     result = diagnose_bags(
         [Path(b) for b in args.bag],
         _robot(args),
-        args.target,
+        PreprocessConfig(target=args.target, mode=args.preprocessing),
         out,
         effects=_names(args.effects) if args.effects else None,
         progress=not args.quiet,
@@ -314,6 +351,7 @@ def _names(text: str) -> list[str]:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """Train models on bags; write models, metrics.json and report.md into the run folder."""
+    from id_learning.dataset.preprocess import PreprocessConfig
     from id_learning.training import train_run
 
     robot = _robot(args)
@@ -327,6 +365,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         max_seconds_per_model=args.max_seconds_per_model,
         progress=not args.quiet,
         device=args.device,
+        preprocess=PreprocessConfig(mode=args.preprocessing),
     )
     print(_metrics_table(run.metrics))
     print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
@@ -411,6 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
         '--out', required=True, help='folder for report.md, effects.json, figures and model/'
     )
     target_option(p)
+    preprocessing_option(p)
     p.add_argument(
         '--effects',
         help='comma-separated candidate effects to try (default: the whole library)',
@@ -440,6 +480,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--bag', help='bag folder (default: the shipped bags/default)')
     p.add_argument('--out', default='out/demo', help='output folder (the run goes to OUT/run)')
     target_option(p)
+    preprocessing_option(p)
     p.add_argument(
         '--models',
         default=DEMO_MODELS,
@@ -488,6 +529,18 @@ def target_option(p: argparse.ArgumentParser) -> None:
     )
 
 
+def preprocessing_option(p: argparse.ArgumentParser) -> None:
+    """The --preprocessing option: fit through the label filter, or the study's way."""
+    p.add_argument(
+        '--preprocessing',
+        choices=PREPROCESSING_CHOICES,
+        default='through_filter',
+        help="through_filter (default): models see a controller's inputs and their torque is "
+        "filtered like the labels before it meets them; study: the reference study's pipeline "
+        '(low-passed inputs, torque compared with the low-passed labels as is), for comparison',
+    )
+
+
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``train`` (shared by ``id-learning train`` and ``ros2 run ... train``)."""
     p.add_argument(
@@ -495,6 +548,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument('--robot', help='robot config YAML (default: MABI MAX 100)')
     target_option(p)
+    preprocessing_option(p)
     p.add_argument(
         '--models',
         default='all',

@@ -8,8 +8,10 @@ from id_learning.dataset.importer import (
     import_log,
     load_import_mapping,
 )
+from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.inspect import BagReport, inspect_bag, plot_report, render_report
 from id_learning.dataset.preprocess import (
+    PREPROCESS_MODES,
     Dataset,
     MinMaxScaler,
     PreprocessConfig,
@@ -22,11 +24,14 @@ from id_learning.dataset.preprocess import (
 from id_learning.dataset.recording import Recording, load_recording, write_recording
 
 __all__ = [
+    'PREPROCESS_MODES',
     'BagReport',
     'Dataset',
     'ImportMapping',
     'ImportReport',
+    'InputDefinition',
     'MinMaxScaler',
+    'Motion',
     'PreprocessConfig',
     'Recording',
     'Split',

@@ -1,11 +1,21 @@
-"""The reference study's preprocessing, from a recording to a training set.
+"""From a recording to a training set: labels through the study's filter, inputs as sent.
 
 1. motor currents to tau_u (or the measured joint torque, by choice of target);
-2. zero-phase low-pass per joint with the robot's cut-offs (Butterworth, forward and backward);
-3. accelerations by central differences of the filtered velocities;
+2. the labels: zero-phase low-pass per joint with the robot's cut-offs (Butterworth, forward and
+   backward), as the reference study does;
+3. the inputs (``dataset.inputs``): by default what a controller sends (recorded positions,
+   velocities smoothed far above the motion's band, accelerations differentiated from them);
+   with ``mode='study'`` the study's inputs (positions and velocities low-passed like the
+   labels). Both are kept, so any model can be scored on either;
 4. a contiguous 70 % / 30 % train/test split (no shuffling: neighbouring samples are strongly
    correlated, so a shuffled split leaks);
 5. per-joint normalisation to [-1, 1], with scalers fitted on the training part and kept.
+
+Why not the study's way by default: friction flips sign at every velocity reversal, and the
+0.3-1.2 Hz filter smears each flip over 1-2 s, so the filtered label is not a function of the
+filtered state at the same instant; no instantaneous model can match it. Models are therefore
+fitted *through* the filter (``mode='through_filter'``): their torque on the unfiltered inputs
+passes the labels' filter before it meets the label (parallel filtering, Gautier and Khalil).
 """
 
 from __future__ import annotations
@@ -15,14 +25,16 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Self
 
 import numpy as np
-from scipy import signal
 
+from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.recording import Recording
+from id_learning.dataset.signals import differentiate, lowpass
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import motor_torque_from_current
 
 __all__ = [
+    'PREPROCESS_MODES',
     'Dataset',
     'MinMaxScaler',
     'PreprocessConfig',
@@ -36,6 +48,10 @@ __all__ = [
 
 _LOG = logging.getLogger(__name__)
 Target = Literal['motor', 'joint']
+PreprocessMode = Literal['through_filter', 'study']
+#: 'through_filter': fit on a controller's inputs, model torque filtered like the labels;
+#: 'study': the reference study's pipeline, filtered inputs to filtered labels, instantaneous.
+PREPROCESS_MODES: tuple[PreprocessMode, ...] = ('through_filter', 'study')
 
 
 @dataclass(frozen=True)
@@ -44,16 +60,24 @@ class PreprocessConfig:
 
     Attributes:
         target: 'motor' for tau_u from currents, 'joint' for measured joint torques.
+        mode: 'through_filter' (models see a controller's inputs and are fitted and judged
+            with their torque passed through the labels' filter) or 'study' (the reference
+            study's pipeline: filtered inputs, torque compared with the filtered label as is).
         filter_order: Butterworth order of each pass (zero-phase doubles the attenuation).
         cutoff_hz: per-joint cut-offs [Hz]; None takes the robot config's lowpass_cutoff_hz.
+        input_smoothing_hz: per-joint cut-offs of the controller inputs' velocity smoothing
+            [Hz]; None takes the robot config's input_smoothing_hz (a stored model's own
+            definition when it is evaluated).
         train_fraction: leading share of samples used for training.
         jitter_tolerance: a stamp within this share of a period from the IPO grid is on it.
         min_filter_periods: a recording must last this many periods of the lowest cut-off.
     """
 
     target: Target = 'motor'
+    mode: PreprocessMode = 'through_filter'
     filter_order: int = 4
     cutoff_hz: tuple[float, ...] | None = None
+    input_smoothing_hz: tuple[float, ...] | None = None
     train_fraction: float = 0.7
     jitter_tolerance: float = 0.25
     min_filter_periods: float = 2.0
@@ -62,6 +86,10 @@ class PreprocessConfig:
         """Check ranges, naming the key."""
         if self.target not in ('motor', 'joint'):
             raise ConfigError(f"target must be 'motor' or 'joint', got {self.target!r}")
+        if self.mode not in PREPROCESS_MODES:
+            raise ConfigError(
+                f'preprocessing mode must be one of {PREPROCESS_MODES}, got {self.mode!r}'
+            )
         if not 1 <= self.filter_order <= 8:
             raise ConfigError(f'filter_order must be in [1, 8], got {self.filter_order}')
         if not 0.0 < self.train_fraction < 1.0:
@@ -73,31 +101,6 @@ class PreprocessConfig:
 def minimum_duration_s(cutoff_hz: np.ndarray, config: PreprocessConfig) -> float:
     """Shortest recording the filter accepts [s]: min_filter_periods of the lowest cut-off."""
     return config.min_filter_periods / float(np.min(cutoff_hz))
-
-
-def lowpass(x: np.ndarray, cutoff_hz: np.ndarray, period_s: float, order: int = 4) -> np.ndarray:
-    """Zero-phase Butterworth low-pass of each column of x (N, n) with its own cut-off [Hz].
-
-    Raises:
-        DatasetError: too few samples for the filter's padding.
-    """
-    x = np.asarray(x, dtype=float)
-    out = np.empty_like(x)
-    for j in range(x.shape[1]):
-        sos = signal.butter(order, cutoff_hz[j], btype='low', fs=1.0 / period_s, output='sos')
-        try:
-            out[:, j] = signal.sosfiltfilt(sos, x[:, j])
-        except ValueError as err:
-            raise DatasetError(
-                f'{len(x)} samples are too few for the {cutoff_hz[j]:g} Hz low-pass '
-                f'of column {j}: {err}'
-            ) from err
-    return out
-
-
-def differentiate(x: np.ndarray, period_s: float) -> np.ndarray:
-    """Time derivative of uniformly sampled columns by central differences (second-order edges)."""
-    return np.gradient(np.asarray(x, dtype=float), period_s, axis=0, edge_order=2)
 
 
 @dataclass
@@ -244,19 +247,29 @@ class Split:
 
 @dataclass(frozen=True, eq=False)
 class Dataset:
-    """A preprocessed recording, split in time, with scalers fitted on the training part.
+    """A preprocessed recording (or several), split in time, with scalers from the training part.
 
     Attributes:
         joints: joint names (column order).
         target: 'motor' (tau_u from currents) or 'joint' (measured joint torque).
         period_s: sample period [s].
         stamps_ns: (N,) stamps on the IPO grid.
-        q, v, a, tau: (N, n) filtered positions, velocities, accelerations, target torques.
-        tau_raw: (N, n) target torque before filtering.
+        q, v, a: (N, n) the inputs models are fitted on: ``controller`` in the default mode,
+            ``study`` in the study's (see ``fitting_inputs``).
+        tau: (N, n) label torques, low-passed with ``cutoff_hz`` (the label filter).
+        tau_raw: (N, n) label torques before filtering.
         n_train: the first n_train samples are the training part, the rest the test part.
-        input_scaler, target_scaler: fitted on the training part.
-        cutoff_hz: per-joint cut-offs used [Hz]; filter_order: Butterworth order.
+        input_scaler, target_scaler: fitted on the training part (of q, v, a and of tau).
+        cutoff_hz: per-joint cut-offs of the label filter [Hz]; filter_order: its order.
+        mode: 'through_filter' or 'study' (``PreprocessConfig.mode``).
+        controller: (N, n) each, the inputs a controller sends (``controller_inputs``): what
+            every model is scored on and what the predictor receives online.
+        study: (N, n) each, the study's inputs: q and v low-passed like the labels.
+        controller_inputs: how ``controller`` was made.
+        tau_clean: (N, n) the noise-free label torque before filtering [N*m], where known (a
+            twin recording's ground truth); None otherwise.
         regularise_report: what regularise() changed.
+        extra: 'segments' when several recordings are combined (see ``recording_rows``).
     """
 
     joints: tuple[str, ...]
@@ -273,6 +286,11 @@ class Dataset:
     target_scaler: MinMaxScaler
     cutoff_hz: np.ndarray
     filter_order: int
+    mode: PreprocessMode
+    controller: Motion
+    study: Motion
+    controller_inputs: InputDefinition
+    tau_clean: np.ndarray | None = None
     regularise_report: RegulariseReport | None = None
     source: str = ''
     extra: dict[str, Any] = field(default_factory=dict)
@@ -291,6 +309,46 @@ class Dataset:
     def test(self) -> Split:
         """The trailing, contiguous test part."""
         return self._part(slice(self.n_train, None))
+
+    @property
+    def is_through_filter(self) -> bool:
+        """Models are fitted with their torque passed through the label filter."""
+        return self.mode == 'through_filter'
+
+    @property
+    def fitting_inputs(self) -> InputDefinition:
+        """How q, v and a (the inputs models are fitted on) were made."""
+        if self.is_through_filter:
+            return self.controller_inputs
+        return InputDefinition.study(self.cutoff_hz, self.filter_order)
+
+    @property
+    def label_filter(self) -> dict[str, Any]:
+        """The label filter, JSON-ready."""
+        return {
+            'filter': 'zero-phase Butterworth low-pass (scipy sosfiltfilt)',
+            'cutoff_hz': np.asarray(self.cutoff_hz, dtype=float).tolist(),
+            'filter_order': self.filter_order,
+        }
+
+    def recording_rows(self) -> list[np.ndarray]:
+        """Per recording, its rows in time order (training part, then test part)."""
+        segments = self.extra.get('segments')
+        if not segments:
+            return [np.arange(len(self.q))]
+        return [np.concatenate([np.arange(*s['train']), np.arange(*s['test'])]) for s in segments]
+
+    def filter_like_labels(self, x: np.ndarray) -> np.ndarray:
+        """Low-pass x (N, n, rows in order) exactly like the labels, each recording on its own.
+
+        The label filter is zero-phase over a whole recording, so a model's torque (or a
+        regressor column) along the recording becomes comparable with ``tau`` sample by sample.
+        """
+        x = np.asarray(x, dtype=float)
+        out = np.empty_like(x)
+        for rows in self.recording_rows():
+            out[rows] = lowpass(x[rows], self.cutoff_hz, self.period_s, self.filter_order)
+        return out
 
 
 def target_torque(recording: Recording, robot: RobotConfig, target: Target) -> np.ndarray:
@@ -314,7 +372,7 @@ def target_torque(recording: Recording, robot: RobotConfig, target: Target) -> n
 def prepare_dataset(
     recording: Recording, robot: RobotConfig, config: PreprocessConfig | None = None
 ) -> Dataset:
-    """Run the study's preprocessing on one recording.
+    """Preprocess one recording: labels through the study's filter, inputs both ways.
 
     Raises:
         DatasetError: the recording is too short for the filter, lacks the target, or is off-grid.
@@ -336,20 +394,32 @@ def prepare_dataset(
     regular, report = regularise(recording, robot.ipo_period_s, config.jitter_tolerance)
     tau_raw = target_torque(regular, robot, config.target)
     period = robot.ipo_period_s
-    q = lowpass(regular.position, cutoff, period, config.filter_order)
-    v = lowpass(regular.velocity, cutoff, period, config.filter_order)
+    smoothing = np.asarray(
+        config.input_smoothing_hz
+        if config.input_smoothing_hz is not None
+        else robot.input_smoothing_hz
+    )
+    if smoothing.shape != (robot.n_joints,):
+        raise ConfigError(
+            f'input_smoothing_hz needs {robot.n_joints} values, got {smoothing.tolist()}'
+        )
+    controller_inputs = InputDefinition.controller(smoothing, config.filter_order)
+    controller = controller_inputs.motion(regular.position, regular.velocity, period)
+    study = InputDefinition.study(cutoff, config.filter_order).motion(
+        regular.position, regular.velocity, period
+    )
+    fitting = controller if config.mode == 'through_filter' else study
     tau = lowpass(tau_raw, cutoff, period, config.filter_order)
-    a = differentiate(v, period)
-    n_train = round(config.train_fraction * len(q))
-    inputs = np.hstack([q, v, a])
+    n_train = round(config.train_fraction * len(tau))
+    inputs = np.hstack([fitting.q, fitting.v, fitting.a])
     return Dataset(
         joints=robot.joints,
         target=config.target,
         period_s=period,
         stamps_ns=regular.stamps_ns,
-        q=q,
-        v=v,
-        a=a,
+        q=fitting.q,
+        v=fitting.v,
+        a=fitting.a,
         tau=tau,
         tau_raw=tau_raw,
         n_train=n_train,
@@ -357,6 +427,10 @@ def prepare_dataset(
         target_scaler=MinMaxScaler().fit(tau[:n_train]),
         cutoff_hz=cutoff,
         filter_order=config.filter_order,
+        mode=config.mode,
+        controller=controller,
+        study=study,
+        controller_inputs=controller_inputs,
         regularise_report=report,
         source=recording.source,
     )

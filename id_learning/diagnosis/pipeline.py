@@ -1,9 +1,12 @@
 """Diagnose a recording: where the nominal model and the measurements disagree, and why.
 
-1. Nominal model: URDF RNEA plus the datasheet rotor inertia; residual r = filtered label minus
-   the filtered nominal torque.
+1. Nominal model: URDF RNEA plus the datasheet rotor inertia, on a controller's inputs (the
+   recorded motion, ``dataset.inputs``); residual r = filtered label minus the nominal torque
+   filtered exactly like the label.
 2. Candidates: every named effect on every joint (``candidates``), its columns filtered exactly
-   like the label, edges trimmed where the zero-phase filter starts up.
+   like the label, edges trimmed where the zero-phase filter starts up. With the study's
+   preprocessing (``PreprocessConfig.mode='study'``) the columns are built on the filtered
+   motion and meet the filtered label unfiltered, as the study's instantaneous models do.
 3. Noise: the filtered label's noise level and correlation time from the raw label's
    high-frequency floor and the filter (``statistics``); rows are weighted by them.
 4. Selection: forward group selection with F test, BIC, held-out gain and plausibility; alias sets;
@@ -19,15 +22,16 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property, lru_cache
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy import optimize, signal, stats
 
-from id_learning.dataset.preprocess import Dataset, differentiate, prepare_dataset, regularise
+from id_learning.dataset.preprocess import Dataset, prepare_dataset
 from id_learning.dataset.recording import Recording
+from id_learning.dataset.signals import butterworth, differentiate
 from id_learning.diagnosis.candidates import (
     JOINT_COLUMNS,
     SPECIAL_CASES,
@@ -463,23 +467,24 @@ def augmented_torque(
 def filtered_prediction(
     result: DiagnosisResult, recording: Recording, *, with_effects: bool = True
 ) -> tuple[Dataset, np.ndarray]:
-    """The refit (or nominal) model's torque along a recording, filtered like the label.
+    """The refit (or nominal) model's torque along a recording, as the diagnosis meets the label.
 
     The model sees the recording's motion the way the diagnosis fitted it (``column_motion``),
-    and its torque passes the label's zero-phase filter, so it compares sample by sample with
-    the dataset's label ``tau`` (or with a noise-free torque filtered the same way).
+    and its torque passes the label's zero-phase filter (the study's preprocessing: as is), so
+    it compares sample by sample with the dataset's label ``tau`` (or with a noise-free torque
+    filtered the same way).
 
     Returns:
-        (the preprocessed dataset, (N, n) filtered model torque [N*m]).
+        (the preprocessed dataset, (N, n) model torque filtered like the label [N*m]).
     """
     config = result.settings or DiagnosisConfig()
-    ((dataset, raw),) = _as_datasets(recording, result.robot, config)
-    q, v, a, jerk = column_motion(dataset, raw)
+    (dataset,) = _as_datasets(recording, result.robot, config)
+    q, v, a, jerk = column_motion(dataset)
     if with_effects:
         tau = augmented_torque(result, q, v, a, jerk)
     else:
         tau = result.nominal_model.evaluate(q, v, a).tau_nominal
-    return dataset, _lowpass(tau, dataset.cutoff_hz, dataset.period_s, dataset.filter_order)
+    return dataset, _as_label(tau, dataset)
 
 
 def evaluation_rows(
@@ -516,12 +521,12 @@ def _as_datasets(
     data: Recording | Dataset | Sequence[Recording | Dataset],
     robot: RobotConfig,
     config: DiagnosisConfig,
-) -> list[tuple[Dataset, Recording | None]]:
-    """Preprocess recordings (kept on the IPO grid for the columns); check datasets."""
+) -> list[Dataset]:
+    """Preprocess recordings; check datasets."""
     items = [data] if isinstance(data, (Recording, Dataset)) else list(data)
     if not items:
         raise DatasetError('diagnosis: no recordings given')
-    datasets: list[tuple[Dataset, Recording | None]] = []
+    datasets: list[Dataset] = []
     for item in items:
         source = item.source
         if tuple(item.joints) != tuple(robot.joints):
@@ -531,75 +536,55 @@ def _as_datasets(
                 'recording was made with'
             )
         if isinstance(item, Recording):
-            dataset = prepare_dataset(item, robot, config.preprocess)
-            regular, _ = regularise(item, robot.ipo_period_s, config.preprocess.jitter_tolerance)
-            datasets.append((dataset, regular))
+            datasets.append(prepare_dataset(item, robot, config.preprocess))
             continue
         if not math.isclose(item.period_s, robot.ipo_period_s, rel_tol=1e-9):
             raise DatasetError(
                 f'{source}: sample period {item.period_s} s differs from the robot config '
                 f'{robot.name} ({robot.ipo_period_s} s)'
             )
-        datasets.append((item, None))
-    targets = {d.target for d, _ in datasets}
-    if len(targets) > 1:
-        raise DatasetError(f'diagnosis: recordings mix targets {sorted(targets)}')
+        datasets.append(item)
+    for name in ('target', 'mode'):
+        found = {getattr(d, name) for d in datasets}
+        if len(found) > 1:
+            raise DatasetError(f'diagnosis: recordings mix {name}s {sorted(found)}')
     return datasets
 
 
-@lru_cache(maxsize=64)
-def _butterworth(cutoff_hz: float, period_s: float, order: int) -> np.ndarray:
-    """The label's filter, as ``preprocess.lowpass`` designs it."""
-    return signal.butter(order, cutoff_hz, btype='low', fs=1.0 / period_s, output='sos')
-
-
-def column_motion(
-    dataset: Dataset, raw: Recording | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def column_motion(dataset: Dataset) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The motion (q, v, a, jerk), each (N, n), that regressor columns are built from.
 
-    Columns are filtered once, like the label; building them from the already filtered q and v
-    would filter the motion twice (the label saw the true motion filtered once), which near
-    motion onsets costs several N*m on heavily loaded joints. So the recorded q and v are only
-    cleaned of sensor noise by a light low-pass (20 times the highest cut-off, at most a quarter
-    of the sampling rate) before a and the jerk are differentiated. Without the raw recording
-    (a dataset was given), the dataset's filtered motion is used.
+    The dataset's fitting inputs: a controller's (recorded q, v smoothed far above the motion's
+    band, a from them), so that columns are filtered once, like the label (building them from
+    the filtered motion would filter the motion twice, which near motion onsets costs several
+    N*m on heavily loaded joints); with the study's preprocessing, the filtered motion. The jerk
+    is differentiated from a.
     """
-    if raw is None:
-        q, v, a = dataset.q, dataset.v, dataset.a
-    else:
-        fs = 1.0 / dataset.period_s
-        light = np.full(
-            len(dataset.joints), min(0.25 * fs, 20.0 * float(np.max(dataset.cutoff_hz)))
-        )
-        q = _lowpass(raw.position, light, dataset.period_s, dataset.filter_order)
-        v = _lowpass(raw.velocity, light, dataset.period_s, dataset.filter_order)
-        a = differentiate(v, dataset.period_s)
-    return q, v, a, differentiate(a, dataset.period_s)
+    return dataset.q, dataset.v, dataset.a, differentiate(dataset.a, dataset.period_s)
 
 
-def _lowpass(x: np.ndarray, cutoff_hz: np.ndarray, period_s: float, order: int) -> np.ndarray:
-    """``preprocess.lowpass`` with the filter designed once per cut-off."""
-    out = np.empty_like(x, dtype=float)
-    for j in range(x.shape[1]):
-        sos = _butterworth(float(cutoff_hz[j]), period_s, order)
-        out[:, j] = signal.sosfiltfilt(sos, x[:, j])
-    return out
+def _as_label(x: np.ndarray, dataset: Dataset) -> np.ndarray:
+    """A torque (N, n) along the dataset's recordings as the labels meet it.
+
+    Filtered like the labels when fitting through the filter; as is for the study's way.
+    """
+    return dataset.filter_like_labels(x) if dataset.is_through_filter else np.array(x, float)
 
 
 def _filter_columns(x: np.ndarray, dataset: Dataset) -> np.ndarray:
     """Filter each joint row of columns (N, n, k) like that joint's label (zero rows skipped).
 
     The same zero-phase Butterworth as ``preprocess.lowpass`` (forward-backward, default
-    padding), with the filter designed once per cut-off.
+    padding), each recording on its own.
     """
     out = np.zeros_like(x)
-    for j in range(x.shape[1]):
-        block = x[:, j, :]
-        if not np.any(block):
-            continue
-        sos = _butterworth(float(dataset.cutoff_hz[j]), dataset.period_s, dataset.filter_order)
-        out[:, j, :] = signal.sosfiltfilt(sos, block, axis=0)
+    for rows in dataset.recording_rows():
+        for j in range(x.shape[1]):
+            block = x[rows, j, :]
+            if not np.any(block):
+                continue
+            sos = butterworth(float(dataset.cutoff_hz[j]), dataset.period_s, dataset.filter_order)
+            out[rows, j, :] = signal.sosfiltfilt(sos, block, axis=0)
     return out
 
 
@@ -616,18 +601,13 @@ class _Problem:
     """Filtered residual, candidate columns and weights over all recordings."""
 
     def __init__(
-        self,
-        datasets: list[tuple[Dataset, Recording | None]],
-        robot: RobotConfig,
-        config: DiagnosisConfig,
+        self, datasets: list[Dataset], robot: RobotConfig, config: DiagnosisConfig
     ) -> None:
         self.robot = robot
         self.config = config
-        self.raw = [raw for _, raw in datasets]
-        self.datasets = [dataset for dataset, _ in datasets]
-        datasets_only = self.datasets
-        self.model = NominalModel(robot, datasets_only[0].target)
-        first = datasets_only[0]
+        self.datasets = datasets
+        self.model = NominalModel(robot, datasets[0].target)
+        first = datasets[0]
         self.cutoff = np.asarray(first.cutoff_hz, dtype=float)
         self.period = first.period_s
         self.noise = self._noise()
@@ -664,14 +644,12 @@ class _Problem:
         derivatives, regressor = needs_derivatives(probe), needs_regressor(probe)
         all_rows = [_kept_rows(d, self.trim, self.step, self.config) for d in self.datasets]
         self._check_length(all_rows)
-        for dataset, raw, rows in zip(self.datasets, self.raw, all_rows, strict=True):
-            q, v, a, jerk = column_motion(dataset, raw)
+        for dataset, rows in zip(self.datasets, all_rows, strict=True):
+            q, v, a, jerk = column_motion(dataset)
             quantities = self.model.evaluate(
                 q, v, a, jerk, derivatives=derivatives, regressor=regressor
             )
-            nominal = _lowpass(
-                quantities.tau_nominal, dataset.cutoff_hz, dataset.period_s, dataset.filter_order
-            )
+            nominal = _as_label(quantities.tau_nominal, dataset)
             smooth = self._smooth(dataset)
             self.recordings.append(_Recording(dataset, quantities, smooth, rows, nominal))
         self.library = build_library(self.model, self.joined_quantities(), self.config)
@@ -703,10 +681,11 @@ class _Problem:
 
     def _smooth(self, dataset: Dataset) -> NominalQuantities:
         """Quantities along the filtered motion, for the testability of switching effects."""
+        q, v, a = dataset.study.q, dataset.study.v, dataset.study.a
         if 'load_dependent_friction' in self.config.effects:
-            return self.model.evaluate(dataset.q, dataset.v, dataset.a)
-        zeros = np.zeros_like(dataset.q)  # only the load-dependent columns read the torques
-        return NominalQuantities(dataset.q, dataset.v, dataset.a, zeros, zeros, zeros, zeros)
+            return self.model.evaluate(q, v, a)
+        zeros = np.zeros_like(q)  # only the load-dependent columns read the torques
+        return NominalQuantities(q, v, a, zeros, zeros, zeros, zeros)
 
     def joined_quantities(self) -> NominalQuantities:
         """Training rows of every recording, for choices that look at the whole excitation."""
@@ -751,7 +730,7 @@ class _Problem:
         switching = spec.name in SWITCHING_EFFECTS
         for r in self.recordings:
             x = candidate_columns(spec, r.quantities, self.model)
-            xf = _filter_columns(x, r.dataset)
+            xf = _filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
             for part in ('train', 'test'):
                 filtered[part].append(xf[r.rows[part]])
             train = r.rows['train']
@@ -818,8 +797,7 @@ def run_diagnosis(
 ) -> DiagnosisResult:
     """The diagnosis without writing anything (see ``diagnose``)."""
     config = config or DiagnosisConfig()
-    pairs = _as_datasets(data, robot, config)
-    problem = _Problem(pairs, robot, config)
+    problem = _Problem(_as_datasets(data, robot, config), robot, config)
     candidates = _Candidates(problem)
     y = {part: problem.residual(part) for part in PARTS}
     n_eff = {part: problem.n_effective(part) for part in PARTS}

@@ -22,14 +22,17 @@ SHARE_NAMES = ('gravity', 'inertia', 'coriolis', 'rotor_inertia', 'remainder')
 def nominal_components(dataset: Dataset, robot: RobotConfig) -> dict[str, np.ndarray]:
     """Split the target torque with the nominal model; each (N, n) [N*m].
 
-    ``remainder`` is the target minus the nominal model: friction, balancer, payload and every
-    other effect the URDF and datasheet do not know.
+    The nominal model is evaluated on the motion filtered like the labels (``dataset.study``),
+    so that every part is as smooth as the filtered target. ``remainder`` is the target minus
+    the nominal model: friction, balancer, payload and every other effect the URDF and datasheet
+    do not know.
     """
+    q, v, a = dataset.study.q, dataset.study.v, dataset.study.a
     dynamics = RigidBodyDynamics.from_config(robot)
-    gravity = dynamics.gravity(dataset.q)
-    inertia = np.einsum('bij,bj->bi', dynamics.mass_matrix(dataset.q), dataset.a)
-    coriolis = dynamics.coriolis(dataset.q, dataset.v)
-    rotor = rotor_inertia_torque(dataset.a, robot.drives.rotor_inertia, robot.drives.gear_ratio)
+    gravity = dynamics.gravity(q)
+    inertia = np.einsum('bij,bj->bi', dynamics.mass_matrix(q), a)
+    coriolis = dynamics.coriolis(q, v)
+    rotor = rotor_inertia_torque(a, robot.drives.rotor_inertia, robot.drives.gear_ratio)
     remainder = dataset.tau - gravity - inertia - coriolis - rotor
     return {
         'gravity': gravity,
@@ -108,9 +111,9 @@ def summarise(
     ranges = {
         name: {'min': np.min(x, axis=0).tolist(), 'max': np.max(x, axis=0).tolist()}
         for name, x in (
-            ('q_rad', dataset.q),
-            ('v_rad_s', dataset.v),
-            ('a_rad_s2', dataset.a),
+            ('q_rad', dataset.controller.q),
+            ('v_rad_s', dataset.controller.v),
+            ('a_rad_s2', dataset.controller.a),
             ('tau_nm', dataset.tau),
         )
     }

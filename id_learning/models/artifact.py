@@ -17,6 +17,7 @@ from safetensors import SafetensorError
 from safetensors.numpy import load_file, save_file
 
 from id_learning import __version__
+from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import CheckpointError
 from id_learning.robot.config import RobotConfig
 
@@ -25,6 +26,7 @@ __all__ = [
     'METADATA_FILE',
     'UNITS',
     'WEIGHTS_FILE',
+    'artifact_inputs',
     'read_artifact',
     'robot_fingerprint',
     'write_artifact',
@@ -146,3 +148,22 @@ def read_artifact(
         raise CheckpointError(f'{weights_path}: tensors {shapes} differ from the metadata')
     _check_robot(metadata.get('robot', {}), robot, folder)
     return metadata, tensors
+
+
+def artifact_inputs(
+    metadata: dict[str, Any],
+) -> tuple[InputDefinition | None, InputDefinition | None]:
+    """The input definitions an artifact stores: what it is served on, what it was fitted on.
+
+    Artifacts written before input definitions existed store neither (None, None); they were
+    fitted on the study's low-passed inputs.
+
+    Raises:
+        CheckpointError: a stored definition is malformed.
+    """
+    preprocessing = metadata.get('preprocessing') or {}
+    inputs, fitting = preprocessing.get('inputs'), preprocessing.get('fitting_inputs')
+    return (
+        None if inputs is None else InputDefinition.from_dict(inputs),
+        None if fitting is None else InputDefinition.from_dict(fitting),
+    )

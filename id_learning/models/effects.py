@@ -85,6 +85,11 @@ def _training_part(data: TrainingData) -> Any:
     ds = data.dataset
     rows = data.train_rows
     n_train = round(DiagnosisConfig().preprocess.train_fraction * ds.n_train)
+    # Each recording's training part stays one segment, so filters never cross a seam.
+    segments = [
+        {'source': s.get('source', ''), 'train': s['train'], 'test': [s['train'][1]] * 2}
+        for s in ds.extra.get('segments', [])
+    ]
     return replace(
         ds,
         stamps_ns=ds.stamps_ns[rows],
@@ -94,6 +99,10 @@ def _training_part(data: TrainingData) -> Any:
         tau=ds.tau[rows],
         tau_raw=ds.tau_raw[rows],
         n_train=n_train,
+        controller=ds.controller.take(rows),
+        study=ds.study.take(rows),
+        tau_clean=None if ds.tau_clean is None else ds.tau_clean[rows],
+        extra={'segments': segments} if segments else {},
     )
 
 

@@ -11,14 +11,26 @@ import logging
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Protocol
 
+import numpy as np
 import torch
 from tqdm import tqdm
 
 from id_learning.errors import ConfigError
+from id_learning.models.data import TrainingData
+from id_learning.models.through_filter import ThroughFilterLoss, WindowPredictor
 
-__all__ = ['OptimConfig', 'TrainHistory', 'configure_torch', 'select_device', 'train_module']
+__all__ = [
+    'NetworkSettings',
+    'OptimConfig',
+    'TrainHistory',
+    'configure_torch',
+    'fit_network',
+    'select_device',
+    'train_module',
+]
 
 _LOG = logging.getLogger(__name__)
 
@@ -93,6 +105,11 @@ def select_device(device: str = 'auto') -> torch.device:
     return torch.device(device)
 
 
+def is_over(config: OptimConfig, start: float) -> bool:
+    """Whether the fit started at ``start`` (perf_counter) has used its time budget."""
+    return config.max_seconds is not None and time.perf_counter() - start > config.max_seconds
+
+
 def _batches(n: int, batch_size: int, generator: torch.Generator) -> list[torch.Tensor]:
     order = torch.randperm(n, generator=generator)
     return list(order.split(batch_size))
@@ -141,6 +158,8 @@ def train_module(
             optimiser.step()
             total += float(loss.detach()) * len(rows)
             count += len(rows)
+            if is_over(config, start):
+                break  # an epoch of long windows can outlast a budget several times
         module.eval()
         with torch.no_grad():
             validation = float(loss_fn(*validation_tensors))
@@ -156,10 +175,113 @@ def train_module(
         if stale >= config.patience:
             history.stopped_by = 'early_stopping'
             break
-        if config.max_seconds is not None and time.perf_counter() - start > config.max_seconds:
+        if is_over(config, start):
             history.stopped_by = 'time_budget'
             break
     module.load_state_dict(best_state)
     history.seconds = time.perf_counter() - start
     _LOG.info('%s: %s', description, history.to_dict())
     return history
+
+
+class NetworkSettings(Protocol):
+    """What ``fit_network`` reads of a network model's config."""
+
+    kind: str
+    seed: int
+    stride: int
+    windows_per_batch: int
+    eval_stride: int
+
+    def optim(self) -> OptimConfig:
+        """The optimiser settings."""
+        ...
+
+
+def fit_network(
+    network: torch.nn.Module,
+    predict: WindowPredictor,
+    data: TrainingData,
+    target: np.ndarray,
+    scale: np.ndarray,
+    *,
+    config: NetworkSettings,
+    device: torch.device,
+    progress: bool = False,
+    history: int = 0,
+) -> TrainHistory:
+    """Fit a network the dataset's way; leave it on the CPU in evaluation mode.
+
+    Through the filter (the default preprocessing): on contiguous windows, the predicted torque
+    filtered like the labels (``ThroughFilterLoss``; ``windows_per_batch`` windows per step).
+    The study's way: on every ``stride``-th sample, the prediction compared with the label as is.
+    Either way the loss is the study's normalised MSE and the best validation weights are kept.
+
+    Args:
+        network: the module to fit (its parameters are optimised in place).
+        predict: torque (B, P, n) at columns ``positions`` (P,) of dataset rows ``rows``
+            (B, history + W) in time order; the pointwise way passes (B, history + 1) rows and
+            the last column.
+        data: the training data.
+        target: (N, n) what the network's torque must match [N*m]: the labels, or the labels
+            minus a fixed physics part (filtered like them when fitting through the filter).
+        scale: (n,) per-joint normalisation [N*m].
+        config: the model's settings.
+        device: where to fit.
+        progress: show a progress bar over epochs.
+        history: samples before each evaluated one that ``predict`` reads (sequence models).
+
+    Raises:
+        DatasetError: the training part is too short to fit through the filter.
+    """
+    network.to(device)
+    if data.dataset.is_through_filter:
+        windows = ThroughFilterLoss(
+            data.dataset,
+            data.fit_rows,
+            data.validation_rows,
+            target,
+            scale=scale,
+            device=device,
+            eval_stride=config.eval_stride,
+            history=history,
+            seed=config.seed,
+        )
+
+        def window_loss(items: torch.Tensor) -> torch.Tensor:
+            return windows.loss(predict, items)
+
+        history_ = train_module(
+            network,
+            window_loss,
+            windows.fit_items,
+            windows.validation_items,
+            replace(config.optim(), batch_size=config.windows_per_batch),
+            progress=progress,
+            description=f'{config.kind} (through the filter)',
+        )
+    else:
+        target_t = torch.as_tensor(np.ascontiguousarray(target), dtype=torch.float32).to(device)
+        scale_t = torch.as_tensor(np.asarray(scale), dtype=torch.float32).to(device)
+        offsets = torch.arange(-history, 1, device=device)
+        last = torch.tensor([history], device=device)
+
+        def point_loss(rows: torch.Tensor) -> torch.Tensor:
+            torque = predict(rows[:, None] + offsets, last)[:, 0]
+            return torch.mean(((torque - target_t[rows]) / scale_t) ** 2)
+
+        def part(rows: slice) -> list[torch.Tensor]:
+            start = max(rows.start or 0, history)
+            return [torch.arange(start, rows.stop, config.stride, device=device)]
+
+        history_ = train_module(
+            network,
+            point_loss,
+            part(data.fit_rows),
+            part(data.validation_rows),
+            config.optim(),
+            progress=progress,
+            description=config.kind,
+        )
+    network.to('cpu').eval()
+    return history_

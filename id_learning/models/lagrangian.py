@@ -58,7 +58,7 @@ from id_learning.models.base import (
     TorqueComponents,
 )
 from id_learning.models.data import TrainingData
-from id_learning.models.fitting import OptimConfig, select_device, train_module
+from id_learning.models.fitting import OptimConfig, fit_network, select_device
 from id_learning.models.nets import (
     SMOOTH_ACTIVATIONS,
     AnalyticMLP,
@@ -67,7 +67,6 @@ from id_learning.models.nets import (
 )
 from id_learning.models.torch_utils import (
     float64_array,
-    normalised_mse,
     numpy_softplus,
     to_numpy,
     to_tensor,
@@ -583,8 +582,11 @@ class _LagrangianConfig(ModelConfig):
         max_epochs: upper bound on epochs.
         patience: early stopping after this many epochs without a better validation loss.
         weight_decay: Adam's L2 penalty.
-        stride: use every stride-th sample (the data are low-pass filtered far below the IPO
-            rate, so neighbours carry almost the same information).
+        stride: the study's preprocessing: use every stride-th sample (the data are low-pass
+            filtered far below the IPO rate, so neighbours carry almost the same information).
+        windows_per_batch: through the filter: contiguous windows per mini-batch.
+        eval_stride: through the filter: evaluate the network on every eval_stride-th sample
+            of a window (``models.through_filter``).
         seed: seeds the initial weights and the batch order.
         max_seconds: wall-clock budget of the fit [s], None for none.
         device: 'auto' (CUDA when available), 'cpu' or 'cuda'. Prediction runs on the CPU.
@@ -600,13 +602,16 @@ class _LagrangianConfig(ModelConfig):
     patience: int = 30
     weight_decay: float = 1e-3
     stride: int = 4
+    windows_per_batch: int = 2
+    eval_stride: int = 2
     seed: int = 0
     max_seconds: float | None = None
     device: str = 'auto'
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
-        for key in ('width', 'depth', 'batch_size', 'max_epochs', 'patience', 'stride'):
+        keys = ('width', 'depth', 'batch_size', 'max_epochs', 'patience', 'stride')
+        for key in (*keys, 'windows_per_batch', 'eval_stride'):
             value = getattr(self, key)
             if not isinstance(value, int) or value < 1:
                 raise ConfigError(f'{self.kind}: {key} must be an integer >= 1, got {value!r}')
@@ -743,11 +748,12 @@ class _LagrangianModel(InverseDynamicsModel):
         return self.network_
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
-        """Fit on every stride-th sample of the fit rows; early stopping on the validation rows.
+        """Fit the torque to the labels; early stopping on the validation rows.
 
-        Minimises the mean squared torque error on the normalised scale with train_module
-        (Adam, mini-batches, the best validation weights kept). Trains on ``config.device``;
-        the fitted network is moved to the CPU for prediction.
+        Minimises the mean squared torque error on the normalised scale (``fit_network``):
+        through the label filter on contiguous windows (the default), or the study's way on
+        every stride-th sample. Trains on ``config.device``; the fitted network is moved to the
+        CPU for prediction.
 
         Raises:
             DatasetError: the dataset's joints are not the robot's.
@@ -762,32 +768,26 @@ class _LagrangianModel(InverseDynamicsModel):
         device = select_device(config.device)
         scaling = LagrangianScaling.from_dataset(dataset)
         network = self.make_network(scaling, torch.Generator().manual_seed(config.seed))
-        network.to(device)
+        q, v, a = (to_tensor(x, device) for x in (dataset.q, dataset.v, dataset.a))
+        n = len(self.joint_names)
 
-        def part(rows: slice) -> list[torch.Tensor]:
-            picked = np.arange(len(dataset.q))[rows][:: config.stride]
-            return [
-                to_tensor(array[picked], device)
-                for array in (dataset.q, dataset.v, dataset.a, dataset.tau)
-            ]
+        def predict(rows: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
+            index = rows[:, positions]
+            flat = index.reshape(-1)
+            torque: torch.Tensor = network(q[flat], v[flat], a[flat])
+            return torque.reshape(*index.shape, n)
 
-        scale = network.tau_half
-
-        def loss(
-            q: torch.Tensor, v: torch.Tensor, a: torch.Tensor, tau: torch.Tensor
-        ) -> torch.Tensor:
-            return normalised_mse(network(q, v, a), tau, scale)
-
-        history = train_module(
+        history = fit_network(
             network,
-            loss,
-            part(data.fit_rows),
-            part(data.validation_rows),
-            config.optim(),
+            predict,
+            data,
+            dataset.tau,
+            scaling.torque.scale(),
+            config=config,
+            device=device,
             progress=progress,
-            description=self.kind,
         )
-        self.network_ = network.to('cpu').eval()
+        self.network_ = network
         self.scaling_ = scaling
         self.history_ = history.to_dict()
         return self

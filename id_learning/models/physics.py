@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 import torch
 
-from id_learning.dataset.preprocess import MinMaxScaler, lowpass
+from id_learning.dataset.preprocess import MinMaxScaler
 from id_learning.errors import CheckpointError, ConfigError
 from id_learning.models.base import (
     InverseDynamicsModel,
@@ -39,14 +39,12 @@ from id_learning.models.blackbox import (
     module_state,
     predict_chunked,
     require_fitted,
-    run_training,
     scalers_metadata,
     seeded,
-    strided_rows,
 )
 from id_learning.models.data import TrainingData
-from id_learning.models.fitting import TrainHistory, select_device
-from id_learning.models.torch_utils import normalised_mse, to_tensor
+from id_learning.models.fitting import TrainHistory, fit_network, select_device
+from id_learning.models.torch_utils import to_tensor
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.dynamics import RigidBodyDynamics
 
@@ -125,19 +123,19 @@ class RneaLqConfig(ModelConfig):
             'viscous_coulomb_offset' (+ a constant per joint).
         coulomb_velocity: v_eps of the Coulomb term [rad/s], the speed below which friction
             turns smoothly through zero.
-        filter_regressors: low-pass each regressor column (and the RNEA torque) with the filter
-            that produced the labels before solving. The labels are zero-phase filtered torques,
-            so a column must see the same filter to be comparable: without it, the filter's smear
-            of the Coulomb step at every velocity reversal biases F_c and theta_D by 10-40 %, and
-            the filter's attenuation of the gravity torque's harmonics (joints 2 and 3, 0.3 Hz)
-            leaks into the rotor inertia. Prediction always uses the unfiltered model. The
-            dataset's rows must be one contiguous recording, as prepare_dataset makes them.
+
+    How the least squares meet the labels follows the dataset's preprocessing: through the
+    filter (the default), each regressor column and the RNEA torque, computed on a controller's
+    inputs, are low-passed exactly like the labels before solving (without it, the filter's
+    smear of the Coulomb step at every velocity reversal biases F_c and theta_D by 10-40 %, and
+    its attenuation of the gravity torque's harmonics leaks into the rotor inertia); the study's
+    way, the columns on the filtered inputs meet the filtered labels as they are. Prediction
+    always uses the unfiltered model.
     """
 
     kind: Literal['rnea_lq'] = 'rnea_lq'
     friction: str = 'viscous'
     coulomb_velocity: float = 0.01
-    filter_regressors: bool = True
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
@@ -205,15 +203,12 @@ class RneaLqModel(_NominalPhysics):
         ds, physics, rows = data.dataset, data.physics, data.train_rows
         columns = self._columns(ds.v, physics.rotor_basis)
         rnea = physics.rnea
-        if self.config.filter_regressors:
-            # Filter the whole recording, as preprocessing filtered the labels, then take the
+        if ds.is_through_filter:
+            # Filter whole recordings, as preprocessing filtered the labels, then take the
             # training rows: a slice filtered alone would add start-up transients at its ends.
-            def label_filter(x: np.ndarray) -> np.ndarray:
-                return lowpass(x, ds.cutoff_hz, ds.period_s, ds.filter_order)
-
-            rnea = label_filter(rnea)
+            rnea = ds.filter_like_labels(rnea)
             columns = {
-                name: column if name == 'offset' else label_filter(column)
+                name: column if name == 'offset' else ds.filter_like_labels(column)
                 for name, column in columns.items()
             }
         target = ds.tau[rows] - rnea[rows]
@@ -319,7 +314,7 @@ class RneaLqModel(_NominalPhysics):
         """The identified parameters per joint with their units, and the fit's RMSE.
 
         ``training_rmse_nm`` is the least-squares residual on the training rows, measured on the
-        filtered regressors when ``filter_regressors`` is set.
+        filtered regressors when fitting through the label filter.
         """
         p = self._parameters()
         out: dict[str, Any] = {
@@ -407,29 +402,33 @@ class RneaMlpModel(_NominalPhysics):
         return torque
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
-        """Fit h on the training residual, with early stopping on the validation tail."""
+        """Fit h on the training residual, with early stopping on the validation tail.
+
+        Through the label filter (the default), the residual is the label minus the physics
+        part filtered like it, and h's torque is filtered before it meets that residual.
+        """
         ds, c, n = data.dataset, self.config, self.robot.n_joints
         device = select_device(c.device)
-        residual = ds.tau - self.training_physics(data)
+        physics = self.training_physics(data)
+        if ds.is_through_filter:
+            physics = ds.filter_like_labels(physics)
+        residual = ds.tau - physics
         assert ds.input_scaler.low_ is not None
         assert ds.input_scaler.high_ is not None
         state_scaler = MinMaxScaler(ds.input_scaler.low_[: 2 * n], ds.input_scaler.high_[: 2 * n])
         network = self._build(state_scaler, MinMaxScaler().fit(residual[data.train_rows]))
-        states = np.hstack([ds.q, ds.v])
-        scale = to_tensor(ds.target_scaler.scale(), device)
+        states = to_tensor(np.hstack([ds.q, ds.v]), device)
 
-        def part(rows: slice) -> list[torch.Tensor]:
-            index = strided_rows(rows, c.stride)
-            return [to_tensor(states[index], device), to_tensor(residual[index], device)]
+        def predict(rows: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
+            torque: torch.Tensor = network(states[rows[:, positions]])
+            return torque
 
-        def loss(x: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-            return normalised_mse(network(x), target, scale)
-
-        self.history_ = run_training(
+        self.history_ = fit_network(
             network,
-            loss,
-            part(data.fit_rows),
-            part(data.validation_rows),
+            predict,
+            data,
+            residual,
+            ds.target_scaler.scale(),
             config=c,
             device=device,
             progress=progress,

@@ -44,6 +44,11 @@ MODEL_KINDS: dict[str, tuple[type[ModelConfig], type[InverseDynamicsModel]]] = {
 #: The reference study's seven models, in its table order.
 STUDY_MODELS = ('rnea_lq', 'rnea_mlp', 'delan', 'lnn', 'lnn_mlp', 'mlp', 'lstm')
 
+#: Hyper-parameters that older artifacts hold and that are no setting any more: dropped on load.
+#: rnea_lq.filter_regressors: whether regressors meet the labels through the label filter is now
+#: the dataset's preprocessing mode.
+RETIRED_HYPERPARAMETERS: dict[str, tuple[str, ...]] = {'rnea_lq': ('filter_regressors',)}
+
 
 def make_config(kind: str, **overrides: Any) -> ModelConfig:
     """The default config of a model kind, with overrides.
@@ -91,9 +96,10 @@ def load_model(folder: Path, robot: RobotConfig, kind: str | None = None) -> Inv
     found = metadata['kind']
     if found not in MODEL_KINDS:
         raise CheckpointError(f'{folder}: unknown model kind {found!r}')
+    retired = ('kind', *RETIRED_HYPERPARAMETERS.get(found, ()))
     try:
         config = make_config(
-            found, **{k: v for k, v in metadata['hyperparameters'].items() if k != 'kind'}
+            found, **{k: v for k, v in metadata['hyperparameters'].items() if k not in retired}
         )
     except (ConfigError, TypeError) as err:
         raise CheckpointError(f'{folder}: hyper-parameters do not fit {found}: {err}') from err

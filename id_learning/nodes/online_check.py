@@ -6,21 +6,27 @@ the offline prediction of the same artifact on the same samples, both against th
 
 The samples: the test part of the bag exactly as the trainer splits it (``load_datasets`` with the
 preprocessing stored in the artifact, then ``segment_rows(dataset, 'test')``), from its start,
-``seconds`` long (clipped to the test part). The label and the offline inputs are that dataset's
-(zero-phase low-pass over the whole recording after putting the stamps on the IPO grid, a by
-central differences); the offline prediction is the trainer's ``predict_rows`` on the excerpt's
-rows, so a sequence model starts its window at the excerpt as the node does.
+``seconds`` long (clipped to the test part). The offline inputs are that dataset's controller
+inputs (the artifact's input definition: recorded q, v smoothed far above the motion's band, a by
+central differences); the replay builds its reference with the same velocity smoothing. The
+offline prediction runs on the excerpt's rows, so a sequence model starts its window at the
+excerpt as the node does.
 
-Why online and offline RMSE may differ: the predictor gets the replay's reference, which the replay
-rebuilds from the recorded joint states with the same cut-offs, but filtered over the played span
-plus ``REFERENCE_PAD_S`` (10 s) on either side (not over the whole recording) and differentiated
-over the bag's stamps as recorded (not snapped to the grid). The filter's edge transients
-therefore leave small differences in q, v and a, reported as ``max_input_diff``; on top, tau_u is
-clamped to the torque limits, and a sample the node's input queue dropped has no tau_u. To tell
-these input differences from an error in the node, the artifact is also run offline on exactly
-the references the predictor received: ``max_abs_node_error_nm`` must be at floating-point level
-(float32 rounding for the networks, batched against one sample at a time; 0 for a float64 model
-such as RNEA+LQ).
+Against the label: tau_u is the torque the drive needs now, the label a low-passed torque; so
+both the online and the offline excerpt are put into the model's offline torque along the whole
+recording, which is then low-passed like the labels, and compared with the label on the excerpt
+(the trainer's "through the filter" figure, restricted to the excerpt).
+
+Why online and offline may differ: the predictor gets the replay's reference, which the replay
+rebuilds from the recorded joint states with the same smoothing, but filtered over the played
+span plus ``REFERENCE_PAD_S`` (10 s) on either side (not over the whole recording) and
+differentiated over the bag's stamps as recorded (not snapped to the grid). The filter's edge
+transients therefore leave small differences in q, v and a, reported as ``max_input_diff``; on
+top, tau_u is clamped to the torque limits, and a sample the node's input queue dropped has no
+tau_u. To tell these input differences from an error in the node, the artifact is also run
+offline on exactly the references the predictor received: ``max_abs_node_error_nm`` must be at
+floating-point level (float32 rounding for the networks, batched against one sample at a time; 0
+for a float64 model such as RNEA+LQ).
 
 Isolation: both nodes run in a private namespace (also their /diagnostics, and the replayed joint
 states are remapped into it; no /clock), so the check cannot feed a live system that shares the
@@ -85,8 +91,9 @@ class OnlineCheckResult:
         n_inputs: reference messages the listener received.
         n_outputs: tau_u messages received that belong to an excerpt sample.
         n_missing: excerpt samples without tau_u.
-        rmse_online_nm: online tau_u against the label [N*m].
-        rmse_offline_nm: offline prediction (dataset inputs) against the label, same samples.
+        rmse_online_nm: online tau_u against the label, through the label filter [N*m].
+        rmse_offline_nm: offline prediction (controller inputs) against the label, through the
+            filter, same samples.
         max_abs_online_offline_nm: max |online - offline| [N*m].
         max_abs_node_error_nm: max |online - the artifact on the received references| [N*m].
         max_input_diff: max |reference - dataset input| per 'q' [rad], 'v' [rad/s], 'a' [rad/s^2].
@@ -140,7 +147,7 @@ class OnlineCheckResult:
         header = ''.join(f'{j:>{width}}' for j in self.joints)
 
         def row(label: str, values: np.ndarray) -> str:
-            return f'  {label:<34}' + ''.join(f'{x:>{width}.4g}' for x in values)
+            return f'  {label:<38}' + ''.join(f'{x:>{width}.4g}' for x in values)
 
         clip = ' (clipped: the test part is shorter)' if self.is_clipped else ''
         lines = [
@@ -151,9 +158,9 @@ class OnlineCheckResult:
             f'tau_u outputs, {self.n_missing} missing; {pred.get("clamped_samples", "?")} '
             f'clamped, {pred.get("out_of_range_samples", "?")} out of the training range, '
             f'{pred.get("rejected", "?")} rejected',
-            f'  {"[N*m]":<34}{header}',
-            row('RMSE online vs label', self.rmse_online_nm),
-            row('RMSE offline vs label', self.rmse_offline_nm),
+            f'  {"[N*m]":<38}{header}',
+            row('RMSE online vs label, through filter', self.rmse_online_nm),
+            row('RMSE offline vs label, through filter', self.rmse_offline_nm),
             row('max |online - offline|', self.max_abs_online_offline_nm),
             row('max |node - model(its inputs)|', self.max_abs_node_error_nm),
             '  online inputs vs offline inputs (replay reference vs training preprocessing): '
@@ -432,12 +439,12 @@ def online_check(
         ConfigError: ``seconds`` or the domain id is out of range.
     """
     from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.evaluation.scoring import predict_along
     from id_learning.models.registry import load_model
     from id_learning.robot.config import load_robot_config
     from id_learning.training.trainer import (
         bag_sha256,
         load_datasets,
-        predict_rows,
         preprocess_from_dict,
         segment_rows,
     )
@@ -464,6 +471,18 @@ def online_check(
         preprocess = PreprocessConfig()
         notes.append('the artifact stores no preprocessing: the default (motor target) is used')
     period_ns = round(robot.ipo_period_s * NS_PER_S)
+    smoothing = np.asarray(
+        preprocess.input_smoothing_hz
+        if preprocess.input_smoothing_hz is not None
+        else robot.input_smoothing_hz
+    )
+    # The replay takes one smoothing cut-off for every joint (0: the robot config's).
+    smoothing_hz = float(smoothing[0]) if np.all(smoothing == smoothing[0]) else 0.0
+    if not smoothing_hz and not np.array_equal(smoothing, robot.input_smoothing_hz):
+        notes.append(
+            f'the artifact smooths velocities at {smoothing.tolist()} Hz per joint; the replay '
+            f"takes one value, so it uses the robot config's {robot.input_smoothing_hz.tolist()}"
+        )
     namespace = f'/online_check_{os.getpid()}'
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # before rclpy.init
 
@@ -511,7 +530,10 @@ def online_check(
                 'the bag is not one of the artifact\'s training bags: its "test part" is only its '
                 'last share in time'
             )
-        offline = predict_rows(model, dataset, [(test_start, stop)])
+        controller = dataset.controller
+        along = predict_along(model, controller, dataset.recording_rows())
+        excerpt = controller.take(slice(test_start, stop))
+        offline = model.predict(excerpt.q, excerpt.v, excerpt.a)
         stamps = dataset.stamps_ns
         # The replay counts its offset from the bag's first stamp, which is the dataset's first
         # (regularise keeps it); half a period of margin on each side against rounding.
@@ -551,6 +573,8 @@ def online_check(
                     'topics': [js_topic],
                     'reference_source': js_topic,
                     'reference_topic': 'reference',
+                    'reference_inputs': 'controller',
+                    'reference_smoothing_hz': smoothing_hz,
                     'start_offset_s': max(start_offset_s, 0.0),
                     'duration_s': duration_s,
                     'publish_clock': False,
@@ -634,12 +658,18 @@ def online_check(
     online = np.vstack([tau_by_row[r] for r in matched])
     offline_matched = offline[index - test_start]
     label = dataset.tau[index]
+
+    def through_filter(excerpt_torque: np.ndarray) -> np.ndarray:
+        spliced = along.copy()
+        spliced[index] = excerpt_torque
+        return dataset.filter_like_labels(spliced)[index]
+
     ref_rows = np.asarray(sorted(ref_by_row))
     q_ref, v_ref, a_ref = (np.vstack([ref_by_row[r][k] for r in ref_rows]) for k in range(3))
     input_diff = {
-        'q': np.max(np.abs(q_ref - dataset.q[ref_rows]), axis=0),
-        'v': np.max(np.abs(v_ref - dataset.v[ref_rows]), axis=0),
-        'a': np.max(np.abs(a_ref - dataset.a[ref_rows]), axis=0),
+        'q': np.max(np.abs(q_ref - controller.q[ref_rows]), axis=0),
+        'v': np.max(np.abs(v_ref - controller.v[ref_rows]), axis=0),
+        'a': np.max(np.abs(a_ref - controller.a[ref_rows]), axis=0),
     }
     # The artifact on exactly the node's inputs: the references it answered, in order (a sequence
     # model's window skips a dropped sample as the node's does), clamped as the node clamps.
@@ -668,8 +698,8 @@ def online_check(
         n_inputs=n_inputs,
         n_outputs=len(tau_by_row),
         n_missing=n_missing,
-        rmse_online_nm=_rmse(online, label),
-        rmse_offline_nm=_rmse(offline_matched, label),
+        rmse_online_nm=_rmse(through_filter(online), label),
+        rmse_offline_nm=_rmse(through_filter(offline_matched), label),
         max_abs_online_offline_nm=np.max(np.abs(online - offline_matched), axis=0),
         max_abs_node_error_nm=np.max(np.abs(online - node_model), axis=0),
         max_input_diff=input_diff,

@@ -164,8 +164,8 @@ class ReplayConfig:
     )
     robot_config: str = param(
         '',
-        'Robot config YAML (joints, IPO period, low-pass cut-offs). Empty: the package '
-        'config/mabi_max100.yaml.',
+        'Robot config YAML (joints, IPO period, label and input cut-offs). Empty: the '
+        'package config/mabi_max100.yaml.',
     )
     rate: float = param(1.0, 'Playback speed factor [-]: 2.0 plays twice as fast.')
     loop: bool = param(False, 'Start again from the start offset at the end.')
@@ -189,10 +189,18 @@ class ReplayConfig:
     reference_source: str = param(
         '/joint_states', 'Bag topic (sensor_msgs/JointState) the reference is built from.'
     )
-    reference_lowpass: bool = param(
-        True,
-        'Low-pass q and v of the reference with the robot cut-offs (zero-phase, as the '
-        'training data) before differentiating; false keeps the recorded values.',
+    reference_inputs: str = param(
+        'controller',
+        'How the reference is built from the recorded joint states: controller = recorded q, '
+        "v smoothed at reference_smoothing_hz and a differentiated from it (a controller's "
+        'smooth reference, what models are fitted and scored on); study = q and v low-passed '
+        "with the robot label cut-offs (the study's inputs); recorded = q and v as recorded.",
+        choices=('controller', 'study', 'recorded'),
+    )
+    reference_smoothing_hz: float = param(
+        0.0,
+        'Velocity smoothing of the controller reference [Hz] (zero-phase Butterworth); '
+        '0 = the robot config input_smoothing_hz.',
     )
     qos_depth: int = param(100, 'Publisher queue depth [messages] (KEEP_LAST).')
     wait_for_subscribers: int = param(
@@ -219,7 +227,14 @@ class ReplayConfig:
             raise ConfigError('bag is required: the bag folder to play')
         if not 0 < self.rate <= 100:
             raise ConfigError(f'rate must be in (0, 100], got {self.rate}')
-        _positive(self, 'start_offset_s', 'duration_s', 'wait_for_subscribers', allow_zero=True)
+        _positive(
+            self,
+            'start_offset_s',
+            'duration_s',
+            'wait_for_subscribers',
+            'reference_smoothing_hz',
+            allow_zero=True,
+        )
         _positive(self, 'qos_depth', 'wait_timeout_s', 'diagnostics_period_s')
         if not self.topics and self.reference_mode == 'none':
             raise ConfigError('nothing to publish: topics is empty and reference_mode is none')

@@ -245,8 +245,16 @@ class Predictor(Node):
             f'{config.input_type} on {self._subscription.topic_name} -> tau_u on '
             f'{self._tau_u.topic_name}'
             + (f' and {self._command.topic_name}' if self._command else '')
-            + f'; input range check: {source}'
+            + f'; input range check: {source}; '
+            + (self.core.inputs.describe() if self.core.inputs else 'inputs not recorded')
         )
+        if self.core.fitting_inputs is None or self.core.fitting_inputs.name == 'study':
+            self.get_logger().warning(
+                "the model was fitted on inputs low-passed like the labels (the study's "
+                "preprocessing), not on a controller's reference: expect larger errors where "
+                'the reference changes faster than the label filter (retrain with the default '
+                'preprocessing)'
+            )
 
     # -- the hot path -----------------------------------------------------------------------------
     def _warm_up(self) -> None:

@@ -12,9 +12,11 @@ cycle publishes, in order: /clock (the cycle's stamp, for use_sim_time), the bag
 serialized bytes of each message (rclpy publishes bytes as they are), then the reference.
 
 The reference (``reference_mode``) is built up front from the ``reference_source`` joint states
-with ``predictor.reference_from_states``: optionally low-passed with the robot's zero-phase
-cut-offs (as the training data), and a = central differences of v over the stamps (the replay
-knows the whole trajectory, like the controller's interpolator). It is published as a one-point
+with ``predictor.reference_from_states``, as a controller would send it (``reference_inputs``):
+by default recorded q and v smoothed far above the motion's band (the robot's
+``input_smoothing_hz``, the inputs models are fitted and scored on; not the labels' 0.3-1.2 Hz
+low-pass), and a = central differences of v over the stamps (the replay knows the whole
+trajectory, like the controller's interpolator). It is published as a one-point
 trajectory_msgs/JointTrajectory (q, v, a) or a sensor_msgs/JointState (q, v), stamped with the
 sample's stamp.
 
@@ -49,6 +51,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from id_learning.bag import JOINT_STATE, bag_info, decode_joint_state, iter_raw
 from id_learning.bag.messages import typestore
+from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import BagError, ConfigError, DatasetError
 from id_learning.nodes.msg_conversions import (
     clock_message,
@@ -143,18 +146,24 @@ def _reference_bytes(
     stamps = np.array([msg.stamp_ns for msg in decoded], dtype=np.int64)
     q = np.vstack([msg.position for msg in decoded])
     v = np.vstack([msg.velocity for msg in decoded])
-    cutoff = None
-    if config.reference_lowpass:
+    inputs = None
+    if config.reference_inputs != 'recorded':
         if set(names) != set(robot.joints) or len(names) != len(robot.joints):
             raise BagError(
                 f'{config.bag}: joints {list(names)} are not the robot {robot.name} joints '
-                f'{list(robot.joints)}; set reference_lowpass false or robot_config'
+                f'{list(robot.joints)}; set reference_inputs recorded or robot_config'
             )
         # The robot's cut-offs are in its joint order; the bag may use another.
-        cutoff = robot.lowpass_cutoff_hz[[robot.joints.index(name) for name in names]]
+        order = [robot.joints.index(name) for name in names]
+        if config.reference_inputs == 'study':
+            inputs = InputDefinition.study(robot.lowpass_cutoff_hz[order])
+        elif config.reference_smoothing_hz > 0:
+            inputs = InputDefinition.controller(np.full(len(names), config.reference_smoothing_hz))
+        else:
+            inputs = InputDefinition.controller(robot.input_smoothing_hz[order])
     try:
         reference = reference_from_states(
-            names, stamps, q, v, period_s=robot.ipo_period_s, cutoff_hz=cutoff
+            names, stamps, q, v, period_s=robot.ipo_period_s, inputs=inputs
         )
     except DatasetError as err:
         raise BagError(f'{config.bag}: {config.reference_source}: {err}') from err

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import ctypes
 import enum
+import json
 import logging
 import math
 import time
@@ -39,6 +40,7 @@ from typing import Literal
 import numpy as np
 import torch
 
+from id_learning.dataset.inputs import InputDefinition
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.predictor.acceleration import CausalAccelerationEstimator
 from id_learning.predictor.config import GuardConfig
@@ -262,6 +264,10 @@ class FeedForwardPredictor:
         self._last_stamp_ns: int | None = None
         self._last_receive_ns: int | None = None
         self._is_stale = False
+        #: The artifact's input definitions (``from_artifact``): what the model is served on and
+        #: what it was fitted on; None where unknown.
+        self.inputs: InputDefinition | None = None
+        self.fitting_inputs: InputDefinition | None = None
 
     # -- construction -----------------------------------------------------------------------------
     @classmethod
@@ -278,17 +284,21 @@ class FeedForwardPredictor:
         Raises:
             CheckpointError: the artifact is invalid or belongs to another robot.
         """
+        from id_learning.models.artifact import METADATA_FILE, artifact_inputs
         from id_learning.models.registry import load_model
 
         config = config or GuardConfig(period_s=robot.ipo_period_s)
         model = load_model(Path(folder), robot)
-        return cls(
+        predictor = cls(
             model,
             robot.limits.torque,
             config,
             training_range(model.fitted_metadata(), robot),
             inference=inference,
         )
+        metadata = json.loads((Path(folder) / METADATA_FILE).read_text(encoding='utf-8'))
+        predictor.inputs, predictor.fitting_inputs = artifact_inputs(metadata)
+        return predictor
 
     def warm_up(self, calls: int = 25) -> None:
         """Run the guards and the model on a sample at rest, leaving no trace in the state.

@@ -1,12 +1,12 @@
 """The reference a controller would send, rebuilt from recorded joint states (for the replay).
 
 A controller's reference (q, v, a) is smooth: it comes from the interpolator, not from encoders.
-Recorded joint states carry measurement noise, and the models were trained on zero-phase
-low-passed signals with accelerations by central differences (``dataset.preprocess``). The replay
-therefore rebuilds the reference the same way, over the whole replayed span at once (it knows the
-future, as the interpolator does):
+Recorded joint states carry measurement noise; models are fitted and scored on inputs made from
+them by an input definition (``dataset.inputs``: a controller's, by default, whose velocity
+smoothing sits far above the motion's band). The replay rebuilds the reference the same way, over
+the whole replayed span at once (it knows the future, as the interpolator does):
 
-1. optionally, the zero-phase Butterworth low-pass of q and v with the robot's cut-offs;
+1. q and v low-passed (zero-phase Butterworth) as the input definition says, or kept as recorded;
 2. a = central differences of v over the actual stamps (second-order one-sided at both ends).
 """
 
@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import DatasetError
 
 __all__ = ['Reference', 'reference_from_states']
@@ -47,8 +48,7 @@ def reference_from_states(
     v: np.ndarray,
     *,
     period_s: float,
-    cutoff_hz: np.ndarray | None = None,
-    filter_order: int = 4,
+    inputs: InputDefinition | None = None,
 ) -> Reference:
     """Positions, velocities and accelerations of each sample of a recorded run.
 
@@ -57,9 +57,9 @@ def reference_from_states(
         stamps_ns: (N,) strictly increasing stamps [ns].
         q: (N, n) positions [rad].
         v: (N, n) velocities [rad/s].
-        period_s: the sample period the filter assumes [s].
-        cutoff_hz: (n,) low-pass cut-offs [Hz]; None leaves q and v unfiltered.
-        filter_order: Butterworth order of each pass.
+        period_s: the sample period the filters assume [s].
+        inputs: how q and v are smoothed (its cut-offs in ``joints`` order); None keeps them as
+            recorded.
 
     Raises:
         DatasetError: fewer than 3 samples, stamps not increasing, or too few for the filter.
@@ -71,12 +71,9 @@ def reference_from_states(
         raise DatasetError('reference stamps must increase strictly')
     q = np.asarray(q, dtype=float)
     v = np.asarray(v, dtype=float)
-    if cutoff_hz is not None:
-        # Imported here: scipy.signal takes seconds to import, and only the filter needs it.
-        from id_learning.dataset.preprocess import lowpass
-
-        q = lowpass(q, np.asarray(cutoff_hz, dtype=float), period_s, filter_order)
-        v = lowpass(v, np.asarray(cutoff_hz, dtype=float), period_s, filter_order)
+    if inputs is not None:
+        smoothed = inputs.motion(q, v, period_s)
+        q, v = smoothed.q, smoothed.v
     t_s = (stamps - stamps[0]) / NS_PER_S
     a = np.gradient(v, t_s, axis=0, edge_order=2)
     return Reference(tuple(joints), stamps, q, v, a)

@@ -33,6 +33,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, prepare_dataset
 from id_learning.dataset.recording import load_recording
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
@@ -41,6 +42,7 @@ from id_learning.models.base import InverseDynamicsModel
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import configure_torch, select_device
 from id_learning.robot.config import RobotConfig
+from id_learning.twin import read_noise_free_torque
 
 __all__ = [
     'METRICS_FILE',
@@ -161,26 +163,38 @@ def data_sha256(dataset: Dataset) -> str:
 
 
 def preprocess_to_dict(config: PreprocessConfig, dataset: Dataset) -> dict[str, Any]:
-    """The preprocessing settings as used (cut-offs resolved), JSON-ready."""
+    """The preprocessing settings as used (cut-offs and inputs resolved), JSON-ready.
+
+    ``inputs`` is the input definition a model is scored and served on (a controller's);
+    ``fitting_inputs`` the one it was fitted on (the same, or the study's filtered inputs).
+    """
     return {
         'target': config.target,
+        'mode': config.mode,
         'filter': 'zero-phase Butterworth low-pass (scipy sosfiltfilt)',
         'filter_order': config.filter_order,
         'cutoff_hz': np.asarray(dataset.cutoff_hz, dtype=float).tolist(),
         'train_fraction': config.train_fraction,
         'jitter_tolerance': config.jitter_tolerance,
         'min_filter_periods': config.min_filter_periods,
-        'acceleration': 'central differences of the filtered velocity',
+        'inputs': dataset.controller_inputs.to_dict(),
+        'fitting_inputs': dataset.fitting_inputs.to_dict(),
     }
 
 
 def preprocess_from_dict(data: dict[str, Any]) -> PreprocessConfig:
     """Rebuild the PreprocessConfig of a run from ``preprocess_to_dict`` output."""
     try:
+        inputs = data.get('inputs')
         return PreprocessConfig(
             target=data['target'],
+            # Runs written before the mode existed were fitted the study's way.
+            mode=data.get('mode', 'study'),
             filter_order=int(data['filter_order']),
             cutoff_hz=tuple(float(x) for x in data['cutoff_hz']),
+            input_smoothing_hz=None
+            if inputs is None
+            else InputDefinition.from_dict(inputs).velocity_cutoff_hz,
             train_fraction=float(data['train_fraction']),
             jitter_tolerance=float(data['jitter_tolerance']),
             min_filter_periods=float(data['min_filter_periods']),
@@ -200,7 +214,9 @@ def load_datasets(
         recording = load_recording(
             Path(bag), robot, require_current=config.target == 'motor', progress=progress
         )
-        datasets.append(prepare_dataset(recording, robot, config))
+        dataset = prepare_dataset(recording, robot, config)
+        clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)
+        datasets.append(replace(dataset, tau_clean=clean) if clean is not None else dataset)
         _LOG.info('%s: %d samples', bag, recording.n_samples)
     return datasets
 
@@ -221,10 +237,15 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
                 f'{other.source}: joints/target {other.joints}/{other.target} differ from '
                 f'{first.source}: {first.joints}/{first.target}'
             )
-        if other.period_s != first.period_s or not np.array_equal(
-            other.cutoff_hz, first.cutoff_hz
+        if (
+            other.period_s != first.period_s
+            or not np.array_equal(other.cutoff_hz, first.cutoff_hz)
+            or other.mode != first.mode
+            or other.controller_inputs != first.controller_inputs
         ):
-            raise DatasetError(f'{other.source}: period or cut-offs differ from {first.source}')
+            raise DatasetError(
+                f'{other.source}: period, cut-offs or inputs differ from {first.source}'
+            )
     train_rows = [slice(0, d.n_train) for d in datasets]
     test_rows = [slice(d.n_train, len(d.q)) for d in datasets]
     segments: list[dict[str, Any]] = []
@@ -243,7 +264,13 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
         parts += [getattr(d, name)[rows] for d, rows in zip(datasets, test_rows, strict=True)]
         return np.concatenate(parts, axis=0)
 
+    def stack_motion(name: str) -> Motion:
+        parts = [getattr(d, name).take(rows) for d, rows in zip(datasets, train_rows, strict=True)]
+        parts += [getattr(d, name).take(rows) for d, rows in zip(datasets, test_rows, strict=True)]
+        return Motion.concatenate(parts)
+
     q, v, a, tau = stack('q'), stack('v'), stack('a'), stack('tau')
+    has_clean = all(d.tau_clean is not None for d in datasets)
     return Dataset(
         joints=first.joints,
         target=first.target,
@@ -259,6 +286,11 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
         target_scaler=MinMaxScaler().fit(tau[:n_train]),
         cutoff_hz=first.cutoff_hz,
         filter_order=first.filter_order,
+        mode=first.mode,
+        controller=stack_motion('controller'),
+        study=stack_motion('study'),
+        controller_inputs=first.controller_inputs,
+        tau_clean=stack('tau_clean') if has_clean else None,
         regularise_report=first.regularise_report if len(datasets) == 1 else None,
         source=' + '.join(d.source for d in datasets),
         extra={'segments': segments},
@@ -266,29 +298,36 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
 
 
 def concatenate_for_evaluation(
-    datasets: Sequence[Dataset], keep: Sequence[slice], target_scaler: MinMaxScaler
+    datasets: Sequence[Dataset], seen: Sequence[int], target_scaler: MinMaxScaler
 ) -> Dataset:
-    """Concatenate the kept rows of preprocessed recordings, in order, as one all-test dataset.
+    """Concatenate whole preprocessed recordings, in order, as one dataset to evaluate on.
 
-    Nothing of it is for training (``n_train`` is 0): every recording's kept rows form one
-    contiguous test segment in ``extra['segments']``. The label scaler is the run's.
+    Nothing of it is for training (``n_train`` is 0). Each recording is one segment in
+    ``extra['segments']``: its first ``seen`` rows (the training part, when a model saw it) are
+    its 'train' range, the rest its 'test' range, which is what is scored. The recordings stay
+    whole so that a torque filtered like the labels is filtered over the whole recording, as the
+    labels were. The label scaler is the run's.
     """
     segments: list[dict[str, Any]] = []
     start = 0
-    for d, rows in zip(datasets, keep, strict=True):
-        stop = start + len(d.q[rows])
-        segments.append({'source': d.source, 'train': [start, start], 'test': [start, stop]})
+    for d, n_seen in zip(datasets, seen, strict=True):
+        stop = start + len(d.q)
+        segments.append(
+            {'source': d.source, 'train': [start, start + n_seen], 'test': [start + n_seen, stop]}
+        )
         start = stop
-    if start == 0:
+    if sum(s['test'][1] - s['test'][0] for s in segments) == 0:
         raise DatasetError('no samples left to evaluate')
 
     def stack(name: str) -> np.ndarray:
-        return np.concatenate(
-            [getattr(d, name)[rows] for d, rows in zip(datasets, keep, strict=True)], axis=0
-        )
+        return np.concatenate([getattr(d, name) for d in datasets], axis=0)
+
+    def stack_motion(name: str) -> Motion:
+        return Motion.concatenate([getattr(d, name) for d in datasets])
 
     q, v, a = stack('q'), stack('v'), stack('a')
     first = datasets[0]
+    has_clean = all(d.tau_clean is not None for d in datasets)
     return Dataset(
         joints=first.joints,
         target=first.target,
@@ -304,6 +343,11 @@ def concatenate_for_evaluation(
         target_scaler=target_scaler,
         cutoff_hz=first.cutoff_hz,
         filter_order=first.filter_order,
+        mode=first.mode,
+        controller=stack_motion('controller'),
+        study=stack_motion('study'),
+        controller_inputs=first.controller_inputs,
+        tau_clean=stack('tau_clean') if has_clean else None,
         source=' + '.join(d.source for d in datasets),
         extra={'segments': segments},
     )
@@ -456,6 +500,24 @@ def _machine() -> dict[str, Any]:
     }
 
 
+def _metric_notes(dataset: Dataset) -> dict[str, Any]:
+    """What the metrics mean, and the label-noise floor where the noise-free torque is known."""
+    from id_learning.evaluation.scoring import label_noise_floor
+
+    floor = label_noise_floor(dataset)
+    return {
+        'metric': (
+            "through_filter: each model on a controller's inputs along whole recordings, its "
+            'torque low-passed like the labels, against the labels on the test part '
+            "(rmse_nm = rmse_through_filter_nm); study_way: on the study's low-passed inputs, "
+            'the torque against the labels as is'
+        ),
+        'inputs': dataset.controller_inputs.to_dict(),
+        'label_filter': dataset.label_filter,
+        'label_noise_floor_nm': None if floor is None else floor.tolist(),
+    }
+
+
 def _write_json(path: Path, document: dict[str, Any]) -> None:
     path.write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
 
@@ -471,31 +533,32 @@ def _evaluate(
     *,
     timing: bool,
 ) -> tuple[dict[str, dict[str, Any]], dict[str, np.ndarray]]:
-    """Errors (and timings) of each model on ``rows``; fills the ModelResult metrics in place.
+    """Errors (and timings) of each model on the test rows; fills the ModelResult metrics.
+
+    The errors are ``evaluation.scoring.score_model``'s: through the label filter first.
 
     Returns:
-        The metrics entries and the predictions (N_eval, n) [N*m], by kind.
+        The metrics entries and the predictions through the filter on the test rows
+        (N_eval, n) [N*m], by kind.
     """
-    from id_learning.evaluation.metrics import error_metrics
+    from id_learning.evaluation.scoring import score_model
 
-    index = np.concatenate([np.arange(a, b) for a, b in rows])
-    target = dataset.tau[index]
     table: dict[str, dict[str, Any]] = {}
     predictions: dict[str, np.ndarray] = {}
     for kind, result in results.items():
-        # Warm up (first-call allocations), then time the batched prediction the metrics use.
-        a, b = rows[0]
-        predict_rows(result.model, dataset, [(a, min(b, a + 64))])
         start = time.perf_counter()
-        prediction = predictions[kind] = predict_rows(result.model, dataset, rows)
+        score = score_model(result.model, dataset, scale)
         seconds = time.perf_counter() - start
-        entry = error_metrics(prediction, target, scale).to_dict()
+        predictions[kind] = score.filtered
+        entry = dict(score.metrics)
         if timing:
             a, b = max(rows, key=lambda r: r[1] - r[0])
-            entry['inference_seconds_per_sample'] = seconds / len(index)
+            # Every sample is predicted twice (controller's and the study's inputs).
+            entry['inference_seconds_per_sample'] = seconds / (2 * len(dataset.tau))
+            motion = dataset.controller
             entry.update(
                 measure_inference(
-                    result.model, dataset.q[a:b], dataset.v[a:b], dataset.a[a:b], repeats=0
+                    result.model, motion.q[a:b], motion.v[a:b], motion.a[a:b], repeats=0
                 )
             )
         result.metrics.update(entry)
@@ -516,6 +579,7 @@ def _report(
     predictions: dict[str, np.ndarray],
 ) -> tuple[Path, list[dict[str, Any]]]:
     from id_learning.evaluation.report import ReportInput, write_report
+    from id_learning.evaluation.scoring import label_noise_floor
 
     report = ReportInput(
         title=title,
@@ -527,6 +591,7 @@ def _report(
         models={kind: r.model for kind, r in results.items()},
         metrics={kind: r.metrics for kind, r in results.items()},
         predictions=predictions,
+        noise_floor=label_noise_floor(dataset),
     )
     return write_report(report, out)
 
@@ -664,6 +729,7 @@ def train_run(
         'target': target,
         'joints': list(robot.joints),
         'evaluated_on': evaluated_on,
+        **_metric_notes(dataset),
         'n_samples': int(sum(b - a for a, b in rows)),
         'target_scale_nm': scale.tolist(),
         'bags': training_data['bags'],
@@ -734,16 +800,16 @@ def evaluate_run(
     bags = [Path(b) for b in bags]
     datasets = load_datasets(bags, robot, config, progress=progress)
     trained_on = {entry['sha256'] for entry in run['training_data']['bags']}
-    keep, parts = [], []
+    seen, parts = [], []
     for bag, part in zip(bags, datasets, strict=True):
         if bag_sha256(bag) in trained_on:
-            keep.append(slice(part.n_train, len(part.q)))
+            seen.append(part.n_train)
             parts.append(f'{bag}: test part only (a training bag of the run)')
         else:
-            keep.append(slice(0, len(part.q)))
+            seen.append(0)
             parts.append(f'{bag}: whole recording')
     target_scaler = MinMaxScaler.from_dict(run['target_scaler'])
-    dataset = concatenate_for_evaluation(datasets, keep, target_scaler)
+    dataset = concatenate_for_evaluation(datasets, seen, target_scaler)
     rows = segment_rows(dataset, 'test')
     scale = target_scaler.scale()
     out.mkdir(parents=True, exist_ok=True)
@@ -771,6 +837,7 @@ def evaluate_run(
         'target': config.target,
         'joints': list(robot.joints),
         'evaluated_on': evaluated_on,
+        **_metric_notes(dataset),
         'n_samples': int(sum(b - a for a, b in rows)),
         'target_scale_nm': scale.tolist(),
         'bags': [{'path': str(b), 'sha256': bag_sha256(b)} for b in bags],

@@ -51,6 +51,7 @@ __all__ = [
     'TwinConfig',
     'TwinResult',
     'load_twin_config',
+    'read_noise_free_torque',
     'simulate',
     'true_dynamics',
     'write_twin_output',
@@ -491,3 +492,30 @@ def write_twin_output(
     (out / TWIN_CONFIG_COPY).write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
     _LOG.info('twin: wrote %d samples to %s', result.recording.n_samples, out)
     return out
+
+
+def read_noise_free_torque(
+    bag: Path | str, target: str, stamps_ns: np.ndarray
+) -> np.ndarray | None:
+    """The twin's noise-free label torque at the given stamps, or None for a bag without it.
+
+    Args:
+        bag: a bag folder written by ``write_twin_output``.
+        target: 'motor' (tau_u) or 'joint' (joint torque).
+        stamps_ns: (N,) the stamps wanted (a preprocessed recording's grid).
+
+    Returns:
+        (N, n) noise-free tau_u or joint torque [N*m]; None when the bag holds no ground truth
+        or it lacks one of the stamps (the recording was edited after the twin wrote it).
+    """
+    path = Path(bag) / GROUND_TRUTH_ARRAYS
+    if not path.is_file():
+        return None
+    key = 'tau_u_clean' if target == 'motor' else 'tau_joint_clean'
+    with np.load(path) as arrays:
+        stamps, clean = arrays['stamps_ns'], arrays[key]
+    rows = np.searchsorted(stamps, stamps_ns)
+    if rows.max(initial=0) >= len(stamps) or not np.array_equal(stamps[rows], stamps_ns):
+        return None
+    torque: np.ndarray = clean[rows].astype(float)
+    return torque

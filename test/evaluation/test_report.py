@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -9,7 +10,6 @@ import pytest
 
 from id_learning.dataset.preprocess import prepare_dataset
 from id_learning.evaluation import report as report_module
-from id_learning.evaluation.metrics import error_metrics
 from id_learning.evaluation.report import (
     HIGH_FRICTION_SHARE,
     ReportInput,
@@ -18,6 +18,7 @@ from id_learning.evaluation.report import (
     high_friction_axes,
     write_report,
 )
+from id_learning.evaluation.scoring import label_noise_floor, score_model
 from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
 from id_learning.models.data import TrainingData, nominal_rnea
 
@@ -161,9 +162,8 @@ class NominalPlusViscous(InverseDynamicsModel):
 @pytest.fixture(scope='module')
 def report_input(mabi, short_twin):
     _, result = short_twin
-    dataset = prepare_dataset(result.recording, mabi)
+    dataset = replace(prepare_dataset(result.recording, mabi), tau_clean=result.tau_u_clean)
     rows = [(dataset.n_train, len(dataset.q))]
-    test = slice(*rows[0])
     scale = dataset.target_scaler.scale()
     models = {
         'rnea_lq': NominalPlusViscous(mabi, 300.0),
@@ -171,9 +171,8 @@ def report_input(mabi, short_twin):
     }
     metrics = {}
     for kind, model in models.items():
-        prediction = model.predict(dataset.q[test], dataset.v[test], dataset.a[test])
         metrics[kind] = {
-            **error_metrics(prediction, dataset.tau[test], scale).to_dict(),
+            **score_model(model, dataset, scale).metrics,
             'train_seconds': 1.5,
             'history': {'epochs': 4, 'stopped_by': 'early_stopping'},
             'inference_seconds_per_sample': 2e-6,
@@ -189,6 +188,7 @@ def report_input(mabi, short_twin):
         target_scale=scale,
         models=models,
         metrics=metrics,
+        noise_floor=label_noise_floor(dataset),
     )
 
 
@@ -200,7 +200,11 @@ def test_the_report_has_both_rmse_tables_timings_findings_and_four_png_figures(
     assert text.startswith('# A test report')
     assert '| RNEA+LQ |' in text
     assert '| RNEA+MLP |' in text
-    assert 'Per-joint test RMSE [N·m]' in text
+    assert 'Per-joint test RMSE through the label filter [N·m]' in text
+    assert '| label-noise floor |' in text
+    assert 'as a multiple of the label-noise floor' in text
+    assert 'Against the noise-free torque (twin ground truth)' in text
+    assert "The study's way [N·m] (for comparison)" in text
     assert 'normalised [-1, 1] scale' in text
     assert "**The study's Table 1 is not bundled**" in text
     assert 'arXiv:2506.17994' in text

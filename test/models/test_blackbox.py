@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 from safetensors.numpy import load_file, save_file
+from support import quick_preprocess
 
 from id_learning.dataset import prepare_dataset
 from id_learning.errors import CheckpointError, ConfigError
@@ -42,7 +43,8 @@ def one_torch_thread():
 @pytest.fixture(scope='module')
 def data(short_twin) -> TrainingData:
     config, result = short_twin
-    return TrainingData(prepare_dataset(result.recording, config.robot), config.robot)
+    dataset = prepare_dataset(result.recording, config.robot, quick_preprocess())
+    return TrainingData(dataset, config.robot)
 
 
 @pytest.fixture(scope='module')

@@ -7,7 +7,7 @@ import copy
 import numpy as np
 import pytest
 import torch
-from support import sine_recording
+from support import quick_preprocess, sine_recording
 
 from id_learning.dataset import prepare_dataset
 from id_learning.models.data import TrainingData
@@ -38,7 +38,7 @@ RTOL = 1e-9
 
 @pytest.fixture(scope='module')
 def data(mabi) -> TrainingData:
-    return TrainingData(prepare_dataset(sine_recording(1250), mabi), mabi)
+    return TrainingData(prepare_dataset(sine_recording(1250), mabi, quick_preprocess()), mabi)
 
 
 @pytest.fixture(scope='module')

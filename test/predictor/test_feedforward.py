@@ -152,7 +152,8 @@ def test_estimated_accelerations_match_the_batch_estimate_offline(kind, tiny_art
     a = causal_acceleration(stamps, v, cutoff_hz=20.0)
     assert np.abs(a[1:]).max() > 0  # the estimate is not trivially zero
     offline = load_model(tiny_artifacts[kind], mabi).predict(q, v, a)
-    np.testing.assert_allclose(np.array(online), offline, rtol=1e-5, atol=1e-6)
+    # float64 one-sample path against the float32 network: equal to float32 rounding
+    np.testing.assert_allclose(np.array(online), offline, rtol=1e-5, atol=1e-4)
 
 
 def test_predictor_reorders_joints_by_name(linear):

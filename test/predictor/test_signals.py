@@ -8,6 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import DatasetError
 from id_learning.predictor import (
     CausalAccelerationEstimator,
@@ -81,12 +82,33 @@ def test_the_reference_low_pass_removes_noise_but_keeps_a_slow_motion():
     v = v_true + rng.normal(scale=0.01, size=v_true.shape)
     q = np.zeros_like(v)
     raw = reference_from_states(('j',), stamps, q, v, period_s=0.008)
-    smooth = reference_from_states(('j',), stamps, q, v, period_s=0.008, cutoff_hz=np.array([1.0]))
+    smooth = reference_from_states(
+        ('j',), stamps, q, v, period_s=0.008, inputs=InputDefinition.study(np.array([1.0]))
+    )
     a_true = 2 * np.pi * 0.1 * np.cos(2 * np.pi * 0.1 * t)
     inner = slice(200, -200)
     error_raw = np.std(raw.a[inner, 0] - a_true[inner])
     error_smooth = np.std(smooth.a[inner, 0] - a_true[inner])
     assert error_smooth < 0.05 * error_raw
+
+
+def test_a_controller_reference_keeps_recorded_positions_and_smooths_velocities_only():
+    stamps = np.arange(2000) * PERIOD_NS
+    t = stamps * 1e-9
+    rng = np.random.default_rng(1)
+    v_true = np.sin(2 * np.pi * 0.1 * t)[:, None]
+    v = v_true + rng.normal(scale=0.01, size=v_true.shape)
+    q = rng.normal(size=v.shape)  # any positions: they must come through untouched
+    inputs = InputDefinition.controller(np.array([10.0]))
+    reference = reference_from_states(('j',), stamps, q, v, period_s=0.008, inputs=inputs)
+    motion = inputs.motion(q, v, 0.008)
+
+    np.testing.assert_array_equal(reference.q, q)
+    np.testing.assert_allclose(reference.v, motion.v, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(reference.a, motion.a, rtol=1e-9, atol=1e-9)
+    # 10 Hz keeps the 0.1 Hz motion (a low-pass at the labels' 0.3 Hz would not)
+    inner = slice(200, -200)
+    assert np.max(np.abs(reference.v[inner] - v_true[inner])) < 0.02
 
 
 def test_reference_refuses_too_few_or_unordered_samples():

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from support import sine_recording
+from support import quick_preprocess, sine_recording
 
 #: Per kind, the smallest hyper-parameters that still exercise the model's code paths.
 TINY_HYPER: dict[str, dict[str, object]] = {
@@ -48,7 +48,8 @@ def build_tiny_artifacts(folder: Path, robot, kinds=None) -> dict[str, Path]:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        data = TrainingData(prepare_dataset(training_recording(), robot), robot)
+        preprocess = quick_preprocess(robot.n_joints)
+        data = TrainingData(prepare_dataset(training_recording(), robot, preprocess), robot)
         out = {}
         for kind in kinds or STUDY_MODELS:
             model = make_model(kind, robot, **TINY_HYPER[kind]).fit(data)

@@ -30,7 +30,7 @@ def test_each_cycle_holds_the_recorded_bytes_of_its_stamp_then_the_reference(bag
     from rclpy.serialization import deserialize_message
     from trajectory_msgs.msg import JointTrajectory
 
-    plan = build_plan(ReplayConfig(bag=str(bag), reference_lowpass=False), mabi)
+    plan = build_plan(ReplayConfig(bag=str(bag), reference_inputs='recorded'), mabi)
     assert len(plan.cycles) == 400
     assert plan.message_count == 800
     assert plan.period_ns == PERIOD_NS

@@ -11,7 +11,8 @@ import pytest
 import yaml
 from support import REPO, twin_config
 
-from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
+from id_learning.dataset.inputs import InputDefinition
+from id_learning.dataset.preprocess import PreprocessConfig, lowpass, prepare_dataset
 from id_learning.dataset.recording import load_recording
 from id_learning.errors import CheckpointError, ConfigError
 from id_learning.models.registry import load_model
@@ -32,11 +33,14 @@ FAST = {'mlp': {'max_epochs': 2}}
 
 @pytest.fixture(scope='module')
 def bags(tmp_path_factory):
-    """Two 45 s default twin recordings with different seeds (different excitations)."""
+    """Two 51.5 s default twin recordings with different seeds (different excitations).
+
+    Long enough to fit through the 0.3 Hz label filter, which reads 11 s on either side.
+    """
     folder = tmp_path_factory.mktemp('bags')
     paths = []
     for seed in (11, 12):
-        config = twin_config(45.0, seed=seed)
+        config = twin_config(60.0, seed=seed)
         paths.append(write_twin_output(simulate(config), config, folder / f'twin_{seed}'))
     return paths
 
@@ -103,11 +107,56 @@ def test_a_run_writes_metrics_with_per_joint_errors_and_timings(run, mabi):
     assert '| MLP |' in report
 
 
+def test_metrics_score_through_the_filter_against_labels_and_the_twins_truth(run, bags, mabi):
+    """Each bag scored independently: scipy's filter over the whole recording, its test part."""
+    metrics = json.loads((run.out / 'metrics.json').read_text())
+    model = load_model(run.out / 'models/rnea_lq', mabi)
+    sums = {key: np.zeros(mabi.n_joints) for key in ('label', 'truth', 'raw', 'floor', 'study')}
+    count = 0
+    for bag in bags:
+        dataset = prepare_dataset(load_recording(bag, mabi), mabi)
+        with np.load(bag / 'ground_truth.npz') as arrays:
+            clean = arrays['tau_u_clean'].astype(float)
+        motion, test = dataset.controller, slice(dataset.n_train, None)
+        torque = model.predict(motion.q, motion.v, motion.a)
+        cutoff, period = dataset.cutoff_hz, dataset.period_s
+        filtered, clean_filtered = (lowpass(x, cutoff, period) for x in (torque, clean))
+        study = model.predict(*(getattr(dataset.study, k)[test] for k in ('q', 'v', 'a')))
+        errors = {
+            'label': filtered[test] - dataset.tau[test],
+            'truth': filtered[test] - clean_filtered[test],
+            'raw': torque[test] - clean[test],
+            'floor': dataset.tau[test] - clean_filtered[test],
+            'study': study - dataset.tau[test],
+        }
+        for key, error in errors.items():
+            sums[key] += np.sum(error**2, axis=0)
+        count += len(dataset.tau) - dataset.n_train
+    rms = {key: np.sqrt(value / count) for key, value in sums.items()}
+    entry = metrics['models']['rnea_lq']
+
+    np.testing.assert_allclose(entry['rmse_through_filter_nm'], rms['label'], rtol=1e-9)
+    np.testing.assert_allclose(entry['rmse_nm'], rms['label'], rtol=1e-9)
+    np.testing.assert_allclose(entry['rmse_true_through_filter_nm'], rms['truth'], rtol=1e-6)
+    np.testing.assert_allclose(entry['rmse_true_nm'], rms['raw'], rtol=1e-6)
+    np.testing.assert_allclose(metrics['label_noise_floor_nm'], rms['floor'], rtol=1e-6)
+    np.testing.assert_allclose(
+        entry['rmse_through_filter_over_floor'], rms['label'] / rms['floor'], rtol=1e-6
+    )
+    np.testing.assert_allclose(entry['study_way']['rmse_nm'], rms['study'], rtol=1e-9)
+    assert metrics['inputs']['name'] == 'controller'
+    assert metrics['label_filter']['cutoff_hz'] == [1.2, 0.3, 0.3, 0.7, 0.5, 0.7]
+
+
 def test_artifacts_carry_preprocessing_data_hashes_and_metrics(run, bags):
     document = json.loads((run.out / 'models/mlp/model.json').read_text())
     assert document['preprocessing']['target'] == 'motor'
+    assert document['preprocessing']['mode'] == 'through_filter'
     assert document['preprocessing']['cutoff_hz'] == [1.2, 0.3, 0.3, 0.7, 0.5, 0.7]
     assert document['preprocessing']['train_fraction'] == 0.7
+    inputs = InputDefinition.from_dict(document['preprocessing']['inputs'])
+    assert inputs == InputDefinition.controller(np.full(6, 10.0))
+    assert document['preprocessing']['fitting_inputs'] == document['preprocessing']['inputs']
     training = document['training_data']
     assert [b['sha256'] for b in training['bags']] == [bag_sha256(b) for b in bags]
     assert training['data_sha256'] == data_sha256(run.dataset)
@@ -205,6 +254,15 @@ def test_evaluate_takes_the_test_part_of_a_training_bag_and_all_of_a_new_one(
     assert 'whole recording' in result.metrics['evaluated_on']
     # Errors are normalised with the run's training scaler, so they read like the run's own.
     assert result.metrics['target_scale_nm'] == run.metrics['target_scale_nm']
+    # The test part of a training bag is scored exactly as the run scored it: the filtered
+    # torque of its whole recording, not of the test part alone.
+    alone = evaluate_run(run.out, [bags[0]], mabi, tmp_path / 'eval_first', progress=False)
+    model = run.models['rnea_lq'].model
+    torque = model.predict(first.controller.q, first.controller.v, first.controller.a)
+    filtered = lowpass(torque, first.cutoff_hz, first.period_s)
+    test = slice(first.n_train, None)
+    expected = np.sqrt(np.mean((filtered[test] - first.tau[test]) ** 2, axis=0))
+    np.testing.assert_allclose(alone.metrics['models']['rnea_lq']['rmse_nm'], expected, rtol=1e-9)
     assert (tmp_path / 'eval/report.md').is_file()
     assert set(result.metrics['models']) == {'rnea_lq', 'mlp'}
 
