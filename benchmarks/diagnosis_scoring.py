@@ -52,8 +52,8 @@ from id_learning.dataset.preprocess import lowpass  # noqa: E402
 from id_learning.diagnosis import (  # noqa: E402
     DiagnosisResult,
     NominalModel,
-    candidate_columns,
     column_motion,
+    effect_columns,
     evaluation_rows,
     filtered_prediction,
     run_diagnosis,
@@ -232,8 +232,7 @@ def torque_error(
     q, v, a, jerk = column_motion(dataset)
     quantities = result.nominal_model.evaluate(q, v, a, jerk, derivatives=True, regressor=True)
     fitted = sum(
-        candidate_columns(e.spec, quantities, result.nominal_model) @ e.coefficients
-        for e in effects
+        effect_columns(e.spec, quantities, result.nominal_model) @ e.coefficients for e in effects
     )
     rows = evaluation_rows(dataset, result.settings)['test']
     truth = filtered(true_torque, dataset)[rows]

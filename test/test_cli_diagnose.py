@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from support import REPO, run_cli, twin_config
 
-from id_learning.diagnosis import AugmentedModel
 from id_learning.models.registry import load_model
+from id_learning.physics import AugmentedModel
 from id_learning.twin import simulate, write_twin_output
 
 ROBOT = str(REPO / 'config/mabi_max100.yaml')

@@ -3,25 +3,23 @@
 ``diagnose`` compares the nominal model (URDF rigid-body dynamics plus datasheet drives) with
 recordings, selects the named effects (the twin's stable names) that explain the disagreement,
 reports alias sets, untestable effects and any unexplained remainder, and refits the augmented
-model (``augmented_torque``).
+model (``augmented_torque``, a ``physics.AugmentedModel``).
 """
 
 from __future__ import annotations
 
-from id_learning.diagnosis.candidates import CandidateSpec, NominalModel, candidate_columns
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.pipeline import (
-    AugmentedModel,
     DiagnosisResult,
     FoundEffect,
     Remainder,
     augmented_torque,
     column_motion,
-    diagnose,
     evaluation_rows,
     filtered_prediction,
     run_diagnosis,
 )
+from id_learning.diagnosis.report import diagnose
 from id_learning.diagnosis.selection import AliasSet
 from id_learning.diagnosis.statistics import (
     NoiseEstimate,
@@ -29,25 +27,24 @@ from id_learning.diagnosis.statistics import (
     estimate_noise,
     integrated_autocorrelation,
 )
+from id_learning.diagnosis.training_part import diagnose_training_part, training_part
 
 __all__ = [
     'AliasSet',
-    'AugmentedModel',
-    'CandidateSpec',
     'DiagnosisConfig',
     'DiagnosisResult',
     'FoundEffect',
     'NoiseEstimate',
-    'NominalModel',
     'Remainder',
     'augmented_torque',
-    'candidate_columns',
     'column_motion',
     'diagnose',
+    'diagnose_training_part',
     'effective_sample_size',
     'estimate_noise',
     'evaluation_rows',
     'filtered_prediction',
     'integrated_autocorrelation',
     'run_diagnosis',
+    'training_part',
 ]

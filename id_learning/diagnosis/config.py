@@ -7,7 +7,7 @@ from typing import Any
 
 from id_learning.dataset.preprocess import PreprocessConfig
 from id_learning.errors import ConfigError
-from id_learning.twin.effects import EFFECT_NAMES
+from id_learning.physics.terms import EFFECT_NAMES
 
 __all__ = ['DiagnosisConfig']
 

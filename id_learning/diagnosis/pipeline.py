@@ -20,10 +20,9 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,18 +32,11 @@ from id_learning.dataset.preprocess import Dataset, prepare_dataset
 from id_learning.dataset.recording import Recording
 from id_learning.dataset.signals import butterworth, differentiate
 from id_learning.diagnosis.candidates import (
-    JOINT_COLUMNS,
     SPECIAL_CASES,
-    CandidateSpec,
     ExcitationFacts,
-    NominalModel,
-    NominalQuantities,
     PlausibilityFacts,
     build_library,
-    candidate_columns,
     describe_parameters,
-    needs_derivatives,
-    needs_regressor,
     plausibility,
     testability,
 )
@@ -65,17 +57,23 @@ from id_learning.diagnosis.statistics import (
     estimate_noise,
     integrated_autocorrelation,
 )
-from id_learning.errors import DatasetError, RobotModelError
+from id_learning.errors import DatasetError
+from id_learning.physics.augmented import AugmentedModel
+from id_learning.physics.nominal import NominalModel, NominalQuantities
+from id_learning.physics.terms import (
+    EffectSpec,
+    effect_columns,
+    needs_derivatives,
+    needs_regressor,
+)
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
-    'AugmentedModel',
     'DiagnosisResult',
     'FoundEffect',
     'Remainder',
     'augmented_torque',
     'column_motion',
-    'diagnose',
     'evaluation_rows',
     'filtered_prediction',
     'run_diagnosis',
@@ -107,7 +105,7 @@ class FoundEffect:
         selection: the tests when it entered (F, p-value, delta BIC, held-out gain).
     """
 
-    spec: CandidateSpec
+    spec: EffectSpec
     status: str
     confidence: str
     coefficients: np.ndarray
@@ -323,124 +321,6 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f'{type(value).__name__} is not JSON serialisable')
 
 
-# -- the augmented model -------------------------------------------------------------------------
-class AugmentedModel:
-    """The nominal model plus identified effects: what a ``rnea_effects`` artifact holds.
-
-    Args:
-        robot: the robot config (URDF, drives).
-        target: 'motor' (tau_u, rotor inertia included) or 'joint'.
-        terms: (effect, coefficients) pairs; each adds ``candidate_columns(effect) @ theta``.
-    """
-
-    def __init__(
-        self,
-        robot: RobotConfig,
-        target: str,
-        terms: Sequence[tuple[CandidateSpec, np.ndarray]],
-    ) -> None:
-        """Store the terms; the URDF is read on first use."""
-        self.robot = robot
-        self.target = target
-        self.terms = [(spec, np.asarray(theta, dtype=float)) for spec, theta in terms]
-
-    @cached_property
-    def nominal(self) -> NominalModel:
-        """The nominal model the effects are added to."""
-        return NominalModel(self.robot, self.target)
-
-    def torque(
-        self, q: np.ndarray, v: np.ndarray, a: np.ndarray, jerk: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Torque (N, n) [N*m] for states (N, n); see ``augmented_torque``."""
-        specs = [spec for spec, _ in self.terms]
-        quantities = self.nominal.evaluate(
-            np.atleast_2d(q),
-            np.atleast_2d(v),
-            np.atleast_2d(a),
-            None if jerk is None else np.atleast_2d(jerk),
-            derivatives=needs_derivatives(specs),
-            regressor=needs_regressor(specs),
-        )
-        tau = quantities.tau_nominal.copy()
-        for spec, theta in self.terms:
-            tau += candidate_columns(spec, quantities, self.nominal) @ theta
-        return tau
-
-    def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
-        """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.
-
-        The single-joint effects (``JOINT_COLUMNS``) of one name and one column are folded: all
-        their joints in one vectorised call with their settings as arrays; the rest go through
-        ``candidate_columns`` as in ``torque``.
-        """
-        groups: dict[str, list[tuple[CandidateSpec, np.ndarray]]] = {}
-        rest: list[tuple[CandidateSpec, np.ndarray]] = []
-        for spec, theta in self.terms:
-            scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
-            if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar:
-                groups.setdefault(spec.name, []).append((spec, theta))
-            else:
-                rest.append((spec, theta))
-        folded = []
-        for name, members in groups.items():
-            joints = np.array([spec.joint for spec, _ in members])
-            keys = members[0][0].settings.keys()
-            settings = {k: np.array([spec.settings[k] for spec, _ in members]) for k in keys}
-            theta = np.array([theta[0] for _, theta in members])
-            folded.append((JOINT_COLUMNS[name], joints, settings, theta))
-        specs = [spec for spec, _ in rest]
-        derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
-        nominal = self.nominal
-
-        def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-            qs = nominal.evaluate(
-                q[None], v[None], a[None], derivatives=derivatives, regressor=regressor
-            )
-            tau: np.ndarray = qs.tau_nominal[0].copy()
-            for columns, joints, settings, theta in folded:
-                np.add.at(tau, joints, columns(qs, joints, settings, nominal)[0][0] * theta)
-            for spec, theta in rest:
-                tau += candidate_columns(spec, qs, nominal)[0] @ theta
-            return tau
-
-        return torque_one
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form; ``from_dict`` rebuilds it for the same robot."""
-        return {
-            'robot': self.robot.name,
-            'joints': list(self.robot.joints),
-            'target': self.target,
-            'terms': [
-                {'spec': spec.to_dict(), 'coefficients': theta.tolist()}
-                for spec, theta in self.terms
-            ],
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any], robot: RobotConfig) -> AugmentedModel:
-        """Rebuild from ``to_dict`` output (or effects.json) for ``robot``.
-
-        Raises:
-            RobotModelError: the saved joints differ from the robot's.
-        """
-        if list(data['joints']) != list(robot.joints):
-            raise RobotModelError(
-                f'the effects were identified for joints {list(data["joints"])} '
-                f'({data.get("robot")}), not for {list(robot.joints)} ({robot.name})'
-            )
-        if 'terms' in data:
-            entries = [(t['spec'], t['coefficients']) for t in data['terms']]
-        else:  # effects.json
-            entries = [(e['model']['spec'], e['model']['coefficients']) for e in data['effects']]
-        terms = [
-            (CandidateSpec.from_dict(spec, robot.joints), np.asarray(theta, dtype=float))
-            for spec, theta in entries
-        ]
-        return cls(robot, str(data['target']), terms)
-
-
 def augmented_torque(
     result: DiagnosisResult,
     q: np.ndarray,
@@ -615,7 +495,7 @@ class _Problem:
         self.step = max(1, int(tau.min() // 6))
         self.trim = _trim_samples(first, config)
         self.weights = self.step / (self.noise.filtered_std_nm**2 * tau)
-        self.library_preview: list[CandidateSpec] = []
+        self.library_preview: list[EffectSpec] = []
         self.recordings: list[_Recording] = []
         self._quantities_for_library()
 
@@ -640,7 +520,7 @@ class _Problem:
         )  # fmt: skip
 
     def _quantities_for_library(self) -> None:
-        probe = [CandidateSpec(name) for name in self.config.effects]
+        probe = [EffectSpec(name) for name in self.config.effects]
         derivatives, regressor = needs_derivatives(probe), needs_regressor(probe)
         all_rows = [_kept_rows(d, self.trim, self.step, self.config) for d in self.datasets]
         self._check_length(all_rows)
@@ -722,14 +602,14 @@ class _Problem:
             ]
         )
 
-    def columns(self, spec: CandidateSpec) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
+    def columns(self, spec: EffectSpec) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
         """Filtered columns per part, raw training columns and the filter's retention."""
         filtered: dict[str, list[np.ndarray]] = {'train': [], 'test': []}
         raw_train = []
         raw_energy = kept_energy = 0.0
         switching = spec.name in SWITCHING_EFFECTS
         for r in self.recordings:
-            x = candidate_columns(spec, r.quantities, self.model)
+            x = effect_columns(spec, r.quantities, self.model)
             xf = _filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
             for part in ('train', 'test'):
                 filtered[part].append(xf[r.rows[part]])
@@ -738,7 +618,7 @@ class _Problem:
             if switching:
                 # Judge the signature on the smooth (filtered) motion: sensor noise in the
                 # recorded motion would pass for high-frequency content.
-                smooth = candidate_columns(spec, r.smooth, self.model)
+                smooth = effect_columns(spec, r.smooth, self.model)
                 raw_energy += float(np.sum(smooth[train] ** 2))
                 kept_energy += float(np.sum(_filter_columns(smooth, r.dataset)[train] ** 2))
         retention = kept_energy / raw_energy if raw_energy > 0 else (0.0 if switching else 1.0)
@@ -764,32 +644,6 @@ class _Problem:
 
 
 # -- the diagnosis --------------------------------------------------------------------------------
-def diagnose(
-    data: Recording | Dataset | Sequence[Recording | Dataset],
-    robot: RobotConfig,
-    config: DiagnosisConfig | None = None,
-    out_dir: Path | str | None = None,
-) -> DiagnosisResult:
-    """Diagnose recordings against the nominal model; write the report when ``out_dir`` is given.
-
-    Args:
-        data: recordings (preprocessed here) or datasets (from ``prepare_dataset``), one robot.
-        robot: the robot config the recordings were made with.
-        config: diagnosis settings; defaults if None.
-        out_dir: folder for report.md, effects.json and the figures; nothing is written if None.
-
-    Raises:
-        DatasetError: the recordings do not match the robot, or are too short to diagnose.
-        ConfigError: an invalid setting.
-    """
-    result = run_diagnosis(data, robot, config)
-    if out_dir is not None:
-        from id_learning.diagnosis.report import write_report
-
-        write_report(result, Path(out_dir))
-    return result
-
-
 def run_diagnosis(
     data: Recording | Dataset | Sequence[Recording | Dataset],
     robot: RobotConfig,
@@ -1141,14 +995,14 @@ def _remainder(
 def _refine(
     problem: _Problem,
     others: dict[str, dict[str, np.ndarray]],
-    spec: CandidateSpec,
+    spec: EffectSpec,
     *,
     y: dict[str, np.ndarray],
     n_eff: dict[str, np.ndarray],
-) -> CandidateSpec | None:
+) -> EffectSpec | None:
     """Tune a selected effect's nonlinear setting on the training part, the others kept."""
 
-    def rss_of(candidate: CandidateSpec) -> tuple[float, Design, Fit]:
+    def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
         cols, _, _ = problem.columns(candidate)
         small = Design(y, {**others, candidate.label: cols}, problem.weights, n_eff)
         fit = small.fit([*others, candidate.label])

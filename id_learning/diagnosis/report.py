@@ -1,20 +1,25 @@
-"""The diagnosis report: DIR/report.md with figures and DIR/effects.json."""
+"""The diagnosis report: DIR/report.md with figures, DIR/effects.json; ``diagnose`` writes both."""
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from id_learning.dataset.preprocess import Dataset
+from id_learning.dataset.recording import Recording
+from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.locate import LOCATION_VARIABLES
-from id_learning.diagnosis.pipeline import DiagnosisResult
+from id_learning.diagnosis.pipeline import DiagnosisResult, run_diagnosis
+from id_learning.physics.augmented import EFFECTS_JSON
+from id_learning.robot.config import RobotConfig
 
-__all__ = ['EFFECTS_JSON', 'REPORT_MD', 'render_summary', 'write_report']
+__all__ = ['EFFECTS_JSON', 'REPORT_MD', 'diagnose', 'render_summary', 'write_report']
 
 _LOG = logging.getLogger(__name__)
-EFFECTS_JSON = 'effects.json'
 REPORT_MD = 'report.md'
 
 
@@ -331,3 +336,27 @@ def render_summary(result: DiagnosisResult) -> str:
     lines += ['waterfall:', head]
     lines += [f'{name:<{width}}' + ''.join(f'{x:>10.3g}' for x in rmse) for name, rmse in rows]
     return '\n'.join(lines)
+
+
+def diagnose(
+    data: Recording | Dataset | Sequence[Recording | Dataset],
+    robot: RobotConfig,
+    config: DiagnosisConfig | None = None,
+    out_dir: Path | str | None = None,
+) -> DiagnosisResult:
+    """Diagnose recordings against the nominal model; write the report when ``out_dir`` is given.
+
+    Args:
+        data: recordings (preprocessed here) or datasets (from ``prepare_dataset``), one robot.
+        robot: the robot config the recordings were made with.
+        config: diagnosis settings; defaults if None.
+        out_dir: folder for report.md, effects.json and the figures; nothing is written if None.
+
+    Raises:
+        DatasetError: the recordings do not match the robot, or are too short to diagnose.
+        ConfigError: an invalid setting.
+    """
+    result = run_diagnosis(data, robot, config)
+    if out_dir is not None:
+        write_report(result, Path(out_dir))
+    return result

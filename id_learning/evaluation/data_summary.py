@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 
 from id_learning.dataset.preprocess import Dataset, lowpass
+from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import rotor_inertia_torque
-from id_learning.robot.dynamics import RigidBodyDynamics
 
 __all__ = ['DataSummary', 'nominal_components', 'summarise', 'write_summary']
 

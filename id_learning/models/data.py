@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
 from id_learning.dataset.preprocess import Dataset
+from id_learning.physics.augmented import AugmentedModel
+from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
-from id_learning.robot.dynamics import RigidBodyDynamics
 
-__all__ = ['PhysicsFeatures', 'TrainingData', 'nominal_rnea']
+__all__ = ['DiagnosedEffects', 'PhysicsFeatures', 'TrainingData', 'nominal_rnea']
 
 
 def nominal_rnea(robot: RobotConfig, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -33,16 +35,32 @@ class PhysicsFeatures:
 
 
 @dataclass(frozen=True, eq=False)
+class DiagnosedEffects:
+    """The effects a diagnosis of the training part found, for the kinds built on them.
+
+    Attributes:
+        model: the nominal model plus the effects, identified on the training part.
+        summary: JSON-ready record of where they came from (named effects, alias sets, ...).
+    """
+
+    model: AugmentedModel
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
 class TrainingData:
     """A preprocessed dataset with its robot, split into fit / validation / test parts.
 
     The training part (the first ``dataset.n_train`` samples) is split again in time: its last
-    ``validation_fraction`` is the validation part used for early stopping.
+    ``validation_fraction`` is the validation part used for early stopping. ``diagnosed`` holds
+    the effects a diagnosis of the training part found, where the trainer ran one (the
+    ``rnea_effects`` kinds without an effects file use them).
     """
 
     dataset: Dataset
     robot: RobotConfig
     validation_fraction: float = 0.15
+    diagnosed: DiagnosedEffects | None = None
 
     @cached_property
     def physics(self) -> PhysicsFeatures:

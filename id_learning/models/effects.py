@@ -9,8 +9,9 @@ network's MLP h(q, v) on top of it, so the network only learns what the named ef
 Where the effects come from (``effects``):
 
 - a diagnosis' ``effects.json`` (or its output folder): the terms are taken as identified there;
-- empty (the default): the trainer diagnoses the training part itself (its last 30 % are the
-  diagnosis' held-out part) and adopts what it finds. The test part is never seen.
+- empty (the default): the effects a diagnosis of the training part found
+  (``TrainingData.diagnosed``; the trainer runs it, with the training part's last 30 % as the
+  diagnosis' held-out part). The test part is never seen.
 
 The signal-delay term needs the jerk, which the (q, v, a) interface does not carry: predictions
 use zero jerk, i.e. keep the term's d tau / dq v + d tau / dv a part.
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Literal, Self
 
@@ -36,6 +37,7 @@ from id_learning.models.base import (
 from id_learning.models.blackbox import NumpyNormalisedMlp, check_kind, require_fitted
 from id_learning.models.data import TrainingData
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
+from id_learning.physics.augmented import EFFECTS_JSON, AugmentedModel
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
@@ -58,8 +60,6 @@ def load_effects_file(path: str | Path) -> dict[str, Any]:
     Raises:
         ConfigError: the file is missing or is not a diagnosis' effects.json.
     """
-    from id_learning.diagnosis.report import EFFECTS_JSON
-
     path = Path(path)
     if path.is_dir():
         path = path / EFFECTS_JSON
@@ -74,44 +74,14 @@ def load_effects_file(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def _training_part(data: TrainingData) -> Any:
-    """The training part as a dataset of its own, split like a recording the diagnosis reads.
-
-    The diagnosis holds out the training part's tail (its default share, 30 %) to check that
-    an effect improves data the fit did not see; the test part stays unseen.
-    """
-    from id_learning.diagnosis import DiagnosisConfig
-
-    ds = data.dataset
-    rows = data.train_rows
-    n_train = round(DiagnosisConfig().preprocess.train_fraction * ds.n_train)
-    # Each recording's training part stays one segment, so filters never cross a seam.
-    segments = [
-        {'source': s.get('source', ''), 'train': s['train'], 'test': [s['train'][1]] * 2}
-        for s in ds.extra.get('segments', [])
-    ]
-    return replace(
-        ds,
-        stamps_ns=ds.stamps_ns[rows],
-        q=ds.q[rows],
-        v=ds.v[rows],
-        a=ds.a[rows],
-        tau=ds.tau[rows],
-        tau_raw=ds.tau_raw[rows],
-        n_train=n_train,
-        controller=ds.controller.take(rows),
-        study=ds.study.take(rows),
-        tau_clean=None if ds.tau_clean is None else ds.tau_clean[rows],
-        extra={'segments': segments} if segments else {},
-    )
-
-
 def _effects_model(
     effects: str, data: TrainingData, robot: RobotConfig
-) -> tuple[Any, dict[str, Any]]:
-    """The augmented model from a diagnosis file, or from diagnosing the training part."""
-    from id_learning.diagnosis import AugmentedModel, run_diagnosis
+) -> tuple[AugmentedModel, dict[str, Any]]:
+    """The augmented model from a diagnosis file, or from the diagnosis of the training part.
 
+    Raises:
+        ConfigError: a bad effects file, or neither a file nor a diagnosis of the training part.
+    """
     target = data.dataset.target
     if effects:
         saved = load_effects_file(effects)
@@ -125,21 +95,20 @@ def _effects_model(
         except Exception as err:  # a RobotModelError or a malformed entry
             raise ConfigError(f'effects: {effects} does not fit {robot.name}: {err}') from err
         return model, {'source': str(effects)}
-    result = run_diagnosis(_training_part(data), robot)
-    summary = {
-        'source': 'diagnosis of the training part (its last 30 % held out)',
-        'effects': [effect.label for effect in result.named_effects()],
-        'alias_sets': [list(alias.members) for alias in result.alias_sets],
-        'untestable': [list(item) for item in result.untestable_effects()],
-    }
-    return result.augmented_model, summary
+    if data.diagnosed is None:
+        raise ConfigError(
+            'effects: no effects file given and no diagnosis of the training part: give a '
+            "diagnosis' effects.json, or train through id_learning.training (or call "
+            'id_learning.diagnosis.diagnose_training_part) to diagnose the training part'
+        )
+    return data.diagnosed.model, data.diagnosed.summary
 
 
-def _terms_state(model: Any) -> dict[str, np.ndarray]:
+def _terms_state(model: AugmentedModel) -> dict[str, np.ndarray]:
     return {f'{TERM_PREFIX}{i}': theta.copy() for i, (_, theta) in enumerate(model.terms)}
 
 
-def _terms_metadata(model: Any) -> dict[str, Any]:
+def _terms_metadata(model: AugmentedModel) -> dict[str, Any]:
     return {
         'target': model.target,
         'terms': [spec.to_dict() for spec, _ in model.terms],
@@ -148,14 +117,12 @@ def _terms_metadata(model: Any) -> dict[str, Any]:
 
 def _load_terms(
     tensors: dict[str, np.ndarray], fitted: dict[str, Any], robot: RobotConfig, kind: str
-) -> Any:
+) -> AugmentedModel:
     """Rebuild the augmented model from an artifact's tensors and fitted metadata.
 
     Raises:
         CheckpointError: the terms and the tensors do not match.
     """
-    from id_learning.diagnosis import AugmentedModel
-
     specs = fitted.get('terms')
     if not isinstance(specs, list) or 'target' not in fitted:
         raise CheckpointError(f'{kind}: the metadata lacks the effect terms and target')
@@ -204,7 +171,7 @@ class RneaEffectsModel(InverseDynamicsModel):
         """Store the settings; no I/O, no fitting."""
         super().__init__(config, robot)
         self.config: RneaEffectsConfig = config
-        self.model_: Any = None
+        self.model_: AugmentedModel | None = None
         self.diagnosis_: dict[str, Any] = {}
         #: The training part's (q, v, a) range, for the predictor's out-of-range warning.
         self.input_range_: dict[str, Any] | None = None
@@ -218,14 +185,14 @@ class RneaEffectsModel(InverseDynamicsModel):
         return self
 
     @classmethod
-    def from_augmented(cls, model: Any, source: str = '') -> RneaEffectsModel:
+    def from_augmented(cls, model: AugmentedModel, source: str = '') -> RneaEffectsModel:
         """Wrap a diagnosis' ``AugmentedModel`` (e.g. ``DiagnosisResult.augmented_model``)."""
         out = cls(RneaEffectsConfig(), model.robot)
         out.model_ = model
         out.diagnosis_ = {'source': source} if source else {}
         return out
 
-    def _model(self) -> Any:
+    def _model(self) -> AugmentedModel:
         if self.model_ is None:
             raise CheckpointError(f'{self.kind}: the model is not fitted')
         return self.model_
@@ -289,7 +256,7 @@ class RneaEffectsMlpModel(RneaMlpModel):
         """Store the settings; no I/O, no fitting."""
         super().__init__(config, robot)
         self.config: RneaEffectsMlpConfig = config
-        self.effects_: Any = None
+        self.effects_: AugmentedModel | None = None
         self.diagnosis_: dict[str, Any] = {}
 
     def training_physics(self, data: TrainingData) -> np.ndarray:

@@ -45,8 +45,8 @@ from id_learning.models.blackbox import (
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import TrainHistory, fit_network, select_device
 from id_learning.models.torch_utils import to_tensor
+from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
-from id_learning.robot.dynamics import RigidBodyDynamics
 
 __all__ = [
     'FRICTION_MODELS',

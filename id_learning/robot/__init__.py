@@ -1,4 +1,4 @@
-"""Robot description: config (URDF, joints, drives, limits) and rigid-body dynamics."""
+"""Robot description: config (URDF, joints, drives, limits) and the drive-side conversions."""
 
 from __future__ import annotations
 
@@ -14,15 +14,12 @@ from id_learning.robot.drives import (
     motor_torque_from_current,
     rotor_inertia_torque,
 )
-from id_learning.robot.dynamics import RigidBodyDynamics, build_pinocchio_model
 
 __all__ = [
     'DriveConfig',
     'JointLimits',
-    'RigidBodyDynamics',
     'RobotConfig',
     'TopicConfig',
-    'build_pinocchio_model',
     'current_from_motor_torque',
     'load_robot_config',
     'motor_torque_from_current',

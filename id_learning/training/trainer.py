@@ -39,7 +39,7 @@ from id_learning.dataset.recording import load_recording
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
 from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.models.base import InverseDynamicsModel
-from id_learning.models.data import TrainingData
+from id_learning.models.data import DiagnosedEffects, TrainingData
 from id_learning.models.fitting import configure_torch, select_device
 from id_learning.robot.config import RobotConfig
 from id_learning.twin import read_noise_free_torque
@@ -596,6 +596,27 @@ def _report(
     return write_report(report, out)
 
 
+def _with_diagnosis(
+    data: TrainingData, kinds: Sequence[str], overrides: dict[str, dict[str, Any]]
+) -> tuple[TrainingData, dict[str, float]]:
+    """Diagnose the training part once if a kind builds on its effects (no effects file given).
+
+    Returns:
+        The training data with the diagnosis, and per kind that uses it the seconds it took.
+    """
+    from id_learning.diagnosis import diagnose_training_part
+    from id_learning.models.registry import make_config
+
+    users = [k for k in kinds if getattr(make_config(k, **overrides[k]), 'effects', None) == '']
+    if not users:
+        return data, {}
+    start = time.perf_counter()
+    model, summary = diagnose_training_part(data.dataset, data.robot)
+    seconds = time.perf_counter() - start
+    _LOG.info('diagnosed the training part in %.1f s for %s', seconds, users)
+    return replace(data, diagnosed=DiagnosedEffects(model, summary)), dict.fromkeys(users, seconds)
+
+
 def train_run(
     bags: Sequence[Path],
     robot: RobotConfig,
@@ -680,13 +701,15 @@ def train_run(
     }
     _write_json(out / RUN_FILE, run_document)
 
+    data, diagnosis_seconds = _with_diagnosis(data, kinds, overrides)
     results: dict[str, ModelResult] = {}
     for kind in tqdm(kinds, desc='models', unit='model', disable=not progress):
         model = make_model(kind, robot, **overrides[kind])
         _LOG.info('fitting %s on %d samples', kind, data.n_fit)
         start = time.perf_counter()
         model.fit(data, progress=progress)
-        seconds = time.perf_counter() - start
+        # A kind built on the diagnosis of the training part pays for it too.
+        seconds = time.perf_counter() - start + diagnosis_seconds.get(kind, 0.0)
         results[kind] = ModelResult(
             kind,
             model,

@@ -22,10 +22,10 @@ from tqdm import tqdm
 from id_learning.config_io import check_keys, float_vector, load_yaml_mapping
 from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError
+from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
 from id_learning.robot.config import RobotConfig, load_robot_config
 from id_learning.robot.drives import current_from_motor_torque
-from id_learning.robot.dynamics import RigidBodyDynamics
 from id_learning.twin.effects import (
     CoggingEffect,
     CoulombFriction,

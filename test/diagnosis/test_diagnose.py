@@ -11,8 +11,6 @@ import pytest
 from support import twin_config
 
 from id_learning.diagnosis import (
-    AugmentedModel,
-    CandidateSpec,
     DiagnosisConfig,
     augmented_torque,
     diagnose,
@@ -20,6 +18,7 @@ from id_learning.diagnosis import (
     run_diagnosis,
 )
 from id_learning.errors import ConfigError, DatasetError, RobotModelError
+from id_learning.physics import AugmentedModel, EffectSpec
 from id_learning.twin import simulate
 
 DURATION_S = 150.0  # five excitation segments: enough independent samples in the held-out part
@@ -175,26 +174,26 @@ def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
     terms = []
     for j, joint in enumerate(joints):
         terms += [
-            (CandidateSpec('viscous_friction', j, joint), rng.normal(size=1)),
-            (CandidateSpec('coulomb_friction', j, joint, {'smoothing_velocity': 0.005}),
+            (EffectSpec('viscous_friction', j, joint), rng.normal(size=1)),
+            (EffectSpec('coulomb_friction', j, joint, {'smoothing_velocity': 0.005}),
              rng.normal(size=1)),
-            (CandidateSpec('stribeck_friction', j, joint,
+            (EffectSpec('stribeck_friction', j, joint,
                            {'velocity': 0.02 + 0.01 * j, 'smoothing_velocity': 0.005}),
              rng.normal(size=1)),
-            (CandidateSpec('load_dependent_friction', j, joint, {'smoothing_velocity': 0.004}),
+            (EffectSpec('load_dependent_friction', j, joint, {'smoothing_velocity': 0.004}),
              rng.normal(size=1)),
-            (CandidateSpec('rotor_inertia', j, joint), rng.normal(size=1) * 1e-4),
-            (CandidateSpec('torque_constant_scale', j, joint), rng.normal(size=1) * 0.01),
-            (CandidateSpec('torque_offset', j, joint), rng.normal(size=1)),
-            (CandidateSpec('cogging', j, joint, {'periods_per_motor_turn': 6}),
+            (EffectSpec('rotor_inertia', j, joint), rng.normal(size=1) * 1e-4),
+            (EffectSpec('torque_constant_scale', j, joint), rng.normal(size=1) * 0.01),
+            (EffectSpec('torque_offset', j, joint), rng.normal(size=1)),
+            (EffectSpec('cogging', j, joint, {'periods_per_motor_turn': 6}),
              rng.normal(size=2)),
         ]  # fmt: skip
     terms += [
-        (CandidateSpec('gravity_spring', 1, joints[1], {'reference_rad': 0.0, 'degree': 3}),
+        (EffectSpec('gravity_spring', 1, joints[1], {'reference_rad': 0.0, 'degree': 3}),
          rng.normal(size=3)),
-        (CandidateSpec('joint_offset', 2, joints[2]), rng.normal(size=1) * 1e-3),
-        (CandidateSpec('signal_delay'), np.array([0.004])),
-        (CandidateSpec('payload_mass', settings={'frame': mabi.payload_frame,
+        (EffectSpec('joint_offset', 2, joints[2]), rng.normal(size=1) * 1e-3),
+        (EffectSpec('signal_delay'), np.array([0.004])),
+        (EffectSpec('payload_mass', settings={'frame': mabi.payload_frame,
                                                  'com_guess_m': [0.1, 0.0, 0.05]}),
          np.array([20.0, 2.0, 0.0, 1.0])),
     ]  # fmt: skip

@@ -10,13 +10,14 @@ import pytest
 from support import REPO, twin_config
 
 from id_learning.dataset import prepare_dataset
-from id_learning.diagnosis import AugmentedModel, diagnose
+from id_learning.diagnosis import diagnose, diagnose_training_part
 from id_learning.errors import CheckpointError, ConfigError
-from id_learning.models.data import TrainingData
+from id_learning.models.data import DiagnosedEffects, TrainingData
 from id_learning.models.registry import load_model, make_model, save_model
+from id_learning.physics import AugmentedModel
+from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.predictor import FeedForwardPredictor, ReferenceSample
 from id_learning.robot import load_robot_config
-from id_learning.robot.dynamics import RigidBodyDynamics
 from id_learning.twin import simulate
 
 VISCOUS_J1 = 35.0  # N*m*s/rad, hidden on joint 1 of an otherwise nominal twin
@@ -29,7 +30,10 @@ def hidden_viscous():
     config = twin_config(200.0, effects, seed=4)
     twin = simulate(config)
     robot = config.robot
-    return robot, twin, TrainingData(prepare_dataset(twin.recording, robot), robot)
+    dataset = prepare_dataset(twin.recording, robot)
+    # What the trainer does for the kinds built on the training part's diagnosis.
+    diagnosed = DiagnosedEffects(*diagnose_training_part(dataset, robot))
+    return robot, twin, TrainingData(dataset, robot, diagnosed=diagnosed)
 
 
 @pytest.fixture(scope='module')

@@ -14,12 +14,8 @@ import pinocchio as pin
 import pytest
 
 from id_learning.errors import RobotModelError
-from id_learning.robot import (
-    RigidBodyDynamics,
-    RobotConfig,
-    build_pinocchio_model,
-    load_robot_config,
-)
+from id_learning.physics import RigidBodyDynamics, build_pinocchio_model
+from id_learning.robot import RobotConfig, load_robot_config
 
 REPO = Path(__file__).resolve().parents[2]
 MABI_URDF = REPO / 'urdf/mabi_max100.urdf'

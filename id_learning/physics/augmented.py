@@ -1,0 +1,142 @@
+"""The nominal model plus identified effects: what an ``rnea_effects`` artifact holds."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from id_learning.errors import RobotModelError
+from id_learning.physics.nominal import NominalModel
+from id_learning.physics.terms import (
+    JOINT_COLUMNS,
+    EffectSpec,
+    effect_columns,
+    needs_derivatives,
+    needs_regressor,
+)
+from id_learning.robot.config import RobotConfig
+
+__all__ = ['EFFECTS_JSON', 'AugmentedModel']
+
+#: The file a diagnosis writes its effects and its augmented model to.
+EFFECTS_JSON = 'effects.json'
+
+
+class AugmentedModel:
+    """The nominal model plus identified effects: what a ``rnea_effects`` artifact holds.
+
+    Args:
+        robot: the robot config (URDF, drives).
+        target: 'motor' (tau_u, rotor inertia included) or 'joint'.
+        terms: (effect, coefficients) pairs; each adds ``effect_columns(effect) @ theta``.
+    """
+
+    def __init__(
+        self,
+        robot: RobotConfig,
+        target: str,
+        terms: Sequence[tuple[EffectSpec, np.ndarray]],
+    ) -> None:
+        """Store the terms; the URDF is read on first use."""
+        self.robot = robot
+        self.target = target
+        self.terms = [(spec, np.asarray(theta, dtype=float)) for spec, theta in terms]
+
+    @cached_property
+    def nominal(self) -> NominalModel:
+        """The nominal model the effects are added to."""
+        return NominalModel(self.robot, self.target)
+
+    def torque(
+        self, q: np.ndarray, v: np.ndarray, a: np.ndarray, jerk: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Torque (N, n) [N*m] for states (N, n); see ``augmented_torque``."""
+        specs = [spec for spec, _ in self.terms]
+        quantities = self.nominal.evaluate(
+            np.atleast_2d(q),
+            np.atleast_2d(v),
+            np.atleast_2d(a),
+            None if jerk is None else np.atleast_2d(jerk),
+            derivatives=needs_derivatives(specs),
+            regressor=needs_regressor(specs),
+        )
+        tau = quantities.tau_nominal.copy()
+        for spec, theta in self.terms:
+            tau += effect_columns(spec, quantities, self.nominal) @ theta
+        return tau
+
+    def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.
+
+        The single-joint effects (``JOINT_COLUMNS``) of one name and one column are folded: all
+        their joints in one vectorised call with their settings as arrays; the rest go through
+        ``effect_columns`` as in ``torque``.
+        """
+        groups: dict[str, list[tuple[EffectSpec, np.ndarray]]] = {}
+        rest: list[tuple[EffectSpec, np.ndarray]] = []
+        for spec, theta in self.terms:
+            scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
+            if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar:
+                groups.setdefault(spec.name, []).append((spec, theta))
+            else:
+                rest.append((spec, theta))
+        folded = []
+        for name, members in groups.items():
+            joints = np.array([spec.joint for spec, _ in members])
+            keys = members[0][0].settings.keys()
+            settings = {k: np.array([spec.settings[k] for spec, _ in members]) for k in keys}
+            theta = np.array([theta[0] for _, theta in members])
+            folded.append((JOINT_COLUMNS[name], joints, settings, theta))
+        specs = [spec for spec, _ in rest]
+        derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
+        nominal = self.nominal
+
+        def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            qs = nominal.evaluate(
+                q[None], v[None], a[None], derivatives=derivatives, regressor=regressor
+            )
+            tau: np.ndarray = qs.tau_nominal[0].copy()
+            for columns, joints, settings, theta in folded:
+                np.add.at(tau, joints, columns(qs, joints, settings, nominal)[0][0] * theta)
+            for spec, theta in rest:
+                tau += effect_columns(spec, qs, nominal)[0] @ theta
+            return tau
+
+        return torque_one
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form; ``from_dict`` rebuilds it for the same robot."""
+        return {
+            'robot': self.robot.name,
+            'joints': list(self.robot.joints),
+            'target': self.target,
+            'terms': [
+                {'spec': spec.to_dict(), 'coefficients': theta.tolist()}
+                for spec, theta in self.terms
+            ],
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], robot: RobotConfig) -> AugmentedModel:
+        """Rebuild from ``to_dict`` output (or effects.json) for ``robot``.
+
+        Raises:
+            RobotModelError: the saved joints differ from the robot's.
+        """
+        if list(data['joints']) != list(robot.joints):
+            raise RobotModelError(
+                f'the effects were identified for joints {list(data["joints"])} '
+                f'({data.get("robot")}), not for {list(robot.joints)} ({robot.name})'
+            )
+        if 'terms' in data:
+            entries = [(t['spec'], t['coefficients']) for t in data['terms']]
+        else:  # effects.json
+            entries = [(e['model']['spec'], e['model']['coefficients']) for e in data['effects']]
+        terms = [
+            (EffectSpec.from_dict(spec, robot.joints), np.asarray(theta, dtype=float))
+            for spec, theta in entries
+        ]
+        return cls(robot, str(data['target']), terms)

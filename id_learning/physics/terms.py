@@ -1,0 +1,208 @@
+"""Effect terms: named groups of regressor columns that the nominal model lacks.
+
+Each term is one of the stable effect names (the twin's) on one joint, or robot-wide, with a
+group of columns X (N, n, k) built from q, v, a and the nominal model's own quantities, such that
+the effect adds X @ theta [N*m] to the torque of every joint. theta is in physical units (see
+``PARAMETERS``). The diagnosis selects terms; the augmented model and the identified models add
+them to the nominal torque.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from id_learning.errors import RobotModelError
+from id_learning.physics.nominal import NominalModel, NominalQuantities
+from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
+
+__all__ = [
+    'EFFECT_NAMES',
+    'JOINT_COLUMNS',
+    'PARAMETERS',
+    'ROBOT_WIDE',
+    'EffectSpec',
+    'effect_columns',
+    'needs_derivatives',
+    'needs_regressor',
+]
+
+
+#: Parameters of each effect's columns, in column order, with units (k of them, or a prefix).
+PARAMETERS: dict[str, tuple[tuple[str, str], ...]] = {
+    'viscous_friction': (('coefficient', 'N*m*s/rad'),),
+    'coulomb_friction': (('level', 'N*m'),),
+    'stribeck_friction': (('level', 'N*m'),),
+    'load_dependent_friction': (('coefficient', '1'),),
+    'rotor_inertia': (('rotor_inertia_change_motor_side', 'kg*m^2'),),
+    'gravity_spring': (('c1', 'N*m/rad'), ('c2', 'N*m/rad^2'), ('c3', 'N*m/rad^3')),
+    'payload_mass': (('mass', 'kg'), ('first_moment_x', 'kg*m'), ('first_moment_y', 'kg*m'),
+                     ('first_moment_z', 'kg*m')),
+    'joint_offset': (('offset', 'rad'),),
+    'torque_constant_scale': (('label_gain_change', '1'),),
+    'signal_delay': (('delay', 's'),),
+    'cogging': (('sine', 'N*m'), ('cosine', 'N*m')),
+    'torque_offset': (('offset', 'N*m'),),
+    'inertial_parameter_error': (('base_parameter', 'SI'),),
+}  # fmt: skip
+
+
+#: The effects' stable names, in the library's order.
+EFFECT_NAMES: tuple[str, ...] = tuple(PARAMETERS)
+
+ROBOT_WIDE = ('payload_mass', 'signal_delay', 'inertial_parameter_error')
+
+
+@dataclass(frozen=True, eq=False)
+class EffectSpec:
+    """One candidate: an effect name, the joint it sits on, and the settings of its columns.
+
+    Attributes:
+        name: the twin's stable effect name.
+        joint: index of the joint the effect sits on; None for robot-wide effects.
+        joint_name: that joint's name ('' for robot-wide effects).
+        settings: JSON-ready values the columns depend on (v_s, cogging periods, basis, ...).
+    """
+
+    name: str
+    joint: int | None = None
+    joint_name: str = ''
+    settings: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """Unique, readable key: name[joint, setting]."""
+        parts = [self.joint_name] if self.joint_name else []
+        if self.name == 'stribeck_friction':
+            parts.append(f'v_s={self.settings["velocity"]:g}')
+        if self.name == 'cogging':
+            parts.append(f'p={self.settings["periods_per_motor_turn"]}')
+        if self.name == 'payload_mass':
+            parts.append(str(self.settings['frame']))
+        return f'{self.name}[{", ".join(parts)}]' if parts else self.name
+
+    def replace_settings(self, **changes: Any) -> EffectSpec:
+        """A copy with some settings changed (a refined Stribeck velocity, payload COM)."""
+        return EffectSpec(self.name, self.joint, self.joint_name, {**self.settings, **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form; ``from_dict`` rebuilds it."""
+        return {
+            'name': self.name,
+            'joint': self.joint_name or None,
+            'settings': dict(self.settings),
+            'label': self.label,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], joints: tuple[str, ...]) -> EffectSpec:
+        """Rebuild from ``to_dict`` output for a robot with these joints."""
+        joint_name = data.get('joint') or ''
+        if joint_name and joint_name not in joints:
+            raise RobotModelError(
+                f'effect {data.get("label", data["name"])} sits on joint {joint_name!r}, which '
+                f'the robot {list(joints)} does not have'
+            )
+        joint = joints.index(joint_name) if joint_name else None
+        return cls(str(data['name']), joint, joint_name, dict(data.get('settings') or {}))
+
+
+def _friction_sign(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -> np.ndarray:
+    sign: np.ndarray = np.tanh(qs.v[:, j] / settings['smoothing_velocity'])
+    return sign
+
+
+def _gravity_spring(
+    qs: NominalQuantities, j: Any, settings: Mapping[str, Any], model: NominalModel
+) -> tuple[np.ndarray, ...]:
+    dq = qs.q[:, j] - settings['reference_rad']
+    return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
+
+
+def _cogging(
+    qs: NominalQuantities, j: Any, settings: Mapping[str, Any], model: NominalModel
+) -> tuple[np.ndarray, ...]:
+    phase = settings['periods_per_motor_turn'] * model.robot.drives.gear_ratio[j] * qs.q[:, j]
+    return np.sin(phase), np.cos(phase)
+
+
+JointColumns = Callable[
+    [NominalQuantities, Any, Mapping[str, Any], NominalModel], tuple[np.ndarray, ...]
+]
+
+
+#: Effects that sit on one joint and act on it alone: their columns as functions of the nominal
+#: quantities, the joint index j and the spec's settings. Written with numpy broadcasting, so j
+#: may also be an index array with settings arrays of its length: all joints of an effect at once.
+JOINT_COLUMNS: dict[str, JointColumns] = {
+    'viscous_friction': lambda qs, j, s, model: (qs.v[:, j],),
+    'coulomb_friction': lambda qs, j, s, model: (_friction_sign(qs, j, s),),
+    'stribeck_friction': lambda qs, j, s, model: (
+        np.exp(-((qs.v[:, j] / s['velocity']) ** 2)) * _friction_sign(qs, j, s),
+    ),
+    'load_dependent_friction': lambda qs, j, s, model: (
+        np.abs(qs.tau_rigid[:, j]) * _friction_sign(qs, j, s),
+    ),
+    'rotor_inertia': lambda qs, j, s, model: (model.robot.drives.gear_ratio[j] ** 2 * qs.a[:, j],),
+    'gravity_spring': _gravity_spring,
+    'torque_constant_scale': lambda qs, j, s, model: (qs.tau_nominal[:, j],),
+    'cogging': _cogging,
+    'torque_offset': lambda qs, j, s, model: (np.ones_like(qs.q[:, j]),),
+}
+
+
+def effect_columns(
+    spec: EffectSpec, quantities: NominalQuantities, model: NominalModel
+) -> np.ndarray:
+    """The candidate's columns X (N, n, k): the effect adds X @ theta to each joint's tau_u [N*m].
+
+    Raises:
+        ValueError: the quantities lack what the effect needs (derivatives, regressor).
+    """
+    qs = quantities
+    n_samples, n = qs.q.shape
+    j = spec.joint
+    settings = spec.settings
+
+    def on_joint(*columns: np.ndarray) -> np.ndarray:
+        out = np.zeros((n_samples, n, len(columns)))
+        for c, column in enumerate(columns):
+            out[:, j, c] = column
+        return out
+
+    name = spec.name
+    if name in JOINT_COLUMNS:
+        return on_joint(*JOINT_COLUMNS[name](qs, j, settings, model))
+    if name == 'joint_offset':
+        if qs.dtau_dq is None:
+            raise ValueError('joint_offset needs quantities evaluated with derivatives=True')
+        return qs.dtau_dq[:, :, j : j + 1].copy()
+    if name == 'signal_delay':
+        # Currents at t belong to the motion at t - d: tau(t - d) ~ tau(t) - d dtau/dt.
+        return -model.nominal_rate(qs)[:, :, None]
+    if name == 'payload_mass':
+        if qs.regressor is None:
+            raise ValueError('payload_mass needs quantities evaluated with regressor=True')
+        body, mapping = model.payload_map(str(settings['frame']), settings['com_guess_m'])
+        block = qs.regressor[
+            :, :, N_INERTIAL_PARAMETERS * body : N_INERTIAL_PARAMETERS * (body + 1)
+        ]
+        return block @ mapping
+    if name == 'inertial_parameter_error':
+        if qs.regressor is None:
+            raise ValueError('inertial_parameter_error needs quantities with regressor=True')
+        return qs.regressor @ np.asarray(settings['base_directions'])
+    raise ValueError(f'unknown effect {name!r}')
+
+
+def needs_derivatives(specs: list[EffectSpec]) -> bool:
+    """Whether any candidate needs d tau / d q, d tau / d v or M(q)."""
+    return any(spec.name in ('joint_offset', 'signal_delay') for spec in specs)
+
+
+def needs_regressor(specs: list[EffectSpec]) -> bool:
+    """Whether any candidate needs the inertial-parameter regressor."""
+    return any(spec.name in ('payload_mass', 'inertial_parameter_error') for spec in specs)
