@@ -51,13 +51,12 @@ sys.path.insert(0, str(REPO))
 from id_learning.dataset.preprocess import lowpass  # noqa: E402
 from id_learning.diagnosis import (  # noqa: E402
     DiagnosisResult,
-    NominalModel,
     column_motion,
-    effect_columns,
     evaluation_rows,
     filtered_prediction,
     run_diagnosis,
 )
+from id_learning.physics import NominalModel, effect_columns  # noqa: E402
 from id_learning.robot.drives import current_from_motor_torque  # noqa: E402
 from id_learning.twin import TwinConfig, load_twin_config, simulate  # noqa: E402
 

@@ -191,25 +191,28 @@ def _demo_online_check(args: argparse.Namespace, bag: Path, run: Any, out: Path)
 
 
 def _kinds(text: str) -> list[str]:
-    """Model kinds from a comma-separated list ('all': the study's seven, in its order).
+    """Model kinds from a comma-separated list.
 
-    'all' mixes with other kinds: 'all,rnea_effects' is the seven plus the diagnosed model.
+    'all' is every kind the package has (registry order), 'study' the study's seven in its
+    table order; both mix with other kinds: 'study,rnea_id' is the seven plus the identified
+    physics.
 
     Raises:
         ConfigError: an unknown kind (the message lists the known ones).
     """
     from id_learning.models.registry import MODEL_KINDS, STUDY_MODELS
 
+    groups = {'all': tuple(MODEL_KINDS), 'study': STUDY_MODELS}
     kinds: list[str] = []
     for item in (item.strip() for item in text.split(',')):
-        for kind in STUDY_MODELS if item == 'all' else (item,) if item else ():
+        for kind in groups.get(item, (item,) if item else ()):
             if kind not in kinds:
                 kinds.append(kind)
     unknown = [kind for kind in kinds if kind not in MODEL_KINDS]
     if unknown or not kinds:
         raise ConfigError(
             f'--models: unknown model kind(s) {unknown or [text]}; known kinds: '
-            f'{", ".join(MODEL_KINDS)} (or all: the seven of the study)'
+            f'{", ".join(MODEL_KINDS)} (or all: every kind; study: the seven of the study)'
         )
     return kinds
 
@@ -506,8 +509,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-#: The demo trains the study's seven and the model of a diagnosis of the training part.
-DEMO_MODELS = 'all,rnea_effects'
+#: The demo trains the study's seven, the identified physics and the diagnosed model.
+DEMO_MODELS = 'study,rnea_id,rnea_effects'
 #: Budget per model in ``demo``: seven models on the shipped bag within 10 minutes on 2 cores.
 DEMO_SECONDS_PER_MODEL = 60.0
 
@@ -552,8 +555,8 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         '--models',
         default='all',
-        help='comma-separated model kinds: rnea_lq,rnea_mlp,delan,lnn,lnn_mlp,mlp,lstm '
-        '(default: all)',
+        help='comma-separated model kinds, e.g. rnea_id,mlp; all: every kind (default); study: '
+        "the study's seven (rnea_lq,rnea_mlp,delan,lnn,lnn_mlp,mlp,lstm)",
     )
     p.add_argument('--out', required=True, help='run folder to write')
     p.add_argument(

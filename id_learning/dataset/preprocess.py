@@ -338,16 +338,18 @@ class Dataset:
             return [np.arange(len(self.q))]
         return [np.concatenate([np.arange(*s['train']), np.arange(*s['test'])]) for s in segments]
 
-    def filter_like_labels(self, x: np.ndarray) -> np.ndarray:
+    def filter_like_labels(self, x: np.ndarray, joint: int | None = None) -> np.ndarray:
         """Low-pass x (N, n, rows in order) exactly like the labels, each recording on its own.
 
         The label filter is zero-phase over a whole recording, so a model's torque (or a
         regressor column) along the recording becomes comparable with ``tau`` sample by sample.
+        With ``joint``, x is (N, k): k columns that all belong to that joint's label.
         """
         x = np.asarray(x, dtype=float)
+        cutoff = self.cutoff_hz if joint is None else np.full(x.shape[1], self.cutoff_hz[joint])
         out = np.empty_like(x)
         for rows in self.recording_rows():
-            out[rows] = lowpass(x[rows], self.cutoff_hz, self.period_s, self.filter_order)
+            out[rows] = lowpass(x[rows], cutoff, self.period_s, self.filter_order)
         return out
 
 

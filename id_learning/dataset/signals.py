@@ -37,15 +37,18 @@ def lowpass(x: np.ndarray, cutoff_hz: np.ndarray, period_s: float, order: int = 
     from scipy import signal
 
     x = np.asarray(x, dtype=float)
+    cutoff_hz = np.asarray(cutoff_hz, dtype=float)
     out = np.empty_like(x)
-    for j in range(x.shape[1]):
-        sos = butterworth(float(cutoff_hz[j]), period_s, order)
+    # Columns that share a cut-off are filtered together (one call over a 2-D block).
+    for cutoff in np.unique(cutoff_hz):
+        columns = np.flatnonzero(cutoff_hz == cutoff)
+        sos = butterworth(float(cutoff), period_s, order)
         try:
-            out[:, j] = signal.sosfiltfilt(sos, x[:, j])
+            out[:, columns] = signal.sosfiltfilt(sos, x[:, columns], axis=0)
         except ValueError as err:
             raise DatasetError(
-                f'{len(x)} samples are too few for the {cutoff_hz[j]:g} Hz low-pass '
-                f'of column {j}: {err}'
+                f'{len(x)} samples are too few for the {cutoff:g} Hz low-pass '
+                f'of column {int(columns[0])}: {err}'
             ) from err
     return out
 

@@ -21,12 +21,6 @@ from id_learning.diagnosis.pipeline import (
 )
 from id_learning.diagnosis.report import diagnose
 from id_learning.diagnosis.selection import AliasSet
-from id_learning.diagnosis.statistics import (
-    NoiseEstimate,
-    effective_sample_size,
-    estimate_noise,
-    integrated_autocorrelation,
-)
 from id_learning.diagnosis.training_part import diagnose_training_part, training_part
 
 __all__ = [
@@ -34,17 +28,13 @@ __all__ = [
     'DiagnosisConfig',
     'DiagnosisResult',
     'FoundEffect',
-    'NoiseEstimate',
     'Remainder',
     'augmented_torque',
     'column_motion',
     'diagnose',
     'diagnose_training_part',
-    'effective_sample_size',
-    'estimate_noise',
     'evaluation_rows',
     'filtered_prediction',
-    'integrated_autocorrelation',
     'run_diagnosis',
     'training_part',
 ]

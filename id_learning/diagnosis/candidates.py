@@ -20,7 +20,7 @@ from id_learning.errors import ConfigError
 from id_learning.physics.inertial import inertial_base_directions
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
-from id_learning.physics.terms import PARAMETERS, EffectSpec
+from id_learning.physics.terms import PARAMETERS, EffectSpec, gravity_loaded_joints
 
 __all__ = [
     'SPECIAL_CASES',
@@ -59,11 +59,7 @@ def spring_joints(
                 f'diagnosis.gravity_spring_joints: {unknown} are not joints of {list(joints)}'
             )
         return [joints.index(name) for name in config.gravity_spring_joints]
-    step = max(1, len(quantities.q) // 2000)
-    gravity = model.dynamics.gravity(quantities.q[::step])
-    sweep = gravity.max(axis=0) - gravity.min(axis=0)
-    share = sweep / model.robot.limits.torque
-    return [j for j in range(len(joints)) if share[j] >= config.gravity_spring_min_share]
+    return gravity_loaded_joints(model, quantities.q, config.gravity_spring_min_share)
 
 
 def build_library(

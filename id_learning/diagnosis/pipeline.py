@@ -31,6 +31,11 @@ from scipy import optimize, signal, stats
 from id_learning.dataset.preprocess import Dataset, prepare_dataset
 from id_learning.dataset.recording import Recording
 from id_learning.dataset.signals import butterworth, differentiate
+from id_learning.dataset.statistics import (
+    NoiseEstimate,
+    estimate_noise,
+    integrated_autocorrelation,
+)
 from id_learning.diagnosis.candidates import (
     SPECIAL_CASES,
     ExcitationFacts,
@@ -51,11 +56,6 @@ from id_learning.diagnosis.selection import (
     find_aliases,
     forward_select,
     noise_consistency,
-)
-from id_learning.diagnosis.statistics import (
-    NoiseEstimate,
-    estimate_noise,
-    integrated_autocorrelation,
 )
 from id_learning.errors import DatasetError
 from id_learning.physics.augmented import AugmentedModel

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from id_learning.diagnosis.statistics import f_test
+from id_learning.dataset.statistics import f_test
 
 __all__ = [
     'AliasSet',

@@ -353,10 +353,12 @@ class RneaMlpConfig(NetworkConfig):
 class RneaMlpModel(_NominalPhysics):
     """The study's Newtonian network: tau = RNEA_URDF(q, v, a) + I_M N**2 a + h(q, v).
 
-    The physics parameters are fixed (URDF and the robot config's datasheet rotor inertia); the
-    MLP h learns the remainder from (q, v), both scaled with the dataset's input scaler. Its
-    output is scaled by the training residual's own range, and it is trained on the study's
-    normalised MSE of the whole torque (each joint divided by the target's half range).
+    The physics parameters are fixed (URDF and the robot config's datasheet rotor inertia); with
+    joint-torque labels the physics holds the link-side terms only (no rotor inertia: a joint
+    torque sensor at the gear output never sees the motor's inertia). The MLP h learns the
+    remainder from (q, v), both scaled with the dataset's input scaler. Its output is scaled by
+    the training residual's own range, and it is trained on the study's normalised MSE of the
+    whole torque (each joint divided by the target's half range).
 
     Components: the nominal rigid-body parts and the datasheet rotor inertia, then h split in
     two. friction is h's velocity-dependent part, h(q, v) - h(q, 0): the dissipation the study
@@ -375,6 +377,8 @@ class RneaMlpModel(_NominalPhysics):
         self.state_scaler_: MinMaxScaler | None = None
         self.residual_scaler_: MinMaxScaler | None = None
         self.history_: TrainHistory | None = None
+        #: The label the model was fitted on: 'motor' (tau_u) or 'joint' (joint torque).
+        self.target_ = 'motor'
 
     def _build(self, state_scaler: MinMaxScaler, residual_scaler: MinMaxScaler) -> NormalisedMlp:
         n, c = self.robot.n_joints, self.config
@@ -389,16 +393,20 @@ class RneaMlpModel(_NominalPhysics):
         torque: np.ndarray = self.dynamics.rnea(q, v, a) + self._rotor_torque(a)
         return torque
 
-    def _rotor_torque(self, a: np.ndarray) -> np.ndarray:
+    @property
+    def _rotor_joint_side(self) -> np.ndarray:
+        """J_m N^2 [kg*m^2] per joint for motor labels; zero for joint-torque labels."""
         drives = self.robot.drives
-        torque: np.ndarray = drives.rotor_inertia * drives.gear_ratio**2 * a
+        rotor: np.ndarray = drives.rotor_inertia * drives.gear_ratio**2
+        return rotor if self.target_ == 'motor' else np.zeros_like(rotor)
+
+    def _rotor_torque(self, a: np.ndarray) -> np.ndarray:
+        torque: np.ndarray = self._rotor_joint_side * a
         return torque
 
     def training_physics(self, data: TrainingData) -> np.ndarray:
         """The physics part's torque on every sample of ``data``; h learns the rest."""
-        torque: np.ndarray = (
-            data.physics.rnea + data.physics.rotor_basis * self.robot.drives.rotor_inertia
-        )
+        torque: np.ndarray = data.physics.rnea + self._rotor_torque(data.dataset.a)
         return torque
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
@@ -409,6 +417,7 @@ class RneaMlpModel(_NominalPhysics):
         """
         ds, c, n = data.dataset, self.config, self.robot.n_joints
         device = select_device(c.device)
+        self.target_ = ds.target
         physics = self.training_physics(data)
         if ds.is_through_filter:
             physics = ds.filter_like_labels(physics)
@@ -453,7 +462,7 @@ class RneaMlpModel(_NominalPhysics):
         require_fitted(self, self.network_)
         assert self.network_ is not None
         h = NumpyNormalisedMlp(self.network_)
-        rotor = self.robot.drives.rotor_inertia * self.robot.drives.gear_ratio**2
+        rotor = self._rotor_joint_side
         rnea, concatenate = self.sample_rnea(), np.concatenate
 
         def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -470,7 +479,7 @@ class RneaMlpModel(_NominalPhysics):
         return TorqueComponents(
             total=self.physics_torque(q, v, a) + h,
             **self.rigid_body_parts(q, v, a),
-            rotor_inertia=self._rotor_torque(a),
+            rotor_inertia=self._rotor_torque(a) if self.target_ == 'motor' else None,
             friction=h - h_rest,
             residual=h_rest,
         )
@@ -491,6 +500,8 @@ class RneaMlpModel(_NominalPhysics):
         network = self._build(*scalers)
         load_module_state(network, tensors, self.kind)
         self.network_ = network.eval()
+        # Artifacts written before the target was recorded were all fitted on tau_u.
+        self.target_ = str(fitted.get('target', 'motor'))
 
     def fitted_metadata(self) -> dict[str, Any]:
         """The scalers of h's inputs (q, v) and output, the physics constants, a fit summary."""
@@ -500,6 +511,7 @@ class RneaMlpModel(_NominalPhysics):
         out = scalers_metadata(
             state_scaler=self.state_scaler_, residual_scaler=self.residual_scaler_
         )
+        out['target'] = self.target_
         out['rotor_inertia_motor_side_kgm2'] = self.robot.drives.rotor_inertia.tolist()
         if self.history_ is not None:
             out['training'] = self.history_.to_dict()

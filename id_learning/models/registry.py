@@ -16,6 +16,12 @@ from id_learning.models.effects import (
     RneaEffectsMlpModel,
     RneaEffectsModel,
 )
+from id_learning.models.identified import (
+    RneaIdConfig,
+    RneaIdMlpConfig,
+    RneaIdMlpModel,
+    RneaIdModel,
+)
 from id_learning.models.lagrangian import (
     DelanConfig,
     DelanModel,
@@ -39,6 +45,8 @@ MODEL_KINDS: dict[str, tuple[type[ModelConfig], type[InverseDynamicsModel]]] = {
     'lstm': (LstmConfig, LstmModel),
     'rnea_effects': (RneaEffectsConfig, RneaEffectsModel),
     'rnea_effects_mlp': (RneaEffectsMlpConfig, RneaEffectsMlpModel),
+    'rnea_id': (RneaIdConfig, RneaIdModel),
+    'rnea_id_mlp': (RneaIdMlpConfig, RneaIdMlpModel),
 }
 
 #: The reference study's seven models, in its table order.

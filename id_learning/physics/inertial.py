@@ -14,6 +14,7 @@ from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import JointLimits
 
 __all__ = [
+    'frame_parameter_map',
     'inertial_base_directions',
     'payload_parameter_map',
     'transform_dynamic_parameters',
@@ -127,3 +128,25 @@ def inertial_base_directions(
     u, s, _ = np.linalg.svd(spanning, full_matrices=False)
     null = u[:, s > 1e-9 * s.max()] if s.size and s.max() > 0 else u[:, :0]
     return vectors[:, :rank] / scale[:, None], null
+
+
+def frame_parameter_map(dynamics: RigidBodyDynamics, frame: str) -> tuple[int, np.ndarray]:
+    """Map a body's 10 parameters expressed in ``frame`` onto its parent body's (a payload).
+
+    Returns:
+        (body index into the regressor's bodies, (10, 10) map T: theta_parent += T theta_frame).
+
+    Raises:
+        RobotModelError: the frame does not exist.
+    """
+    pin_model = dynamics.model
+    frame_id = pin_model.getFrameId(frame)
+    if frame_id >= len(pin_model.frames):
+        raise RobotModelError(f'frame {frame!r} does not exist in the URDF')
+    placement = pin_model.frames[frame_id].placement
+    parent = int(pin_model.frames[frame_id].parentJoint)
+    columns = [
+        transform_dynamic_parameters(unit, placement.rotation, placement.translation)
+        for unit in np.eye(10)
+    ]
+    return parent - 1, np.array(columns).T

@@ -144,6 +144,11 @@ class RigidBodyDynamics:
         return len(self.joints)
 
     @property
+    def joint_index(self) -> np.ndarray:
+        """(n,) pinocchio's velocity index of each config joint, in config order."""
+        return self._index
+
+    @property
     def n_bodies(self) -> int:
         """Number of moving bodies (one per joint)."""
         return self.model.njoints - 1

@@ -26,6 +26,7 @@ __all__ = [
     'ROBOT_WIDE',
     'EffectSpec',
     'effect_columns',
+    'gravity_loaded_joints',
     'needs_derivatives',
     'needs_regressor',
 ]
@@ -206,3 +207,18 @@ def needs_derivatives(specs: list[EffectSpec]) -> bool:
 def needs_regressor(specs: list[EffectSpec]) -> bool:
     """Whether any candidate needs the inertial-parameter regressor."""
     return any(spec.name in ('payload_mass', 'inertial_parameter_error') for spec in specs)
+
+
+def gravity_loaded_joints(
+    model: NominalModel, q: np.ndarray, min_share: float = 0.05
+) -> list[int]:
+    """Joints whose nominal gravity torque sweeps at least ``min_share`` of their torque limit.
+
+    These are the joints a balancer (spring, hydraulic) may sit on: heavy arms balance the
+    shoulder and sometimes the elbow against gravity. ``q`` (N, n) is the recorded motion.
+    """
+    step = max(1, len(q) // 2000)
+    gravity = model.dynamics.gravity(np.asarray(q)[::step])
+    sweep = gravity.max(axis=0) - gravity.min(axis=0)
+    share = sweep / model.robot.limits.torque
+    return [j for j in range(model.robot.n_joints) if share[j] >= min_share]

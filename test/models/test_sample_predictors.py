@@ -31,6 +31,7 @@ VARIANTS: dict[str, tuple[str, dict[str, object]]] = {
         'lstm',
         {**QUICK, 'hidden_size': 16, 'num_layers': 2, 'sequence_length': 7, 'stride': 32},
     ),
+    'rnea_id': ('rnea_id', {'balancer': 'joint_2', 'iterations': 1}),
 }
 ONE_SAMPLE = [name for name, (kind, _) in VARIANTS.items() if kind != 'lstm']
 RTOL = 1e-9
@@ -69,8 +70,8 @@ def states(data: TrainingData, count: int = 40, seed: int = 0):
 
 
 def float64_reference(model, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """The model's torque with its torch network copied to float64."""
-    if model.kind == 'rnea_lq':
+    """The model's torque with its torch network copied to float64 (float64 models as they are)."""
+    if model.kind in ('rnea_lq', 'rnea_id'):
         return model.predict(q, v, a)
     network = copy.deepcopy(model.network_).double()
     with torch.inference_mode():
@@ -146,5 +147,5 @@ def test_numpy_mlp_refuses_a_network_that_is_not_a_plain_mlp():
         NumpyMlp.from_sequential(torch.nn.Sequential(*net, torch.nn.Tanh()))
 
 
-def test_every_study_model_is_covered():
-    assert {kind for kind, _ in VARIANTS.values()} == set(STUDY_MODELS)
+def test_every_study_model_and_the_identified_physics_are_covered():
+    assert {kind for kind, _ in VARIANTS.values()} == {*STUDY_MODELS, 'rnea_id'}

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from id_learning.dataset.preprocess import lowpass
-from id_learning.diagnosis.statistics import (
+from id_learning.dataset.statistics import (
     effective_sample_size,
     estimate_noise,
     f_test,

@@ -1,0 +1,90 @@
+"""The identified-physics kinds (rnea_id, rnea_id_mlp) and target-aware Newtonian physics."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from support import twin_config
+
+from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
+from id_learning.errors import ConfigError
+from id_learning.models.data import TrainingData
+from id_learning.models.registry import load_model, make_model, save_model
+from id_learning.physics import RigidBodyDynamics
+from id_learning.twin import simulate
+
+QUICK_MLP = {'max_epochs': 3, 'device': 'cpu', 'width': 16, 'windows_per_batch': 1}
+
+
+@pytest.fixture(scope='module')
+def data(mabi):
+    """A 150 s default twin run (every hidden effect), as training data."""
+    result = simulate(twin_config(150.0, seed=9))
+    return TrainingData(prepare_dataset(result.recording, mabi), mabi)
+
+
+@pytest.fixture(scope='module')
+def fitted(data, mabi):
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return {
+            'rnea_id': make_model('rnea_id', mabi).fit(data),
+            'rnea_id_mlp': make_model('rnea_id_mlp', mabi, **QUICK_MLP).fit(data),
+        }
+    finally:
+        torch.set_num_threads(threads)
+
+
+@pytest.mark.parametrize('kind', ['rnea_id', 'rnea_id_mlp'])
+def test_identified_kinds_save_load_and_predict_exactly_the_same(
+    kind, fitted, data, mabi, tmp_path
+):
+    model = fitted[kind]
+    save_model(model, tmp_path / kind)
+    loaded = load_model(tmp_path / kind, mabi, kind)
+    ds = data.dataset
+    rows = slice(0, 500, 9)
+    q, v, a = ds.q[rows], ds.v[rows], ds.a[rows]
+    np.testing.assert_array_equal(loaded.predict(q, v, a), model.predict(q, v, a))
+    one = loaded.sample_predictor()
+    single = np.vstack([one(q[k], v[k], a[k]) for k in range(len(q))])
+    # float64 numpy against the float32 network of rnea_id_mlp; exact for rnea_id.
+    np.testing.assert_allclose(single, model.predict(q, v, a), rtol=1e-6, atol=1e-3)
+    parts = loaded.components(q, v, a)
+    np.testing.assert_allclose(sum(parts.parts().values()), parts.total, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(parts.total, model.predict(q, v, a), rtol=1e-9, atol=1e-6)
+
+
+def test_rnea_id_names_the_balancer_and_the_payload_the_urdf_lacks(fitted, mabi):
+    report = fitted['rnea_id'].fitted_metadata()['physics']['report']
+    assert 'joint_2' in [entry['joint'] for entry in report['balancers']]
+    nominal = RigidBodyDynamics.from_config(mabi).inertial_parameters().reshape(-1, 10)
+    identified = fitted['rnea_id'].physics_.theta.reshape(-1, 10)
+    # The twin's 40 kg payload sits on the last body.
+    assert identified[-1, 0] - nominal[-1, 0] == pytest.approx(40.0, rel=0.15)
+
+
+def test_rnea_id_settings_are_checked_naming_the_key(mabi):
+    with pytest.raises(ConfigError, match='mass_rel_std'):
+        make_model('rnea_id', mabi, mass_rel_std=0.0)
+    with pytest.raises(ConfigError, match='friction'):
+        make_model('rnea_id', mabi, friction='viscous,sticky')
+
+
+def test_rnea_mlp_on_joint_torques_adds_no_rotor_inertia(mabi):
+    """A joint torque sensor at the gear output never sees the motor's inertia."""
+    config = replace(twin_config(60.0, {}, seed=3), joint_torque_sensors=True)
+    result = simulate(config)
+    dataset = prepare_dataset(
+        result.recording, mabi, PreprocessConfig(target='joint', mode='study')
+    )
+    data = TrainingData(dataset, mabi)
+    model = make_model('rnea_mlp', mabi, max_epochs=1, device='cpu', width=8).fit(data)
+    np.testing.assert_array_equal(model.training_physics(data), data.physics.rnea)
+    q, v, a = dataset.q[:5], dataset.v[:5], dataset.a[:5]
+    assert model.components(q, v, a).rotor_inertia is None
+    assert model.fitted_metadata()['target'] == 'joint'
