@@ -136,12 +136,17 @@ def effective_sample_size(x: np.ndarray) -> float:
 
 
 def f_test(
-    rss_small: float, rss_large: float, extra_parameters: int, n_effective: float, p_large: int
+    rss_small: float,
+    rss_large: float,
+    extra_parameters: float,
+    n_effective: float,
+    p_large: float,
 ) -> tuple[float, float]:
     """F statistic and p-value of adding ``extra_parameters`` columns, with effective samples.
 
     Both residual sums must already be in effective-sample units (each joint's squared residual
-    divided by its noise variance and its correlation time).
+    divided by its noise variance and its correlation time). Parameter counts may be effective
+    ones (a group under a prior), hence floats.
 
     Returns:
         (F, p-value); (0, 1) when the larger model gains nothing or no degrees of freedom remain.

@@ -17,10 +17,15 @@ from scipy import stats
 
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.errors import ConfigError
+from id_learning.physics.base_parameters import base_parameters
 from id_learning.physics.inertial import inertial_base_directions
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
-from id_learning.physics.terms import PARAMETERS, EffectSpec, gravity_loaded_joints
+from id_learning.physics.terms import (
+    PARAMETERS,
+    EffectSpec,
+    gravity_loaded_joints,
+)
 
 __all__ = [
     'SPECIAL_CASES',
@@ -102,19 +107,13 @@ def build_library(
                     ]
                 elif name == 'gravity_spring':
                     if j in springs:
-                        specs.append(
-                            EffectSpec(
-                                name,
-                                j,
-                                joint,
-                                {
-                                    'reference_rad': config.gravity_spring_reference_rad,
-                                    'degree': config.gravity_spring_degree,
-                                },
-                            )
-                        )
+                        # A middling geometry; a selected balancer's is refined (pipeline).
+                        settings = {'ratio': 0.5, 'phase_rad': 0.0}
+                        specs.append(EffectSpec(name, j, joint, settings))
                 elif name in ('coulomb_friction', 'load_dependent_friction'):
                     specs.append(EffectSpec(name, j, joint, {'smoothing_velocity': eps}))
+                elif name == 'torque_constant_scale':
+                    specs.append(EffectSpec(name, j, joint, {'form': 'label_gain'}))
                 else:
                     specs.append(EffectSpec(name, j, joint))
     return specs
@@ -421,6 +420,7 @@ def describe_parameters(
     theta: np.ndarray,
     half_width: np.ndarray,
     model: NominalModel,
+    interval_covariance: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
     """Physical parameters with confidence intervals, in the twin's terms where one exists.
 
@@ -429,6 +429,9 @@ def describe_parameters(
         theta: (k,) fitted column coefficients in physical units.
         half_width: (k,) half widths of their confidence intervals (same units).
         model: the nominal model (datasheet values for scales).
+        interval_covariance: (k, k) covariance of theta scaled so that the square roots of its
+            diagonal are ``half_width``; needed for parameters that mix coefficients (the
+            base parameters of ``inertial_parameter_error``).
 
     Returns:
         One dict per parameter: name, value, ci (low, high), unit.
@@ -447,14 +450,7 @@ def describe_parameters(
     lo, hi = theta - half_width, theta + half_width
     name = spec.name
     if name == 'inertial_parameter_error':
-        return [
-            {
-                'name': 'base_parameter_changes',
-                'value': len(theta),
-                'ci': None,
-                'unit': 'count (directions of the identifiable inertial parameters)',
-            }
-        ]
+        return _base_parameter_changes(spec, theta, model, interval_covariance)
     if name == 'rotor_inertia' and j is not None:
         nominal = robot.drives.rotor_inertia[j]
         out = [entry('rotor_inertia_motor_side', nominal + theta[0], nominal + lo[0],
@@ -471,7 +467,8 @@ def describe_parameters(
             )
         return out
     if name == 'torque_constant_scale':
-        # tau_u from currents = tau_true / s, so the column gain is c = 1 / s - 1.
+        # tau_u from currents = tau_true / s = (1 + c) tau_true (the whole torque in the
+        # label-gain form, the nominal one before): s = 1 / (1 + c).
         def scale(c: float) -> float:
             return 1.0 / (1.0 + c) if c > -1 else math.inf
 
@@ -507,6 +504,13 @@ def describe_parameters(
             ),
         ]
     if name == 'gravity_spring':
+        if 'ratio' in spec.settings:
+            ratio, phase = spec.settings['ratio'], spec.settings['phase_rad']
+            return [
+                entry('arm_ratio', ratio, ratio, ratio, '1'),
+                entry('phase', phase, phase, phase, 'rad'),
+                *[entry(f'f{k}', theta[k], lo[k], hi[k], 'N*m') for k in range(len(theta))],
+            ]
         unit = {1: 'N*m/rad'}
         return [
             entry(f'c{k}', theta[k - 1], lo[k - 1], hi[k - 1], unit.get(k, f'N*m/rad^{k}'))
@@ -514,3 +518,49 @@ def describe_parameters(
         ]
     names = PARAMETERS[name]
     return [entry(names[k][0], theta[k], lo[k], hi[k], names[k][1]) for k in range(len(theta))]
+
+
+def _base_parameter_changes(
+    spec: EffectSpec,
+    theta: np.ndarray,
+    model: NominalModel,
+    interval_covariance: np.ndarray | None,
+) -> list[dict[str, Any]]:
+    """The base parameters whose interval excludes the URDF's value, and how many there are.
+
+    A change c along the identifiable directions D moves the link parameters by D c and the
+    base parameters (``physics.base_parameters``) by E D c; each is named after the parameter
+    it stands for, with what it groups.
+    """
+    directions = np.asarray(spec.settings['base_directions'])
+    base = base_parameters(model.dynamics, model.robot.limits)
+    mapping = base.matrix @ directions
+    urdf = base.matrix @ model.dynamics.inertial_parameters()
+    change = mapping @ theta
+    if interval_covariance is None:
+        half = np.zeros_like(change)
+    else:
+        half = np.sqrt(
+            np.clip(np.einsum('ik,kl,il->i', mapping, interval_covariance, mapping), 0, None)
+        )
+    changed = np.flatnonzero(np.abs(change) > half)
+    out: list[dict[str, Any]] = [
+        {
+            'name': 'changed_base_parameters',
+            'value': int(changed.size),
+            'ci': None,
+            'unit': f'count of {base.count} (interval excludes the URDF value)',
+        }
+    ]
+    for i in changed:
+        value = urdf[i] + change[i]
+        out.append(
+            {
+                'name': base.names[i],
+                'value': float(value),
+                'ci': [float(value - half[i]), float(value + half[i])],
+                'unit': base.units[i],
+                'urdf': float(urdf[i]),
+            }
+        )
+    return out

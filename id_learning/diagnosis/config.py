@@ -35,11 +35,8 @@ class DiagnosisConfig:
         gravity_spring_joints: joints that may carry a balancer spring; None: every joint whose
             nominal gravity torque sweeps at least ``gravity_spring_min_share`` of its torque
             limit over the recording.
-        gravity_spring_min_share: see ``gravity_spring_joints``.
-        gravity_spring_degree: degree of the polynomial in (q - reference) for the spring.
-        gravity_spring_reference_rad: joint position where the balancer is neutral (its torque
-            vanishes); balancers are built neutral at the upright pose, the URDF zero of
-            shoulder and elbow axes. No constant term: that would be a torque offset.
+        gravity_spring_min_share: see ``gravity_spring_joints``. A balancer's torque has the
+            physical form of ``physics.balancer``; its geometry is refined once selected.
         edge_trim_s: seconds dropped at each recording end and after the train/test boundary,
             where the zero-phase filter's start-up transient lives; None: 1 / lowest cut-off.
         min_moving_fraction: a friction term on a joint needs this share of moving samples.
@@ -64,8 +61,6 @@ class DiagnosisConfig:
     cogging_periods: tuple[int, ...] = (6, 12, 18, 24, 36)
     gravity_spring_joints: tuple[str, ...] | None = None
     gravity_spring_min_share: float = 0.05
-    gravity_spring_degree: int = 3
-    gravity_spring_reference_rad: float = 0.0
     edge_trim_s: float | None = None
     min_moving_fraction: float = 0.2
     min_slow_fraction: float = 0.02
@@ -89,7 +84,6 @@ class DiagnosisConfig:
             'max_effects': (0, 100),
             'smoothing_velocity': (1e-6, 1.0),
             'gravity_spring_min_share': (0.0, 1.0),
-            'gravity_spring_degree': (1, 6),
             'min_moving_fraction': (0.0, 1.0),
             'min_slow_fraction': (0.0, 1.0),
             'min_below_cutoff_fraction': (0.0, 1.0),

@@ -21,7 +21,7 @@ import json
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -59,12 +59,16 @@ from id_learning.diagnosis.selection import (
 )
 from id_learning.errors import DatasetError
 from id_learning.physics.augmented import AugmentedModel
+from id_learning.physics.balancer import BALANCER_PHASES, BALANCER_RATIOS
+from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import (
+    LINK_SIDE_EFFECTS,
     EffectSpec,
     effect_columns,
     needs_derivatives,
     needs_regressor,
+    uses_model_load,
 )
 from id_learning.robot.config import RobotConfig
 
@@ -81,6 +85,8 @@ __all__ = [
 
 _LOG = logging.getLogger(__name__)
 SCHEMA = 'id_learning.diagnosis/1'
+#: Prior std of a label gain (torque-constant error) around 0, as in the identification.
+LABEL_GAIN_STD = 0.05
 #: Effects whose signature switches with the sign of v or the position within a motor turn: the
 #: low-pass can remove most of it, so their testability checks what the filter keeps.
 SWITCHING_EFFECTS = ('coulomb_friction', 'stribeck_friction', 'load_dependent_friction', 'cogging')
@@ -497,6 +503,8 @@ class _Problem:
         self.weights = self.step / (self.noise.filtered_std_nm**2 * tau)
         self.library_preview: list[EffectSpec] = []
         self.recordings: list[_Recording] = []
+        #: Link-side terms (spec, physical coefficients) the model-load friction sees.
+        self.link_terms: list[tuple[EffectSpec, np.ndarray]] = []
         self._quantities_for_library()
 
     def _noise(self) -> NoiseEstimate:
@@ -609,7 +617,8 @@ class _Problem:
         raw_energy = kept_energy = 0.0
         switching = spec.name in SWITCHING_EFFECTS
         for r in self.recordings:
-            x = effect_columns(spec, r.quantities, self.model)
+            quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
+            x = effect_columns(spec, quantities, self.model)
             xf = _filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
             for part in ('train', 'test'):
                 filtered[part].append(xf[r.rows[part]])
@@ -627,6 +636,13 @@ class _Problem:
             np.concatenate(raw_train),
             retention,
         )
+
+    def _loaded(self, r: _Recording) -> NominalQuantities:
+        """A recording's quantities with the link torque of the nominal model plus link terms."""
+        link = r.quantities.tau_rigid.copy()
+        for spec, theta in self.link_terms:
+            link += effect_columns(spec, r.quantities, self.model) @ theta
+        return replace(r.quantities, tau_rigid=link)
 
     def times(self, part: str) -> np.ndarray:
         """Times [s] of one part's kept rows; later recordings follow the earlier ones."""
@@ -721,9 +737,33 @@ class _Candidates:
         )
 
     def design(self, y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]) -> Design:
-        """The regression problem over the testable candidates."""
+        """The regression problem over the testable candidates.
+
+        The link parameters' changes (inertial_parameter_error) carry the CAD prior of
+        ``physics.base_parameters``: a URDF's masses and centres of mass are good to ten per
+        cent and a few centimetres, so the data move them only as far as they show.
+        """
         columns = {label: self.columns[label] for label in self.testable}
-        return Design(y, columns, self.problem.weights, n_eff)
+        priors = {}
+        for label in self.testable:
+            name = self.specs[label].name
+            if name == 'inertial_parameter_error':
+                priors[label] = self._cad_precision(self.specs[label])
+            elif name == 'torque_constant_scale':
+                # A datasheet torque constant's tolerance: it and the link masses trade a
+                # common scale that only the priors settle.
+                priors[label] = np.array([[1.0 / LABEL_GAIN_STD**2]])
+        return Design(y, columns, self.problem.weights, n_eff, priors)
+
+    def _cad_precision(self, spec: EffectSpec) -> np.ndarray:
+        """Prior precision of the base-direction coefficients of the link parameters' change."""
+        directions = np.asarray(spec.settings['base_directions'])
+        theta0 = self.problem.model.dynamics.inertial_parameters()
+        std = CadPrior().std(theta0)
+        # A change d theta ~ N(0, diag(std^2)) has base coordinates c = pinv(D) d theta.
+        mapping = np.linalg.pinv(directions)
+        covariance = (mapping * std**2) @ mapping.T
+        return np.linalg.inv(covariance)
 
     def plausible(self, design: Design, fit: Fit) -> dict[str, tuple[bool, str]]:
         """The plausibility rule's verdict on every group of a fit."""
@@ -756,23 +796,53 @@ class _Candidates:
     def refine(
         self, selected: Sequence[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
     ) -> list[str]:
-        """Tune the Stribeck velocity and the payload COM of selected effects; new labels."""
+        """Tune the selected effects' nonlinear settings; the selection's new labels.
+
+        Stribeck velocity, payload COM and balancer geometry, then the friction's load.
+        """
         selected = list(selected)
         for index, label in enumerate(list(selected)):
             spec = self.specs[label]
-            if spec.name not in ('stribeck_friction', 'payload_mass'):
+            if spec.name not in ('stribeck_friction', 'payload_mass', 'gravity_spring'):
                 continue
             others = {g: self.columns[g] for g in selected if g != label}
             refined = _refine(self.problem, others, spec, y=y, n_eff=n_eff)
             if refined is None:
                 continue
-            new = refined.label
-            self.specs[new] = refined
-            self.columns[new], self.raw[new], _ = self.problem.columns(refined)
-            selected[index] = new
-            self.testable = [
-                new if t == label else t for t in self.testable if t != new or t == label
-            ]
+            self._swap(label, refined)
+            selected[index] = refined.label
+        return self._load_on_model(selected, y, n_eff)
+
+    def _swap(self, label: str, refined: EffectSpec) -> None:
+        """Put a refined spec (and its columns) in the place of a candidate."""
+        new = refined.label
+        self.specs[new] = refined
+        self.columns[new], self.raw[new], _ = self.problem.columns(refined)
+        self.testable = [new if t == label else t for t in self.testable if t != new or t == label]
+
+    def _load_on_model(
+        self, selected: list[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
+    ) -> list[str]:
+        """Let selected load-dependent friction see the model's link torque, not the URDF's.
+
+        A payload, a balancer or changed link parameters change the torque the gears carry;
+        with the URDF's alone the friction coefficient soaks up their share (``uses_model_load``).
+        """
+        specs = [self.specs[label] for label in selected]
+        loads = [i for i, s in enumerate(specs) if s.name == 'load_dependent_friction']
+        link = [
+            label for label, s in zip(selected, specs, strict=True) if s.name in LINK_SIDE_EFFECTS
+        ]
+        if not loads or not link:
+            return selected
+        design = self.design(y, n_eff)
+        fit = design.fit(selected)
+        self.problem.link_terms = [(self.specs[g], design.physical(fit, g)) for g in link]
+        selected = list(selected)
+        for i in loads:
+            refined = specs[i].replace_settings(load='model')
+            self._swap(selected[i], refined)
+            selected[i] = refined.label
         return selected
 
     def _general_of(self, special: str, general: str) -> bool:
@@ -875,9 +945,8 @@ def _assemble(
     for step, label in zip(selection.steps, selected, strict=True):
         spec = candidates.specs[label]
         theta = design.physical(final, label)
-        half = t_crit * np.sqrt(
-            np.clip(np.diag(design.physical_covariance(final, label)), 0, None)
-        )
+        interval_covariance = t_crit**2 * design.physical_covariance(final, label)
+        half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
         rms = _rmse(np.concatenate([design.contribution(final, label, p) for p in PARTS]))
         # Low confidence: a structured remainder on one of its joints outweighs what it explains.
         low = any(
@@ -890,7 +959,9 @@ def _assemble(
                 confidence='low' if low else 'high',
                 coefficients=theta,
                 coefficients_ci=np.stack([theta - half, theta + half], axis=1),
-                parameters=describe_parameters(spec, theta, half, problem.model),
+                parameters=describe_parameters(
+                    spec, theta, half, problem.model, interval_covariance
+                ),
                 contribution_rms_nm=rms,
                 variance_explained=explained[label],
                 variance_explained_total=explained_total[label],
@@ -1022,6 +1093,29 @@ def _refine(
         )
         if best.fun < rss_of(spec)[0]:
             return spec.replace_settings(velocity=round(float(math.exp(best.x)), 5))
+        return None
+    if spec.name == 'gravity_spring' and 'ratio' in spec.settings:
+        # The balancer's geometry: the best of a grid of arm ratios and phases, then refined
+        # together (an encoder zero error shifts the phase by milliradians).
+        def spring_rss(geometry: np.ndarray) -> float:
+            ratio = float(np.clip(geometry[0], 0.05, 0.98))
+            return rss_of(spec.replace_settings(ratio=ratio, phase_rad=float(geometry[1])))[0]
+
+        grid = [np.array([r, p]) for r in BALANCER_RATIOS for p in BALANCER_PHASES]
+        start = min(grid, key=spring_rss)
+        best = optimize.minimize(
+            spring_rss,
+            start,
+            method='Nelder-Mead',
+            options={
+                'xatol': 1e-4,
+                'fatol': 1e-9,
+                'initial_simplex': start + np.array([[0.0, 0.0], [0.05, 0.0], [0.0, 0.05]]),
+            },
+        )
+        if best.fun < rss_of(spec)[0]:
+            ratio = round(float(np.clip(best.x[0], 0.05, 0.98)), 5)
+            return spec.replace_settings(ratio=ratio, phase_rad=round(float(best.x[1]), 5))
         return None
     if spec.name == 'payload_mass':
         current = spec

@@ -51,7 +51,8 @@ class Fit:
     Attributes:
         groups: group labels in the fit, in order.
         theta: coefficients of the normalised columns, concatenated in group order.
-        rank: numerical rank of the fitted columns.
+        rank: numerical rank of the fitted columns; with a prior on a group, its effective
+            number of parameters trace((G + P)^-1 G).
         rss: {'train', 'test'} -> effective residual sums of squares.
         covariance: covariance of ``theta`` (normalised columns), scaled by the residual variance
             per effective sample (what the confidence intervals use).
@@ -61,7 +62,7 @@ class Fit:
 
     groups: tuple[str, ...]
     theta: np.ndarray
-    rank: int
+    rank: float
     rss: dict[str, float]
     covariance: np.ndarray
     noise_covariance: np.ndarray
@@ -75,6 +76,9 @@ class Design:
         columns: group label -> {'train', 'test'} -> (M, n, k) filtered columns.
         weights: (n,) row weight of each joint (d / (sigma_j^2 tau_j)).
         n_effective: {'train', 'test'} -> (n,) effective samples per joint.
+        priors: group label -> (k, k) prior precision of its physical coefficients (a Gaussian
+            around zero, on the scale of effective samples): a fit of the group is then its
+            posterior mean. For groups a CAD model already bounds (link parameters).
     """
 
     def __init__(
@@ -83,6 +87,7 @@ class Design:
         columns: dict[str, dict[str, np.ndarray]],
         weights: np.ndarray,
         n_effective: dict[str, np.ndarray],
+        priors: dict[str, np.ndarray] | None = None,
     ) -> None:
         """Stack, weight and normalise the columns; precompute the Gram matrices."""
         self.weights = np.asarray(weights, dtype=float)
@@ -113,6 +118,13 @@ class Design:
         self.cross = {part: self.matrix[part].T @ self._yw[part] for part in PARTS}
         self.yy = {part: float(self._yw[part] @ self._yw[part]) for part in PARTS}
         self.n_columns = n_columns
+        # Priors in the normalised columns' units: theta_phys = theta / norm.
+        self.prior = np.zeros((n_columns, n_columns))
+        for label, precision in (priors or {}).items():
+            if label in self.slices:
+                block = self.slices[label]
+                norm = self.column_norm[block]
+                self.prior[block, block] = np.asarray(precision) / np.outer(norm, norm)
 
     @property
     def labels(self) -> list[str]:
@@ -136,12 +148,14 @@ class Design:
         if not idx.size:
             rss = {part: self.yy[part] for part in PARTS}
             return Fit(tuple(groups), np.zeros(0), 0, rss, np.zeros((0, 0)), np.zeros((0, 0)))
-        gram = self.gram['train'][np.ix_(idx, idx)]
+        data = self.gram['train'][np.ix_(idx, idx)]
+        gram = data + self.prior[np.ix_(idx, idx)]
         values, vectors = np.linalg.eigh(gram)
         keep = values > 1e-10 * max(values.max(), 1e-300)
         inverse = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
         theta = inverse @ self.cross['train'][idx]
-        rank = int(keep.sum())
+        # With a prior, the effective number of parameters: trace((G + P)^-1 G).
+        rank = float(np.trace(inverse @ data)) if self.prior.any() else float(keep.sum())
         rss = {}
         for part in PARTS:
             g = self.gram[part][np.ix_(idx, idx)]
@@ -211,7 +225,7 @@ class GroupEvaluation:
     """
 
     label: str
-    extra_rank: int
+    extra_rank: float
     f_statistic: float
     p_value: float
     delta_bic: float

@@ -3,19 +3,23 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from functools import cached_property
 from typing import Any
 
 import numpy as np
 
 from id_learning.errors import RobotModelError
-from id_learning.physics.nominal import NominalModel
+from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import (
     JOINT_COLUMNS,
+    LINK_SIDE_EFFECTS,
     EffectSpec,
     effect_columns,
+    is_label_gain,
     needs_derivatives,
     needs_regressor,
+    uses_model_load,
 )
 from id_learning.robot.config import RobotConfig
 
@@ -63,9 +67,43 @@ class AugmentedModel:
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
         )
-        tau = quantities.tau_nominal.copy()
+        return self._label_gains(self._additive(quantities, self.terms))
+
+    def _additive(
+        self,
+        quantities: NominalQuantities,
+        terms: Sequence[tuple[EffectSpec, np.ndarray]],
+        tau: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """The nominal torque (or ``tau``) plus the additive terms, loads from the model.
+
+        Load-dependent friction of the model-load form (``uses_model_load``) comes last, on the
+        link torque of the nominal model plus the link-side terms.
+        """
+        tau = quantities.tau_nominal.copy() if tau is None else tau
+        link = quantities.tau_rigid.copy()
+        deferred = []
+        for spec, theta in terms:
+            if is_label_gain(spec):
+                continue
+            if uses_model_load(spec):
+                deferred.append((spec, theta))
+                continue
+            contribution = effect_columns(spec, quantities, self.nominal) @ theta
+            tau += contribution
+            if spec.name in LINK_SIDE_EFFECTS:
+                link += contribution
+        if deferred:
+            loaded = replace(quantities, tau_rigid=link)
+            for spec, theta in deferred:
+                tau += effect_columns(spec, loaded, self.nominal) @ theta
+        return tau
+
+    def _label_gains(self, tau: np.ndarray) -> np.ndarray:
+        """Scale tau (..., n) by (1 + c) on each joint with a label gain c (``is_label_gain``)."""
         for spec, theta in self.terms:
-            tau += effect_columns(spec, quantities, self.nominal) @ theta
+            if is_label_gain(spec):
+                tau[..., spec.joint] *= 1.0 + theta[0]
         return tau
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
@@ -78,8 +116,11 @@ class AugmentedModel:
         groups: dict[str, list[tuple[EffectSpec, np.ndarray]]] = {}
         rest: list[tuple[EffectSpec, np.ndarray]] = []
         for spec, theta in self.terms:
+            if is_label_gain(spec):
+                continue  # applied last, to the whole torque
             scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
-            if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar:
+            foldable = not (uses_model_load(spec) or spec.name in LINK_SIDE_EFFECTS)
+            if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar and foldable:
                 groups.setdefault(spec.name, []).append((spec, theta))
             else:
                 rest.append((spec, theta))
@@ -92,7 +133,7 @@ class AugmentedModel:
             folded.append((JOINT_COLUMNS[name], joints, settings, theta))
         specs = [spec for spec, _ in rest]
         derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
-        nominal = self.nominal
+        nominal, label_gains, additive = self.nominal, self._label_gains, self._additive
 
         def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             qs = nominal.evaluate(
@@ -101,9 +142,7 @@ class AugmentedModel:
             tau: np.ndarray = qs.tau_nominal[0].copy()
             for columns, joints, settings, theta in folded:
                 np.add.at(tau, joints, columns(qs, joints, settings, nominal)[0][0] * theta)
-            for spec, theta in rest:
-                tau += effect_columns(spec, qs, nominal)[0] @ theta
-            return tau
+            return label_gains(additive(qs, rest, tau[None])[0])
 
         return torque_one
 

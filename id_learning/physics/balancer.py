@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ['BALANCER_TERMS', 'balancer_basis']
+__all__ = ['BALANCER_PHASES', 'BALANCER_RATIOS', 'BALANCER_TERMS', 'balancer_basis']
 
 #: Columns of the balancer basis (force polynomial of degree 2 in the length).
 BALANCER_TERMS = 3
+#: Geometries a search starts from: ratios of the arms, phases [rad] (0: shortest upright).
+BALANCER_RATIOS = (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+BALANCER_PHASES = (-0.2, -0.1, 0.0, 0.1, 0.2)
 
 
 def balancer_basis(q: np.ndarray, ratio: float, phase: float) -> np.ndarray:

@@ -16,19 +16,23 @@ from typing import Any
 import numpy as np
 
 from id_learning.errors import RobotModelError
+from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
 
 __all__ = [
     'EFFECT_NAMES',
     'JOINT_COLUMNS',
+    'LINK_SIDE_EFFECTS',
     'PARAMETERS',
     'ROBOT_WIDE',
     'EffectSpec',
     'effect_columns',
     'gravity_loaded_joints',
+    'is_label_gain',
     'needs_derivatives',
     'needs_regressor',
+    'uses_model_load',
 ]
 
 
@@ -39,7 +43,7 @@ PARAMETERS: dict[str, tuple[tuple[str, str], ...]] = {
     'stribeck_friction': (('level', 'N*m'),),
     'load_dependent_friction': (('coefficient', '1'),),
     'rotor_inertia': (('rotor_inertia_change_motor_side', 'kg*m^2'),),
-    'gravity_spring': (('c1', 'N*m/rad'), ('c2', 'N*m/rad^2'), ('c3', 'N*m/rad^3')),
+    'gravity_spring': (('f0', 'N*m'), ('f1', 'N*m'), ('f2', 'N*m')),
     'payload_mass': (('mass', 'kg'), ('first_moment_x', 'kg*m'), ('first_moment_y', 'kg*m'),
                      ('first_moment_z', 'kg*m')),
     'joint_offset': (('offset', 'rad'),),
@@ -55,6 +59,9 @@ PARAMETERS: dict[str, tuple[tuple[str, str], ...]] = {
 EFFECT_NAMES: tuple[str, ...] = tuple(PARAMETERS)
 
 ROBOT_WIDE = ('payload_mass', 'signal_delay', 'inertial_parameter_error')
+#: Effects that change the torque the links put on the joints (the load of load-dependent
+#: friction), as against the drive's own terms.
+LINK_SIDE_EFFECTS = ('inertial_parameter_error', 'payload_mass', 'gravity_spring', 'joint_offset')
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,6 +90,10 @@ class EffectSpec:
             parts.append(f'p={self.settings["periods_per_motor_turn"]}')
         if self.name == 'payload_mass':
             parts.append(str(self.settings['frame']))
+        if uses_model_load(self):
+            parts.append('model load')
+        if self.name == 'gravity_spring' and 'ratio' in self.settings:
+            parts.append(f'r={self.settings["ratio"]:.3g}, phi={self.settings["phase_rad"]:.3g}')
         return f'{self.name}[{", ".join(parts)}]' if parts else self.name
 
     def replace_settings(self, **changes: Any) -> EffectSpec:
@@ -119,6 +130,13 @@ def _friction_sign(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -
 def _gravity_spring(
     qs: NominalQuantities, j: Any, settings: Mapping[str, Any], model: NominalModel
 ) -> tuple[np.ndarray, ...]:
+    """A balancer's torque columns (``physics.balancer``) for its geometry in the settings.
+
+    Terms written before the balancer form hold a polynomial in (q - reference_rad) instead.
+    """
+    if 'ratio' in settings:
+        basis = balancer_basis(qs.q[:, j], settings['ratio'], settings['phase_rad'])
+        return tuple(basis[..., k] for k in range(BALANCER_TERMS))
     dq = qs.q[:, j] - settings['reference_rad']
     return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
 
@@ -222,3 +240,24 @@ def gravity_loaded_joints(
     sweep = gravity.max(axis=0) - gravity.min(axis=0)
     share = sweep / model.robot.limits.torque
     return [j for j in range(model.robot.n_joints) if share[j] >= min_share]
+
+
+def is_label_gain(spec: EffectSpec) -> bool:
+    """Whether a torque_constant_scale term scales the whole torque (its current form).
+
+    The labels of a drive whose torque constant is off by a scale s are 1 / s times the torque
+    of the rest of the model, all of it: y = (1 + c) base with c = 1 / s - 1. Its column is the
+    nominal torque (c base - c nominal is second order: c times the effects); terms written
+    before this form add c times the nominal torque only.
+    """
+    return spec.name == 'torque_constant_scale' and spec.settings.get('form') == 'label_gain'
+
+
+def uses_model_load(spec: EffectSpec) -> bool:
+    """Whether a load-dependent friction term grows with the model's link torque (its form).
+
+    The load is the link torque of the whole model (nominal plus the link-side effects): with a
+    payload or a balancer the URDF's alone is far off. Terms written before this form (no
+    'load' setting) take the URDF's rigid-body torque.
+    """
+    return spec.name == 'load_dependent_friction' and spec.settings.get('load') == 'model'

@@ -168,7 +168,7 @@ def test_unknown_effects_in_the_config_are_refused():
 
 
 def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
-    """Every kind of term at once, several per effect, against AugmentedModel.torque."""
+    """Every kind of term and form at once, several per effect, against AugmentedModel.torque."""
     rng = np.random.default_rng(3)
     joints = mabi.joints
     terms = []
@@ -191,6 +191,12 @@ def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
     terms += [
         (EffectSpec('gravity_spring', 1, joints[1], {'reference_rad': 0.0, 'degree': 3}),
          rng.normal(size=3)),
+        (EffectSpec('gravity_spring', 2, joints[2], {'ratio': 0.6, 'phase_rad': 0.01}),
+         rng.normal(size=3) * 100),
+        (EffectSpec('torque_constant_scale', 3, joints[3], {'form': 'label_gain'}),
+         np.array([0.05])),
+        (EffectSpec('load_dependent_friction', 4, joints[4],
+                    {'smoothing_velocity': 0.004, 'load': 'model'}), np.array([0.03])),
         (EffectSpec('joint_offset', 2, joints[2]), rng.normal(size=1) * 1e-3),
         (EffectSpec('signal_delay'), np.array([0.004])),
         (EffectSpec('payload_mass', settings={'frame': mabi.payload_frame,
@@ -203,3 +209,61 @@ def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
     batch = model.torque(q, v, a)
     for k in range(len(q)):
         np.testing.assert_allclose(one(q[k], v[k], a[k]), batch[k], rtol=1e-12, atol=1e-9)
+
+
+def test_label_gains_scale_the_whole_torque_and_model_load_sees_the_link_side_terms(mabi):
+    """y = (1 + c) (nominal + effects); load-dependent friction on the link torque with payload."""
+    rng = np.random.default_rng(5)
+    q, v, a = (rng.uniform(-1.0, 1.0, (20, 6)) for _ in range(3))
+    payload = EffectSpec('payload_mass', settings={'frame': mabi.payload_frame,
+                                                   'com_guess_m': [0.1, 0.0, 0.05]})  # fmt: skip
+    mass = np.array([30.0, 3.0, 0.0, 0.6])
+    eps = 0.004
+    load = EffectSpec('load_dependent_friction', 1, 'joint_2',
+                      {'smoothing_velocity': eps, 'load': 'model'})  # fmt: skip
+    gain = EffectSpec('torque_constant_scale', 1, 'joint_2', {'form': 'label_gain'})
+    base = AugmentedModel(mabi, 'motor', [])
+    with_payload = AugmentedModel(mabi, 'motor', [(payload, mass)])
+    full = AugmentedModel(
+        mabi, 'motor', [(payload, mass), (load, np.array([0.05])), (gain, np.array([0.1]))]
+    )
+    # The link torque with the payload, independently: its difference to the URDF's plus the
+    # URDF's rigid-body torque (rotor terms are motor-side and not part of the load).
+    rigid = base.nominal.evaluate(q, v, a).tau_rigid
+    link = rigid + with_payload.torque(q, v, a) - base.torque(q, v, a)
+    friction = 0.05 * np.abs(link[:, 1]) * np.tanh(v[:, 1] / eps)
+    expected = with_payload.torque(q, v, a)
+    expected[:, 1] = 1.1 * (expected[:, 1] + friction)
+    np.testing.assert_allclose(full.torque(q, v, a), expected, rtol=1e-10, atol=1e-8)
+
+
+def test_a_balancer_is_named_with_its_geometry():
+    config, twin = hidden({'gravity_spring': {'enabled': True}})
+    spring = config.effects.get('gravity_spring')
+    result = run_diagnosis(twin.recording, config.robot)
+    assert named(result) == {('gravity_spring', 'joint_2')}
+    parameters = {p['name']: p['value'] for p in result.effects[0].parameters}
+    assert parameters['arm_ratio'] == pytest.approx(
+        spring.arm_base_m / spring.arm_link_m, abs=0.08
+    )
+    assert parameters['phase'] == pytest.approx(spring.phase_rad, abs=0.02)
+    # Its torque over the joint's range against the twin's: the spring's torque helps the
+    # motor, which needs that much less.
+    q = np.zeros((50, 6))
+    q[:, 1] = np.linspace(-1.0, 1.0, 50)
+    model = result.augmented_model
+    nominal = AugmentedModel(config.robot, 'motor', [])
+    found = (model.torque(q, 0 * q, 0 * q) - nominal.torque(q, 0 * q, 0 * q))[:, 1]
+    truth = -spring.torque_on_joint(q[:, 1])
+    assert np.sqrt(np.mean((found - truth) ** 2)) < 0.05 * np.sqrt(np.mean(truth**2))
+
+
+def test_load_dependent_friction_takes_the_payload_into_its_load():
+    payload = {'enabled': True, 'mass_kg': 40.0, 'com_m': [0.16, 0.0, 0.02]}
+    load = {'enabled': True, 'coefficient': [0.0, 0.03, 0.0, 0.0, 0.0, 0.0]}
+    config, twin = hidden({'payload_mass': payload, 'load_dependent_friction': load})
+    result = run_diagnosis(twin.recording, config.robot)
+    assert named(result) == {('payload_mass', None), ('load_dependent_friction', 'joint_2')}
+    friction = next(e for e in result.effects if e.name == 'load_dependent_friction')
+    assert friction.spec.settings['load'] == 'model'
+    assert friction.coefficients[0] == pytest.approx(0.03, rel=0.1)
