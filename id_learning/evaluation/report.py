@@ -28,6 +28,7 @@ from id_learning.dataset.preprocess import Dataset
 from id_learning.dataset.signals import lowpass
 from id_learning.evaluation.data_summary import nominal_components, rms, shares
 from id_learning.evaluation.metrics import absolute_errors
+from id_learning.evaluation.physics_report import identified_physics_section
 from id_learning.evaluation.scoring import score_model
 from id_learning.evaluation.study import (
     MODEL_LABELS,
@@ -743,6 +744,7 @@ def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, A
         f'Models fitted {_MODES[ds.mode]}.',
         '',
         *_accuracy_tables(report, kinds),
+        *identified_physics_section(report.models, robot),
         "### The study's Table 1",
         '',
         _study_table(

@@ -11,6 +11,7 @@ from support import twin_config
 
 from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
 from id_learning.errors import ConfigError
+from id_learning.evaluation.physics_report import identified_physics_section
 from id_learning.models.data import TrainingData
 from id_learning.models.registry import load_model, make_model, save_model
 from id_learning.physics import RigidBodyDynamics
@@ -66,6 +67,26 @@ def test_rnea_id_names_the_balancer_and_the_payload_the_urdf_lacks(fitted, mabi)
     identified = fitted['rnea_id'].physics_.theta.reshape(-1, 10)
     # The twin's 40 kg payload sits on the last body.
     assert identified[-1, 0] - nominal[-1, 0] == pytest.approx(40.0, rel=0.15)
+
+
+def test_the_report_section_puts_the_identified_physics_beside_the_urdf(fitted, mabi):
+    lines = identified_physics_section({'mlp': object(), **fitted}, mabi)
+    text = '\n'.join(lines)
+    assert lines[0] == '## Identified physics (rnea_id) against the URDF'
+    physics = fitted['rnea_id'].physics_
+    report = physics.report
+    n_data = sum(b['identified'] for b in report['base_parameters'])
+    assert f'{n_data} of {len(report["base_parameters"])} base parameters' in text
+    # One row per body, per joint and per base parameter, each naming it first.
+    for j, joint in enumerate(mabi.joints):
+        assert f'| body {j + 1} ({joint}) |' in text
+        assert f'| {joint} | {mabi.drives.rotor_inertia[j]:.4g} |' in text
+    for entry in report['base_parameters']:
+        assert f'| {entry["name"]} | {entry["unit"]} |' in text
+    payload = np.asarray(report['payload']['value'])
+    assert payload[0] == pytest.approx(40.0, rel=0.15)
+    assert f'mass {payload[0]:.4g} ±' in text
+    assert identified_physics_section({'mlp': object()}, mabi) == []
 
 
 def test_rnea_id_settings_are_checked_naming_the_key(mabi):
