@@ -112,8 +112,6 @@ def build_library(
                         specs.append(EffectSpec(name, j, joint, settings))
                 elif name in ('coulomb_friction', 'load_dependent_friction'):
                     specs.append(EffectSpec(name, j, joint, {'smoothing_velocity': eps}))
-                elif name == 'torque_constant_scale':
-                    specs.append(EffectSpec(name, j, joint, {'form': 'label_gain'}))
                 else:
                     specs.append(EffectSpec(name, j, joint))
     return specs
@@ -467,8 +465,7 @@ def describe_parameters(
             )
         return out
     if name == 'torque_constant_scale':
-        # tau_u from currents = tau_true / s = (1 + c) tau_true (the whole torque in the
-        # label-gain form, the nominal one before): s = 1 / (1 + c).
+        # tau_u from currents = tau_true / s; the column is the nominal torque, so s = 1 / (1 + c).
         def scale(c: float) -> float:
             return 1.0 / (1.0 + c) if c > -1 else math.inf
 

@@ -16,7 +16,6 @@ from id_learning.physics.terms import (
     LINK_SIDE_EFFECTS,
     EffectSpec,
     effect_columns,
-    is_label_gain,
     needs_derivatives,
     needs_regressor,
     uses_model_load,
@@ -67,7 +66,7 @@ class AugmentedModel:
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
         )
-        return self._label_gains(self._additive(quantities, self.terms))
+        return self._additive(quantities, self.terms)
 
     def _additive(
         self,
@@ -84,8 +83,6 @@ class AugmentedModel:
         link = quantities.tau_rigid.copy()
         deferred = []
         for spec, theta in terms:
-            if is_label_gain(spec):
-                continue
             if uses_model_load(spec):
                 deferred.append((spec, theta))
                 continue
@@ -99,13 +96,6 @@ class AugmentedModel:
                 tau += effect_columns(spec, loaded, self.nominal) @ theta
         return tau
 
-    def _label_gains(self, tau: np.ndarray) -> np.ndarray:
-        """Scale tau (..., n) by (1 + c) on each joint with a label gain c (``is_label_gain``)."""
-        for spec, theta in self.terms:
-            if is_label_gain(spec):
-                tau[..., spec.joint] *= 1.0 + theta[0]
-        return tau
-
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.
 
@@ -116,8 +106,6 @@ class AugmentedModel:
         groups: dict[str, list[tuple[EffectSpec, np.ndarray]]] = {}
         rest: list[tuple[EffectSpec, np.ndarray]] = []
         for spec, theta in self.terms:
-            if is_label_gain(spec):
-                continue  # applied last, to the whole torque
             scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
             foldable = not (uses_model_load(spec) or spec.name in LINK_SIDE_EFFECTS)
             if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar and foldable:
@@ -133,7 +121,7 @@ class AugmentedModel:
             folded.append((JOINT_COLUMNS[name], joints, settings, theta))
         specs = [spec for spec, _ in rest]
         derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
-        nominal, label_gains, additive = self.nominal, self._label_gains, self._additive
+        nominal, additive = self.nominal, self._additive
 
         def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             qs = nominal.evaluate(
@@ -142,7 +130,7 @@ class AugmentedModel:
             tau: np.ndarray = qs.tau_nominal[0].copy()
             for columns, joints, settings, theta in folded:
                 np.add.at(tau, joints, columns(qs, joints, settings, nominal)[0][0] * theta)
-            return label_gains(additive(qs, rest, tau[None])[0])
+            return additive(qs, rest, tau[None])[0]
 
         return torque_one
 

@@ -29,7 +29,6 @@ __all__ = [
     'EffectSpec',
     'effect_columns',
     'gravity_loaded_joints',
-    'is_label_gain',
     'needs_derivatives',
     'needs_regressor',
     'uses_model_load',
@@ -240,17 +239,6 @@ def gravity_loaded_joints(
     sweep = gravity.max(axis=0) - gravity.min(axis=0)
     share = sweep / model.robot.limits.torque
     return [j for j in range(model.robot.n_joints) if share[j] >= min_share]
-
-
-def is_label_gain(spec: EffectSpec) -> bool:
-    """Whether a torque_constant_scale term scales the whole torque (its current form).
-
-    The labels of a drive whose torque constant is off by a scale s are 1 / s times the torque
-    of the rest of the model, all of it: y = (1 + c) base with c = 1 / s - 1. Its column is the
-    nominal torque (c base - c nominal is second order: c times the effects); terms written
-    before this form add c times the nominal torque only.
-    """
-    return spec.name == 'torque_constant_scale' and spec.settings.get('form') == 'label_gain'
 
 
 def uses_model_load(spec: EffectSpec) -> bool:

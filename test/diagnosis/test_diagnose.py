@@ -193,8 +193,6 @@ def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
          rng.normal(size=3)),
         (EffectSpec('gravity_spring', 2, joints[2], {'ratio': 0.6, 'phase_rad': 0.01}),
          rng.normal(size=3) * 100),
-        (EffectSpec('torque_constant_scale', 3, joints[3], {'form': 'label_gain'}),
-         np.array([0.05])),
         (EffectSpec('load_dependent_friction', 4, joints[4],
                     {'smoothing_velocity': 0.004, 'load': 'model'}), np.array([0.03])),
         (EffectSpec('joint_offset', 2, joints[2]), rng.normal(size=1) * 1e-3),
@@ -211,8 +209,8 @@ def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
         np.testing.assert_allclose(one(q[k], v[k], a[k]), batch[k], rtol=1e-12, atol=1e-9)
 
 
-def test_label_gains_scale_the_whole_torque_and_model_load_sees_the_link_side_terms(mabi):
-    """y = (1 + c) (nominal + effects); load-dependent friction on the link torque with payload."""
+def test_model_load_friction_sees_the_link_side_terms(mabi):
+    """Model-load friction grows with the link torque, the payload included."""
     rng = np.random.default_rng(5)
     q, v, a = (rng.uniform(-1.0, 1.0, (20, 6)) for _ in range(3))
     payload = EffectSpec('payload_mass', settings={'frame': mabi.payload_frame,
@@ -221,19 +219,16 @@ def test_label_gains_scale_the_whole_torque_and_model_load_sees_the_link_side_te
     eps = 0.004
     load = EffectSpec('load_dependent_friction', 1, 'joint_2',
                       {'smoothing_velocity': eps, 'load': 'model'})  # fmt: skip
-    gain = EffectSpec('torque_constant_scale', 1, 'joint_2', {'form': 'label_gain'})
     base = AugmentedModel(mabi, 'motor', [])
     with_payload = AugmentedModel(mabi, 'motor', [(payload, mass)])
-    full = AugmentedModel(
-        mabi, 'motor', [(payload, mass), (load, np.array([0.05])), (gain, np.array([0.1]))]
-    )
+    full = AugmentedModel(mabi, 'motor', [(payload, mass), (load, np.array([0.05]))])
     # The link torque with the payload, independently: its difference to the URDF's plus the
     # URDF's rigid-body torque (rotor terms are motor-side and not part of the load).
     rigid = base.nominal.evaluate(q, v, a).tau_rigid
     link = rigid + with_payload.torque(q, v, a) - base.torque(q, v, a)
     friction = 0.05 * np.abs(link[:, 1]) * np.tanh(v[:, 1] / eps)
     expected = with_payload.torque(q, v, a)
-    expected[:, 1] = 1.1 * (expected[:, 1] + friction)
+    expected[:, 1] += friction
     np.testing.assert_allclose(full.torque(q, v, a), expected, rtol=1e-10, atol=1e-8)
 
 
