@@ -52,8 +52,6 @@ def _parameter_text(parameter: dict[str, Any]) -> str:
 
 def render_markdown(result: DiagnosisResult, figures: list[str]) -> str:
     """The report's Markdown text."""
-    joints = list(result.joints)
-    noise = result.noise
     lines = [
         f'# Diagnosis: {", ".join(result.sources)}',
         '',
@@ -63,9 +61,21 @@ def render_markdown(result: DiagnosisResult, figures: list[str]) -> str:
         'Every torque below is joint side [N·m], filtered like the label; RMSEs are on the '
         'held-out (last 30 %, contiguous) part.',
         '',
-        '## Verdict',
+        *_verdict(result),
+        *_effects(result),
+        *_untestable(result),
+        *_remainder(result),
+        '## Figures',
+        '',
+        *[f'![{name}]({name})' for name in figures],
         '',
     ]
+    return '\n'.join(lines)
+
+
+def _verdict(result: DiagnosisResult) -> list[str]:
+    """What was found, in words, and the held-out RMSE as each effect enters."""
+    lines = ['## Verdict', '']
     named = result.named_effects()
     if named:
         for effect in named:
@@ -91,49 +101,50 @@ def render_markdown(result: DiagnosisResult, figures: list[str]) -> str:
             + ', '.join(structured)
             + ': structure no candidate explains (see the remainder table).'
         )
-    lines += [
+    return [
+        *lines,
         f'- Selection stopped: {result.stop_reason}.',
         '',
         '## Held-out RMSE before and after [N·m]',
         '',
         *_table(
-            ['model', *joints],
+            ['model', *result.joints],
             [
                 ['nominal', *[f'{x:.3g}' for x in result.rmse_before_nm]],
                 *[[f'+ {label}', *[f'{x:.3g}' for x in rmse]] for label, rmse in result.waterfall],
-                ['noise level (estimate)', *[f'{x:.3g}' for x in noise.filtered_std_nm]],
+                ['noise level (estimate)', *[f'{x:.3g}' for x in result.noise.filtered_std_nm]],
             ],
         ),
         '',
     ]
+
+
+def _effects(result: DiagnosisResult) -> list[str]:
+    """The refit model's effects with parameters and selection statistics; the alias sets."""
+    lines: list[str] = []
     if result.effects:
-        lines += ['## Effects in the refit model', '']
-        rows = []
-        for effect in result.effects:
-            rows.append(
-                [
-                    effect.label,
-                    effect.status,
-                    effect.confidence,
-                    '<br>'.join(_parameter_text(p) for p in effect.parameters),
-                    ', '.join(f'{100 * x:.0f}' for x in effect.variance_explained),
-                    f'F = {effect.selection["f_statistic"]:.1f}, '
-                    f'p = {effect.selection["p_value"]:.2g}, '
-                    f'ΔBIC = {effect.selection["delta_bic"]:.1f}',
-                ]
-            )
-        lines += _table(
+        rows = [
             [
-                'effect',
-                'status',
-                'confidence',
-                'parameters [95 % interval]',
-                'variance explained per joint [%]',
-                'selection',
-            ],
-            rows,
-        )
-        lines.append('')
+                effect.label,
+                effect.status,
+                effect.confidence,
+                '<br>'.join(_parameter_text(p) for p in effect.parameters),
+                ', '.join(f'{100 * x:.0f}' for x in effect.variance_explained),
+                f'F = {effect.selection["f_statistic"]:.1f}, '
+                f'p = {effect.selection["p_value"]:.2g}, '
+                f'ΔBIC = {effect.selection["delta_bic"]:.1f}',
+            ]
+            for effect in result.effects
+        ]
+        head = [
+            'effect',
+            'status',
+            'confidence',
+            'parameters [95 % interval]',
+            'variance explained per joint [%]',
+            'selection',
+        ]
+        lines += ['## Effects in the refit model', '', *_table(head, rows), '']
     if result.alias_sets:
         lines += ['## Alias sets', '']
         for alias in result.alias_sets:
@@ -143,44 +154,41 @@ def render_markdown(result: DiagnosisResult, figures: list[str]) -> str:
             )
             lines.append(f'- {alias.representative} ≈ {detail}')
         lines.append('')
-    lines += ['## Untestable on this recording', '']
-    if result.untestable:
-        lines += _table(
-            ['effect', 'joint', 'all variants', 'reason'],
-            [
-                [u['name'], u['joint'] or '-', 'yes' if u['all_variants'] else 'some', u['reason']]
-                for u in result.untestable
-            ],
-        )
-    else:
-        lines.append('Every candidate is testable.')
-    lines += [
-        '',
+    return lines
+
+
+def _untestable(result: DiagnosisResult) -> list[str]:
+    """Candidates this recording cannot test, and why."""
+    lines = ['## Untestable on this recording', '']
+    if not result.untestable:
+        return [*lines, 'Every candidate is testable.', '']
+    rows = [
+        [u['name'], u['joint'] or '-', 'yes' if u['all_variants'] else 'some', u['reason']]
+        for u in result.untestable
+    ]
+    return [*lines, *_table(['effect', 'joint', 'all variants', 'reason'], rows), '']
+
+
+def _remainder(result: DiagnosisResult) -> list[str]:
+    """The remainder after the refit against the noise, and where the nominal residual lives."""
+    noise = result.noise
+    rows = [
+        [
+            r.joint,
+            f'{r.rms_nm:.3g}',
+            f'{r.noise_nm:.3g}',
+            f'{r.ratio:.2f}',
+            f'{r.p_value:.2g}',
+            f'{r.correlation_ratio:.1f}',
+            'yes' if r.structured else 'no',
+        ]
+        for r in result.remainder
+    ]
+    head = ['joint', 'RMS [N·m]', 'noise [N·m]', 'ratio', 'p (variance)', 'corr. time ratio']
+    return [
         '## Remainder after the refit',
         '',
-        *_table(
-            [
-                'joint',
-                'RMS [N·m]',
-                'noise [N·m]',
-                'ratio',
-                'p (variance)',
-                'corr. time ratio',
-                'structured',
-            ],
-            [
-                [
-                    r.joint,
-                    f'{r.rms_nm:.3g}',
-                    f'{r.noise_nm:.3g}',
-                    f'{r.ratio:.2f}',
-                    f'{r.p_value:.2g}',
-                    f'{r.correlation_ratio:.1f}',
-                    'yes' if r.structured else 'no',
-                ]
-                for r in result.remainder
-            ],
-        ),
+        *_table([*head, 'structured'], rows),
         '',
         f'Noise: raw label {", ".join(f"{x:.3g}" for x in noise.raw_std_nm)} N·m white level '
         f'(median spectrum {noise.band_hz[0]:g}–{noise.band_hz[1]:g} Hz); after the filter '
@@ -203,12 +211,7 @@ def render_markdown(result: DiagnosisResult, figures: list[str]) -> str:
             ],
         ),
         '',
-        '## Figures',
-        '',
-        *[f'![{name}]({name})' for name in figures],
-        '',
     ]
-    return '\n'.join(lines)
 
 
 def _plot(result: DiagnosisResult, out: Path) -> list[str]:

@@ -202,71 +202,8 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         raise ConfigError(f'{where}: joints: duplicate joint names {duplicates}')
     n = len(joints)
 
-    drives = data['drives']
-    if not isinstance(drives, dict):
-        raise ConfigError(f'{where}: drives: expected a mapping')
-    check_keys(
-        drives,
-        ('gear_ratio', 'torque_constant', 'rotor_inertia'),
-        f'{where}: drives',
-        required=('gear_ratio', 'torque_constant', 'rotor_inertia'),
-    )
-    drive = DriveConfig(
-        gear_ratio=float_vector(
-            drives['gear_ratio'],
-            f'{where}: drives.gear_ratio',
-            n,
-            minimum=0.0,
-            exclusive_minimum=True,
-        ),
-        torque_constant=float_vector(
-            drives['torque_constant'],
-            f'{where}: drives.torque_constant',
-            n,
-            minimum=0.0,
-            exclusive_minimum=True,
-        ),
-        rotor_inertia=float_vector(
-            drives['rotor_inertia'], f'{where}: drives.rotor_inertia', n, minimum=0.0
-        ),
-    )
-
-    limits_data = data['limits']
-    if not isinstance(limits_data, dict):
-        raise ConfigError(f'{where}: limits: expected a mapping')
-    check_keys(limits_data, _LIMIT_KEYS, f'{where}: limits', required=_LIMIT_KEYS)
-    lower = float_vector(limits_data['position_lower'], f'{where}: limits.position_lower', n)
-    upper = float_vector(limits_data['position_upper'], f'{where}: limits.position_upper', n)
-    if np.any(lower >= upper):
-        joint = joints[int(np.argmax(lower >= upper))]
-        raise ConfigError(
-            f'{where}: limits: position_lower must be below position_upper (joint {joint})'
-        )
-    limits = JointLimits(
-        position_lower=lower,
-        position_upper=upper,
-        velocity=float_vector(
-            limits_data['velocity'],
-            f'{where}: limits.velocity',
-            n,
-            minimum=0.0,
-            exclusive_minimum=True,
-        ),
-        acceleration=float_vector(
-            limits_data['acceleration'],
-            f'{where}: limits.acceleration',
-            n,
-            minimum=0.0,
-            exclusive_minimum=True,
-        ),
-        torque=float_vector(
-            limits_data['torque'],
-            f'{where}: limits.torque',
-            n,
-            minimum=0.0,
-            exclusive_minimum=True,
-        ),
-    )
+    drive = _drives(data['drives'], n, where)
+    limits = _limits(data['limits'], joints, where)
 
     period = data['ipo_period_s']
     if not isinstance(period, (int, float)) or not 1e-5 <= float(period) <= 1.0:
@@ -301,6 +238,77 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         payload_frame=str(data['payload_frame']),
         locked_joints={key: float(value) for key, value in locked.items()},
         topics=topics,
+    )
+
+
+def _drives(drives: Any, n: int, where: str) -> DriveConfig:
+    """The drives section: gear ratios, torque constants and rotor inertias per joint."""
+    if not isinstance(drives, dict):
+        raise ConfigError(f'{where}: drives: expected a mapping')
+    check_keys(
+        drives,
+        ('gear_ratio', 'torque_constant', 'rotor_inertia'),
+        f'{where}: drives',
+        required=('gear_ratio', 'torque_constant', 'rotor_inertia'),
+    )
+    return DriveConfig(
+        gear_ratio=float_vector(
+            drives['gear_ratio'],
+            f'{where}: drives.gear_ratio',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        torque_constant=float_vector(
+            drives['torque_constant'],
+            f'{where}: drives.torque_constant',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        rotor_inertia=float_vector(
+            drives['rotor_inertia'], f'{where}: drives.rotor_inertia', n, minimum=0.0
+        ),
+    )
+
+
+def _limits(limits_data: Any, joints: list[str], where: str) -> JointLimits:
+    """The limits section; each position range must be non-empty."""
+    n = len(joints)
+    if not isinstance(limits_data, dict):
+        raise ConfigError(f'{where}: limits: expected a mapping')
+    check_keys(limits_data, _LIMIT_KEYS, f'{where}: limits', required=_LIMIT_KEYS)
+    lower = float_vector(limits_data['position_lower'], f'{where}: limits.position_lower', n)
+    upper = float_vector(limits_data['position_upper'], f'{where}: limits.position_upper', n)
+    if np.any(lower >= upper):
+        joint = joints[int(np.argmax(lower >= upper))]
+        raise ConfigError(
+            f'{where}: limits: position_lower must be below position_upper (joint {joint})'
+        )
+    return JointLimits(
+        position_lower=lower,
+        position_upper=upper,
+        velocity=float_vector(
+            limits_data['velocity'],
+            f'{where}: limits.velocity',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        acceleration=float_vector(
+            limits_data['acceleration'],
+            f'{where}: limits.acceleration',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
+        torque=float_vector(
+            limits_data['torque'],
+            f'{where}: limits.torque',
+            n,
+            minimum=0.0,
+            exclusive_minimum=True,
+        ),
     )
 
 

@@ -334,31 +334,7 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     rotor_inertia = robot.drives.rotor_inertia * (rotor.scale if rotor.enabled else 1.0)
     components['rotor_inertia'] = rotor_inertia * gear**2 * ac
 
-    viscous, coulomb, stribeck, load = (
-        effects.get(name)
-        for name in (
-            'viscous_friction',
-            'coulomb_friction',
-            'stribeck_friction',
-            'load_dependent_friction',
-        )
-    )
-    assert isinstance(viscous, ViscousFriction)
-    assert isinstance(coulomb, CoulombFriction)
-    assert isinstance(stribeck, StribeckFriction)
-    assert isinstance(load, LoadDependentFriction)
-    if viscous.enabled:
-        components['viscous_friction'] = viscous.torque(vc)
-    if coulomb.enabled:
-        components['coulomb_friction'] = coulomb.torque(vc)
-    if stribeck.enabled:
-        components['stribeck_friction'] = stribeck.torque(vc)
-    if load.enabled:
-        components['load_dependent_friction'] = load.torque(vc, tau_joint)
-    cogging = effects.get('cogging')
-    assert isinstance(cogging, CoggingEffect)
-    if cogging.enabled:
-        components['cogging'] = cogging.torque(qc, gear)
+    components |= _friction_and_cogging(effects, vc, qc, tau_joint, gear)
 
     scale_effect = effects.get('torque_constant_scale')
     assert isinstance(scale_effect, TorqueConstantScale)
@@ -386,18 +362,11 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     joint_torque = None
     if config.joint_torque_sensors:
         # A torque sensor at the gear output sees the motion at the sample time, without delay.
-        if delay_s:
-            g_now, c_now, i_now = _rigid_body_terms(dynamics, q, v, a, progress)
-            spring_now = np.zeros_like(q)
-            if spring.enabled:
-                j = robot.joints.index(spring.joint)
-                spring_now[:, j] = spring.torque_on_joint(q[:, j])
-            tau_joint_now = g_now + c_now + i_now - spring_now
-        else:
-            tau_joint_now = tau_joint
-        joint_torque = tau_joint_now + m.joint_torque_noise_std * sensor_rng.standard_normal(
-            q.shape
+        tau_joint_now = (
+            _link_torque(dynamics, spring, robot, (q, v, a), progress) if delay_s else tau_joint
         )
+        noise = m.joint_torque_noise_std * sensor_rng.standard_normal(q.shape)
+        joint_torque = tau_joint_now + noise
 
     stamps = config.start_time_ns + np.round(t * 1e9).astype(np.int64)
     recording = Recording(
@@ -416,6 +385,56 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     }
     parameters['tau_u_clean_rms_nm'] = np.sqrt(np.mean(tau_u_clean**2, axis=0)).tolist()
     return TwinResult(recording, components, tau_u_clean, tau_joint, q, v, a, parameters)
+
+
+def _friction_and_cogging(
+    effects: EffectSet, vc: np.ndarray, qc: np.ndarray, tau_joint: np.ndarray, gear: np.ndarray
+) -> dict[str, np.ndarray]:
+    """The enabled friction laws' and cogging's torques [N*m] on the delayed motion."""
+    components: dict[str, np.ndarray] = {}
+    viscous, coulomb, stribeck, load = (
+        effects.get(name)
+        for name in (
+            'viscous_friction',
+            'coulomb_friction',
+            'stribeck_friction',
+            'load_dependent_friction',
+        )
+    )
+    assert isinstance(viscous, ViscousFriction)
+    assert isinstance(coulomb, CoulombFriction)
+    assert isinstance(stribeck, StribeckFriction)
+    assert isinstance(load, LoadDependentFriction)
+    if viscous.enabled:
+        components['viscous_friction'] = viscous.torque(vc)
+    if coulomb.enabled:
+        components['coulomb_friction'] = coulomb.torque(vc)
+    if stribeck.enabled:
+        components['stribeck_friction'] = stribeck.torque(vc)
+    if load.enabled:
+        components['load_dependent_friction'] = load.torque(vc, tau_joint)
+    cogging = effects.get('cogging')
+    assert isinstance(cogging, CoggingEffect)
+    if cogging.enabled:
+        components['cogging'] = cogging.torque(qc, gear)
+    return components
+
+
+def _link_torque(
+    dynamics: RigidBodyDynamics,
+    spring: GravitySpring,
+    robot: RobotConfig,
+    motion: tuple[np.ndarray, np.ndarray, np.ndarray],
+    progress: bool,
+) -> np.ndarray:
+    """The torque at the gear output [N*m]: rigid body minus the balancer's help."""
+    q, v, a = motion
+    gravity, coriolis, inertia = _rigid_body_terms(dynamics, q, v, a, progress)
+    spring_torque = np.zeros_like(q)
+    if spring.enabled:
+        j = robot.joints.index(spring.joint)
+        spring_torque[:, j] = spring.torque_on_joint(q[:, j])
+    return gravity + coriolis + inertia - spring_torque
 
 
 def _check_torque_limits(tau_motor: np.ndarray, robot: RobotConfig, t: np.ndarray) -> None:

@@ -1,0 +1,303 @@
+"""The library's candidates on one problem, and the tuning of a selected effect's settings.
+
+Columns, testability, plausibility and priors of every candidate; the nonlinear settings of a
+selected effect (Stribeck velocity, payload centre of mass, balancer geometry, the load of
+load-dependent friction) tuned on the training part.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy import optimize
+
+from id_learning.diagnosis.candidates import (
+    SPECIAL_CASES,
+    ExcitationFacts,
+    PlausibilityFacts,
+    plausibility,
+    testability,
+)
+from id_learning.diagnosis.problem import ResidualProblem
+from id_learning.diagnosis.selection import (
+    AliasSet,
+    Design,
+    Fit,
+)
+from id_learning.physics.balancer import BALANCER_PHASES, BALANCER_RATIOS
+from id_learning.physics.base_parameters import CadPrior
+from id_learning.physics.terms import (
+    LINK_SIDE_EFFECTS,
+    EffectSpec,
+)
+
+__all__ = ['LABEL_GAIN_STD', 'CandidateSet', 'refine_setting']
+
+#: Prior std of a label gain (torque-constant error) around 0, as in the identification.
+LABEL_GAIN_STD = 0.05
+
+
+class CandidateSet:
+    """The library's columns on every part, their testability and plausibility rules."""
+
+    def __init__(self, problem: ResidualProblem) -> None:
+        self.problem = problem
+        model = problem.model
+        self.specs = {spec.label: spec for spec in problem.library}
+        self.columns: dict[str, dict[str, np.ndarray]] = {}
+        self.raw: dict[str, np.ndarray] = {}
+        retention: dict[str, float] = {}
+        norm: dict[str, np.ndarray] = {}
+        for label, spec in self.specs.items():
+            self.columns[label], self.raw[label], retention[label] = problem.columns(spec)
+            train = self.columns[label]['train']
+            weighted = train * problem.weights[None, :, None]
+            norm[label] = np.sqrt(np.sum(weighted * train, axis=(0, 1)))
+        facts = ExcitationFacts(problem.part('v', 'train'), problem.cutoff, norm, retention)
+        self.verdicts = {
+            label: testability(spec, facts, model, problem.config)
+            for label, spec in self.specs.items()
+        }
+        self.testable = [label for label in self.specs if self.verdicts[label][0]]
+        quantities = problem.joined_quantities()
+        self.facts = PlausibilityFacts(
+            rigid_rms=np.sqrt(np.mean(quantities.tau_rigid**2, axis=0)),
+            gravity=model.dynamics.gravity(quantities.q),
+            moving_mass_kg=model.dynamics.total_moving_mass(),
+            body_parameters=model.dynamics.inertial_parameters().reshape(-1, 10),
+        )
+
+    def design(self, y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]) -> Design:
+        """The regression problem over the testable candidates.
+
+        The link parameters' changes (inertial_parameter_error) carry the CAD prior of
+        ``physics.base_parameters``: a URDF's masses and centres of mass are good to ten per
+        cent and a few centimetres, so the data move them only as far as they show.
+        """
+        columns = {label: self.columns[label] for label in self.testable}
+        priors = {}
+        for label in self.testable:
+            name = self.specs[label].name
+            if name == 'inertial_parameter_error':
+                priors[label] = self._cad_precision(self.specs[label])
+            elif name == 'torque_constant_scale':
+                # A datasheet torque constant's tolerance: it and the link masses trade a
+                # common scale that only the priors settle.
+                priors[label] = np.array([[1.0 / LABEL_GAIN_STD**2]])
+        return Design(y, columns, self.problem.weights, n_eff, priors)
+
+    def _cad_precision(self, spec: EffectSpec) -> np.ndarray:
+        """Prior precision of the base-direction coefficients of the link parameters' change."""
+        directions = np.asarray(spec.settings['base_directions'])
+        theta0 = self.problem.model.dynamics.inertial_parameters()
+        std = CadPrior().std(theta0)
+        # A change d theta ~ N(0, diag(std^2)) has base coordinates c = pinv(D) d theta.
+        mapping = np.linalg.pinv(directions)
+        covariance = (mapping * std**2) @ mapping.T
+        return np.linalg.inv(covariance)
+
+    def plausible(self, design: Design, fit: Fit) -> dict[str, tuple[bool, str]]:
+        """The plausibility rule's verdict on every group of a fit."""
+        out = {}
+        for group in fit.groups:
+            theta = design.physical(fit, group)
+            out[group] = plausibility(
+                self.specs[group],
+                theta,
+                self.raw[group] @ theta,
+                self.problem.model,
+                self.facts,
+                # Estimation noise, not the misfit of effects still missing, widens the margin.
+                covariance=design.physical_covariance(fit, group, noise_only=True),
+            )
+        return out
+
+    def variants(self, a: str, b: str) -> bool:
+        """Whether two candidates are variants of one effect on one joint."""
+        return (
+            self.specs[a].name == self.specs[b].name and self.specs[a].joint == self.specs[b].joint
+        )
+
+    def conflicts(self, label: str, selected: Sequence[str]) -> bool:
+        """Two Stribeck velocities of one joint never enter together."""
+        if self.specs[label].name != 'stribeck_friction':
+            return False
+        return any(self.variants(label, other) for other in selected)
+
+    def refine(
+        self, selected: Sequence[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
+    ) -> list[str]:
+        """Tune the selected effects' nonlinear settings; the selection's new labels.
+
+        Stribeck velocity, payload COM and balancer geometry, then the friction's load.
+        """
+        selected = list(selected)
+        for index, label in enumerate(list(selected)):
+            spec = self.specs[label]
+            if spec.name not in ('stribeck_friction', 'payload_mass', 'gravity_spring'):
+                continue
+            others = {g: self.columns[g] for g in selected if g != label}
+            refined = refine_setting(self.problem, others, spec, y=y, n_eff=n_eff)
+            if refined is None:
+                continue
+            self._swap(label, refined)
+            selected[index] = refined.label
+        return self._load_on_model(selected, y, n_eff)
+
+    def _swap(self, label: str, refined: EffectSpec) -> None:
+        """Put a refined spec (and its columns) in the place of a candidate."""
+        new = refined.label
+        self.specs[new] = refined
+        self.columns[new], self.raw[new], _ = self.problem.columns(refined)
+        self.testable = [new if t == label else t for t in self.testable if t != new or t == label]
+
+    def _load_on_model(
+        self, selected: list[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
+    ) -> list[str]:
+        """Let selected load-dependent friction see the model's link torque, not the URDF's.
+
+        A payload, a balancer or changed link parameters change the torque the gears carry;
+        with the URDF's alone the friction coefficient soaks up their share (``uses_model_load``).
+        """
+        specs = [self.specs[label] for label in selected]
+        loads = [i for i, s in enumerate(specs) if s.name == 'load_dependent_friction']
+        link = [
+            label for label, s in zip(selected, specs, strict=True) if s.name in LINK_SIDE_EFFECTS
+        ]
+        if not loads or not link:
+            return selected
+        design = self.design(y, n_eff)
+        fit = design.fit(selected)
+        self.problem.link_terms = [(self.specs[g], design.physical(fit, g)) for g in link]
+        selected = list(selected)
+        for i in loads:
+            refined = specs[i].replace_settings(load='model')
+            self._swap(selected[i], refined)
+            selected[i] = refined.label
+        return selected
+
+    def _general_of(self, special: str, general: str) -> bool:
+        return SPECIAL_CASES.get(self.specs[special].name) == self.specs[general].name
+
+    def special_cases(self, selected: Sequence[str], aliases: Sequence[AliasSet]) -> list[str]:
+        """``selected`` with each general effect replaced by a special case that mimics it.
+
+        Of several, the one that leaves least of the general effect's contribution.
+        """
+        out = list(selected)
+        for alias in aliases:
+            special = [m for m in alias.members[1:] if self._general_of(m, alias.representative)]
+            if special:
+                best = min(special, key=lambda m: alias.unexplained.get(m, math.inf))
+                out[out.index(alias.representative)] = best
+        return out
+
+    def without_generalisations(self, aliases: Sequence[AliasSet]) -> list[AliasSet]:
+        """Alias sets without the general effects of their (special-case) representatives."""
+        out = []
+        for alias in aliases:
+            members = [m for m in alias.members if not self._general_of(alias.representative, m)]
+            if len(members) > 1:
+                keep = set(members)
+                out.append(
+                    AliasSet(
+                        alias.representative,
+                        members,
+                        {k: v for k, v in alias.canonical_correlation.items() if k in keep},
+                        {k: v for k, v in alias.unexplained.items() if k in keep},
+                    )
+                )
+        return out
+
+    def untestable_summary(self) -> list[dict[str, Any]]:
+        """Untestable candidates grouped by effect and joint, with the reason."""
+        groups: dict[tuple[str, str], list[str]] = {}
+        for label, spec in self.specs.items():
+            groups.setdefault((spec.name, spec.joint_name), []).append(label)
+        out = []
+        for (name, joint), labels in groups.items():
+            bad = [label for label in labels if not self.verdicts.get(label, (True, ''))[0]]
+            if not bad:
+                continue
+            out.append(
+                {
+                    'name': name,
+                    'joint': joint or None,
+                    'all_variants': len(bad) == len(labels),
+                    'variants': {label: self.verdicts[label][1] for label in bad},
+                    'reason': self.verdicts[bad[0]][1],
+                }
+            )
+        return out
+
+
+def refine_setting(
+    problem: ResidualProblem,
+    others: dict[str, dict[str, np.ndarray]],
+    spec: EffectSpec,
+    *,
+    y: dict[str, np.ndarray],
+    n_eff: dict[str, np.ndarray],
+) -> EffectSpec | None:
+    """Tune a selected effect's nonlinear setting on the training part, the others kept."""
+
+    def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
+        cols, _, _ = problem.columns(candidate)
+        small = Design(y, {**others, candidate.label: cols}, problem.weights, n_eff)
+        fit = small.fit([*others, candidate.label])
+        return fit.rss['train'], small, fit
+
+    if spec.name == 'stribeck_friction':
+        start = float(spec.settings['velocity'])
+
+        def objective(log_vs: float) -> float:
+            return rss_of(spec.replace_settings(velocity=float(math.exp(log_vs))))[0]
+
+        best = optimize.minimize_scalar(
+            objective,
+            bounds=(math.log(start / 2.5), math.log(start * 2.5)),
+            method='bounded',
+            options={'xatol': 0.02},
+        )
+        if best.fun < rss_of(spec)[0]:
+            return spec.replace_settings(velocity=round(float(math.exp(best.x)), 5))
+        return None
+    if spec.name == 'gravity_spring' and 'ratio' in spec.settings:
+        # The balancer's geometry: the best of a grid of arm ratios and phases, then refined
+        # together (an encoder zero error shifts the phase by milliradians).
+        def spring_rss(geometry: np.ndarray) -> float:
+            ratio = float(np.clip(geometry[0], 0.05, 0.98))
+            return rss_of(spec.replace_settings(ratio=ratio, phase_rad=float(geometry[1])))[0]
+
+        grid = [np.array([r, p]) for r in BALANCER_RATIOS for p in BALANCER_PHASES]
+        start = min(grid, key=spring_rss)
+        best = optimize.minimize(
+            spring_rss,
+            start,
+            method='Nelder-Mead',
+            options={
+                'xatol': 1e-4,
+                'fatol': 1e-9,
+                'initial_simplex': start + np.array([[0.0, 0.0], [0.05, 0.0], [0.0, 0.05]]),
+            },
+        )
+        if best.fun < rss_of(spec)[0]:
+            ratio = round(float(np.clip(best.x[0], 0.05, 0.98)), 5)
+            return spec.replace_settings(ratio=ratio, phase_rad=round(float(best.x[1]), 5))
+        return None
+    if spec.name == 'payload_mass':
+        current = spec
+        for _ in range(6):
+            _, small, fit = rss_of(current)
+            theta = small.physical(fit, current.label)
+            if theta[0] <= 0:
+                return None
+            com = (np.asarray(theta[1:4]) / theta[0]).tolist()
+            if np.allclose(com, current.settings['com_guess_m'], atol=1e-4):
+                break
+            current = current.replace_settings(com_guess_m=com)
+        return current
+    return None

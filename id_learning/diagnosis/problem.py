@@ -1,0 +1,344 @@
+"""The diagnosis's regression problem: filtered residual, candidate columns and row weights.
+
+Every recording is preprocessed, the nominal model evaluated on a controller's inputs, the rows
+kept where the zero-phase filter has settled; candidate columns are filtered exactly like the
+label (or, with the study's preprocessing, built on the filtered motion).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import signal
+
+from id_learning.dataset.preprocess import Dataset, prepare_dataset
+from id_learning.dataset.recording import Recording
+from id_learning.dataset.signals import butterworth, differentiate
+from id_learning.dataset.statistics import (
+    NoiseEstimate,
+    estimate_noise,
+)
+from id_learning.diagnosis.candidates import (
+    build_library,
+)
+from id_learning.diagnosis.config import DiagnosisConfig
+from id_learning.diagnosis.selection import (
+    PARTS,
+)
+from id_learning.errors import DatasetError
+from id_learning.physics.nominal import NominalModel, NominalQuantities
+from id_learning.physics.terms import (
+    EffectSpec,
+    effect_columns,
+    needs_derivatives,
+    needs_regressor,
+    uses_model_load,
+)
+from id_learning.robot.config import RobotConfig
+
+__all__ = [
+    'SWITCHING_EFFECTS',
+    'PreparedRecording',
+    'ResidualProblem',
+    'as_datasets',
+    'as_label',
+    'column_motion',
+    'evaluation_rows',
+    'filter_columns',
+    'kept_rows',
+    'trim_samples',
+]
+
+#: Effects whose signature switches with the sign of v or the position within a motor turn: the
+#: low-pass can remove most of it, so their testability checks what the filter keeps.
+SWITCHING_EFFECTS = ('coulomb_friction', 'stribeck_friction', 'load_dependent_friction', 'cogging')
+
+
+def evaluation_rows(
+    dataset: Dataset, config: DiagnosisConfig | None = None
+) -> dict[str, np.ndarray]:
+    """Rows of the training and held-out parts that the diagnosis scores on.
+
+    The filter's start-up transient is trimmed at both recording ends and after the train/test
+    boundary (``DiagnosisConfig.edge_trim_s``).
+    """
+    config = config or DiagnosisConfig()
+    return kept_rows(dataset, trim_samples(dataset, config), 1, config)
+
+
+def trim_samples(dataset: Dataset, config: DiagnosisConfig) -> int:
+    """Samples dropped at each recording edge, where the zero-phase filter starts up."""
+    cutoff = float(np.min(dataset.cutoff_hz))
+    trim_s = config.edge_trim_s if config.edge_trim_s is not None else 1.0 / cutoff
+    return round(trim_s / dataset.period_s)
+
+
+@dataclass(eq=False)
+class PreparedRecording:
+    """One preprocessed recording with its nominal quantities and kept rows."""
+
+    dataset: Dataset
+    quantities: NominalQuantities
+    smooth: NominalQuantities
+    rows: dict[str, np.ndarray]
+    nominal_filtered: np.ndarray
+
+
+def as_datasets(
+    data: Recording | Dataset | Sequence[Recording | Dataset],
+    robot: RobotConfig,
+    config: DiagnosisConfig,
+) -> list[Dataset]:
+    """Preprocess recordings; check datasets."""
+    items = [data] if isinstance(data, (Recording, Dataset)) else list(data)
+    if not items:
+        raise DatasetError('diagnosis: no recordings given')
+    datasets: list[Dataset] = []
+    for item in items:
+        source = item.source
+        if tuple(item.joints) != tuple(robot.joints):
+            raise DatasetError(
+                f'{source}: its joints {list(item.joints)} do not match the robot config '
+                f'{robot.name} ({list(robot.joints)}); diagnose with the robot config the '
+                'recording was made with'
+            )
+        if isinstance(item, Recording):
+            datasets.append(prepare_dataset(item, robot, config.preprocess))
+            continue
+        if not math.isclose(item.period_s, robot.ipo_period_s, rel_tol=1e-9):
+            raise DatasetError(
+                f'{source}: sample period {item.period_s} s differs from the robot config '
+                f'{robot.name} ({robot.ipo_period_s} s)'
+            )
+        datasets.append(item)
+    for name in ('target', 'mode'):
+        found = {getattr(d, name) for d in datasets}
+        if len(found) > 1:
+            raise DatasetError(f'diagnosis: recordings mix {name}s {sorted(found)}')
+    return datasets
+
+
+def column_motion(dataset: Dataset) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The motion (q, v, a, jerk), each (N, n), that regressor columns are built from.
+
+    The dataset's fitting inputs: a controller's (recorded q, v smoothed far above the motion's
+    band, a from them), so that columns are filtered once, like the label (building them from
+    the filtered motion would filter the motion twice, which near motion onsets costs several
+    N*m on heavily loaded joints); with the study's preprocessing, the filtered motion. The jerk
+    is differentiated from a.
+    """
+    return dataset.q, dataset.v, dataset.a, differentiate(dataset.a, dataset.period_s)
+
+
+def as_label(x: np.ndarray, dataset: Dataset) -> np.ndarray:
+    """A torque (N, n) along the dataset's recordings as the labels meet it.
+
+    Filtered like the labels when fitting through the filter; as is for the study's way.
+    """
+    return dataset.filter_like_labels(x) if dataset.is_through_filter else np.array(x, float)
+
+
+def filter_columns(x: np.ndarray, dataset: Dataset) -> np.ndarray:
+    """Filter each joint row of columns (N, n, k) like that joint's label (zero rows skipped).
+
+    The same zero-phase Butterworth as ``preprocess.lowpass`` (forward-backward, default
+    padding), each recording on its own.
+    """
+    out = np.zeros_like(x)
+    for rows in dataset.recording_rows():
+        for j in range(x.shape[1]):
+            block = x[rows, j, :]
+            if not np.any(block):
+                continue
+            sos = butterworth(float(dataset.cutoff_hz[j]), dataset.period_s, dataset.filter_order)
+            out[rows, j, :] = signal.sosfiltfilt(sos, block, axis=0)
+    return out
+
+
+def kept_rows(
+    dataset: Dataset, trim: int, step: int, config: DiagnosisConfig
+) -> dict[str, np.ndarray]:
+    """Training and held-out rows, edges trimmed and every ``step``-th kept."""
+    n_samples = len(dataset.q)
+    train = np.arange(trim, dataset.n_train, step)
+    test = np.arange(dataset.n_train + trim, n_samples - trim, step)
+    return {'train': train, 'test': test}
+
+
+class ResidualProblem:
+    """Filtered residual, candidate columns and weights over all recordings."""
+
+    def __init__(
+        self, datasets: list[Dataset], robot: RobotConfig, config: DiagnosisConfig
+    ) -> None:
+        self.robot = robot
+        self.config = config
+        self.datasets = datasets
+        self.model = NominalModel(robot, datasets[0].target)
+        first = datasets[0]
+        self.cutoff = np.asarray(first.cutoff_hz, dtype=float)
+        self.period = first.period_s
+        self.noise = self._noise()
+        tau = self.noise.correlation_samples
+        self.step = max(1, int(tau.min() // 6))
+        self.trim = trim_samples(first, config)
+        self.weights = self.step / (self.noise.filtered_std_nm**2 * tau)
+        self.library_preview: list[EffectSpec] = []
+        self.recordings: list[PreparedRecording] = []
+        #: Link-side terms (spec, physical coefficients) the model-load friction sees.
+        self.link_terms: list[tuple[EffectSpec, np.ndarray]] = []
+        self._quantities_for_library()
+
+    def _noise(self) -> NoiseEstimate:
+        estimates = [
+            estimate_noise(d.tau_raw, d.cutoff_hz, d.period_s, d.filter_order)
+            for d in self.datasets
+        ]
+        lengths = np.array([len(d.tau_raw) for d in self.datasets], dtype=float)
+        share = lengths / lengths.sum()
+
+        def pooled(values: list[np.ndarray]) -> np.ndarray:
+            return np.sqrt(np.sum([s * x**2 for s, x in zip(share, values, strict=True)], axis=0))
+
+        raw = pooled([e.raw_std_nm for e in estimates])
+        filtered = pooled([e.filtered_std_nm for e in estimates])
+        # A perfectly clean label (no noise at all) still needs a finite weight.
+        floor = 1e-6 * np.maximum(self.robot.limits.torque, 1.0)
+        return NoiseEstimate(
+            raw, np.maximum(filtered, floor), estimates[0].correlation_samples,
+            estimates[0].band_hz,
+        )  # fmt: skip
+
+    def _quantities_for_library(self) -> None:
+        probe = [EffectSpec(name) for name in self.config.effects]
+        derivatives, regressor = needs_derivatives(probe), needs_regressor(probe)
+        all_rows = [kept_rows(d, self.trim, self.step, self.config) for d in self.datasets]
+        self._check_length(all_rows)
+        for dataset, rows in zip(self.datasets, all_rows, strict=True):
+            q, v, a, jerk = column_motion(dataset)
+            quantities = self.model.evaluate(
+                q, v, a, jerk, derivatives=derivatives, regressor=regressor
+            )
+            nominal = as_label(quantities.tau_nominal, dataset)
+            smooth = self._smooth(dataset)
+            self.recordings.append(PreparedRecording(dataset, quantities, smooth, rows, nominal))
+        self.library = build_library(self.model, self.joined_quantities(), self.config)
+
+    def _check_length(self, all_rows: list[dict[str, np.ndarray]]) -> None:
+        """Refuse recordings whose parts hold too few independent samples (all together)."""
+        for part in PARTS:
+            count = sum(len(rows[part]) for rows in all_rows)
+            n_eff = count * self.step / self.noise.correlation_samples
+            if n_eff.min() >= self.config.min_effective_samples:
+                continue
+            n_total = sum(len(d.q) for d in self.datasets)
+            n_train = sum(d.n_train for d in self.datasets)
+            share = (n_total - n_train if part == 'test' else n_train) / n_total
+            needed = (
+                self.config.min_effective_samples
+                * self.noise.correlation_samples.max()
+                * self.period
+                / share
+                + 3 * self.trim * self.period
+            )
+            total = sum(len(d.q) for d in self.datasets) * self.period
+            raise DatasetError(
+                f'{", ".join(d.source for d in self.datasets)}: {total:.1f} s is too short to '
+                f'diagnose: the {part} part holds {n_eff.min():.1f} independent samples on the '
+                f'slowest-filtered joint, fewer than {self.config.min_effective_samples:g}; '
+                f'record at least {needed:.0f} s'
+            )
+
+    def _smooth(self, dataset: Dataset) -> NominalQuantities:
+        """Quantities along the filtered motion, for the testability of switching effects."""
+        q, v, a = dataset.study.q, dataset.study.v, dataset.study.a
+        if 'load_dependent_friction' in self.config.effects:
+            return self.model.evaluate(q, v, a)
+        zeros = np.zeros_like(q)  # only the load-dependent columns read the torques
+        return NominalQuantities(q, v, a, zeros, zeros, zeros, zeros)
+
+    def joined_quantities(self) -> NominalQuantities:
+        """Training rows of every recording, for choices that look at the whole excitation."""
+
+        def join(key: str) -> np.ndarray:
+            return np.concatenate(
+                [getattr(r.quantities, key)[r.rows['train']] for r in self.recordings]
+            )
+
+        return NominalQuantities(
+            q=join('q'),
+            v=join('v'),
+            a=join('a'),
+            jerk=join('jerk'),
+            tau_rigid=join('tau_rigid'),
+            tau_rotor=join('tau_rotor'),
+            tau_nominal=join('tau_nominal'),
+        )
+
+    def part(self, key: str, part: str) -> np.ndarray:
+        """A dataset quantity on one part's kept rows, over every recording."""
+        return np.concatenate([getattr(r.dataset, key)[r.rows[part]] for r in self.recordings])
+
+    def label(self, part: str) -> np.ndarray:
+        """(M, n) filtered label [N*m] on one part's kept rows."""
+        return np.concatenate([r.dataset.tau[r.rows[part]] for r in self.recordings])
+
+    def residual(self, part: str) -> np.ndarray:
+        """(M, n) filtered label minus filtered nominal [N*m] on one part's kept rows."""
+        return np.concatenate(
+            [
+                r.dataset.tau[r.rows[part]] - r.nominal_filtered[r.rows[part]]
+                for r in self.recordings
+            ]
+        )
+
+    def columns(self, spec: EffectSpec) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
+        """Filtered columns per part, raw training columns and the filter's retention."""
+        filtered: dict[str, list[np.ndarray]] = {'train': [], 'test': []}
+        raw_train = []
+        raw_energy = kept_energy = 0.0
+        switching = spec.name in SWITCHING_EFFECTS
+        for r in self.recordings:
+            quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
+            x = effect_columns(spec, quantities, self.model)
+            xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
+            for part in ('train', 'test'):
+                filtered[part].append(xf[r.rows[part]])
+            train = r.rows['train']
+            raw_train.append(x[train])
+            if switching:
+                # Judge the signature on the smooth (filtered) motion: sensor noise in the
+                # recorded motion would pass for high-frequency content.
+                smooth = effect_columns(spec, r.smooth, self.model)
+                raw_energy += float(np.sum(smooth[train] ** 2))
+                kept_energy += float(np.sum(filter_columns(smooth, r.dataset)[train] ** 2))
+        retention = kept_energy / raw_energy if raw_energy > 0 else (0.0 if switching else 1.0)
+        return (
+            {part: np.concatenate(blocks) for part, blocks in filtered.items()},
+            np.concatenate(raw_train),
+            retention,
+        )
+
+    def _loaded(self, r: PreparedRecording) -> NominalQuantities:
+        """A recording's quantities with the link torque of the nominal model plus link terms."""
+        link = r.quantities.tau_rigid.copy()
+        for spec, theta in self.link_terms:
+            link += effect_columns(spec, r.quantities, self.model) @ theta
+        return replace(r.quantities, tau_rigid=link)
+
+    def times(self, part: str) -> np.ndarray:
+        """Times [s] of one part's kept rows; later recordings follow the earlier ones."""
+        out, offset = [], 0.0
+        for r in self.recordings:
+            t = (r.dataset.stamps_ns - r.dataset.stamps_ns[0]) * 1e-9
+            out.append(t[r.rows[part]] + offset)
+            offset += float(t[-1]) + self.period
+        return np.concatenate(out)
+
+    def n_effective(self, part: str) -> np.ndarray:
+        """(n,) effective samples per joint on one part."""
+        rows = sum(len(r.rows[part]) for r in self.recordings)
+        return rows * self.step / self.noise.correlation_samples
