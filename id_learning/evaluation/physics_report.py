@@ -66,7 +66,8 @@ def _section(kind: str, physics: IdentifiedPhysics, robot: RobotConfig) -> list[
     lines = [
         f'## Identified physics ({kind}) against the URDF',
         '',
-        f'Identified from {report.get("samples", "?")} samples in '
+        f'Identified from {report.get("samples", "?")} rows (every '
+        f'{report.get("row_step", 1)}. sample of the training part) in '
         f'{_g(seconds, 3)} s. Condition number of the base regressor on this recording: '
         f'{_g(condition, 3)}. {identified} of {len(base)} base parameters are identified by the '
         f'data (posterior std below {PRIOR_DOMINATED:g} of the prior std); the others stay near '

@@ -1,0 +1,110 @@
+"""Identification on fresh twin robots: its time, and how often the base parameters' intervals
+hold the truth.
+
+    python benchmarks/identification.py [--seeds 71,72,73] [--duration 600]
+
+Per seed: simulates config/twin_default.yaml (every hidden effect: payload, balancer, link
+errors, friction, torque-constant scales, delay), identifies the rigid body and drives on the
+training part (``physics.identification``, the default settings of ``rnea_id``) and compares
+with the twin's truth: the share of base parameters whose 95 % interval holds the true value
+(the twin's links with the payload folded in), torque-constant scales, rotor inertias and the
+delay. Prints a table and ends with one JSON line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from common import DEFAULT_ROBOT, REPO, environment
+
+from id_learning.dataset.preprocess import prepare_dataset
+from id_learning.physics import RigidBodyDynamics
+from id_learning.physics.base_parameters import base_parameters
+from id_learning.physics.identification import identify
+from id_learning.robot import load_robot_config
+from id_learning.twin import load_twin_config, simulate
+
+
+def true_parameters(parameters: dict[str, Any], robot: Any) -> np.ndarray:
+    """The twin's inertial parameters with its payload folded into the carrying body."""
+    dynamics = RigidBodyDynamics.from_config(robot).with_inertial_parameters(
+        np.asarray(parameters['true']['inertial_parameters'])
+    )
+    payload = parameters['effects']['payload_mass']
+    if payload['enabled'] and payload['mass_kg'] > 0:
+        dynamics = dynamics.with_payload(
+            robot.payload_frame,
+            payload['mass_kg'],
+            np.asarray(payload['com_m']),
+            np.diag(payload['inertia_kgm2']),
+        )
+    return dynamics.inertial_parameters()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--seeds', default='71,72,73')
+    parser.add_argument('--duration', type=float, default=600.0, help='recording length [s]')
+    args = parser.parse_args()
+    robot = load_robot_config(DEFAULT_ROBOT)
+    base = base_parameters(RigidBodyDynamics.from_config(robot), robot.limits)
+    runs = []
+    for seed in (int(s) for s in args.seeds.split(',')):
+        config = load_twin_config(REPO / 'config/twin_default.yaml', {'seed': seed})
+        config = replace(config, excitation=replace(config.excitation, duration_s=args.duration))
+        result = simulate(config)
+        dataset = prepare_dataset(result.recording, robot)
+        began = time.perf_counter()
+        physics = identify(dataset, robot)
+        seconds = time.perf_counter() - began
+        truth = base.matrix @ true_parameters(result.parameters, robot)
+        entries = physics.report['base_parameters']
+        inside = [e['ci95'][0] <= t <= e['ci95'][1] for e, t in zip(entries, truth, strict=True)]
+        effects = result.parameters['effects']
+        runs.append(
+            {
+                'seed': seed,
+                'seconds': seconds,
+                'training_samples': int(dataset.n_train),
+                'condition_number': physics.report['condition_number'],
+                'base_coverage': float(np.mean(inside)),
+                'base_identified': int(sum(e['identified'] for e in entries)),
+                'base_count': len(entries),
+                'torque_constant_scale': (1.0 / (1.0 + physics.gain)).tolist(),
+                'torque_constant_scale_true': effects['torque_constant_scale']['scale'],
+                'rotor_inertia': physics.rotor.tolist(),
+                'rotor_inertia_true': result.parameters['true']['rotor_inertia_motor_side_kgm2'],
+                'delay_s': physics.delay_s,
+                'delay_s_true': result.parameters['true']['signal_delay_s'],
+            }
+        )
+        r = runs[-1]
+        print(
+            f'seed {seed}: {r["seconds"]:.1f} s for {r["training_samples"]} samples; '
+            f'base parameters: {r["base_coverage"]:.0%} of {r["base_count"]} intervals hold the '
+            f'truth, {r["base_identified"]} identified by the data, condition '
+            f'{r["condition_number"]:.3g}; delay {1e3 * r["delay_s"]:.2f} ms '
+            f'(true {1e3 * r["delay_s_true"]:.2f}); kt scale '
+            f'{np.round(r["torque_constant_scale"], 3).tolist()} '
+            f'(true {r["torque_constant_scale_true"]})',
+            flush=True,
+        )
+    print(
+        json.dumps(
+            {
+                'benchmark': 'identification',
+                'duration_s': args.duration,
+                'runs': runs,
+                'environment': environment(),
+            }
+        )
+    )
+
+
+if __name__ == '__main__':
+    main()
