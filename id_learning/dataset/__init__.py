@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from id_learning.dataset.importer import (
-    ImportMapping,
-    ImportReport,
-    import_log,
-    load_import_mapping,
-)
+from id_learning.dataset.import_mapping import ImportMapping, load_import_mapping
+from id_learning.dataset.importer import ImportReport, import_log
 from id_learning.dataset.inputs import InputDefinition, Motion
-from id_learning.dataset.inspect import BagReport, inspect_bag, plot_report, render_report
+from id_learning.dataset.inspect import inspect_bag
+from id_learning.dataset.inspect_plot import plot_report
+from id_learning.dataset.inspect_report import BagReport
+from id_learning.dataset.inspect_text import render_report
 from id_learning.dataset.preprocess import (
     PREPROCESS_MODES,
     Dataset,

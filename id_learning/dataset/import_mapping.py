@@ -1,0 +1,274 @@
+"""The column mapping of a log import: which column holds what, in which unit, and its checks.
+
+``ImportMapping`` validates itself on construction, and ``load_import_mapping`` builds one from
+a mapping YAML (see ``config/import_example.yaml``). The unit table is here too, since the
+mapping checks units against it and the import converts with it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, TypeGuard
+
+from id_learning.config_io import check_keys, load_yaml_mapping
+from id_learning.errors import ConfigError
+
+__all__ = [
+    'QUANTITIES',
+    'UNITS',
+    'ColumnSpec',
+    'ImportMapping',
+    'JointColumns',
+    'load_import_mapping',
+]
+
+# Factor from each allowed unit to SI (s, rad, rad/s, A, N*m); rpm is joint-side turns per minute.
+UNITS: dict[str, dict[str, float]] = {
+    'time': {'s': 1.0, 'ms': 1e-3, 'us': 1e-6, 'ns': 1e-9},
+    'position': {'rad': 1.0, 'deg': math.pi / 180.0, 'mrad': 1e-3},
+    'velocity': {'rad/s': 1.0, 'deg/s': math.pi / 180.0, 'rpm': 2.0 * math.pi / 60.0},
+    'current': {'A': 1.0, 'mA': 1e-3},
+    'torque': {'Nm': 1.0, 'kNm': 1e3},
+}
+QUANTITIES = ('position', 'velocity', 'current', 'torque')
+_OPTIONAL_QUANTITIES = ('velocity', 'current', 'torque')
+_TOP_KEYS = (
+    'format',
+    'header',
+    'delimiter',
+    'comment',
+    'time',
+    'period_s',
+    'joints',
+    'nan_policy',
+    'jitter_tolerance',
+)
+_SPEC_KEYS = ('column', 'unit', 'index', 'scale', 'offset')
+_JOINT_KEYS = ('name', *QUANTITIES)
+
+
+@dataclass(frozen=True)
+class ColumnSpec:
+    """Where one quantity is in the log, and how to convert it: SI = raw * unit * scale + offset.
+
+    Attributes:
+        column: column name (CSV with header, NPZ key) or 0-based index (CSV without header).
+        unit: unit of the raw values, one of those allowed for the quantity.
+        index: column of a 2-D NPZ array; None for a 1-D array.
+        scale: factor applied after the unit conversion (e.g. -1 for an inverted axis).
+        offset: added last, in SI units (e.g. an encoder zero [rad]); ignored for time, which is
+            made relative to its first value.
+    """
+
+    column: str | int
+    unit: str
+    index: int | None = None
+    scale: float = 1.0
+    offset: float = 0.0
+
+    def describe(self) -> str:
+        """Name the column for messages: ``'q1'`` or ``'q'[:, 2]``."""
+        suffix = '' if self.index is None else f'[:, {self.index}]'
+        return f'{self.column!r}{suffix}'
+
+
+@dataclass(frozen=True)
+class JointColumns:
+    """The columns of one joint; velocity, current and torque are optional."""
+
+    name: str
+    position: ColumnSpec
+    velocity: ColumnSpec | None = None
+    current: ColumnSpec | None = None
+    torque: ColumnSpec | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class ImportMapping:
+    """How to read one kind of log: file format, time base and one column spec per quantity.
+
+    Attributes:
+        joints: the mapped joints, in the order written unless a robot config reorders them.
+        time: the time stamp column, or None when ``period_s`` gives the time base.
+        period_s: fixed sampling period [s] (stamp k = start + k * period), or None.
+        format: 'csv' or 'npz'; None takes it from the file suffix.
+        header: whether a CSV's first non-comment row names the columns; 'auto' detects it
+            (a header when a non-empty field is no number).
+        delimiter: CSV field separator: one character, 'tab' or 'whitespace'; None sniffs.
+        comment: prefix of CSV comment lines, or None.
+        nan_policy: 'refuse' raises on an empty or non-finite cell, 'drop' drops its row.
+        jitter_tolerance: largest stamp deviation from the sampling grid snapped onto it, as a
+            fraction of the period (below 0.5 so that the nearest grid point is unambiguous).
+        source: the mapping file, named in errors.
+    """
+
+    joints: tuple[JointColumns, ...]
+    time: ColumnSpec | None = None
+    period_s: float | None = None
+    format: Literal['csv', 'npz'] | None = None
+    header: bool | Literal['auto'] = 'auto'
+    delimiter: str | None = None
+    comment: str | None = '#'
+    nan_policy: Literal['refuse', 'drop'] = 'refuse'
+    jitter_tolerance: float = 0.25
+    source: Path | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        """Validate every option, naming the mapping file and the key."""
+        object.__setattr__(self, 'joints', tuple(self.joints))
+        _check_options(self, self.where)
+        _check_time_base(self, self.where)
+        _check_joints(self.joints, self.where)
+
+    @property
+    def where(self) -> str:
+        """The mapping file for messages, or a placeholder for a mapping built in code."""
+        return str(self.source) if self.source is not None else '<import mapping>'
+
+
+# -- mapping validation ---------------------------------------------------------------------------
+def _is_number(value: object) -> TypeGuard[float]:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _check_options(mapping: ImportMapping, where: str) -> None:
+    if mapping.format not in (None, 'csv', 'npz'):
+        raise ConfigError(
+            f"{where}: format must be 'csv', 'npz' or omitted (from the file suffix), "
+            f'got {mapping.format!r}'
+        )
+    if not (isinstance(mapping.header, bool) or mapping.header == 'auto'):
+        raise ConfigError(f"{where}: header must be true, false or 'auto', got {mapping.header!r}")
+    delimiter = mapping.delimiter
+    if delimiter is not None and not (
+        delimiter in ('tab', 'whitespace')
+        or (isinstance(delimiter, str) and len(delimiter) == 1 and delimiter not in '\r\n"')
+    ):
+        raise ConfigError(
+            f"{where}: delimiter must be one character, 'tab', 'whitespace' or omitted (sniffed), "
+            f'got {delimiter!r}'
+        )
+    if mapping.comment is not None and not (isinstance(mapping.comment, str) and mapping.comment):
+        raise ConfigError(f'{where}: comment must be a non-empty prefix or null')
+    if mapping.nan_policy not in ('refuse', 'drop'):
+        raise ConfigError(
+            f"{where}: nan_policy must be 'refuse' or 'drop', got {mapping.nan_policy!r}"
+        )
+    tolerance = mapping.jitter_tolerance
+    if not (_is_number(tolerance) and 0.0 <= tolerance < 0.5):
+        raise ConfigError(
+            f'{where}: jitter_tolerance must be in [0, 0.5) periods, got {tolerance!r}'
+        )
+
+
+def _check_time_base(mapping: ImportMapping, where: str) -> None:
+    if (mapping.time is None) == (mapping.period_s is None):
+        raise ConfigError(
+            f'{where}: give exactly one of time (a time stamp column) and period_s (a fixed '
+            'sampling period [s])'
+        )
+    if mapping.time is not None:
+        _check_spec(mapping.time, 'time', 'time', where)
+    elif not (_is_number(mapping.period_s) and mapping.period_s > 0):
+        raise ConfigError(
+            f'{where}: period_s must be a positive number [s], got {mapping.period_s!r}'
+        )
+
+
+def _check_spec(spec: object, quantity: str, key: str, where: str) -> None:
+    if not isinstance(spec, ColumnSpec):
+        raise ConfigError(f'{where}: {key}: expected a column spec, got {spec!r}')
+    column = spec.column
+    if isinstance(column, bool) or not (
+        (isinstance(column, str) and column) or (isinstance(column, int) and column >= 0)
+    ):
+        raise ConfigError(
+            f'{where}: {key}.column must be a name or a 0-based index, got {column!r}'
+        )
+    if spec.index is not None and (
+        isinstance(spec.index, bool) or not isinstance(spec.index, int) or spec.index < 0
+    ):
+        raise ConfigError(f'{where}: {key}.index must be a 0-based index, got {spec.index!r}')
+    allowed = UNITS[quantity]
+    if spec.unit not in allowed:
+        raise ConfigError(
+            f'{where}: {key}.unit: unknown {quantity} unit {spec.unit!r}; allowed: {list(allowed)}'
+        )
+    if not (_is_number(spec.scale) and spec.scale != 0):
+        raise ConfigError(f'{where}: {key}.scale must be a non-zero number, got {spec.scale!r}')
+    if not _is_number(spec.offset):
+        raise ConfigError(f'{where}: {key}.offset must be a finite number, got {spec.offset!r}')
+
+
+def _check_joints(joints: tuple[JointColumns, ...], where: str) -> None:
+    if not joints or not all(isinstance(joint, JointColumns) for joint in joints):
+        raise ConfigError(f'{where}: joints: expected a non-empty list of joint mappings')
+    names = [joint.name for joint in joints]
+    if not all(isinstance(name, str) and name for name in names):
+        raise ConfigError(f'{where}: joints: every joint needs a non-empty name, got {names}')
+    duplicates = sorted({name for name in names if names.count(name) > 1})
+    if duplicates:
+        raise ConfigError(f'{where}: joints: duplicate joint names {duplicates}')
+    for i, joint in enumerate(joints):
+        for quantity in QUANTITIES:
+            spec = getattr(joint, quantity)
+            if spec is not None or quantity == 'position':
+                _check_spec(spec, quantity, f'joints[{i}] ({joint.name}).{quantity}', where)
+    for quantity in _OPTIONAL_QUANTITIES:
+        mapped = [joint.name for joint in joints if getattr(joint, quantity) is not None]
+        if mapped and len(mapped) != len(joints):
+            unmapped = [name for name in names if name not in mapped]
+            raise ConfigError(
+                f'{where}: {quantity} is mapped for joints {mapped} but not for {unmapped}; '
+                'map it for all joints or for none'
+            )
+
+
+# -- mapping YAML ---------------------------------------------------------------------------------
+def _spec_from_yaml(value: Any, where: str) -> ColumnSpec:
+    if not isinstance(value, dict):
+        raise ConfigError(f'{where}: expected a mapping with keys {list(_SPEC_KEYS)}')
+    check_keys(value, _SPEC_KEYS, where, required=('column', 'unit'))
+    return ColumnSpec(**value)
+
+
+def _joint_from_yaml(value: Any, where: str) -> JointColumns:
+    if not isinstance(value, dict):
+        raise ConfigError(f'{where}: expected a mapping with keys {list(_JOINT_KEYS)}')
+    check_keys(value, _JOINT_KEYS, where, required=('name', 'position'))
+    specs = {
+        quantity: _spec_from_yaml(value[quantity], f'{where}.{quantity}')
+        for quantity in QUANTITIES
+        if value.get(quantity) is not None
+    }
+    return JointColumns(name=value['name'], **specs)
+
+
+def load_import_mapping(path: Path | str) -> ImportMapping:
+    """Read and validate a column-mapping YAML (see ``config/import_example.yaml``).
+
+    Raises:
+        ConfigError: the file is unreadable, a key is unknown or missing, or a value is invalid
+            (names the file and the key).
+    """
+    path = Path(path)
+    data = load_yaml_mapping(path)
+    where = str(path)
+    check_keys(data, _TOP_KEYS, where, required=('joints',))
+    joints = data['joints']
+    if not isinstance(joints, list):
+        raise ConfigError(f'{where}: joints: expected a list of joint mappings, got {joints!r}')
+    time = data.get('time')
+    options = {
+        key: data[key] for key in _TOP_KEYS if key in data and key not in ('time', 'joints')
+    }
+    return ImportMapping(
+        joints=tuple(
+            _joint_from_yaml(item, f'{where}: joints[{i}]') for i, item in enumerate(joints)
+        ),
+        time=None if time is None else _spec_from_yaml(time, f'{where}: time'),
+        source=path,
+        **options,
+    )

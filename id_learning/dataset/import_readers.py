@@ -1,0 +1,156 @@
+"""Read a log file (CSV or NPZ) into named raw columns, before any conversion.
+
+CSV files are split line by line so that every data row keeps its line number for messages; the
+delimiter and the header row are detected unless the mapping names them.
+"""
+
+from __future__ import annotations
+
+import csv
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from id_learning.dataset.import_mapping import ImportMapping
+from id_learning.errors import ConfigError, DatasetError
+
+__all__ = ['LogTable', 'is_float', 'read_table']
+
+# Sniffing order: tab and semicolon first, since a comma may be a decimal separator there.
+_SNIFF_DELIMITERS = ('tab', ';', ',', 'whitespace')
+_SNIFF_LINES = 20
+_CSV_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat', '.log')
+
+
+@dataclass(frozen=True)
+class LogTable:
+    """A log's columns as read, before any conversion.
+
+    CSV columns are (N,) arrays of cell strings keyed by header name or 0-based index; NPZ
+    columns are the stored arrays keyed by name. ``line_numbers`` holds the 1-based CSV line of
+    each data row, or None for NPZ, whose rows are named by their 0-based index.
+    """
+
+    source: Path
+    columns: dict[str | int, np.ndarray]
+    line_numbers: np.ndarray | None
+
+    @property
+    def row_label(self) -> Literal['line', 'row']:
+        """'line' for CSV line numbers, 'row' for NPZ array indices."""
+        return 'row' if self.line_numbers is None else 'line'
+
+    def positions(self, n_rows: int) -> np.ndarray:
+        """(N,) position of each data row in the file, as ``row_label`` counts it."""
+        return np.arange(n_rows) if self.line_numbers is None else self.line_numbers
+
+
+def read_table(source: Path, mapping: ImportMapping) -> LogTable:
+    """Read the log as the mapping's format says, else as its file suffix says.
+
+    Raises:
+        ConfigError: no format is given and the suffix names none.
+        DatasetError: the file cannot be read, or holds no data rows.
+    """
+    file_format = mapping.format or _format_from_suffix(source, mapping)
+    return _read_npz(source) if file_format == 'npz' else _read_csv(source, mapping)
+
+
+def _format_from_suffix(source: Path, mapping: ImportMapping) -> Literal['csv', 'npz']:
+    suffix = source.suffix.lower()
+    if suffix == '.npz':
+        return 'npz'
+    if suffix in _CSV_SUFFIXES:
+        return 'csv'
+    raise ConfigError(
+        f'{mapping.where}: cannot tell the format of {source} from its suffix {suffix!r}; set '
+        "format: 'csv' or 'npz'"
+    )
+
+
+def _read_npz(source: Path) -> LogTable:
+    try:
+        loaded = np.load(source, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise DatasetError(f'{source}: not an NPZ archive of named arrays')
+        with loaded:
+            columns: dict[str | int, np.ndarray] = {key: loaded[key] for key in loaded.files}
+    except (OSError, ValueError, zipfile.BadZipFile) as err:
+        raise DatasetError(f'{source}: cannot read NPZ file: {err}') from err
+    return LogTable(source, columns, None)
+
+
+def _read_csv(source: Path, mapping: ImportMapping) -> LogTable:
+    try:
+        text = source.read_text(encoding='utf-8-sig')
+    except (OSError, UnicodeDecodeError) as err:
+        raise DatasetError(f'{source}: cannot read CSV file: {err}') from err
+    comment = mapping.comment
+    numbered = [
+        (number, line)
+        for number, line in enumerate(text.splitlines(), start=1)
+        if line.strip() and not (comment and line.lstrip().startswith(comment))
+    ]
+    if not numbered:
+        raise DatasetError(f'{source}: no data rows')
+    lines = [line for _, line in numbered]
+    delimiter = mapping.delimiter or _sniff_delimiter(lines[:_SNIFF_LINES])
+    rows = _split(lines, delimiter)
+    has_header = _looks_like_header(rows[0]) if mapping.header == 'auto' else mapping.header
+    first_data = 1 if has_header else 0
+    names, data_rows = rows[:first_data], rows[first_data:]
+    if not data_rows:
+        raise DatasetError(f'{source}: no data rows')
+    header = names[0] if names else []
+    _check_unique_names(header, source)
+    width = max(len(header), *(len(row) for row in data_rows))
+    cells = np.array([row + [''] * (width - len(row)) for row in data_rows], dtype=object)
+    keys: Sequence[str | int] = header or range(width)
+    columns: dict[str | int, np.ndarray] = {
+        key: cells[:, j] for j, key in enumerate(keys) if key != ''
+    }
+    line_numbers = np.array([number for number, _ in numbered[first_data:]])
+    return LogTable(source, columns, line_numbers)
+
+
+def _split(lines: Sequence[str], delimiter: str) -> list[list[str]]:
+    """Split lines into stripped fields; one CSV reader per line keeps line numbers exact."""
+    if delimiter == 'whitespace':
+        return [line.split() for line in lines]
+    char = '\t' if delimiter == 'tab' else delimiter
+    return [
+        [cell.strip() for cell in next(csv.reader([line], delimiter=char, skipinitialspace=True))]
+        for line in lines
+    ]
+
+
+def _sniff_delimiter(lines: Sequence[str]) -> str:
+    """The first candidate that splits the first line in several fields, as most lines split."""
+    for candidate in _SNIFF_DELIMITERS:
+        counts = [len(row) for row in _split(lines, candidate)]
+        if counts and counts[0] > 1 and 2 * counts.count(counts[0]) > len(counts):
+            return candidate
+    return ','
+
+
+def is_float(text: str) -> bool:
+    """Whether ``float`` parses the text."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _looks_like_header(row: Sequence[str]) -> bool:
+    return any(cell and not is_float(cell) for cell in row)
+
+
+def _check_unique_names(names: list[str], source: Path) -> None:
+    duplicates = sorted({name for name in names if name and names.count(name) > 1})
+    if duplicates:
+        raise DatasetError(f'{source}: the header names columns {duplicates} more than once')

@@ -1,0 +1,286 @@
+"""The report types of ``inspect_bag`` and the findings they list as problems.
+
+Kept apart from the analysis (``inspect.py``), the text rendering (``inspect_text.py``) and the
+plot (``inspect_plot.py``), which all read these types; this module imports none of them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from id_learning.bag import JointStateSeries
+from id_learning.errors import BagError
+
+__all__ = [
+    'FIELDS',
+    'GAP_PERIODS',
+    'MAX_LISTED',
+    'BagReport',
+    'ContractReport',
+    'FieldStats',
+    'Gap',
+    'JointReport',
+    'TimingReport',
+    'TopicReport',
+]
+
+GAP_PERIODS = 1.5
+"""A step longer than this many nominal periods is a gap."""
+MAX_LISTED = 10
+"""How many gaps, repeated and backward stamps a report lists (it counts all of them)."""
+FIELDS = ('position', 'velocity', 'effort')
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A step between two samples longer than ``GAP_PERIODS`` nominal periods.
+
+    Attributes:
+        sample: index of the first sample after the gap, on its topic.
+        stamp_ns: that sample's time stamp [ns].
+        periods: the step in nominal periods (1.0 is a regular step).
+    """
+
+    sample: int
+    stamp_ns: int
+    periods: float
+
+
+@dataclass(frozen=True)
+class TimingReport:
+    """Time stamps of one topic.
+
+    Jitter is measured over the regular steps only (0 < step <= ``GAP_PERIODS`` periods); gaps,
+    repeated and backward stamps are counted apart.
+
+    Attributes:
+        time_base: 'header' (JointState header stamps) or 'log' (bag receive times).
+        rate_hz: mean rate, (count - 1) / time span [Hz]; None with fewer than two distinct stamps.
+        nominal_period_s: the period steps are compared with [s]: the given period, the robot's
+            IPO period, or the median step.
+        median_period_s: median of the positive steps [s].
+        jitter_std_ms: standard deviation of the regular steps [ms].
+        jitter_p99_ms: 99th percentile of |step - nominal period| over the regular steps [ms].
+        gap_count: number of gaps.
+        gaps: the first ``MAX_LISTED`` gaps.
+        repeated_count: steps of zero (a stamp repeats).
+        repeated: sample indices of the first ``MAX_LISTED`` repeated stamps.
+        backward_count: negative steps (a stamp goes backwards).
+        backward: sample indices of the first ``MAX_LISTED`` backward stamps.
+    """
+
+    time_base: Literal['header', 'log']
+    rate_hz: float | None
+    nominal_period_s: float | None
+    median_period_s: float | None
+    jitter_std_ms: float | None
+    jitter_p99_ms: float | None
+    gap_count: int
+    gaps: tuple[Gap, ...]
+    repeated_count: int
+    repeated: tuple[int, ...]
+    backward_count: int
+    backward: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class FieldStats:
+    """One field (position, velocity or effort) of one joint, over the finite values.
+
+    Attributes:
+        minimum, maximum, mean: in the field's unit; None when no value is finite.
+        non_finite: number of NaN or infinite values.
+    """
+
+    minimum: float | None
+    maximum: float | None
+    mean: float | None
+    non_finite: int
+
+
+@dataclass(frozen=True)
+class JointReport:
+    """Value ranges of one joint on one JointState topic.
+
+    Attributes:
+        name: joint name.
+        position, velocity, effort: statistics, or None when the messages leave the field empty.
+        position_outside_limits: fraction of samples outside the robot's position limits [-];
+            None without a robot, a position field, or a joint of that name in the robot.
+        velocity_outside_limits: fraction of samples with |velocity| above the robot's limit [-].
+    """
+
+    name: str
+    position: FieldStats | None
+    velocity: FieldStats | None
+    effort: FieldStats | None
+    position_outside_limits: float | None = None
+    velocity_outside_limits: float | None = None
+
+
+@dataclass(frozen=True)
+class TopicReport:
+    """One topic of a bag.
+
+    Attributes:
+        name: topic name.
+        msgtype: message type, e.g. 'sensor_msgs/msg/JointState'.
+        count: messages read.
+        timing: time stamp statistics.
+        joints: per-joint statistics (JointState topics only; empty otherwise).
+        undecodable: messages whose bytes do not deserialize (JointState topics).
+        inconsistent: messages whose joint names or array lengths differ from the first message;
+            they count in the timing but not in the joint statistics.
+        first_inconsistent: sample index of the first such message, or None.
+    """
+
+    name: str
+    msgtype: str
+    count: int
+    timing: TimingReport
+    joints: tuple[JointReport, ...] = ()
+    undecodable: int = 0
+    inconsistent: int = 0
+    first_inconsistent: int | None = None
+
+
+@dataclass(frozen=True)
+class ContractReport:
+    """Whether the bag holds the contract's two topics with matching stamps and joints.
+
+    Attributes:
+        joint_states: the contract's joint state topic.
+        motor_currents: the contract's motor current topic.
+        missing: contract topics the bag lacks (or holds with another type than JointState).
+        stamps_match: both topics carry the same header stamps, sample for sample; None when a
+            topic is missing.
+        first_mismatch: first sample index where the stamps differ (or the shorter topic ends).
+        names_match: both topics name the same joints; None when a topic is missing or empty.
+    """
+
+    joint_states: str
+    motor_currents: str
+    missing: tuple[str, ...]
+    stamps_match: bool | None
+    first_mismatch: int | None
+    names_match: bool | None
+
+    @property
+    def is_met(self) -> bool:
+        """Whether both topics are there with matching stamps and joint names."""
+        return not self.missing and bool(self.stamps_match) and bool(self.names_match)
+
+
+@dataclass(frozen=True, eq=False)
+class BagReport:
+    """What ``inspect_bag`` found.
+
+    Attributes:
+        path: the bag folder.
+        storage: storage format ('mcap' or 'other').
+        files: data file names.
+        start_ns: first log time [ns since epoch]; start_iso: the same in ISO 8601, UTC.
+        duration_s: log-time span [s].
+        message_count: messages read on all topics.
+        robot_name: the robot the bag was checked against, or None.
+        topics: one report per topic.
+        contract: the contract topics check.
+        series: the stacked samples of each JointState topic (consistent messages only), kept
+            for ``plot_report``.
+    """
+
+    path: Path
+    storage: str
+    files: tuple[str, ...]
+    start_ns: int
+    start_iso: str
+    duration_s: float
+    message_count: int
+    robot_name: str | None
+    topics: tuple[TopicReport, ...]
+    contract: ContractReport
+    series: Mapping[str, JointStateSeries] = field(default_factory=dict, repr=False)
+
+    def topic(self, name: str) -> TopicReport:
+        """Return the report of one topic.
+
+        Raises:
+            BagError: the bag has no such topic (lists those it has).
+        """
+        for topic in self.topics:
+            if topic.name == name:
+                return topic
+        raise BagError(
+            f'{self.path}: no topic {name}; the bag has {[t.name for t in self.topics]}'
+        )
+
+    @property
+    def problems(self) -> tuple[str, ...]:
+        """One line per finding that ``load_recording`` would reject or a human should check."""
+        lines: list[str] = []
+        for topic in self.topics:
+            lines += _topic_problems(topic)
+        contract = self.contract
+        if contract.missing:
+            lines.append(f'contract: missing JointState topic(s) {list(contract.missing)}')
+        elif contract.stamps_match is False:
+            lines.append(
+                f'contract: {contract.motor_currents} stamps differ from {contract.joint_states} '
+                f'from sample {contract.first_mismatch} on'
+            )
+        if contract.names_match is False:
+            lines.append(
+                f'contract: {contract.motor_currents} and {contract.joint_states} name '
+                'different joints'
+            )
+        return tuple(lines)
+
+
+def _topic_problems(topic: TopicReport) -> list[str]:
+    lines: list[str] = []
+    timing = topic.timing
+    if topic.count == 0:
+        lines.append(f'{topic.name}: no messages')
+    if timing.gap_count:
+        first = timing.gaps[0]
+        lines.append(
+            f'{topic.name}: {timing.gap_count} gap(s) > {GAP_PERIODS:g} periods, the first before '
+            f'sample {first.sample} ({first.periods:.1f} periods)'
+        )
+    if timing.repeated_count:
+        lines.append(
+            f'{topic.name}: {timing.repeated_count} repeated stamp(s), the first at sample '
+            f'{timing.repeated[0]}'
+        )
+    if timing.backward_count:
+        lines.append(
+            f'{topic.name}: {timing.backward_count} stamp(s) going backwards, the first at sample '
+            f'{timing.backward[0]}'
+        )
+    if topic.undecodable:
+        lines.append(f'{topic.name}: {topic.undecodable} message(s) do not deserialize')
+    if topic.inconsistent:
+        lines.append(
+            f'{topic.name}: {topic.inconsistent} message(s) change joint names or array lengths, '
+            f'the first at sample {topic.first_inconsistent}'
+        )
+    for joint in topic.joints:
+        for key in FIELDS:
+            stats: FieldStats | None = getattr(joint, key)
+            if stats is not None and stats.non_finite:
+                lines.append(
+                    f'{topic.name}: {joint.name} {key}: {stats.non_finite} non-finite value(s)'
+                )
+        for key, fraction in (
+            ('position', joint.position_outside_limits),
+            ('velocity', joint.velocity_outside_limits),
+        ):
+            if fraction:
+                lines.append(
+                    f'{topic.name}: {joint.name} {key} outside the robot limits in '
+                    f'{100 * fraction:.2f} % of samples'
+                )
+    return lines
