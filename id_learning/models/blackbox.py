@@ -6,69 +6,55 @@ Both map physical inputs to the model's target torque [N*m]; the dataset's min-m
 study's normalised MSE: the squared error of each joint divided by that joint's half range.
 
 The settings shared by every network model (optimiser, early stopping, seed, device, row stride)
-live in :class:`NetworkConfig`; the Newtonian network in ``physics.py`` uses them too.
+live in :class:`NetworkConfig`; the Newtonian network in ``physics.py`` uses them too. This
+module holds the configs and the two model classes; the normalised networks and the state,
+training and prediction helpers that every network model shares are in
+``models.network_common``, the LSTM's online predictor (``LstmStreams``) in
+``models.lstm_streams``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal, Self, TypeVar
+from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
 import torch
-from torch import nn
 
 from id_learning.dataset.preprocess import MinMaxScaler
-from id_learning.errors import CheckpointError, ConfigError
+from id_learning.errors import ConfigError
 from id_learning.models.base import InverseDynamicsModel, ModelConfig, SamplePredictor
 from id_learning.models.data import TrainingData
-from id_learning.models.fitting import (
-    OptimConfig,
-    TrainHistory,
-    fit_network,
-    select_device,
-    train_module,
+from id_learning.models.fitting import OptimConfig, TrainHistory, fit_network, select_device
+from id_learning.models.lstm_streams import LstmStreams
+from id_learning.models.network_common import (
+    NormalisedLstm,
+    NormalisedMlp,
+    NumpyNormalisedMlp,
+    centre_and_half,
+    load_module_state,
+    load_scalers,
+    module_state,
+    predict_chunked,
+    require_fitted,
+    scalers_metadata,
+    seeded,
 )
-from id_learning.models.torch_utils import (
-    ACTIVATIONS,
-    NumpyMlp,
-    float64_array,
-    make_mlp,
-    to_numpy,
-    to_tensor,
-)
+from id_learning.models.torch_utils import ACTIVATIONS, to_numpy, to_tensor
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
-    'PREDICT_CHUNK',
     'LstmConfig',
     'LstmModel',
     'LstmStreams',
     'MlpConfig',
     'MlpModel',
     'NetworkConfig',
-    'NormalisedLstm',
-    'NormalisedMlp',
-    'NumpyNormalisedMlp',
-    'centre_and_half',
     'check_kind',
     'check_mlp_shape',
-    'load_module_state',
-    'load_scalers',
-    'module_state',
-    'predict_chunked',
-    'require_fitted',
-    'run_training',
-    'scalers_metadata',
-    'seeded',
-    'strided_rows',
 ]
 
-_T = TypeVar('_T')
 DEVICES = ('auto', 'cpu', 'cuda')
-#: Samples per forward pass when predicting long runs (bounds memory, not results).
-PREDICT_CHUNK = 8192
 
 
 # -- configs -------------------------------------------------------------------------------------
@@ -229,184 +215,6 @@ class LstmConfig(NetworkConfig):
             raise ConfigError(f'lstm: sequence_length must be >= 1, got {self.sequence_length}')
 
 
-# -- helpers -------------------------------------------------------------------------------------
-def seeded(seed: int, build: Callable[[], _T]) -> _T:
-    """Call ``build`` (which draws initial weights) with torch's RNG seeded, then restore it.
-
-    Module constructors draw from torch's global generator; forking it keeps library code from
-    changing the caller's random state while making the initial weights a function of ``seed``.
-    """
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        return build()
-
-
-def strided_rows(rows: slice, stride: int, first: int = 0) -> np.ndarray:
-    """Every ``stride``-th row index of a contiguous slice, not before ``first``."""
-    start = max(rows.start or 0, first)
-    return np.arange(start, rows.stop, stride)
-
-
-def centre_and_half(scaler: MinMaxScaler) -> tuple[np.ndarray, np.ndarray]:
-    """A fitted scaler's centre and half range per column (z = (x - centre) / half)."""
-    half = scaler.scale()
-    return scaler.inverse_transform(np.zeros_like(half)), half
-
-
-class _Normalised(nn.Module):
-    """Fixed affine maps around a network: physical inputs in, physical outputs out.
-
-    The maps are non-persistent buffers, rebuilt from the scalers in the fitted metadata, so that
-    ``state_dict()`` holds the trained weights only.
-    """
-
-    input_centre: torch.Tensor
-    input_half: torch.Tensor
-    output_centre: torch.Tensor
-    output_half: torch.Tensor
-
-    def set_scaling(
-        self,
-        inputs: tuple[np.ndarray, np.ndarray],
-        outputs: tuple[np.ndarray, np.ndarray],
-    ) -> None:
-        """Set (centre, half) of the inputs and of the outputs, each (n_in,) / (n_out,)."""
-        for name, value in (
-            ('input_centre', inputs[0]),
-            ('input_half', inputs[1]),
-            ('output_centre', outputs[0]),
-            ('output_half', outputs[1]),
-        ):
-            self.register_buffer(name, to_tensor(value), persistent=False)
-
-
-class NormalisedMlp(_Normalised):
-    """An MLP between fixed input and output scalings; maps (B, n_in) to (B, n_out)."""
-
-    def __init__(self, n_in: int, n_out: int, width: int, depth: int, activation: str) -> None:
-        super().__init__()
-        self.net = make_mlp(n_in, n_out, width, depth, activation)
-        self.set_scaling((np.zeros(n_in), np.ones(n_in)), (np.zeros(n_out), np.ones(n_out)))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Outputs (B, n_out) in physical units for inputs (B, n_in) in physical units."""
-        z = (x - self.input_centre) / self.input_half
-        out: torch.Tensor = self.net(z) * self.output_half + self.output_centre
-        return out
-
-
-class NormalisedLstm(_Normalised):
-    """An LSTM with a linear head on its last step; maps windows (B, T, n_in) to (B, n_out)."""
-
-    def __init__(self, n_in: int, n_out: int, hidden_size: int, num_layers: int) -> None:
-        super().__init__()
-        self.lstm = nn.LSTM(n_in, hidden_size, num_layers=num_layers, batch_first=True)
-        self.head = nn.Linear(hidden_size, n_out)
-        self.set_scaling((np.zeros(n_in), np.ones(n_in)), (np.zeros(n_out), np.ones(n_out)))
-
-    def forward(self, windows: torch.Tensor) -> torch.Tensor:
-        """Torque (B, n_out) of each window's last sample; windows (B, T, n_in), oldest first."""
-        z = (windows - self.input_centre) / self.input_half
-        hidden, _ = self.lstm(z)
-        out: torch.Tensor = self.head(hidden[:, -1]) * self.output_half + self.output_centre
-        return out
-
-
-class NumpyNormalisedMlp:
-    """A float64 numpy copy of a fitted NormalisedMlp, for one sample at a time."""
-
-    def __init__(self, network: NormalisedMlp) -> None:
-        """Copy the weights and the scalings."""
-        self.mlp = NumpyMlp.from_sequential(network.net)
-        self.input_centre = float64_array(network.input_centre)
-        self.input_half = float64_array(network.input_half)
-        self.output_centre = float64_array(network.output_centre)
-        self.output_half = float64_array(network.output_half)
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        """Outputs (n_out,) in physical units for one input x (n_in,) in physical units."""
-        out: np.ndarray = (
-            self.mlp((x - self.input_centre) / self.input_half) * self.output_half
-            + self.output_centre
-        )
-        return out
-
-
-def module_state(module: nn.Module) -> dict[str, np.ndarray]:
-    """A module's weights as float32 numpy arrays, named like its state_dict keys."""
-    return {
-        name: value.detach().to('cpu').numpy().copy()
-        for name, value in module.state_dict().items()
-    }
-
-
-def load_module_state(module: nn.Module, tensors: dict[str, np.ndarray], kind: str) -> None:
-    """Load weights saved by module_state.
-
-    Raises:
-        CheckpointError: names or shapes differ from the module the hyper-parameters build.
-    """
-    expected = {name: tuple(value.shape) for name, value in module.state_dict().items()}
-    found = {name: tuple(np.shape(value)) for name, value in tensors.items()}
-    if expected != found:
-        raise CheckpointError(
-            f'{kind}: saved tensors {found} do not match the network its hyper-parameters '
-            f'build {expected}'
-        )
-    module.load_state_dict({name: torch.as_tensor(value) for name, value in tensors.items()})
-
-
-def scalers_metadata(**scalers: MinMaxScaler) -> dict[str, Any]:
-    """JSON-ready scalers by name."""
-    return {name: scaler.to_dict() for name, scaler in scalers.items()}
-
-
-def require_fitted(model: InverseDynamicsModel, value: object) -> None:
-    """Raise if a model has neither been fitted nor loaded.
-
-    Raises:
-        RuntimeError: ``value`` (the model's fitted network or parameters) is None.
-    """
-    if value is None:
-        raise RuntimeError(f'{model.kind} model is not fitted: call fit() or load_state() first')
-
-
-def run_training(
-    module: nn.Module,
-    loss_fn: Callable[..., torch.Tensor],
-    fit_tensors: list[torch.Tensor],
-    validation_tensors: list[torch.Tensor],
-    *,
-    config: NetworkConfig,
-    device: torch.device,
-    progress: bool,
-) -> TrainHistory:
-    """train_module on ``device``, leaving the module on the CPU in evaluation mode."""
-    module.to(device)
-    history = train_module(
-        module,
-        loss_fn,
-        fit_tensors,
-        validation_tensors,
-        config.optim(),
-        progress=progress,
-        description=config.kind,
-    )
-    module.to('cpu').eval()
-    return history
-
-
-def predict_chunked(module: nn.Module, inputs: np.ndarray | torch.Tensor) -> np.ndarray:
-    """A CPU module's outputs for inputs of any length, PREDICT_CHUNK samples per pass."""
-    with torch.inference_mode():
-        x = inputs if isinstance(inputs, torch.Tensor) else to_tensor(inputs)
-        if len(x) <= PREDICT_CHUNK:
-            return to_numpy(module(x))
-        return np.vstack(
-            [to_numpy(module(x[k : k + PREDICT_CHUNK])) for k in range(0, len(x), PREDICT_CHUNK)]
-        )
-
-
 def _inputs(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.hstack([np.atleast_2d(q), np.atleast_2d(v), np.atleast_2d(a)])
 
@@ -503,23 +311,6 @@ class MlpModel(InverseDynamicsModel):
         if self.history_ is not None:
             out['training'] = self.history_.to_dict()
         return out
-
-
-def load_scalers(
-    fitted: dict[str, Any], names: tuple[str, ...], kind: str
-) -> tuple[MinMaxScaler, ...]:
-    """The named scalers of a model's fitted metadata.
-
-    Raises:
-        CheckpointError: a scaler is missing or malformed.
-    """
-    missing = [name for name in names if name not in fitted]
-    if missing:
-        raise CheckpointError(f'{kind}: fitted metadata lacks {missing}; found {sorted(fitted)}')
-    try:
-        return tuple(MinMaxScaler.from_dict(fitted[name]) for name in names)
-    except (KeyError, TypeError, ValueError) as err:
-        raise CheckpointError(f'{kind}: invalid scaler in fitted metadata: {err}') from err
 
 
 # -- LSTM ----------------------------------------------------------------------------------------
@@ -675,162 +466,3 @@ class LstmModel(InverseDynamicsModel):
         if self.history_ is not None:
             out['training'] = self.history_.to_dict()
         return out
-
-
-class LstmStreams:
-    """The LSTM's online prediction, one sample per call, in float32 or float64.
-
-    Gives what ``LstmModel.predict`` gives for a run, sample by sample: the torque of a sample
-    is the LSTM run from a zero state over the window of the last T samples, and the first
-    window after ``reset`` is padded with the run's first sample. Instead of recomputing each
-    window (T sequential steps of one state), T windows are kept in flight: window k starts from
-    zero at sample k and ends at sample k + T - 1, so each new sample advances T states at once,
-    each layer's products over all of them together. The arithmetic of each window is the same
-    as a recomputation; only the summation order of the products may differ. The products and
-    the sigmoids run through torch on numpy arrays (its GEMM takes ~50 us here
-    against ~90 us for numpy's OpenBLAS); the rest is numpy. Inputs and outputs are float64.
-
-    Attributes:
-        sequence_length: T, samples per window.
-    """
-
-    def __init__(
-        self,
-        network: NormalisedLstm,
-        sequence_length: int,
-        dtype: type[np.floating] = np.float64,
-    ) -> None:
-        """Copy the weights (in ``dtype``) and start empty."""
-        lstm = network.lstm
-        hidden, layers = lstm.hidden_size, lstm.num_layers
-        # Gates reordered from torch's (i, f, g, o) to (i, f, o, g): the sigmoids side by side.
-        order = np.r_[0 : 2 * hidden, 3 * hidden : 4 * hidden, 2 * hidden : 3 * hidden]
-
-        def weight_t(name: str) -> np.ndarray:
-            return float64_array(getattr(lstm, name))[order].T.astype(dtype)
-
-        def bias(layer: int) -> np.ndarray:
-            return (
-                (
-                    float64_array(getattr(lstm, f'bias_ih_l{layer}'))
-                    + float64_array(getattr(lstm, f'bias_hh_l{layer}'))
-                )[order]
-            ).astype(dtype)
-
-        # Layer 0's input projection of one sample (numpy); per layer b and W_hh^T (the part
-        # ``prepare`` computes ahead), and W_ih^T of the layers above the first.
-        self._input_weight_t = np.ascontiguousarray(weight_t('weight_ih_l0'))
-        self._biases = [torch.from_numpy(bias(layer)) for layer in range(layers)]
-        self._recurrent = [
-            torch.from_numpy(np.ascontiguousarray(weight_t(f'weight_hh_l{layer}')))
-            for layer in range(layers)
-        ]
-        self._upward = [
-            torch.from_numpy(np.ascontiguousarray(weight_t(f'weight_ih_l{layer}')))
-            for layer in range(1, layers)
-        ]
-        self._head_t = np.ascontiguousarray(float64_array(network.head.weight).T)
-        self._head_bias = float64_array(network.head.bias)
-        self._input_centre = float64_array(network.input_centre)
-        self._input_half = float64_array(network.input_half)
-        self._output_centre = float64_array(network.output_centre)
-        self._output_half = float64_array(network.output_half)
-        self.sequence_length = sequence_length
-        self._hidden = hidden
-        # The windows in flight, one row each, layer l in columns l * hidden ... (l + 1) * hidden
-        # (so that [h_below, h] of a layer is one slice); row _oldest ends at the next sample.
-        self._dtype = dtype
-        self._h = np.zeros((sequence_length, layers * hidden), dtype=dtype)
-        self._c = np.zeros_like(self._h)
-        self._gates = np.empty((sequence_length, 4 * hidden), dtype=dtype)
-        # Per layer, b + h W_hh^T of every window, computed ahead by ``prepare``.
-        self._ahead = np.empty((layers, sequence_length, 4 * hidden), dtype=dtype)
-        self._is_prepared = False
-        self._oldest = 0
-        self._is_empty = True
-
-    def reset(self) -> None:
-        """Start a new run: the next sample is padded as a run's first."""
-        self._is_empty = True
-        self._is_prepared = False
-
-    def prepare(self) -> None:
-        """Compute what the next step needs of the current state alone, ahead of the sample.
-
-        Each layer's gates are b + x W_ih^T + h W_hh^T; the recurrent part h W_hh^T of every
-        window is known before the next sample arrives, so calling this after a torque has
-        been published (the predictor does) takes two thirds of the products off the path from
-        sample to torque. ``push`` calls it itself when it was not called.
-        """
-        if self._is_empty or self._is_prepared:
-            return
-        self._recur(self._h, self._ahead)
-        self._is_prepared = True
-
-    def push(self, row: np.ndarray) -> np.ndarray:
-        """Torque (n,) [N*m] at a new sample, row (3n,) = [q, v, a] in physical units."""
-        z = ((np.asarray(row, dtype=float) - self._input_centre) / self._input_half).astype(
-            self._dtype
-        )
-        if self._is_empty:
-            self._fill(z)
-            self._is_empty = False
-        else:
-            self.prepare()
-            self._step(z, self._h, self._c, self._gates, self._ahead)
-        self._is_prepared = False
-        oldest = self._oldest
-        out = self._h[oldest, -self._hidden :].astype(float) @ self._head_t + self._head_bias
-        # The oldest window is complete; its row starts a new one (from zero) at the next sample.
-        self._h[oldest] = 0.0
-        self._c[oldest] = 0.0
-        self._oldest = (oldest + 1) % self.sequence_length
-        tau: np.ndarray = out * self._output_half + self._output_centre
-        return tau
-
-    def _recur(self, h: np.ndarray, ahead: np.ndarray) -> None:
-        """ahead[l] = b_l + h_l W_hh_l^T for every row of h (rows, layers * hidden)."""
-        n = self._hidden
-        h_t, ahead_t = torch.from_numpy(h), torch.from_numpy(ahead)
-        for layer, (weight, bias) in enumerate(zip(self._recurrent, self._biases, strict=True)):
-            torch.addmm(bias, h_t[:, layer * n : (layer + 1) * n], weight, out=ahead_t[layer])
-
-    def _step(
-        self, z: np.ndarray, h: np.ndarray, c: np.ndarray, gates: np.ndarray, ahead: np.ndarray
-    ) -> None:
-        """One LSTM step of every row of h, c in place, from ``_recur``'s parts; input z (3n,)."""
-        n = self._hidden
-        gates_t, h_t = torch.from_numpy(gates), torch.from_numpy(h)
-        for layer in range(len(self._recurrent)):
-            columns = slice(layer * n, (layer + 1) * n)
-            if layer == 0:
-                np.add(ahead[0], z @ self._input_weight_t, out=gates)
-            else:
-                below = h_t[:, (layer - 1) * n : layer * n]
-                ahead_t = torch.from_numpy(ahead[layer])
-                torch.addmm(ahead_t, below, self._upward[layer - 1], out=gates_t)
-            self._cell_update(gates, c[:, columns], h[:, columns])
-
-    def _cell_update(self, gates: np.ndarray, c_layer: np.ndarray, h_layer: np.ndarray) -> None:
-        """In place: c = f c + i g, h = o tanh(c), from the pre-activations (i, f, o, g)."""
-        n = self._hidden
-        torch.from_numpy(gates)[:, : 3 * n].sigmoid_()
-        cell = gates[:, 3 * n :]
-        np.tanh(cell, out=cell)
-        c_layer *= gates[:, n : 2 * n]
-        c_layer += gates[:, :n] * cell
-        np.multiply(gates[:, 2 * n : 3 * n], np.tanh(c_layer), out=h_layer)
-
-    def _fill(self, z: np.ndarray) -> None:
-        """States after a padded start: the window i-th oldest has seen T - i copies of z."""
-        length = self.sequence_length
-        h = np.zeros((1, self._h.shape[1]), dtype=self._dtype)
-        c = np.zeros_like(h)
-        gates = np.empty((1, self._gates.shape[1]), dtype=self._dtype)
-        ahead = np.empty((self._ahead.shape[0], 1, self._ahead.shape[2]), dtype=self._dtype)
-        for steps in range(1, length + 1):
-            self._recur(h, ahead)
-            self._step(z, h, c, gates, ahead)
-            row = (self._oldest + length - steps) % length
-            self._h[row] = h[0]
-            self._c[row] = c[0]

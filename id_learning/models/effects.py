@@ -34,8 +34,9 @@ from id_learning.models.base import (
     SamplePredictor,
     TorqueComponents,
 )
-from id_learning.models.blackbox import NumpyNormalisedMlp, check_kind, require_fitted
+from id_learning.models.blackbox import check_kind
 from id_learning.models.data import TrainingData
+from id_learning.models.network_common import NumpyNormalisedMlp, require_fitted
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
 from id_learning.physics.augmented import EFFECTS_JSON, AugmentedModel
 from id_learning.robot.config import RobotConfig

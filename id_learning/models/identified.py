@@ -23,8 +23,9 @@ from id_learning.models.base import (
     SamplePredictor,
     TorqueComponents,
 )
-from id_learning.models.blackbox import NumpyNormalisedMlp, check_kind, require_fitted
+from id_learning.models.blackbox import check_kind
 from id_learning.models.data import TrainingData
+from id_learning.models.network_common import NumpyNormalisedMlp, require_fitted
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
 from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.identification import IdentificationConfig, identify

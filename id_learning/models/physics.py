@@ -27,13 +27,13 @@ from id_learning.models.base import (
     SamplePredictor,
     TorqueComponents,
 )
-from id_learning.models.blackbox import (
-    NetworkConfig,
+from id_learning.models.blackbox import NetworkConfig, check_kind, check_mlp_shape
+from id_learning.models.data import TrainingData
+from id_learning.models.fitting import TrainHistory, fit_network, select_device
+from id_learning.models.network_common import (
     NormalisedMlp,
     NumpyNormalisedMlp,
     centre_and_half,
-    check_kind,
-    check_mlp_shape,
     load_module_state,
     load_scalers,
     module_state,
@@ -42,8 +42,6 @@ from id_learning.models.blackbox import (
     scalers_metadata,
     seeded,
 )
-from id_learning.models.data import TrainingData
-from id_learning.models.fitting import TrainHistory, fit_network, select_device
 from id_learning.models.torch_utils import to_tensor
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig

@@ -13,19 +13,17 @@ from torch.func import grad, hessian, jacfwd, jacrev, vmap
 
 from id_learning.errors import CheckpointError, ConfigError
 from id_learning.models.artifact import read_artifact, write_artifact
+from id_learning.models.delan import DelanNetwork, euler_lagrange_torque
 from id_learning.models.lagrangian import (
     DelanConfig,
     DelanModel,
-    DelanNetwork,
-    LagrangianScaling,
     LnnConfig,
     LnnMlpConfig,
     LnnMlpModel,
-    LnnMlpNetwork,
     LnnModel,
-    LnnNetwork,
-    euler_lagrange_torque,
 )
+from id_learning.models.lagrangian_base import LagrangianScaling
+from id_learning.models.lnn import LnnMlpNetwork, LnnNetwork
 
 N_DOF = 3
 MODELS = {
