@@ -1,0 +1,123 @@
+"""The data subcommands: ``simulate``, ``import``, ``inspect`` and ``bag recover``.
+
+Each makes or examines a bag; they share nothing with training, so they live apart from it.
+``add_data_commands`` adds their parsers; the handlers import their work lazily.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from id_learning.cli import options
+
+__all__ = [
+    'add_data_commands',
+    'cmd_bag_recover',
+    'cmd_import',
+    'cmd_inspect',
+    'cmd_simulate',
+]
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Run the digital twin and write a bag with its ground truth."""
+    from id_learning.twin import load_twin_config, simulate, write_twin_output
+
+    overrides = {}
+    if args.seed is not None:
+        overrides['seed'] = args.seed
+    if args.joint_torque_sensors:
+        overrides['joint_torque_sensors'] = True
+    config = load_twin_config(args.config, overrides)
+    if args.duration is not None:
+        from dataclasses import replace
+
+        config = replace(config, excitation=replace(config.excitation, duration_s=args.duration))
+    result = simulate(config, progress=not args.quiet)
+    write_twin_output(result, config, args.out, overwrite=args.force)
+    print(
+        f'wrote {result.recording.n_samples} samples '
+        f'({result.recording.duration_s:.1f} s) to {args.out}; '
+        f'effects: {", ".join(config.effects.enabled_names()) or "none"}'
+    )
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    """Convert a CSV/NPZ log into a bag of the bag contract."""
+    from id_learning.dataset.importer import import_log, load_import_mapping
+
+    robot = options.load_robot(args) if args.robot else None
+    report = import_log(
+        Path(args.source),
+        load_import_mapping(args.mapping),
+        Path(args.out),
+        robot=robot,
+        overwrite=args.force,
+    )
+    print(report.summary())
+    return 0
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    """Print topics, counts, rates, jitter, gaps and ranges of a bag."""
+    from id_learning.dataset.inspect import inspect_bag, plot_report, render_report
+
+    robot = options.load_robot(args) if args.robot else None
+    report = inspect_bag(Path(args.bag), robot=robot)
+    print(render_report(report))
+    if args.plot:
+        print(f'plot: {plot_report(report, Path(args.plot))}')
+    return 0
+
+
+def cmd_bag_recover(args: argparse.Namespace) -> int:
+    """Rebuild a torn bag (killed recorder) into a valid one."""
+    from id_learning.bag.recover import recover_bag
+
+    report = recover_bag(Path(args.bag), Path(args.out) if args.out else None)
+    print(report.summary())
+    return 0
+
+
+def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``simulate``, ``import``, ``inspect`` and ``bag`` to the subcommands ``sub``."""
+    p = sub.add_parser('simulate', help='run the digital twin and write a bag with ground truth')
+    p.add_argument(
+        '--config', required=True, help='twin config YAML (e.g. config/twin_default.yaml)'
+    )
+    p.add_argument('--out', required=True, help='bag folder to write')
+    p.add_argument('--seed', type=int, help='override the config seed')
+    p.add_argument('--duration', type=float, help='override the excitation duration [s]')
+    p.add_argument(
+        '--joint-torque-sensors', action='store_true', help='record joint torques in effort'
+    )
+    p.add_argument('--force', action='store_true', help='overwrite an existing bag folder')
+    p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser('import', help='convert a CSV/NPZ log into a bag (column-mapping YAML)')
+    p.add_argument('source', help='CSV or NPZ file')
+    p.add_argument(
+        '--mapping', required=True, help='column-mapping YAML (see config/import_example.yaml)'
+    )
+    p.add_argument('--out', required=True, help='bag folder to write')
+    options.robot_option(
+        p, 'robot config: check joint names against it and use its IPO period and topics'
+    )
+    p.add_argument('--force', action='store_true', help='overwrite an existing bag folder')
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser('inspect', help='topics, counts, rate, jitter, gaps and ranges of a bag')
+    p.add_argument('bag', help='bag folder')
+    options.robot_option(p, 'robot config: check ranges against its limits')
+    p.add_argument('--plot', help='write a PNG overview to this path')
+    p.set_defaults(func=cmd_inspect)
+
+    p = sub.add_parser('bag', help='bag maintenance')
+    bag_sub = p.add_subparsers(dest='bag_command', required=True, metavar='ACTION')
+    r = bag_sub.add_parser('recover', help='rebuild a torn bag (e.g. a killed recorder)')
+    r.add_argument('bag', help='bag folder')
+    r.add_argument('--out', help='write the recovered bag here instead of in place')
+    r.set_defaults(func=cmd_bag_recover)

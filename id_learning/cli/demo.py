@@ -1,0 +1,164 @@
+"""The ``demo`` subcommand: the main job on a bag, end to end.
+
+Data summary, diagnosis, training with a report, then the online check of the best model through
+the predictor node. It composes the other commands' work (``diagnose_bags``, ``metrics_table``),
+so it sits on top of their modules; the online check is imported only when it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from id_learning.cli import options
+from id_learning.cli.diagnose import diagnose_bags
+from id_learning.cli.paths import default_bag, default_robot_config
+from id_learning.cli.train import metrics_table
+from id_learning.errors import DatasetError
+
+__all__ = ['DEMO_MODELS', 'DEMO_SECONDS_PER_MODEL', 'add_demo_command', 'cmd_demo']
+
+#: The demo trains the study's seven, the identified physics and the diagnosed model.
+DEMO_MODELS = 'study,rnea_id,rnea_effects'
+#: Budget per model in ``demo``: seven models on the shipped bag within 10 minutes on 2 cores.
+DEMO_SECONDS_PER_MODEL = 60.0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """The main job on a bag: load, preprocess, summarise with plots."""
+    from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
+    from id_learning.dataset.recording import load_recording
+    from id_learning.evaluation.data_summary import write_summary
+    from id_learning.twin import GROUND_TRUTH_ARRAYS, GROUND_TRUTH_JSON
+
+    robot = options.load_robot(args)
+    bag = Path(args.bag or default_bag())
+    out = Path(args.out)
+    print(f'loading {bag} ...', flush=True)
+    recording = load_recording(bag, robot, require_current=args.target == 'motor', progress=True)
+    preprocess = PreprocessConfig(target=args.target, mode=args.preprocessing)
+    dataset = prepare_dataset(recording, robot, preprocess)
+    ground_truth = tau_clean = None
+    if (bag / GROUND_TRUTH_JSON).is_file():
+        ground_truth = json.loads((bag / GROUND_TRUTH_JSON).read_text(encoding='utf-8'))
+        import numpy as np
+
+        with np.load(bag / GROUND_TRUTH_ARRAYS) as arrays:
+            key = 'tau_u_clean' if args.target == 'motor' else 'tau_joint_clean'
+            tau_clean = arrays[key].astype(float)
+    summary = write_summary(dataset, robot, out, ground_truth=ground_truth, tau_clean=tau_clean)
+    print(
+        f'{summary.n_samples} samples, {summary.duration_s:.0f} s; '
+        f'summary written to {out / "summary.md"}',
+        flush=True,
+    )
+    if not args.skip_diagnosis:
+        _demo_diagnosis(bag, robot, preprocess, recording, out / 'diagnosis')
+    if args.skip_training:
+        return 0
+    from id_learning.training import train_run
+
+    kinds = options.model_kinds(args.models)
+    print(
+        f'training {len(kinds)} models ({", ".join(kinds)}), at most '
+        f'{args.train_seconds:g} s each ...',
+        flush=True,
+    )
+    run = train_run(
+        [bag],
+        robot,
+        args.target,
+        kinds,
+        out / 'run',
+        max_seconds_per_model=args.train_seconds,
+        device=args.device,
+        preprocess=preprocess,
+    )
+    print(metrics_table(run.metrics))
+    print(f'report: {run.report}', flush=True)
+    if args.online_seconds > 0:
+        _demo_online_check(args, bag, run, out)
+    return 0
+
+
+def _demo_diagnosis(bag: Path, robot: Any, preprocess: Any, recording: Any, out: Path) -> None:
+    """Diagnose the loaded bag into ``out``; a bag it cannot diagnose only skips this step."""
+    from id_learning.diagnosis.report import render_summary
+
+    try:
+        result = diagnose_bags(
+            [bag],
+            robot,
+            preprocess,
+            out,
+            progress=False,
+            recordings=[recording],
+        )
+    except DatasetError as err:  # e.g. too short: the rest of the demo still runs
+        print(f'diagnosis not run: {err}', flush=True)
+    else:
+        print(render_summary(result))
+        print(
+            f'diagnosis report: {out / "report.md"}; waterfall plot: {out / "waterfall.png"}',
+            flush=True,
+        )
+
+
+def _demo_online_check(args: argparse.Namespace, bag: Path, run: Any, out: Path) -> None:
+    """Replay the test part's start through the predictor node with the run's best model."""
+    from id_learning.nodes.online_check import has_ros, online_check
+
+    if not has_ros():
+        print('online check not run: rclpy (ROS 2 Jazzy) is not installed', flush=True)
+        return
+    models = run.metrics['models']
+    kind = min(models, key=lambda k: models[k]['mean_rmse_normalised'])
+    print(
+        f'online check: replaying {args.online_seconds:g} s of the test part in real time '
+        f'through the predictor node with the best model ({kind}) ...',
+        flush=True,
+    )
+    check = online_check(
+        bag,
+        Path(args.robot or default_robot_config()),
+        run.models[kind].folder,
+        seconds=args.online_seconds,
+        out=out / 'online_check.json',
+    )
+    print(check.summary(), flush=True)
+
+
+def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``demo`` to the subcommands ``sub``."""
+    p = sub.add_parser(
+        'demo',
+        help='the main job on a bag: data summary, then train all seven models with a report',
+    )
+    p.add_argument('--bag', help='bag folder (default: the shipped bags/default)')
+    p.add_argument('--out', default='out/demo', help='output folder (the run goes to OUT/run)')
+    options.target_option(p)
+    options.preprocessing_option(p)
+    p.add_argument(
+        '--models',
+        default=DEMO_MODELS,
+        help=f'comma-separated model kinds to train (default: {DEMO_MODELS})',
+    )
+    p.add_argument(
+        '--train-seconds',
+        type=options.positive_float,
+        default=DEMO_SECONDS_PER_MODEL,
+        help=f'wall-clock budget per model fit [s] (default {DEMO_SECONDS_PER_MODEL:g})',
+    )
+    p.add_argument('--skip-training', action='store_true', help='only write the data summary')
+    p.add_argument('--skip-diagnosis', action='store_true', help='do not run the diagnosis')
+    p.add_argument(
+        '--online-seconds',
+        type=float,
+        default=30.0,
+        help='seconds of the test part replayed through the predictor node (0: skip)',
+    )
+    p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
+    options.robot_option(p)
+    p.set_defaults(func=cmd_demo)

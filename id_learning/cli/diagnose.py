@@ -1,0 +1,106 @@
+"""The ``diagnose`` subcommand, and ``diagnose_bags``, which ``demo`` runs as well.
+
+The diagnosis names the physical effects the nominal model misses and saves the augmented model
+as an ``rnea_effects`` artifact; one function does that for both commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from id_learning.cli import options
+
+__all__ = ['add_diagnose_command', 'cmd_diagnose', 'diagnose_bags']
+
+
+def diagnose_bags(
+    bags: Sequence[Path],
+    robot: Any,
+    preprocess: Any,
+    out: Path,
+    *,
+    effects: Sequence[str] | None = None,
+    progress: bool = True,
+    recordings: Sequence[Any] | None = None,
+) -> Any:
+    """Diagnose bags; write report.md, effects.json, figures and the rnea_effects model to ``out``.
+
+    ``preprocess``: the ``PreprocessConfig`` (target and mode). ``recordings``: the bags already
+    loaded (same order), to skip reading them again.
+
+    Returns:
+        the ``DiagnosisResult``.
+    """
+    from id_learning.dataset.recording import load_recording
+    from id_learning.diagnosis import DiagnosisConfig, diagnose
+    from id_learning.models.effects import RneaEffectsModel
+    from id_learning.models.registry import save_model
+
+    target = preprocess.target
+    settings: dict[str, Any] = {'preprocess': preprocess}
+    if effects:
+        settings['effects'] = tuple(effects)
+    config = DiagnosisConfig(**settings)
+    if recordings is None:
+        recordings = []
+        for bag in bags:
+            print(f'loading {bag} ...', flush=True)
+            recordings.append(
+                load_recording(
+                    Path(bag), robot, require_current=target == 'motor', progress=progress
+                )
+            )
+    print('diagnosing: nominal model vs measurements, forward selection of named effects ...',
+          flush=True)  # fmt: skip
+    result = diagnose(recordings, robot, config, out_dir=out)
+    model = RneaEffectsModel.from_augmented(
+        result.augmented_model, source=str(out / 'effects.json')
+    )
+    save_model(model, out / 'model', extra={'diagnosis': {'sources': result.sources}})
+    return result
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """Find the effects the nominal model misses; report, effects.json and a model artifact."""
+    from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.diagnosis.report import render_summary
+
+    out = Path(args.out)
+    result = diagnose_bags(
+        [Path(b) for b in args.bag],
+        options.load_robot(args),
+        PreprocessConfig(target=args.target, mode=args.preprocessing),
+        out,
+        effects=options.comma_names(args.effects) if args.effects else None,
+        progress=not args.quiet,
+    )
+    print(render_summary(result))
+    print(
+        f'report: {out / "report.md"}; effects: {out / "effects.json"}; waterfall: '
+        f'{out / "waterfall.png"}; model (rnea_effects): {out / "model"}'
+    )
+    return 0
+
+
+def add_diagnose_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``diagnose`` to the subcommands ``sub``."""
+    p = sub.add_parser(
+        'diagnose',
+        help='name the physical effects the nominal model misses, add them, show the gap shrink',
+    )
+    p.add_argument('--bag', required=True, action='append', help='bag folder (repeatable)')
+    p.add_argument(
+        '--out', required=True, help='folder for report.md, effects.json, figures and model/'
+    )
+    options.target_option(p)
+    options.preprocessing_option(p)
+    p.add_argument(
+        '--effects',
+        help='comma-separated candidate effects to try (default: the whole library)',
+    )
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
+    options.robot_option(p)
+    p.set_defaults(func=cmd_diagnose)

@@ -1,0 +1,128 @@
+"""Options shared by several subcommands, and the readers of their values.
+
+One definition per option (``--robot``, ``--target``, ``--preprocessing``) and per value format
+(model kinds, ``--hyper`` items, comma lists), used by every command module that offers it.
+Nothing heavy is imported at module level, so that ``--help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import Any
+
+from id_learning.cli.paths import default_robot_config
+from id_learning.errors import ConfigError
+
+__all__ = [
+    'PREPROCESSING_CHOICES',
+    'comma_names',
+    'hyper_parameters',
+    'load_robot',
+    'model_kinds',
+    'positive_float',
+    'preprocessing_option',
+    'robot_option',
+    'target_option',
+]
+
+#: ``--preprocessing`` values (``dataset.preprocess.PREPROCESS_MODES``; not imported here, so
+#: that ``--help`` stays fast).
+PREPROCESSING_CHOICES = ('through_filter', 'study')
+
+
+def robot_option(
+    p: argparse.ArgumentParser, help_text: str = 'robot config YAML (default: MABI MAX 100)'
+) -> None:
+    """The --robot option: the robot config YAML."""
+    p.add_argument('--robot', help=help_text)
+
+
+def target_option(p: argparse.ArgumentParser) -> None:
+    """The --target option: which torque is the label."""
+    p.add_argument(
+        '--target',
+        choices=('motor', 'joint'),
+        default='motor',
+        help='motor: tau_u from currents (default); joint: measured joint torque',
+    )
+
+
+def preprocessing_option(p: argparse.ArgumentParser) -> None:
+    """The --preprocessing option: fit through the label filter, or the study's way."""
+    p.add_argument(
+        '--preprocessing',
+        choices=PREPROCESSING_CHOICES,
+        default='through_filter',
+        help="through_filter (default): models see a controller's inputs and their torque is "
+        "filtered like the labels before it meets them; study: the reference study's pipeline "
+        '(low-passed inputs, torque compared with the low-passed labels as is), for comparison',
+    )
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a float > 0."""
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
+    return value
+
+
+def load_robot(args: argparse.Namespace):
+    """The robot config of ``--robot``, else the shipped one."""
+    from id_learning.robot import load_robot_config
+
+    return load_robot_config(args.robot or default_robot_config())
+
+
+def model_kinds(text: str) -> list[str]:
+    """Model kinds from a comma-separated list.
+
+    'all' is every kind the package has (registry order), 'study' the study's seven in its
+    table order; both mix with other kinds: 'study,rnea_id' is the seven plus the identified
+    physics.
+
+    Raises:
+        ConfigError: an unknown kind (the message lists the known ones).
+    """
+    from id_learning.models.registry import MODEL_KINDS, STUDY_MODELS
+
+    groups = {'all': tuple(MODEL_KINDS), 'study': STUDY_MODELS}
+    kinds: list[str] = []
+    for item in (item.strip() for item in text.split(',')):
+        for kind in groups.get(item, (item,) if item else ()):
+            if kind not in kinds:
+                kinds.append(kind)
+    unknown = [kind for kind in kinds if kind not in MODEL_KINDS]
+    if unknown or not kinds:
+        raise ConfigError(
+            f'--models: unknown model kind(s) {unknown or [text]}; known kinds: '
+            f'{", ".join(MODEL_KINDS)} (or all: every kind; study: the seven of the study)'
+        )
+    return kinds
+
+
+def hyper_parameters(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
+    """Per-kind hyper-parameters from KIND.KEY=VALUE items (VALUE read as YAML: 3, 1e-3, tanh).
+
+    Raises:
+        ConfigError: an item is not of that form.
+    """
+    import yaml
+
+    hyper: dict[str, dict[str, Any]] = {}
+    for item in items or ():
+        name, sep, value = item.partition('=')
+        kind, dot, key = name.partition('.')
+        if not (sep and dot and kind and key):
+            raise ConfigError(f'--hyper {item!r}: expected KIND.KEY=VALUE, e.g. mlp.max_epochs=50')
+        try:
+            hyper.setdefault(kind, {})[key] = yaml.safe_load(value)
+        except yaml.YAMLError as err:
+            raise ConfigError(f'--hyper {item!r}: cannot read the value: {err}') from err
+    return hyper
+
+
+def comma_names(text: str) -> list[str]:
+    """The non-empty items of a comma-separated list, stripped."""
+    return [item.strip() for item in text.split(',') if item.strip()]

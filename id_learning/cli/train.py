@@ -1,0 +1,158 @@
+"""The ``train`` and ``evaluate`` subcommands, and the metrics table they (and ``demo``) print.
+
+``add_train_arguments`` is also the whole parser of the ``train`` console script
+(``ros2 run id_learning train``), which ``main.train_main`` runs as ``id-learning train``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from id_learning.cli import options
+
+__all__ = [
+    'add_train_arguments',
+    'add_train_commands',
+    'cmd_evaluate',
+    'cmd_train',
+    'metrics_table',
+]
+
+
+def metrics_table(metrics: dict[str, Any]) -> str:
+    """Per-joint test RMSE through the label filter [N*m], with the floor, as plain text."""
+    from id_learning.evaluation.study import MODEL_LABELS
+
+    joints = metrics['joints']
+    floor = metrics.get('label_noise_floor_nm')
+    width = 24
+
+    def row(label: str, values: Sequence[float], last: str = '') -> str:
+        return f'{label:<{width}}' + ''.join(f'{x:>10.3g}' for x in values) + last
+
+    head = f'{"test RMSE through filter":<{width}}' + ''.join(f'{j:>10}' for j in joints)
+    lines = [head + f'{"mean norm.":>12}']
+    for kind, entry in metrics['models'].items():
+        label = MODEL_LABELS.get(kind, kind)
+        lines.append(row(label, entry['rmse_nm'], f'{entry["mean_rmse_normalised"]:>12.3g}'))
+    if floor is not None:
+        lines.append(row('label-noise floor', floor))
+        lines += ['', f'{"x label-noise floor":<{width}}' + ''.join(f'{j:>10}' for j in joints)]
+        for kind, entry in metrics['models'].items():
+            ratio = entry.get('rmse_through_filter_over_floor')
+            if ratio is not None:
+                lines.append(row(MODEL_LABELS.get(kind, kind), ratio))
+    lines += [
+        '',
+        f'{"study way [N*m]":<{width}}'
+        + ''.join(f'{j:>10}' for j in joints)
+        + f'{"mean norm.":>12}',
+    ]
+    for kind, entry in metrics['models'].items():
+        study = entry['study_way']
+        lines.append(
+            row(
+                MODEL_LABELS.get(kind, kind),
+                study['rmse_nm'],
+                f'{study["mean_rmse_normalised"]:>12.3g}',
+            )
+        )
+    return '\n'.join(lines)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train models on bags; write models, metrics.json and report.md into the run folder."""
+    from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.training import train_run
+
+    robot = options.load_robot(args)
+    run = train_run(
+        [Path(b) for b in args.bag],
+        robot,
+        args.target,
+        options.model_kinds(args.models),
+        Path(args.out),
+        hyper=options.hyper_parameters(args.hyper),
+        max_seconds_per_model=args.max_seconds_per_model,
+        progress=not args.quiet,
+        device=args.device,
+        preprocess=PreprocessConfig(mode=args.preprocessing),
+    )
+    print(metrics_table(run.metrics))
+    print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """Evaluate every model of a run on other recordings."""
+    from id_learning.training import evaluate_run, read_run
+
+    run_dir = Path(args.run)
+    if args.robot:
+        robot = options.load_robot(args)
+    else:
+        from id_learning.robot import load_robot_config
+
+        source = read_run(run_dir).get('robot_config')
+        robot = load_robot_config(source) if source else options.load_robot(args)
+    result = evaluate_run(
+        run_dir, [Path(b) for b in args.bag], robot, Path(args.out), progress=not args.quiet
+    )
+    print(metrics_table(result.metrics))
+    print(f'metrics: {result.out / "metrics.json"}; report: {result.report}')
+    return 0
+
+
+def add_train_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``train`` (shared by ``id-learning train`` and ``ros2 run ... train``)."""
+    p.add_argument(
+        '--bag', required=True, action='append', help='bag folder to train on (repeatable)'
+    )
+    options.robot_option(p)
+    options.target_option(p)
+    options.preprocessing_option(p)
+    p.add_argument(
+        '--models',
+        default='all',
+        help='comma-separated model kinds, e.g. rnea_id,mlp; all: every kind (default); study: '
+        "the study's seven (rnea_lq,rnea_mlp,delan,lnn,lnn_mlp,mlp,lstm)",
+    )
+    p.add_argument('--out', required=True, help='run folder to write')
+    p.add_argument(
+        '--device',
+        choices=('auto', 'cpu', 'cuda'),
+        default='auto',
+        help='auto: CUDA when available',
+    )
+    p.add_argument(
+        '--max-seconds-per-model',
+        type=options.positive_float,
+        help='wall-clock budget per model fit [s] (default: none, early stopping decides)',
+    )
+    p.add_argument(
+        '--hyper',
+        action='append',
+        metavar='KIND.KEY=VALUE',
+        help='hyper-parameter override, e.g. mlp.max_epochs=50 (repeatable)',
+    )
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
+
+
+def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``train`` and ``evaluate`` to the subcommands ``sub``."""
+    p = sub.add_parser('train', help='train models on bags; write models, metrics and a report')
+    add_train_arguments(p)
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser('evaluate', help="evaluate a run's models on another recording")
+    p.add_argument('--run', required=True, help='run folder written by train')
+    p.add_argument(
+        '--bag', required=True, action='append', help='bag folder to evaluate on (repeatable)'
+    )
+    p.add_argument('--out', required=True, help='folder for metrics.json, report.md and figures')
+    options.robot_option(p, 'robot config YAML (default: the one the run was trained with)')
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
+    p.set_defaults(func=cmd_evaluate)
