@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from id_learning.dataset.preprocess import prepare_dataset
-from id_learning.evaluation import report as report_module
+from id_learning.evaluation import report_tables
 from id_learning.evaluation.report import (
     HIGH_FRICTION_SHARE,
     ReportInput,
@@ -225,8 +225,8 @@ def test_the_report_has_both_rmse_tables_timings_findings_and_four_png_figures(
 
 def test_the_report_places_a_bundled_study_table_beside_ours(report_input, tmp_path, monkeypatch):
     # Placeholder values, not the study's: they only exercise the table's layout.
-    monkeypatch.setattr(report_module, 'STUDY_TABLE_1', {'rnea_lq': (0.5,) * 6})
-    monkeypatch.setattr(report_module, 'STUDY_TABLE_1_CAPTION', 'Table 1 (test placeholder)')
+    monkeypatch.setattr(report_tables, 'STUDY_TABLE_1', {'rnea_lq': (0.5,) * 6})
+    monkeypatch.setattr(report_tables, 'STUDY_TABLE_1_CAPTION', 'Table 1 (test placeholder)')
     path, _ = write_report(report_input, tmp_path)
     text = path.read_text()
     assert 'not bundled' not in text

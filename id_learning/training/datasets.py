@@ -1,0 +1,293 @@
+"""Loading the bags of a run: preprocessing each on its own, hashing, and joining them.
+
+Several bags: each is preprocessed on its own (the zero-phase filter and the differentiation
+must not run across the seam of two recordings) and split 70/30 in time on its own; the training
+parts are concatenated in bag order, then the test parts (``combine_datasets``). For evaluating a
+run on other recordings they are joined whole instead (``concatenate_for_evaluation``). Kept apart
+from fitting and the run folder because the online check and the benchmarks load data the same
+way without training anything.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from id_learning.dataset.inputs import InputDefinition, Motion
+from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, prepare_dataset
+from id_learning.dataset.recording import load_recording
+from id_learning.errors import CheckpointError, ConfigError, DatasetError
+from id_learning.models.data import TrainingData
+from id_learning.robot.config import RobotConfig
+from id_learning.twin import read_noise_free_torque
+
+__all__ = [
+    'bag_sha256',
+    'combine_datasets',
+    'concatenate_for_evaluation',
+    'data_sha256',
+    'load_datasets',
+    'preprocess_from_dict',
+    'preprocess_to_dict',
+    'segment_rows',
+    'training_data_summary',
+]
+
+_LOG = logging.getLogger(__name__)
+
+
+def bag_sha256(path: Path) -> str:
+    """SHA-256 over a bag's bytes: metadata.yaml and its storage files, in name order.
+
+    Files the twin adds beside the bag (ground truth, its config copy) are not part of the data.
+    """
+    path = Path(path)
+    if path.is_file():
+        files = [path]
+    else:
+        files = sorted(
+            p
+            for p in path.iterdir()
+            if p.is_file() and (p.name == 'metadata.yaml' or p.suffix in ('.mcap', '.db3'))
+        )
+    if not files:
+        raise DatasetError(f'{path}: no bag files (metadata.yaml, *.mcap, *.db3) to hash')
+    digest = hashlib.sha256()
+    for file in files:
+        digest.update(file.name.encode())
+        with file.open('rb') as stream:
+            for block in iter(lambda: stream.read(1 << 20), b''):
+                digest.update(block)
+    return digest.hexdigest()
+
+
+def data_sha256(dataset: Dataset) -> str:
+    """SHA-256 of the preprocessed arrays a model sees (q, v, a, tau as float64) and the split."""
+    digest = hashlib.sha256()
+    for array in (dataset.q, dataset.v, dataset.a, dataset.tau):
+        digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+    digest.update(str(dataset.n_train).encode())
+    return digest.hexdigest()
+
+
+def preprocess_to_dict(config: PreprocessConfig, dataset: Dataset) -> dict[str, Any]:
+    """The preprocessing settings as used (cut-offs and inputs resolved), JSON-ready.
+
+    ``inputs`` is the input definition a model is scored and served on (a controller's);
+    ``fitting_inputs`` the one it was fitted on (the same, or the study's filtered inputs).
+    """
+    return {
+        'target': config.target,
+        'mode': config.mode,
+        'filter': 'zero-phase Butterworth low-pass (scipy sosfiltfilt)',
+        'filter_order': config.filter_order,
+        'cutoff_hz': np.asarray(dataset.cutoff_hz, dtype=float).tolist(),
+        'train_fraction': config.train_fraction,
+        'jitter_tolerance': config.jitter_tolerance,
+        'min_filter_periods': config.min_filter_periods,
+        'inputs': dataset.controller_inputs.to_dict(),
+        'fitting_inputs': dataset.fitting_inputs.to_dict(),
+    }
+
+
+def preprocess_from_dict(data: dict[str, Any]) -> PreprocessConfig:
+    """Rebuild the PreprocessConfig of a run from ``preprocess_to_dict`` output."""
+    try:
+        inputs = data.get('inputs')
+        return PreprocessConfig(
+            target=data['target'],
+            # Runs written before the mode existed were fitted the study's way.
+            mode=data.get('mode', 'study'),
+            filter_order=int(data['filter_order']),
+            cutoff_hz=tuple(float(x) for x in data['cutoff_hz']),
+            input_smoothing_hz=None
+            if inputs is None
+            else InputDefinition.from_dict(inputs).velocity_cutoff_hz,
+            train_fraction=float(data['train_fraction']),
+            jitter_tolerance=float(data['jitter_tolerance']),
+            min_filter_periods=float(data['min_filter_periods']),
+        )
+    except (KeyError, TypeError, ValueError) as err:
+        raise CheckpointError(f'preprocessing settings are incomplete or invalid: {err}') from err
+
+
+def load_datasets(
+    bags: Sequence[Path], robot: RobotConfig, config: PreprocessConfig, *, progress: bool = True
+) -> list[Dataset]:
+    """Load and preprocess each bag on its own (filtering never crosses two recordings)."""
+    if not bags:
+        raise ConfigError('no bag given: pass at least one --bag')
+    datasets = []
+    for bag in tqdm(bags, desc='loading bags', unit='bag', disable=not progress or len(bags) < 2):
+        recording = load_recording(
+            Path(bag), robot, require_current=config.target == 'motor', progress=progress
+        )
+        dataset = prepare_dataset(recording, robot, config)
+        clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)
+        datasets.append(replace(dataset, tau_clean=clean) if clean is not None else dataset)
+        _LOG.info('%s: %d samples', bag, recording.n_samples)
+    return datasets
+
+
+def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
+    """Concatenate preprocessed recordings: all training parts first, then all test parts.
+
+    The scalers are refitted on the concatenated training part. ``extra['segments']`` lists, per
+    recording, its source and the [start, stop) rows of its training and test parts; stamps stay
+    those of each recording (so they are not monotonic across a seam).
+    """
+    if not datasets:
+        raise ConfigError('no dataset to combine')
+    first = datasets[0]
+    for other in datasets[1:]:
+        if other.joints != first.joints or other.target != first.target:
+            raise DatasetError(
+                f'{other.source}: joints/target {other.joints}/{other.target} differ from '
+                f'{first.source}: {first.joints}/{first.target}'
+            )
+        if (
+            other.period_s != first.period_s
+            or not np.array_equal(other.cutoff_hz, first.cutoff_hz)
+            or other.mode != first.mode
+            or other.controller_inputs != first.controller_inputs
+        ):
+            raise DatasetError(
+                f'{other.source}: period, cut-offs or inputs differ from {first.source}'
+            )
+    train_rows = [slice(0, d.n_train) for d in datasets]
+    test_rows = [slice(d.n_train, len(d.q)) for d in datasets]
+    segments: list[dict[str, Any]] = []
+    start = 0
+    for d in datasets:
+        segments.append({'source': d.source, 'train': [start, start + d.n_train]})
+        start += d.n_train
+    n_train = start
+    for d, segment in zip(datasets, segments, strict=True):
+        stop = start + len(d.q) - d.n_train
+        segment['test'] = [start, stop]
+        start = stop
+
+    def stack(name: str) -> np.ndarray:
+        parts = [getattr(d, name)[rows] for d, rows in zip(datasets, train_rows, strict=True)]
+        parts += [getattr(d, name)[rows] for d, rows in zip(datasets, test_rows, strict=True)]
+        return np.concatenate(parts, axis=0)
+
+    def stack_motion(name: str) -> Motion:
+        parts = [getattr(d, name).take(rows) for d, rows in zip(datasets, train_rows, strict=True)]
+        parts += [getattr(d, name).take(rows) for d, rows in zip(datasets, test_rows, strict=True)]
+        return Motion.concatenate(parts)
+
+    q, v, a, tau = stack('q'), stack('v'), stack('a'), stack('tau')
+    has_clean = all(d.tau_clean is not None for d in datasets)
+    return Dataset(
+        joints=first.joints,
+        target=first.target,
+        period_s=first.period_s,
+        stamps_ns=stack('stamps_ns'),
+        q=q,
+        v=v,
+        a=a,
+        tau=tau,
+        tau_raw=stack('tau_raw'),
+        n_train=n_train,
+        input_scaler=MinMaxScaler().fit(np.hstack([q, v, a])[:n_train]),
+        target_scaler=MinMaxScaler().fit(tau[:n_train]),
+        cutoff_hz=first.cutoff_hz,
+        filter_order=first.filter_order,
+        mode=first.mode,
+        controller=stack_motion('controller'),
+        study=stack_motion('study'),
+        controller_inputs=first.controller_inputs,
+        tau_clean=stack('tau_clean') if has_clean else None,
+        regularise_report=first.regularise_report if len(datasets) == 1 else None,
+        source=' + '.join(d.source for d in datasets),
+        extra={'segments': segments},
+    )
+
+
+def concatenate_for_evaluation(
+    datasets: Sequence[Dataset], seen: Sequence[int], target_scaler: MinMaxScaler
+) -> Dataset:
+    """Concatenate whole preprocessed recordings, in order, as one dataset to evaluate on.
+
+    Nothing of it is for training (``n_train`` is 0). Each recording is one segment in
+    ``extra['segments']``: its first ``seen`` rows (the training part, when a model saw it) are
+    its 'train' range, the rest its 'test' range, which is what is scored. The recordings stay
+    whole so that a torque filtered like the labels is filtered over the whole recording, as the
+    labels were. The label scaler is the run's.
+    """
+    segments: list[dict[str, Any]] = []
+    start = 0
+    for d, n_seen in zip(datasets, seen, strict=True):
+        stop = start + len(d.q)
+        segments.append(
+            {'source': d.source, 'train': [start, start + n_seen], 'test': [start + n_seen, stop]}
+        )
+        start = stop
+    if sum(s['test'][1] - s['test'][0] for s in segments) == 0:
+        raise DatasetError('no samples left to evaluate')
+
+    def stack(name: str) -> np.ndarray:
+        return np.concatenate([getattr(d, name) for d in datasets], axis=0)
+
+    def stack_motion(name: str) -> Motion:
+        return Motion.concatenate([getattr(d, name) for d in datasets])
+
+    q, v, a = stack('q'), stack('v'), stack('a')
+    first = datasets[0]
+    has_clean = all(d.tau_clean is not None for d in datasets)
+    return Dataset(
+        joints=first.joints,
+        target=first.target,
+        period_s=first.period_s,
+        stamps_ns=stack('stamps_ns'),
+        q=q,
+        v=v,
+        a=a,
+        tau=stack('tau'),
+        tau_raw=stack('tau_raw'),
+        n_train=0,
+        input_scaler=MinMaxScaler().fit(np.hstack([q, v, a])),
+        target_scaler=target_scaler,
+        cutoff_hz=first.cutoff_hz,
+        filter_order=first.filter_order,
+        mode=first.mode,
+        controller=stack_motion('controller'),
+        study=stack_motion('study'),
+        controller_inputs=first.controller_inputs,
+        tau_clean=stack('tau_clean') if has_clean else None,
+        source=' + '.join(d.source for d in datasets),
+        extra={'segments': segments},
+    )
+
+
+def segment_rows(dataset: Dataset, part: str) -> list[tuple[int, int]]:
+    """Contiguous [start, stop) row ranges of ``part`` ('train', 'test' or 'all') per recording."""
+    segments = dataset.extra.get('segments')
+    if not segments:
+        segments = [{'train': [0, dataset.n_train], 'test': [dataset.n_train, len(dataset.q)]}]
+    if part == 'all':
+        return [(int(s[name][0]), int(s[name][1])) for s in segments for name in ('train', 'test')]
+    return [(int(s[part][0]), int(s[part][1])) for s in segments]
+
+
+def training_data_summary(
+    bags: Sequence[Path], dataset: Dataset, data: TrainingData
+) -> dict[str, Any]:
+    """What a run was trained on, for run.json and each model.json: bags, hashes and sizes."""
+    return {
+        'bags': [{'path': str(b), 'sha256': bag_sha256(b)} for b in bags],
+        'data_sha256': data_sha256(dataset),
+        'n_samples': len(dataset.q),
+        'n_train': dataset.n_train,
+        'n_fit': data.n_fit,
+        'n_validation': dataset.n_train - data.n_fit,
+        'segments': dataset.extra['segments'],
+    }

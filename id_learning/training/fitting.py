@@ -1,0 +1,166 @@
+"""Fitting the models of a run: per-kind settings, the shared diagnosis, and the fits.
+
+``train_run`` checks every kind's settings before any bag is loaded (``resolve_overrides``), then
+fits the kinds one after the other on the same training data (``fit_models``). Evaluating the
+fitted models is ``training.measure``'s; writing them is ``training.run_folder``'s.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from id_learning.errors import ConfigError
+from id_learning.models.base import InverseDynamicsModel
+from id_learning.models.data import DiagnosedEffects, TrainingData
+from id_learning.models.fitting import select_device
+from id_learning.robot.config import RobotConfig
+
+__all__ = [
+    'TRAIN_THREADS',
+    'ModelResult',
+    'fit_models',
+    'model_overrides',
+    'resolve_overrides',
+]
+
+TRAIN_THREADS = 1  # torch intra-op threads for fitting and evaluating the small networks
+
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class ModelResult:
+    """One fitted (or loaded) model of a run and its numbers.
+
+    Attributes:
+        kind: registry name.
+        model: the fitted model.
+        folder: its artifact folder.
+        metrics: the metrics.json entry (errors, timings, training summary).
+    """
+
+    kind: str
+    model: InverseDynamicsModel
+    folder: Path
+    metrics: dict[str, Any]
+
+
+def model_overrides(
+    kind: str,
+    hyper: dict[str, dict[str, Any]],
+    *,
+    max_seconds: float | None = None,
+    device: str = 'auto',
+) -> dict[str, Any]:
+    """The hyper-parameter overrides of one kind: the user's, a time budget and the device."""
+    from id_learning.models.registry import MODEL_KINDS
+
+    if kind not in MODEL_KINDS:
+        raise ConfigError(f'unknown model kind {kind!r}; known kinds: {sorted(MODEL_KINDS)}')
+    names = {item.name for item in fields(MODEL_KINDS[kind][0])}
+    overrides = dict(hyper.get(kind, {}))
+    # Settings a kind does not have (RNEA+LQ is a least-squares fit: no budget, no device) are
+    # left out rather than refused: they are run-wide, not the user's per-kind choice.
+    if max_seconds is not None and 'max_seconds' in names:
+        overrides.setdefault('max_seconds', max_seconds)
+    if 'device' in names:
+        overrides.setdefault('device', device)
+    return overrides
+
+
+def _history(model: InverseDynamicsModel) -> dict[str, Any] | None:
+    for name in ('history_', 'train_history_'):
+        history = getattr(model, name, None)
+        if history is not None:
+            return history.to_dict() if hasattr(history, 'to_dict') else dict(history)
+    return None
+
+
+def _with_diagnosis(
+    data: TrainingData, kinds: Sequence[str], overrides: dict[str, dict[str, Any]]
+) -> tuple[TrainingData, dict[str, float]]:
+    """Diagnose the training part once if a kind builds on its effects (no effects file given).
+
+    Returns:
+        The training data with the diagnosis, and per kind that uses it the seconds it took.
+    """
+    from id_learning.diagnosis import diagnose_training_part
+    from id_learning.models.registry import make_config
+
+    users = [k for k in kinds if getattr(make_config(k, **overrides[k]), 'effects', None) == '']
+    if not users:
+        return data, {}
+    start = time.perf_counter()
+    model, summary = diagnose_training_part(data.dataset, data.robot)
+    seconds = time.perf_counter() - start
+    _LOG.info('diagnosed the training part in %.1f s for %s', seconds, users)
+    return replace(data, diagnosed=DiagnosedEffects(model, summary)), dict.fromkeys(users, seconds)
+
+
+def resolve_overrides(
+    kinds: Sequence[str],
+    hyper: dict[str, dict[str, Any]],
+    *,
+    max_seconds: float | None,
+    device: str,
+) -> tuple[str, dict[str, dict[str, Any]]]:
+    """The device to fit on, and per kind its overrides (``model_overrides``), each checked.
+
+    Raises:
+        ConfigError: hyper-parameters for a kind not in ``kinds``, an unavailable device, an
+            unknown kind or an unknown hyper-parameter; refused before any bag is loaded.
+    """
+    from id_learning.models.registry import make_config
+
+    unknown = sorted(set(hyper) - set(kinds))
+    if unknown:
+        raise ConfigError(f'hyper-parameters given for kinds that are not trained: {unknown}')
+    resolved_device = str(select_device(device))
+    overrides = {
+        kind: model_overrides(kind, hyper, max_seconds=max_seconds, device=resolved_device)
+        for kind in kinds
+    }
+    for kind in kinds:  # refuse a bad hyper-parameter before hours of loading and fitting
+        make_config(kind, **overrides[kind])
+    return resolved_device, overrides
+
+
+def fit_models(
+    data: TrainingData,
+    robot: RobotConfig,
+    kinds: Sequence[str],
+    overrides: dict[str, dict[str, Any]],
+    models_dir: Path,
+    *,
+    progress: bool,
+) -> dict[str, ModelResult]:
+    """Fit each kind in order on ``data``; each result's folder is ``models_dir / kind``.
+
+    A kind's ``train_seconds`` include the diagnosis of the training part when it builds on it.
+    """
+    from id_learning.models.registry import make_model
+
+    data, diagnosis_seconds = _with_diagnosis(data, kinds, overrides)
+    results: dict[str, ModelResult] = {}
+    for kind in tqdm(kinds, desc='models', unit='model', disable=not progress):
+        model = make_model(kind, robot, **overrides[kind])
+        _LOG.info('fitting %s on %d samples', kind, data.n_fit)
+        start = time.perf_counter()
+        model.fit(data, progress=progress)
+        # A kind built on the diagnosis of the training part pays for it too.
+        seconds = time.perf_counter() - start + diagnosis_seconds.get(kind, 0.0)
+        results[kind] = ModelResult(
+            kind,
+            model,
+            models_dir / kind,
+            {'train_seconds': seconds, 'history': _history(model)},
+        )
+        _LOG.info('%s fitted in %.1f s', kind, seconds)
+    return results

@@ -1,0 +1,185 @@
+"""The run folder on disk: its file names, run.json, metrics.json and the model artifacts.
+
+Everything a run writes or reads back goes through here, so the documents' formats and keys are
+defined in one place; ``training.trainer`` decides what goes into them. The layout is in
+``training.trainer``'s docstring.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from id_learning.dataset.preprocess import Dataset, MinMaxScaler
+from id_learning.errors import CheckpointError
+from id_learning.models.artifact import _git_commit, robot_fingerprint
+from id_learning.robot.config import RobotConfig
+from id_learning.training.fitting import ModelResult
+from id_learning.training.measure import metric_notes
+
+__all__ = [
+    'METRICS_FILE',
+    'METRICS_FORMAT',
+    'MODELS_DIR',
+    'REPORT_FILE',
+    'RUN_FILE',
+    'RUN_FORMAT',
+    'machine_info',
+    'metrics_document',
+    'read_run',
+    'run_document',
+    'save_models',
+    'write_json',
+]
+
+RUN_FORMAT = 'id_learning.run/1'
+METRICS_FORMAT = 'id_learning.metrics/1'
+RUN_FILE = 'run.json'
+METRICS_FILE = 'metrics.json'
+REPORT_FILE = 'report.md'
+MODELS_DIR = 'models'
+
+
+def machine_info() -> dict[str, Any]:
+    """The machine the numbers were measured on: host, processor, torch and its threads, GPU."""
+    return {
+        'host': platform.node(),
+        'processor': platform.processor() or platform.machine(),
+        'cpu_count': os.cpu_count(),
+        'torch': torch.__version__,
+        'torch_threads': torch.get_num_threads(),
+        'cuda': torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
+    }
+
+
+def write_json(path: Path, document: dict[str, Any]) -> None:
+    """Write ``document`` as indented JSON with a final newline."""
+    path.write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
+
+
+def read_run(run_dir: Path) -> dict[str, Any]:
+    """Read a run folder's run.json.
+
+    Raises:
+        CheckpointError: missing, not JSON, or not a run document.
+    """
+    path = Path(run_dir) / RUN_FILE
+    if not path.is_file():
+        raise CheckpointError(f'{run_dir}: not a training run folder (no {RUN_FILE})')
+    try:
+        document = json.loads(path.read_text(encoding='utf-8'))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise CheckpointError(f'{path}: not valid JSON: {err}') from err
+    if not isinstance(document, dict) or document.get('format') != RUN_FORMAT:
+        raise CheckpointError(f'{path}: format is not {RUN_FORMAT!r}')
+    return document
+
+
+def run_document(
+    *,
+    robot: RobotConfig,
+    kinds: list[str],
+    device: str,
+    max_seconds_per_model: float | None,
+    preprocessing: dict[str, Any],
+    target_scaler: MinMaxScaler,
+    training_data: dict[str, Any],
+) -> dict[str, Any]:
+    """run.json: how the run was made (robot, kinds, device, preprocessing, scaler, data)."""
+    return {
+        'format': RUN_FORMAT,
+        'created_unix_s': time.time(),
+        'git_commit': _git_commit(),
+        'robot': robot_fingerprint(robot),
+        'robot_config': str(Path(robot.source).resolve()) if robot.source else None,
+        'kinds': kinds,
+        'device': device,
+        'max_seconds_per_model': max_seconds_per_model,
+        'preprocessing': preprocessing,
+        'target_scaler': target_scaler.to_dict(),
+        'training_data': training_data,
+        'machine': machine_info(),
+    }
+
+
+def save_models(
+    results: dict[str, ModelResult],
+    table: dict[str, dict[str, Any]],
+    *,
+    preprocessing: dict[str, Any],
+    target_scaler: MinMaxScaler,
+    training_data: dict[str, Any],
+) -> None:
+    """Save each fitted model into its folder, with the run's settings and its own metrics."""
+    from id_learning.models.registry import save_model
+
+    for kind, result in results.items():
+        save_model(
+            result.model,
+            result.folder,
+            extra={
+                'preprocessing': preprocessing,
+                'target_scaler': target_scaler.to_dict(),
+                'training_data': training_data,
+                'metrics': {k: v for k, v in table[kind].items() if k != 'history'},
+                'train_history': table[kind].get('history'),
+            },
+        )
+
+
+def metrics_document(
+    kind: str,
+    *,
+    run: str | None = None,
+    target: str,
+    robot: RobotConfig,
+    dataset: Dataset,
+    evaluated_on: str,
+    rows: list[tuple[int, int]],
+    scale: np.ndarray,
+    bags: list[dict[str, str]],
+    table: dict[str, dict[str, Any]],
+    findings: list[dict[str, Any]],
+    machine: dict[str, Any],
+    git_commit: str | None,
+) -> dict[str, Any]:
+    """metrics.json of a training run (``kind`` 'training') or an evaluation ('evaluation').
+
+    Args:
+        kind: 'training' or 'evaluation'.
+        run: the evaluated run's folder (evaluations only; the key is left out otherwise).
+        target: 'motor' or 'joint'.
+        robot: the robot.
+        dataset: the evaluated data (for the metric notes and the label-noise floor).
+        evaluated_on: a sentence saying which data ``rows`` are.
+        rows: the evaluated [start, stop) row ranges.
+        scale: (n,) half ranges of the training labels [N*m].
+        bags: per bag, its path and SHA-256.
+        table: per model kind, its metrics entry.
+        findings: the checked findings (JSON-ready).
+        machine: ``machine_info()`` of the run.
+        git_commit: the code's commit, where known.
+    """
+    return {
+        'format': METRICS_FORMAT,
+        'kind': kind,
+        **({} if run is None else {'run': run}),
+        'target': target,
+        'joints': list(robot.joints),
+        'evaluated_on': evaluated_on,
+        **metric_notes(dataset),
+        'n_samples': int(sum(b - a for a, b in rows)),
+        'target_scale_nm': scale.tolist(),
+        'bags': bags,
+        'models': table,
+        'findings': findings,
+        'machine': machine,
+        'git_commit': git_commit,
+    }
