@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 BAG ?= bags/default
 OUT ?= out/demo
 
-.PHONY: demo test lint venv clean bag
+.PHONY: demo test lint typecheck venv clean bag
 
 venv: $(VENV)/.ready
 
@@ -19,8 +19,12 @@ demo: venv
 	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(BAG) --out $(OUT)
 
 # pytest exits 5 when it collects no test: make treats that as the failure it is.
-test: venv
+test: venv typecheck
 	source tools/env.sh $(VENV) && $(PY) -m pytest -q test $(PYTEST_ARGS)
+
+# mypy over id_learning/ (settings in pyproject.toml); `make test` runs it first.
+typecheck: venv
+	source tools/env.sh $(VENV) && $(PY) -m mypy
 
 lint: venv
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .

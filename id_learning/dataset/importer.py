@@ -213,7 +213,7 @@ def _finite_rows(
 
 
 def _drop_reason(bad_cells: np.ndarray, fields: Sequence[_Field]) -> str:
-    columns = ', '.join(fields[i].describe() for i in np.flatnonzero(bad_cells))
+    columns = ', '.join(fields[int(i)].describe() for i in np.flatnonzero(bad_cells))
     return f'empty or non-finite {columns}'
 
 

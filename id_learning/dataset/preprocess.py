@@ -208,19 +208,20 @@ def regularise(
     if not filled.size and not report.n_snapped:
         return recording, report
 
-    def on_grid(array: np.ndarray | None) -> np.ndarray | None:
-        if array is None:
-            return None
+    def resampled(array: np.ndarray) -> np.ndarray:
         out = np.empty((n_slots, array.shape[1]))
         for j in range(array.shape[1]):
             out[:, j] = np.interp(np.arange(n_slots), slots, array[:, j])
         return out
 
+    def on_grid(array: np.ndarray | None) -> np.ndarray | None:
+        return None if array is None else resampled(array)
+
     regular = Recording(
         joints=recording.joints,
         stamps_ns=grid_ns,
-        position=on_grid(recording.position),
-        velocity=on_grid(recording.velocity),
+        position=resampled(recording.position),
+        velocity=resampled(recording.velocity),
         current=on_grid(recording.current),
         joint_torque=on_grid(recording.joint_torque),
         source=recording.source,

@@ -273,15 +273,15 @@ def refine_setting(
             return rss_of(spec.replace_settings(ratio=ratio, phase_rad=float(geometry[1])))[0]
 
         grid = [np.array([r, p]) for r in BALANCER_RATIOS for p in BALANCER_PHASES]
-        start = min(grid, key=spring_rss)
+        geometry = min(grid, key=spring_rss)
         best = optimize.minimize(
             spring_rss,
-            start,
+            geometry,
             method='Nelder-Mead',
             options={
                 'xatol': 1e-4,
                 'fatol': 1e-9,
-                'initial_simplex': start + np.array([[0.0, 0.0], [0.05, 0.0], [0.0, 0.05]]),
+                'initial_simplex': geometry + np.array([[0.0, 0.0], [0.05, 0.0], [0.0, 0.05]]),
             },
         )
         if best.fun < rss_of(spec)[0]:

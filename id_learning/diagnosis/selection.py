@@ -262,7 +262,7 @@ PlausibilityCheck = Callable[[Design, Fit], dict[str, tuple[bool, str]]]
 ConflictCheck = Callable[[str, Sequence[str]], bool]
 
 
-def _bic_change(rss_old: float, rss_new: float, extra: int, n_eff: float) -> float:
+def _bic_change(rss_old: float, rss_new: float, extra: float, n_eff: float) -> float:
     if rss_new <= 0 or rss_old <= 0:
         return -math.inf if rss_new < rss_old else 0.0
     return n_eff * math.log(rss_new / rss_old) + extra * math.log(n_eff)

@@ -130,7 +130,7 @@ def check_kind(config: ModelConfig, kind: str | None = None) -> None:
     Raises:
         ConfigError: names the class, the expected and the given kind.
     """
-    kind = kind or type(config).__dataclass_fields__['kind'].default
+    kind = kind or str(type(config).__dataclass_fields__['kind'].default)
     if config.kind != kind:
         raise ConfigError(f'{type(config).__name__}.kind must be {kind!r}, got {config.kind!r}')
 

@@ -269,18 +269,25 @@ class RneaEffectsMlpModel(RneaMlpModel):
 
     def physics_torque(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """The diagnosed model's torque (B, n) [N*m]."""
+        torque: np.ndarray = self._effects().torque(q, v, a)
+        return torque
+
+    def _effects(self) -> AugmentedModel:
+        """The diagnosed model.
+
+        Raises:
+            CheckpointError: the model is neither fitted nor loaded.
+        """
         if self.effects_ is None:
             raise CheckpointError(f'{self.kind}: the model is not fitted')
-        torque: np.ndarray = self.effects_.torque(q, v, a)
-        return torque
+        return self.effects_
 
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque: the diagnosed model's folded path plus h in float64 numpy."""
-        if self.effects_ is None:
-            raise CheckpointError(f'{self.kind}: the model is not fitted')
+        effects = self._effects()
         require_fitted(self, self.network_)
         assert self.network_ is not None
-        physics = self.effects_.sample_function()
+        physics = effects.sample_function()
         h = NumpyNormalisedMlp(self.network_)
 
         def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -297,7 +304,7 @@ class RneaEffectsMlpModel(RneaMlpModel):
 
     def state(self) -> dict[str, np.ndarray]:
         """The weights of h and the coefficients of every effect term."""
-        return {**super().state(), **_terms_state(self.effects_)}
+        return {**super().state(), **_terms_state(self._effects())}
 
     def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
         """Rebuild h and the effect terms."""
@@ -310,4 +317,4 @@ class RneaEffectsMlpModel(RneaMlpModel):
         """The scalers and fit summary of h, the effect terms and where they came from."""
         out = super().fitted_metadata()
         out.pop('rotor_inertia_motor_side_kgm2', None)
-        return {**out, **_terms_metadata(self.effects_), 'diagnosis': self.diagnosis_}
+        return {**out, **_terms_metadata(self._effects()), 'diagnosis': self.diagnosis_}

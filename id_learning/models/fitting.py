@@ -185,13 +185,32 @@ def train_module(
 
 
 class NetworkSettings(Protocol):
-    """What ``fit_network`` reads of a network model's config."""
+    """What ``fit_network`` reads of a network model's config (read-only, as frozen fields)."""
 
-    kind: str
-    seed: int
-    stride: int
-    windows_per_batch: int
-    eval_stride: int
+    @property
+    def kind(self) -> str:
+        """The model kind."""
+        ...
+
+    @property
+    def seed(self) -> int:
+        """The seed of the weights and batches."""
+        ...
+
+    @property
+    def stride(self) -> int:
+        """Rows between training samples (the study's way)."""
+        ...
+
+    @property
+    def windows_per_batch(self) -> int:
+        """Contiguous windows per batch (through the filter)."""
+        ...
+
+    @property
+    def eval_stride(self) -> int:
+        """Rows between evaluated samples inside a window."""
+        ...
 
     def optim(self) -> OptimConfig:
         """The optimiser settings."""

@@ -24,6 +24,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
+from typing import cast
 
 import numpy as np
 import torch
@@ -115,7 +116,7 @@ class AnalyticMLP(nn.Module):
         )
         generator = generator or torch.Generator().manual_seed(0)
         with torch.no_grad():
-            for index, layer in enumerate(self.layers):
+            for index, layer in enumerate(self.linears()):
                 fan_out, fan_in = layer.weight.shape
                 bound = math.sqrt(6.0 / (fan_in + fan_out))
                 if index == depth:
@@ -126,7 +127,11 @@ class AnalyticMLP(nn.Module):
     def _weights_and_biases(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
         # Plain (weight, bias) pairs: cheaper per call than nn.Linear.__call__ or slicing the
         # ModuleList, which matters for one-sample prediction.
-        return [(layer.weight, layer.bias) for layer in self.layers]
+        return [(layer.weight, layer.bias) for layer in self.linears()]
+
+    def linears(self) -> list[nn.Linear]:
+        """The layers, input to output."""
+        return [cast(nn.Linear, layer) for layer in self.layers]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Output (B, n_out) for inputs x (B, n_in)."""
@@ -270,7 +275,15 @@ def _numpy_softplus_curvature(value: np.ndarray, slope: np.ndarray) -> np.ndarra
     return result
 
 
-_NUMPY_SMOOTH = {
+#: Per activation: (value and slope of z, curvature from value and slope, the plain function).
+_NUMPY_SMOOTH: dict[
+    str,
+    tuple[
+        Callable[[np.ndarray], _NumpyValueSlope],
+        Callable[[np.ndarray, np.ndarray], np.ndarray],
+        Callable[[np.ndarray], np.ndarray],
+    ],
+] = {
     'tanh': (_numpy_tanh, _numpy_tanh_curvature, np.tanh),
     'softplus': (_numpy_softplus, _numpy_softplus_curvature, numpy_softplus),
 }
@@ -287,7 +300,7 @@ class NumpyAnalyticMLP:
         """Copy the weights; later changes to ``net`` are not seen."""
         self.n_in, self.n_out = net.n_in, net.n_out
         self.layers = [
-            (float64_array(layer.weight), float64_array(layer.bias)) for layer in net.layers
+            (float64_array(layer.weight), float64_array(layer.bias)) for layer in net.linears()
         ]
         self._value_slope, self._curvature, self._plain = _NUMPY_SMOOTH[net.activation]
 

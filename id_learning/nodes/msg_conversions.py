@@ -76,7 +76,7 @@ def message_class(msg_type: str) -> type:
     """
     try:
         package, kind, name = msg_type.split('/')
-        return getattr(importlib.import_module(f'{package}.{kind}'), name)  # type: ignore[no-any-return]
+        return getattr(importlib.import_module(f'{package}.{kind}'), name)
     except (ValueError, ImportError, AttributeError) as err:
         raise ConfigError(f'unknown message type {msg_type!r}: {err}') from err
 

@@ -46,7 +46,7 @@ import struct
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -103,7 +103,7 @@ def guard_config(config: PredictorNodeConfig, robot: RobotConfig) -> GuardConfig
         acceleration_cutoff_hz=config.acceleration_cutoff_hz,
         torque_limit_scale=config.torque_limit_scale,
         range_margin=config.range_margin,
-        out_of_range=config.out_of_range,  # type: ignore[arg-type]
+        out_of_range=config.out_of_range,
     )
 
 
@@ -192,7 +192,7 @@ class Predictor(Node):
             config.artifact,
             self.robot,
             guard_config(config, self.robot),
-            inference=config.inference,  # type: ignore[arg-type]
+            inference=config.inference,
         )
         self.done: Future = Future()  # never completes: runs until shut down
         self.names = list(self.core.joint_names)
@@ -227,8 +227,13 @@ class Predictor(Node):
         self.latency_from = (
             'callback_start' if config.executor == 'events' else 'middleware_receive'
         )
+        # rclpy passes the message info as a second argument to a callback that takes two; its
+        # type hints know only the one-argument form.
         self._subscription = self.create_subscription(
-            kind, config.input_topic, callback, input_qos or reference_qos(config.input_depth)
+            kind,
+            config.input_topic,
+            cast(Callable[[Any], None], callback),
+            input_qos or reference_qos(config.input_depth),
         )
         # Half the stale threshold: a stale reference is noticed within 1.5 thresholds.
         self._watchdog = self.create_timer(
@@ -305,7 +310,7 @@ class Predictor(Node):
 
     def _log_reject(self, result: StepResult) -> None:
         throttle = self.config.log_throttle_s
-        text = f'sample at {result.stamp_ns} ns rejected ({result.reject.value}): {result.detail}'  # type: ignore[union-attr]
+        text = f'sample at {result.stamp_ns} ns rejected ({result.reject.value}): {result.detail}'
         if result.reject == Reject.OUT_OF_RANGE:
             self.get_logger().warning(text, throttle_duration_sec=throttle)
         else:

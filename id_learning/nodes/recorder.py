@@ -30,6 +30,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import ROSClock
 from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -100,7 +101,7 @@ class Recorder(Node):
         self._last_sequence: dict[str, int] = {}
         self._is_single_publisher = dict.fromkeys(config.topics, False)
         receive = self._on_message_info if self._has_sequence else self._on_message
-        self._uses_system_time = not self.get_clock().ros_time_is_active
+        self._uses_system_time = not _ros_time_is_active(self)
         self._by_topic: dict[str, Any] = {}
         for topic, msg_type in zip(config.topics, config.msg_types, strict=True):
             msg_class = message_class(msg_type)
@@ -185,7 +186,7 @@ class Recorder(Node):
         )
 
     def _flush(self) -> None:
-        self._uses_system_time = not self.get_clock().ros_time_is_active
+        self._uses_system_time = not _ros_time_is_active(self)
         for topic in self._is_single_publisher:
             self._is_single_publisher[topic] = self.count_publishers(topic) == 1
         try:
@@ -271,6 +272,12 @@ class Recorder(Node):
             for topic, c in self.counts.items()
         ]
         self.get_logger().info('\n'.join(lines))
+
+
+def _ros_time_is_active(node: Node) -> bool:
+    """Whether the node's clock follows /clock (use_sim_time) rather than the system clock."""
+    clock = node.get_clock()
+    return isinstance(clock, ROSClock) and clock.ros_time_is_active
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -112,7 +112,10 @@ def run_node(
     if config_class is not None and wants_help(args):
         print_usage(name, config_class)
         return 0
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(
+        args=None if args is None else list(args),
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
     stop = _StopOnSignal()
     node: ClosableNode | None = None
     status = 0

@@ -122,7 +122,7 @@ class Layout:
     prior_std: list[float] = field(default_factory=list)  # inf: no prior
     blocks: dict[str, slice] = field(default_factory=dict)
 
-    def add(self, block: str, names: list[str], mean: np.ndarray, std: np.ndarray) -> None:
+    def add(self, block: str, names: list[str], mean: np.ndarray, std: np.ndarray | float) -> None:
         """Append a block of parameters with their prior mean and std (inf: no prior)."""
         start = len(self.names)
         self.names += names

@@ -195,6 +195,8 @@ def effect_columns(
     if name in JOINT_COLUMNS:
         return on_joint(*JOINT_COLUMNS[name](qs, j, settings, model))
     if name == 'joint_offset':
+        if j is None:
+            raise ValueError('joint_offset needs a joint')
         if qs.dtau_dq is None:
             raise ValueError('joint_offset needs quantities evaluated with derivatives=True')
         return qs.dtau_dq[:, :, j : j + 1].copy()

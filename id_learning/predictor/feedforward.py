@@ -421,13 +421,14 @@ class FeedForwardPredictor:
         # per-quantity search runs only when it fails.
         total = np.add.reduce(q) + np.add.reduce(v) + (0.0 if a is None else np.add.reduce(a))
         if not math.isfinite(total):
-            for label, values in (('q', q), ('v', v), ('a', a)):
-                if values is not None and not np.isfinite(values).all():
-                    j = int(np.argmax(~np.isfinite(values)))
+            checks: tuple[tuple[str, np.ndarray | None], ...] = (('q', q), ('v', v), ('a', a))
+            for label, checked in checks:
+                if checked is not None and not np.isfinite(checked).all():
+                    j = int(np.argmax(~np.isfinite(checked)))
                     return self._reject(
                         sample,
                         Reject.NON_FINITE,
-                        f'{label} of {self.joint_names[j]} is {values[j]}',
+                        f'{label} of {self.joint_names[j]} is {checked[j]}',
                     )
         if self.config.max_age_s > 0 and clock_ns is not None:
             age_ns = clock_ns - sample.stamp_ns

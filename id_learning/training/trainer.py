@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig
+from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, Target
 from id_learning.errors import CheckpointError
 from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.models.data import TrainingData
@@ -123,7 +123,7 @@ class EvaluationResult:
 def train_run(
     bags: Sequence[Path],
     robot: RobotConfig,
-    target: str,
+    target: Target,
     kinds: Sequence[str],
     out: Path,
     *,
