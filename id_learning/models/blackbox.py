@@ -23,23 +23,22 @@ import torch
 
 from id_learning.dataset.preprocess import MinMaxScaler
 from id_learning.errors import ConfigError
-from id_learning.models.base import InverseDynamicsModel, ModelConfig, SamplePredictor
+from id_learning.models.base import ModelConfig, SamplePredictor
 from id_learning.models.data import TrainingData
-from id_learning.models.fitting import OptimConfig, TrainHistory, fit_network, select_device
+from id_learning.models.fitting import OptimConfig, select_device
 from id_learning.models.lstm_streams import LstmStreams
 from id_learning.models.network_common import (
     NormalisedLstm,
     NormalisedMlp,
     NumpyNormalisedMlp,
     centre_and_half,
-    load_module_state,
     load_scalers,
-    module_state,
     predict_chunked,
     require_fitted,
     scalers_metadata,
     seeded,
 )
+from id_learning.models.torch_model import TorchModel
 from id_learning.models.torch_utils import ACTIVATIONS, to_numpy, to_tensor
 from id_learning.robot.config import RobotConfig
 
@@ -220,7 +219,7 @@ def _inputs(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
 
 
 # -- MLP -----------------------------------------------------------------------------------------
-class MlpModel(InverseDynamicsModel):
+class MlpModel(TorchModel[NormalisedMlp]):
     """The study's MLP baseline: tau = MLP(q, v, a), each joint's torque on its [-1, 1] scale.
 
     No physics and no memory: it separates no torque components.
@@ -232,10 +231,8 @@ class MlpModel(InverseDynamicsModel):
         """Store the settings; no I/O, no fitting."""
         super().__init__(config, robot)
         self.config: MlpConfig = config
-        self.network_: NormalisedMlp | None = None
         self.input_scaler_: MinMaxScaler | None = None
         self.target_scaler_: MinMaxScaler | None = None
-        self.history_: TrainHistory | None = None
 
     def _build(self, input_scaler: MinMaxScaler, target_scaler: MinMaxScaler) -> NormalisedMlp:
         n, c = self.robot.n_joints, self.config
@@ -255,7 +252,7 @@ class MlpModel(InverseDynamicsModel):
             torque: torch.Tensor = network(inputs[rows[:, positions]])
             return torque
 
-        self.history_ = fit_network(
+        self._fit_network(
             network,
             predict,
             data,
@@ -265,32 +262,21 @@ class MlpModel(InverseDynamicsModel):
             device=device,
             progress=progress,
         )
-        self.network_ = network
         return self
 
     def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Torque (B, n) [N*m] for q, v, a (B, n) [rad, rad/s, rad/s^2]."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        return predict_chunked(self.network_, _inputs(q, v, a))
+        return predict_chunked(self.network(), _inputs(q, v, a))
 
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque in float64 numpy: q, v, a (n,) -> tau (n,) [N*m]."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        network = NumpyNormalisedMlp(self.network_)
+        network = NumpyNormalisedMlp(self.network())
         concatenate = np.concatenate
 
         def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             return network(concatenate((q, v, a)))
 
         return predict_one
-
-    def state(self) -> dict[str, np.ndarray]:
-        """The network's weights, named like its state_dict keys ('net.0.weight', ...)."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        return module_state(self.network_)
 
     def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
         """Rebuild the network from the scalers in ``fitted`` and load its weights.
@@ -299,22 +285,21 @@ class MlpModel(InverseDynamicsModel):
             CheckpointError: the scalers are missing or the tensors do not fit the config.
         """
         network = self._build(*load_scalers(fitted, ('input_scaler', 'target_scaler'), 'mlp'))
-        load_module_state(network, tensors, self.kind)
-        self.network_ = network.eval()
+        self._load_network(network, tensors, fitted)
 
     def fitted_metadata(self) -> dict[str, Any]:
         """The input and target scalers, and a summary of the fit."""
         require_fitted(self, self.input_scaler_)
         assert self.input_scaler_ is not None
         assert self.target_scaler_ is not None
-        out = scalers_metadata(input_scaler=self.input_scaler_, target_scaler=self.target_scaler_)
-        if self.history_ is not None:
-            out['training'] = self.history_.to_dict()
-        return out
+        scalers = scalers_metadata(
+            input_scaler=self.input_scaler_, target_scaler=self.target_scaler_
+        )
+        return {**scalers, **self._history_metadata()}
 
 
 # -- LSTM ----------------------------------------------------------------------------------------
-class LstmModel(InverseDynamicsModel):
+class LstmModel(TorchModel[NormalisedLstm]):
     """The study's LSTM baseline: the torque at a sample from the window of samples up to it.
 
     A window is (T, 3n) with T = ``sequence_length`` (20, 160 ms at the 8 ms IPO rate): rows
@@ -334,10 +319,8 @@ class LstmModel(InverseDynamicsModel):
         """Store the settings; no I/O, no fitting."""
         super().__init__(config, robot)
         self.config: LstmConfig = config
-        self.network_: NormalisedLstm | None = None
         self.input_scaler_: MinMaxScaler | None = None
         self.target_scaler_: MinMaxScaler | None = None
-        self.history_: TrainHistory | None = None
 
     @property
     def sequence_length(self) -> int:
@@ -373,7 +356,7 @@ class LstmModel(InverseDynamicsModel):
             torque: torch.Tensor = network(windows).reshape(batch, count, -1)
             return torque
 
-        self.history_ = fit_network(
+        self._fit_network(
             network,
             predict,
             data,
@@ -384,13 +367,10 @@ class LstmModel(InverseDynamicsModel):
             progress=progress,
             history=c.sequence_length - 1,
         )
-        self.network_ = network
         return self
 
     def predict_windows(self, windows: np.ndarray) -> np.ndarray:
         """Torque (B, n) [N*m] at the last sample of each window (B, T, 3n), physical units."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
         windows = np.asarray(windows)
         expected = (self.sequence_length, 3 * self.robot.n_joints)
         if windows.ndim != 3 or windows.shape[1:] != expected:
@@ -399,7 +379,7 @@ class LstmModel(InverseDynamicsModel):
             )
         if not len(windows):
             return np.empty((0, self.robot.n_joints))
-        return predict_chunked(self.network_, windows)
+        return predict_chunked(self.network(), windows)
 
     def predict_window(self, window: np.ndarray) -> np.ndarray:
         """Torque (n,) [N*m] at the last sample of a window (T, 3n): rows [q, v, a], oldest first.
@@ -411,10 +391,8 @@ class LstmModel(InverseDynamicsModel):
         expected = (self.sequence_length, 3 * self.robot.n_joints)
         if window.shape != expected:
             raise ValueError(f'expected a window of shape {expected}, got {window.shape}')
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
         with torch.inference_mode():
-            torque: np.ndarray = to_numpy(self.network_(to_tensor(window)[None]))[0]
+            torque: np.ndarray = to_numpy(self.network()(to_tensor(window)[None]))[0]
         return torque
 
     def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -422,14 +400,12 @@ class LstmModel(InverseDynamicsModel):
 
         The first T - 1 windows are padded by repeating the run's first sample.
         """
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
         inputs = _inputs(q, v, a)
         pad = np.repeat(inputs[:1], self.sequence_length - 1, axis=0)
         padded = to_tensor(np.vstack([pad, inputs]))
         # unfold: (B, 3n, T) views of consecutive rows; transpose to (B, T, 3n).
         windows = padded.unfold(0, self.sequence_length, 1).transpose(1, 2)
-        return predict_chunked(self.network_, windows)
+        return predict_chunked(self.network(), windows)
 
     def sequence_predictor(self, dtype: type[np.floating] = np.float32) -> LstmStreams:
         """The online form of ``predict``: one sample in, its torque out.
@@ -437,15 +413,7 @@ class LstmModel(InverseDynamicsModel):
         ``dtype``: the arithmetic's precision. float32 (the default) is the network's own, as in
         ``predict``, at half the cost of float64 (0.1 against 0.2 ms per sample here).
         """
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        return LstmStreams(self.network_, self.sequence_length, dtype)
-
-    def state(self) -> dict[str, np.ndarray]:
-        """The network's weights, named like its state_dict keys ('lstm.weight_ih_l0', ...)."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        return module_state(self.network_)
+        return LstmStreams(self.network(), self.sequence_length, dtype)
 
     def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
         """Rebuild the network from the scalers in ``fitted`` and load its weights.
@@ -454,15 +422,14 @@ class LstmModel(InverseDynamicsModel):
             CheckpointError: the scalers are missing or the tensors do not fit the config.
         """
         network = self._build(*load_scalers(fitted, ('input_scaler', 'target_scaler'), 'lstm'))
-        load_module_state(network, tensors, self.kind)
-        self.network_ = network.eval()
+        self._load_network(network, tensors, fitted)
 
     def fitted_metadata(self) -> dict[str, Any]:
         """The input and target scalers, and a summary of the fit."""
         require_fitted(self, self.input_scaler_)
         assert self.input_scaler_ is not None
         assert self.target_scaler_ is not None
-        out = scalers_metadata(input_scaler=self.input_scaler_, target_scaler=self.target_scaler_)
-        if self.history_ is not None:
-            out['training'] = self.history_.to_dict()
-        return out
+        scalers = scalers_metadata(
+            input_scaler=self.input_scaler_, target_scaler=self.target_scaler_
+        )
+        return {**scalers, **self._history_metadata()}

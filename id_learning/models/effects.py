@@ -36,7 +36,7 @@ from id_learning.models.base import (
 )
 from id_learning.models.blackbox import check_kind
 from id_learning.models.data import TrainingData
-from id_learning.models.network_common import NumpyNormalisedMlp, require_fitted
+from id_learning.models.network_common import NumpyNormalisedMlp
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
 from id_learning.physics.augmented import EFFECTS_JSON, AugmentedModel
 from id_learning.robot.config import RobotConfig
@@ -285,10 +285,8 @@ class RneaEffectsMlpModel(RneaMlpModel):
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque: the diagnosed model's folded path plus h in float64 numpy."""
         effects = self._effects()
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
+        h = NumpyNormalisedMlp(self.network())
         physics = effects.sample_function()
-        h = NumpyNormalisedMlp(self.network_)
 
         def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             tau: np.ndarray = physics(q, v, a) + h(np.concatenate((q, v)))

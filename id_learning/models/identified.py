@@ -232,9 +232,7 @@ class RneaIdMlpModel(RneaMlpModel):
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque: the identified physics' path plus h in float64 numpy."""
         physics = self._physics().sample_function()
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        h = NumpyNormalisedMlp(self.network_)
+        h = NumpyNormalisedMlp(self.network())
 
         def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             tau: np.ndarray = physics(q, v, a) + h(np.concatenate((q, v)))

@@ -34,17 +34,17 @@ import torch
 
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
 from id_learning.models.base import (
-    InverseDynamicsModel,
     ModelConfig,
     SamplePredictor,
     TorqueComponents,
 )
 from id_learning.models.data import TrainingData
 from id_learning.models.delan import DelanNetwork, euler_lagrange_torque
-from id_learning.models.fitting import OptimConfig, fit_network, select_device
+from id_learning.models.fitting import OptimConfig, select_device
 from id_learning.models.lagrangian_base import LagrangianNetwork, LagrangianScaling, energy_scale
 from id_learning.models.lnn import LnnMlpNetwork, LnnNetwork
 from id_learning.models.nets import SMOOTH_ACTIVATIONS
+from id_learning.models.torch_model import TorchModel
 from id_learning.models.torch_utils import to_numpy, to_tensor
 from id_learning.robot.config import RobotConfig
 
@@ -214,13 +214,14 @@ class LnnMlpConfig(_LagrangianConfig):
         return ('activation', 'dissipation_activation')
 
 
-class _LagrangianModel(InverseDynamicsModel):
+class _LagrangianModel(TorchModel[LagrangianNetwork]):
     """Fit, predict, save and load shared by the three Lagrangian models.
 
     Fitted state: ``network_`` (on the CPU, float32), ``scaling_`` and ``history_``.
     """
 
     config: _LagrangianConfig
+    history_key: ClassVar[str] = 'history'
 
     def __init__(self, config: ModelConfig, robot: RobotConfig) -> None:
         """Store the settings; no I/O, no fitting.
@@ -233,25 +234,13 @@ class _LagrangianModel(InverseDynamicsModel):
                 f'{type(self).__name__} needs a {self.kind!r} config, got {config!r}'
             )
         super().__init__(config, robot)
-        self.network_: LagrangianNetwork | None = None
         self.scaling_: LagrangianScaling | None = None
-        self.history_: dict[str, Any] | None = None
 
     @abstractmethod
     def make_network(
         self, scaling: LagrangianScaling, generator: torch.Generator
     ) -> LagrangianNetwork:
         """Build an untrained network of this configuration, weights drawn from generator."""
-
-    @property
-    def is_fitted(self) -> bool:
-        """Whether the model has weights (fitted or loaded)."""
-        return self.network_ is not None
-
-    def _network(self) -> LagrangianNetwork:
-        if self.network_ is None:
-            raise RuntimeError(f'{self.kind} model is not fitted: call fit() or load_state()')
-        return self.network_
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Fit the torque to the labels; early stopping on the validation rows.
@@ -283,7 +272,7 @@ class _LagrangianModel(InverseDynamicsModel):
             torque: torch.Tensor = network(q[flat], v[flat], a[flat])
             return torque.reshape(*index.shape, n)
 
-        history = fit_network(
+        self._fit_network(
             network,
             predict,
             data,
@@ -293,15 +282,13 @@ class _LagrangianModel(InverseDynamicsModel):
             device=device,
             progress=progress,
         )
-        self.network_ = network
         self.scaling_ = scaling
-        self.history_ = history.to_dict()
         return self
 
     def _evaluate(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray, *, parts: bool
     ) -> dict[str, np.ndarray]:
-        network = self._network()
+        network = self.network()
         chunks: list[dict[str, np.ndarray]] = []
         with torch.inference_mode():
             for start in range(0, max(len(q), 1), _PREDICT_CHUNK):
@@ -322,19 +309,12 @@ class _LagrangianModel(InverseDynamicsModel):
 
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque in float64 numpy (the networks' analytic derivatives)."""
-        return self._network().sample_predictor()
+        return self.network().sample_predictor()
 
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """Inertial, Coriolis/centrifugal and gravity parts (and friction where modelled)."""
         parts = self._evaluate(q, v, a, parts=True)
         return TorqueComponents(total=self.predict(q, v, a), **parts)
-
-    def state(self) -> dict[str, np.ndarray]:
-        """Weights as numpy arrays named like the network's state_dict keys."""
-        return {
-            name: value.detach().cpu().numpy().copy()
-            for name, value in self._network().state_dict().items()
-        }
 
     def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
         """Rebuild the network from the fitted scaling and load the weights.
@@ -354,22 +334,14 @@ class _LagrangianModel(InverseDynamicsModel):
                 f'the robot has {len(self.joint_names)}'
             )
         network = self.make_network(scaling, torch.Generator().manual_seed(self.config.seed))
-        try:
-            network.load_state_dict(
-                {name: torch.as_tensor(np.asarray(value)) for name, value in tensors.items()},
-                strict=True,
-            )
-        except RuntimeError as err:
-            raise CheckpointError(f'{self.kind}: weights do not fit the network: {err}') from err
-        self.network_ = network.eval()
+        self._load_network(network, tensors, fitted)
         self.scaling_ = scaling
-        self.history_ = fitted.get('history')
 
     def fitted_metadata(self) -> dict[str, Any]:
         """The scaling (scalers and energy scale) and the training history."""
         if self.scaling_ is None:
             return {}
-        return {'scaling': self.scaling_.to_dict(), 'history': self.history_}
+        return {'scaling': self.scaling_.to_dict(), **self._history_metadata()}
 
 
 class DelanModel(_LagrangianModel):
@@ -399,7 +371,7 @@ class DelanModel(_LagrangianModel):
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """M(q) (B, n, n) [kg*m^2] for q (B, n) [rad]."""
-        network = self._network()
+        network = self.network()
         assert isinstance(network, DelanNetwork)
         with torch.inference_mode():
             return to_numpy(network.mass_matrix(to_tensor(q)))

@@ -20,7 +20,6 @@ from torch import nn
 from id_learning.dataset.preprocess import MinMaxScaler
 from id_learning.errors import CheckpointError
 from id_learning.models.base import InverseDynamicsModel
-from id_learning.models.fitting import NetworkSettings, TrainHistory, train_module
 from id_learning.models.torch_utils import NumpyMlp, float64_array, make_mlp, to_numpy, to_tensor
 
 __all__ = [
@@ -34,7 +33,6 @@ __all__ = [
     'module_state',
     'predict_chunked',
     'require_fitted',
-    'run_training',
     'scalers_metadata',
     'seeded',
     'strided_rows',
@@ -184,31 +182,6 @@ def require_fitted(model: InverseDynamicsModel, value: object) -> None:
     """
     if value is None:
         raise RuntimeError(f'{model.kind} model is not fitted: call fit() or load_state() first')
-
-
-def run_training(
-    module: nn.Module,
-    loss_fn: Callable[..., torch.Tensor],
-    fit_tensors: list[torch.Tensor],
-    validation_tensors: list[torch.Tensor],
-    *,
-    config: NetworkSettings,
-    device: torch.device,
-    progress: bool,
-) -> TrainHistory:
-    """train_module on ``device``, leaving the module on the CPU in evaluation mode."""
-    module.to(device)
-    history = train_module(
-        module,
-        loss_fn,
-        fit_tensors,
-        validation_tensors,
-        config.optim(),
-        progress=progress,
-        description=config.kind,
-    )
-    module.to('cpu').eval()
-    return history
 
 
 def predict_chunked(module: nn.Module, inputs: np.ndarray | torch.Tensor) -> np.ndarray:

@@ -29,19 +29,18 @@ from id_learning.models.base import (
 )
 from id_learning.models.blackbox import NetworkConfig, check_kind, check_mlp_shape
 from id_learning.models.data import TrainingData
-from id_learning.models.fitting import TrainHistory, fit_network, select_device
+from id_learning.models.fitting import select_device
 from id_learning.models.network_common import (
     NormalisedMlp,
     NumpyNormalisedMlp,
     centre_and_half,
-    load_module_state,
     load_scalers,
-    module_state,
     predict_chunked,
     require_fitted,
     scalers_metadata,
     seeded,
 )
+from id_learning.models.torch_model import TorchModel
 from id_learning.models.torch_utils import to_tensor
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
@@ -348,7 +347,7 @@ class RneaMlpConfig(NetworkConfig):
         check_mlp_shape(self, self.width, self.depth, self.activation)
 
 
-class RneaMlpModel(_NominalPhysics):
+class RneaMlpModel(_NominalPhysics, TorchModel[NormalisedMlp]):
     """The study's Newtonian network: tau = RNEA_URDF(q, v, a) + I_M N**2 a + h(q, v).
 
     The physics parameters are fixed (URDF and the robot config's datasheet rotor inertia); with
@@ -371,10 +370,8 @@ class RneaMlpModel(_NominalPhysics):
         """Store the settings; no I/O, no fitting."""
         super().__init__(config, robot)
         self.config: RneaMlpConfig = config
-        self.network_: NormalisedMlp | None = None
         self.state_scaler_: MinMaxScaler | None = None
         self.residual_scaler_: MinMaxScaler | None = None
-        self.history_: TrainHistory | None = None
         #: The label the model was fitted on: 'motor' (tau_u) or 'joint' (joint torque).
         self.target_ = 'motor'
 
@@ -430,7 +427,7 @@ class RneaMlpModel(_NominalPhysics):
             torque: torch.Tensor = network(states[rows[:, positions]])
             return torque
 
-        self.history_ = fit_network(
+        self._fit_network(
             network,
             predict,
             data,
@@ -440,14 +437,11 @@ class RneaMlpModel(_NominalPhysics):
             device=device,
             progress=progress,
         )
-        self.network_ = network
         return self
 
     def residual_torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The learned remainder h(q, v): (B, n) [N*m]."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        return predict_chunked(self.network_, np.hstack([np.atleast_2d(q), np.atleast_2d(v)]))
+        return predict_chunked(self.network(), np.hstack([np.atleast_2d(q), np.atleast_2d(v)]))
 
     def predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Torque (B, n) [N*m] for q, v, a (B, n) [rad, rad/s, rad/s^2]."""
@@ -457,9 +451,7 @@ class RneaMlpModel(_NominalPhysics):
 
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque, with h in float64 numpy: q, v, a (n,) -> tau (n,) [N*m]."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        h = NumpyNormalisedMlp(self.network_)
+        h = NumpyNormalisedMlp(self.network())
         rotor = self._rotor_joint_side
         rnea, concatenate = self.sample_rnea(), np.concatenate
 
@@ -482,12 +474,6 @@ class RneaMlpModel(_NominalPhysics):
             residual=h_rest,
         )
 
-    def state(self) -> dict[str, np.ndarray]:
-        """The weights of h, named like its state_dict keys ('net.0.weight', ...)."""
-        require_fitted(self, self.network_)
-        assert self.network_ is not None
-        return module_state(self.network_)
-
     def load_state(self, tensors: dict[str, np.ndarray], fitted: dict[str, Any]) -> None:
         """Rebuild h from the scalers in ``fitted`` and load its weights.
 
@@ -495,9 +481,7 @@ class RneaMlpModel(_NominalPhysics):
             CheckpointError: the scalers are missing or the tensors do not fit the config.
         """
         scalers = load_scalers(fitted, ('state_scaler', 'residual_scaler'), self.kind)
-        network = self._build(*scalers)
-        load_module_state(network, tensors, self.kind)
-        self.network_ = network.eval()
+        self._load_network(self._build(*scalers), tensors, fitted)
         # Artifacts written before the target was recorded were all fitted on tau_u.
         self.target_ = str(fitted.get('target', 'motor'))
 
@@ -511,6 +495,4 @@ class RneaMlpModel(_NominalPhysics):
         )
         out['target'] = self.target_
         out['rotor_inertia_motor_side_kgm2'] = self.robot.drives.rotor_inertia.tolist()
-        if self.history_ is not None:
-            out['training'] = self.history_.to_dict()
-        return out
+        return {**out, **self._history_metadata()}
