@@ -104,3 +104,23 @@ def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str
         timeout=timeout,
         check=False,
     )
+
+
+def ground_truth(bag: Path):
+    """The twin's own record of a bag: its settings (JSON) and the sample stamps (NPZ)."""
+    import json
+
+    import numpy as np
+
+    truth = json.loads((bag / 'ground_truth.json').read_text())
+    with np.load(bag / 'ground_truth.npz') as arrays:
+        return truth, arrays['stamps_ns']
+
+
+def inspect_topic_rows(stdout: str) -> dict[str, list[str]]:
+    """The cells of the inspect timing table, by topic (jitter 'std / p99' stays three cells)."""
+    return {
+        cells[0]: cells[1:]
+        for cells in (line.split() for line in stdout.splitlines())
+        if cells and cells[0] in ('/joint_states', '/motor_currents')
+    }

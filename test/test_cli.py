@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
-from support import REPO, run_cli
+import yaml
+from support import REPO, ground_truth, inspect_topic_rows, run_cli
+
+from id_learning.dataset.recording import load_recording
 
 
 @pytest.fixture(scope='module')
@@ -27,11 +31,16 @@ def twin_bag(tmp_path_factory):
     return out
 
 
-def test_simulate_writes_a_bag_with_ground_truth(twin_bag):
-    assert (twin_bag / 'metadata.yaml').is_file()
-    truth = json.loads((twin_bag / 'ground_truth.json').read_text())
+def test_simulate_writes_a_bag_with_ground_truth(twin_bag, mabi):
+    truth, stamps = ground_truth(twin_bag)
     assert truth['seed'] == 3
     assert 'viscous_friction' in truth['effects_enabled']
+    # The bag holds one sample per ground-truth stamp, on the robot's IPO grid.
+    recording = load_recording(twin_bag, mabi)
+    np.testing.assert_array_equal(recording.stamps_ns, stamps)
+    np.testing.assert_array_equal(np.diff(stamps), round(mabi.ipo_period_s * 1e9))
+    assert truth['ipo_period_s'] == mabi.ipo_period_s
+    assert np.isfinite(recording.current).all()
 
 
 def test_inspect_reports_topics_counts_and_rate(twin_bag, tmp_path):
@@ -45,9 +54,22 @@ def test_inspect_reports_topics_counts_and_rate(twin_bag, tmp_path):
         str(plot),
     )
     assert result.returncode == 0, result.stderr
-    assert '/joint_states' in result.stdout
-    assert '/motor_currents' in result.stdout
-    assert '125' in result.stdout
+    truth, stamps = ground_truth(twin_bag)
+    period_s = truth['ipo_period_s']
+    n = len(stamps)
+    rows = inspect_topic_rows(result.stdout)
+    assert set(rows) == {'/joint_states', '/motor_currents'}
+    for topic, cells in rows.items():
+        kind, count, time_base, rate, period, _, _, _, gaps, repeated, backward = cells
+        assert kind == 'sensor_msgs/msg/JointState', topic
+        assert (int(count), time_base) == (n, 'header'), topic
+        assert float(rate) == pytest.approx(1.0 / period_s, abs=5e-4), topic
+        assert float(period) == pytest.approx(period_s * 1e3, abs=5e-4), topic
+        assert (gaps, repeated, backward) == ('0', '0', '0'), topic
+    assert f'({int(stamps[0])} ns)' in result.stdout.splitlines()[2]  # the start line
+    duration = (stamps[-1] - stamps[0]) * 1e-9
+    assert f'duration  {duration:.3f} s, {2 * n} messages' in result.stdout
+    assert 'problems  none' in result.stdout
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
@@ -71,26 +93,90 @@ def test_errors_exit_with_status_two_and_one_clear_line(tmp_path):
     assert 'Traceback' not in result.stderr
 
 
-def test_import_converts_a_csv_log(tmp_path):
-    lines = ['t_ms,' + ','.join(f'q{j},v{j},i{j}' for j in range(1, 7))]
-    for k in range(100):
-        lines.append(f'{8 * k},' + ','.join(f'{0.1 * k + j},{j},{0.5}' for j in range(1, 7)))
-    (tmp_path / 'log.csv').write_text('\n'.join(lines) + '\n')
-    joints = '\n'.join(
-        f'  - name: joint_{j}\n    position: {{column: q{j}, unit: deg}}\n'
-        f'    velocity: {{column: v{j}, unit: deg/s}}\n    current: {{column: i{j}, unit: A}}'
-        for j in range(1, 7)
-    )
-    (tmp_path / 'map.yaml').write_text(f'time: {{column: t_ms, unit: ms}}\njoints:\n{joints}\n')
+#: A 100-row log of 6 joints at the MABI's 8 ms, in the units a controller log may use.
+LOG_ROWS = 100
+
+
+def log_values() -> dict[str, np.ndarray]:
+    """Time [ms], positions [deg], velocities [deg/s] and currents [A] of a seeded log."""
+    rng = np.random.default_rng(17)
+    return {
+        't_ms': 5000.0 + 8.0 * np.arange(LOG_ROWS),
+        'q_deg': rng.uniform(-90.0, 90.0, (LOG_ROWS, 6)),
+        'v_deg_s': rng.uniform(-30.0, 30.0, (LOG_ROWS, 6)),
+        'i_a': rng.uniform(-5.0, 5.0, (LOG_ROWS, 6)),
+    }
+
+
+def write_log(folder, suffix: str, values: dict[str, np.ndarray]):
+    """The log as a CSV (a column per joint and quantity) or an NPZ of 2-D arrays; its mapping."""
+    source = folder / f'log.{suffix}'
+    spec = {
+        'position': ('q_deg', 'deg'),
+        'velocity': ('v_deg_s', 'deg/s'),
+        'current': ('i_a', 'A'),
+    }
+    if suffix == 'npz':
+        np.savez(source, **values)
+
+        def column(key, j):
+            return {'column': key, 'index': j}
+    else:
+        header = ['t_ms'] + [f'{key}{j}' for key in ('q_deg', 'v_deg_s', 'i_a') for j in range(6)]
+        table = np.column_stack(
+            [values['t_ms'], values['q_deg'], values['v_deg_s'], values['i_a']]
+        )
+        lines = [','.join(header)] + [','.join(repr(float(x)) for x in row) for row in table]
+        source.write_text('\n'.join(lines) + '\n')
+
+        def column(key, j):
+            return {'column': f'{key}{j}'}
+
+    mapping = {
+        'time': {'column': 't_ms', 'unit': 'ms'},
+        'joints': [
+            {
+                'name': f'joint_{j + 1}',
+                **{field: {**column(key, j), 'unit': unit} for field, (key, unit) in spec.items()},
+            }
+            for j in range(6)
+        ],
+    }
+    (folder / 'map.yaml').write_text(yaml.safe_dump(mapping, sort_keys=False))
+    return source, folder / 'map.yaml'
+
+
+@pytest.mark.parametrize('suffix', ['csv', 'npz'])
+def test_import_converts_a_log_to_si_units_on_the_ipo_grid(tmp_path, mabi, suffix):
+    values = log_values()
+    source, mapping = write_log(tmp_path, suffix, values)
+    robot = str(REPO / 'config/mabi_max100.yaml')
+    out = str(tmp_path / 'bag')
     result = run_cli(
-        'import',
-        str(tmp_path / 'log.csv'),
-        '--mapping',
-        str(tmp_path / 'map.yaml'),
-        '--out',
-        str(tmp_path / 'bag'),
-        '--robot',
-        str(REPO / 'config/mabi_max100.yaml'),
+        'import', str(source), '--mapping', str(mapping), '--out', out, '--robot', robot
     )
     assert result.returncode == 0, result.stderr
-    assert (tmp_path / 'bag/metadata.yaml').is_file()
+    assert f'{LOG_ROWS} of {LOG_ROWS} rows written, 0 dropped' in result.stdout
+    recording = load_recording(tmp_path / 'bag', mabi)
+    assert recording.joints == mabi.joints
+    stamps = recording.stamps_ns - recording.stamps_ns[0]
+    np.testing.assert_array_equal(stamps, 8_000_000 * np.arange(LOG_ROWS))
+    degree = np.pi / 180.0
+    np.testing.assert_allclose(recording.position, values['q_deg'] * degree, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(recording.velocity, values['v_deg_s'] * degree, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(recording.current, values['i_a'], rtol=1e-12, atol=0)
+
+
+def test_import_of_a_log_without_a_mapped_column_exits_with_status_two(tmp_path):
+    values = log_values()
+    source, mapping = write_log(tmp_path, 'csv', values)
+    text = mapping.read_text().replace('q_deg3', 'q_deg_missing', 1)
+    mapping.write_text(text)
+    result = run_cli(
+        'import', str(source), '--mapping', str(mapping), '--out', str(tmp_path / 'bag')
+    )
+    assert result.returncode == 2
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith('id-learning import: error:')
+    assert 'q_deg_missing' in line
+    assert not (tmp_path / 'bag').exists()

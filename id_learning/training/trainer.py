@@ -160,9 +160,10 @@ def train_run(
     # Measured on a shared 2-core machine: a DeLaN step took 14 ms on one thread, 1.4 s on two.
     configure_torch(TRAIN_THREADS)
     out = Path(out)
-    (out / MODELS_DIR).mkdir(parents=True, exist_ok=True)
     bags = [Path(b) for b in bags]
+    # Bad bags are refused before anything is written.
     dataset = combine_datasets(load_datasets(bags, robot, config, progress=progress))
+    (out / MODELS_DIR).mkdir(parents=True, exist_ok=True)
     data = TrainingData(dataset, robot)
     scale = dataset.target_scaler.scale()
     preprocessing = preprocess_to_dict(config, dataset)

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import json
 import shutil
+import time
+from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import torch
 import yaml
 from support import REPO, twin_config
 
@@ -23,9 +27,11 @@ from id_learning.training import (
     data_sha256,
     evaluate_run,
     load_datasets,
+    measure,
     measure_inference,
     train_run,
 )
+from id_learning.training.measure import LATENCY_CALLS, LATENCY_WARMUP
 from id_learning.twin import simulate, write_twin_output
 
 FAST = {'mlp': {'max_epochs': 2}}
@@ -45,12 +51,47 @@ def bags(tmp_path_factory):
     return paths
 
 
+def time_each_fit(patch: pytest.MonkeyPatch, seconds: dict[str, float]) -> None:
+    """Record in ``seconds`` how long each model's fit() takes, timed inside the call."""
+    from id_learning.models import registry
+
+    make_model = registry.make_model
+
+    def make_timed_model(kind, *args, **kwargs):
+        model = make_model(kind, *args, **kwargs)
+        fit = model.fit
+
+        def timed_fit(*fit_args, **fit_kwargs):
+            start = time.perf_counter()
+            try:
+                return fit(*fit_args, **fit_kwargs)
+            finally:
+                seconds[kind] = time.perf_counter() - start
+
+        model.fit = timed_fit
+        return model
+
+    patch.setattr(registry, 'make_model', make_timed_model)
+
+
 @pytest.fixture(scope='module')
-def run(bags, mabi, tmp_path_factory):
+def timed_run(bags, mabi, tmp_path_factory):
+    """The run, the seconds each fit() took and the wall-clock seconds of the whole run."""
     out = tmp_path_factory.mktemp('run') / 'run'
-    return train_run(
-        bags, mabi, 'motor', ['rnea_lq', 'mlp'], out, hyper=FAST, progress=False, device='cpu'
-    )
+    fit_seconds: dict[str, float] = {}
+    with pytest.MonkeyPatch.context() as patch:
+        time_each_fit(patch, fit_seconds)
+        start = time.perf_counter()
+        result = train_run(
+            bags, mabi, 'motor', ['rnea_lq', 'mlp'], out, hyper=FAST, progress=False, device='cpu'
+        )
+        wall_seconds = time.perf_counter() - start
+    return result, fit_seconds, wall_seconds
+
+
+@pytest.fixture(scope='module')
+def run(timed_run):
+    return timed_run[0]
 
 
 def test_each_bag_is_filtered_on_its_own_and_training_parts_come_first(bags, mabi):
@@ -85,7 +126,8 @@ def test_each_bag_is_filtered_on_its_own_and_training_parts_come_first(bags, mab
     )
 
 
-def test_a_run_writes_metrics_with_per_joint_errors_and_timings(run, mabi):
+def test_a_run_writes_metrics_with_per_joint_errors_and_timings(timed_run, mabi):
+    run, fit_seconds, wall_seconds = timed_run
     metrics = json.loads((run.out / 'metrics.json').read_text())
     assert list(metrics['models']) == ['rnea_lq', 'mlp']
     scale = np.asarray(metrics['target_scale_nm'])
@@ -97,9 +139,17 @@ def test_a_run_writes_metrics_with_per_joint_errors_and_timings(run, mabi):
         np.testing.assert_allclose(
             entry['rmse_normalised'], np.asarray(entry['rmse_nm']) / scale, rtol=1e-12
         )
-        assert entry['train_seconds'] > 0
-        assert entry['inference_seconds_per_sample'] > 0
-        assert 0 < entry['latency_single_sample_median_s'] <= entry['latency_single_sample_p99_s']
+        assert entry['latency_single_sample_median_s'] <= entry['latency_single_sample_p99_s']
+    # Timings in seconds, each within the run's wall clock: a fit takes at least what fit()
+    # took, timed inside it; fits, scoring (each sample predicted twice) and the one-sample calls
+    # (half at least as long as the median) follow one another, so together they fit in the run.
+    spent = 0.0
+    for kind, entry in metrics['models'].items():
+        assert fit_seconds[kind] <= entry['train_seconds'] <= wall_seconds, kind
+        spent += entry['train_seconds']
+        spent += entry['inference_seconds_per_sample'] * 2 * len(run.dataset.tau)
+        spent += entry['latency_single_sample_median_s'] * (LATENCY_CALLS // 2)
+    assert spent <= wall_seconds
     assert metrics['models']['mlp']['history']['epochs'] == 2
     assert metrics['findings'][0]['holds'] is None  # two models cannot decide the findings
     report = (run.out / 'report.md').read_text()
@@ -157,9 +207,6 @@ def test_artifacts_carry_preprocessing_data_hashes_and_metrics(run, bags):
     inputs = InputDefinition.from_dict(document['preprocessing']['inputs'])
     assert inputs == InputDefinition.controller(np.full(6, 10.0))
     assert document['preprocessing']['fitting_inputs'] == document['preprocessing']['inputs']
-    training = document['training_data']
-    assert [b['sha256'] for b in training['bags']] == [bag_sha256(b) for b in bags]
-    assert training['data_sha256'] == data_sha256(run.dataset)
     assert document['metrics']['rmse_nm'] == run.metrics['models']['mlp']['rmse_nm']
     assert document['train_history']['epochs'] == 2
     run_document = json.loads((run.out / 'run.json').read_text())
@@ -178,6 +225,36 @@ def test_saved_models_load_back_and_predict_exactly_the_same(run, mabi):
             rtol=0,
             atol=0,
         )
+
+
+def test_the_recorded_hashes_identify_the_bag_bytes_and_the_data_a_model_saw(
+    run, bags, mabi, tmp_path
+):
+    training = json.loads((run.out / 'models/mlp/model.json').read_text())['training_data']
+    recorded = [bag['sha256'] for bag in training['bags']]
+    assert len(set(recorded)) == len(bags)
+    for bag, digest in zip(bags, recorded, strict=True):
+        # The same bag bytes elsewhere, without the twin's files beside them: the same hash.
+        copy = tmp_path / f'copy_of_{bag.name}'
+        copy.mkdir()
+        for file in bag.iterdir():
+            if file.name == 'metadata.yaml' or file.suffix == '.mcap':
+                shutil.copy2(file, copy / file.name)
+        assert bag_sha256(copy) == digest
+        # One flipped bit of the recording: another hash.
+        (storage,) = copy.glob('*.mcap')
+        data = bytearray(storage.read_bytes())
+        data[len(data) // 2] ^= 0x01
+        storage.write_bytes(bytes(data))
+        assert bag_sha256(copy) != digest
+    # The data hash is that of the preprocessed bags rebuilt from scratch, and changes with
+    # any label or with the split.
+    rebuilt = combine_datasets(load_datasets(bags, mabi, PreprocessConfig(), progress=False))
+    assert data_sha256(rebuilt) == training['data_sha256']
+    tau = rebuilt.tau.copy()
+    tau[-1, 0] += 1e-9
+    assert data_sha256(replace(rebuilt, tau=tau)) != training['data_sha256']
+    assert data_sha256(replace(rebuilt, n_train=rebuilt.n_train - 1)) != training['data_sha256']
 
 
 def reordered_mabi(folder: Path) -> Path:
@@ -277,10 +354,56 @@ def test_unknown_kinds_and_hyper_parameters_are_refused_before_any_bag_is_read(m
         train_run(missing, mabi, 'motor', ['mlp'], tmp_path / 'r', hyper={'lnn': {}})
 
 
-def test_inference_timing_reports_batched_and_one_sample_latency(run):
-    ds, model = run.dataset, run.models['mlp'].model
-    timing = measure_inference(model, ds.q[:500], ds.v[:500], ds.a[:500], calls=20, repeats=1)
-    assert timing['inference_seconds_per_sample'] > 0
+class ClockedModel:
+    """A stand-in model whose predictions take set times on a fake perf_counter."""
+
+    is_sequence_model = False
+
+    def __init__(self, batched_s: list[float], one_sample_s: list[float]) -> None:
+        self.now = 0.0
+        self.batched_s = iter(batched_s)
+        self.one_sample_s = iter(one_sample_s)
+        self.one_sample_threads: set[int] = set()
+
+    def perf_counter(self) -> float:
+        return self.now
+
+    def predict(self, q, v, a):
+        if len(q) == 1:
+            self.now += next(self.one_sample_s)
+            self.one_sample_threads.add(torch.get_num_threads())
+        else:
+            self.now += next(self.batched_s)
+        return np.zeros_like(q)
+
+
+def test_inference_timing_reports_batched_and_one_sample_latency(monkeypatch):
+    n, calls = 500, 20
+    # A first call and the warm-up calls take a second each: none of them may count.
+    warm_up = [1.0] * (1 + LATENCY_WARMUP)
+    model = ClockedModel([3e-3, 2e-3, 2.5e-3], warm_up + [(k + 1) * 1e-5 for k in range(calls)])
+    monkeypatch.setattr(measure, 'time', SimpleNamespace(perf_counter=model.perf_counter))
+    q = np.zeros((n, 6))
+    threads = torch.get_num_threads()
+    timing = measure_inference(model, q, q, q, calls=calls, repeats=3, latency_threads=1)
+    # The fastest batched call per sample; the median and 99th percentile (linear between the
+    # 19th and 20th of the 20 sorted times) of the timed one-sample calls.
+    assert timing['inference_seconds_per_sample'] == pytest.approx(2e-3 / n, rel=1e-9)
+    assert timing['latency_single_sample_median_s'] == pytest.approx(10.5e-5, rel=1e-9)
+    assert timing['latency_single_sample_p99_s'] == pytest.approx(19.81e-5, rel=1e-9)
     assert timing['latency_window_samples'] == 1
-    assert timing['latency_single_sample_median_s'] > 0
+    assert next(model.one_sample_s, None) is None  # every one-sample call was made
+    # The one-sample calls ran on one thread; the caller's thread count is back afterwards.
     assert timing['latency_threads'] == 1
+    assert model.one_sample_threads == {1}
+    assert timing['batched_threads'] == threads
+    assert torch.get_num_threads() == threads
+
+
+def test_inference_timing_without_repeats_has_no_batched_time(monkeypatch):
+    model = ClockedModel([], [1.0] * (1 + LATENCY_WARMUP) + [4e-5, 2e-5, 3e-5])
+    monkeypatch.setattr(measure, 'time', SimpleNamespace(perf_counter=model.perf_counter))
+    q = np.zeros((50, 6))
+    timing = measure_inference(model, q, q, q, calls=3, repeats=0)
+    assert 'inference_seconds_per_sample' not in timing
+    assert timing['latency_single_sample_median_s'] == pytest.approx(3e-5, rel=1e-9)
