@@ -72,8 +72,8 @@ def _section(kind: str, physics: IdentifiedPhysics, robot: RobotConfig) -> list[
         f'{_g(condition, 3)}. {identified} of {len(base)} base parameters are identified by the '
         f'data (posterior std below {PRIOR_DOMINATED:g} of the prior std); the others stay near '
         'the URDF, held by the CAD prior. '
-        'Every body is physically consistent (pseudo-inertia positive semidefinite). Intervals '
-        'are 95 %.',
+        'Every body is physically consistent (pseudo-inertia positive semidefinite; solver '
+        f'status {report.get("solver_status", "optimal")}). Intervals are 95 %.',
         '',
         '### Bodies (payload included in its carrying body)',
         '',

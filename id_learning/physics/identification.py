@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,8 @@ from id_learning.robot.config import RobotConfig
 __all__ = ['IdentificationConfig', 'identify']
 
 _LOG = logging.getLogger(__name__)
+#: Solver statuses whose solution is used.
+SOLVED = ('optimal', 'optimal_inaccurate')
 #: A base parameter whose posterior std exceeds this share of its prior std stayed at the prior.
 PRIOR_DOMINATED = 0.5
 
@@ -101,15 +104,20 @@ def _solve(problem: Problem, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, 
         terms = [u[k] * (s[k] * basis[i]) for i, k in enumerate(index)]
         pseudo = sum(terms)
         constraints.append(0.5 * (pseudo + pseudo.T) >> 0)
-    cp.Problem(cp.Minimize(objective), constraints).solve(solver=problem.config.solver)
-    if u.value is None:
+    constrained = cp.Problem(cp.Minimize(objective), constraints)
+    with warnings.catch_warnings():
+        # cvxpy warns of an inaccurate solution; its status says so, and the report keeps it.
+        warnings.simplefilter('ignore', UserWarning)
+        constrained.solve(solver=problem.config.solver)
+    status = str(constrained.status)
+    if u.value is None or status not in SOLVED:
         raise DatasetError(
             f'{problem.dataset.source}: the constrained identification found no solution '
-            '(solver status: no value)'
+            f'(solver {problem.config.solver}: {status})'
         )
     x = mean + s * np.asarray(u.value)
     covariance = s[:, None] * np.linalg.inv(information) * s[None, :]
-    return x, covariance, 'optimal'
+    return x, covariance, status
 
 
 def identify(
@@ -128,9 +136,10 @@ def identify(
     x = np.where(np.isfinite(x), x, 0.0)
     stribeck = np.full(problem.n, float(np.median(config.stribeck_velocities)))
     covariance = np.zeros((len(layout), len(layout)))
+    status = 'optimal'
     for iteration in range(config.iterations):
         a, b = problem.design(x, stribeck)
-        x, covariance, _ = _solve(problem, a, b)
+        x, covariance, status = _solve(problem, a, b)
         if iteration < 2:
             if iteration == 0:
                 stribeck = choose_stribeck(problem, x, stribeck)
@@ -144,6 +153,15 @@ def identify(
     a, b = problem.design(x, stribeck)
     seconds = time.perf_counter() - start
     report = _report(problem, x, covariance=covariance, a=a, b=b, seconds=seconds)
+    report['solver_status'] = status
+    if status != 'optimal':
+        _LOG.warning(
+            '%s: the identification solver ended %s (%s): the solution is kept; its '
+            'constraints hold to the solver tolerance',
+            dataset.source,
+            status,
+            config.solver,
+        )
     _LOG.info('identified %d parameters in %.1f s', len(layout), seconds)
     return IdentifiedPhysics(
         robot=robot,
