@@ -1,0 +1,168 @@
+"""Test RMSE against the length of the training data: every kind on 5 to 40 min of one twin robot.
+
+    python benchmarks/data_scaling.py [--seed 61] [--minutes 5,10,20,40] [--test-minutes 8]
+        [--kinds all,...] [--seconds-per-model 120] [--out DIR] [--plot PATH]
+
+Simulates one recording of max(--minutes) + --test-minutes (config/twin_default.yaml with the
+seed: one robot, its hidden effects drawn once). For each duration D the D minutes just before
+a common held-out tail make one bag whose training part they are (train fraction
+D / (D + test)), so every model is judged on the same last minutes. Trains each kind through the
+label filter (the default) and prints its test RMSE as a multiple of the label-noise floor per
+joint and duration; plots it (one panel per joint) and ends with one JSON line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from common import DEFAULT_ROBOT, REPO, environment
+
+from id_learning.dataset.preprocess import PreprocessConfig
+from id_learning.models.registry import MODEL_KINDS
+from id_learning.robot import load_robot_config
+from id_learning.training import train_run
+from id_learning.twin import load_twin_config, simulate, write_twin_output
+from id_learning.twin.simulate import TwinResult
+
+
+def last_samples(result: TwinResult, n: int) -> TwinResult:
+    """The last n samples of a twin run, ground truth included."""
+    if n > len(result.recording.stamps_ns):
+        raise ValueError(f'the run holds {len(result.recording.stamps_ns)} samples, not {n}')
+    tail = slice(len(result.recording.stamps_ns) - n, None)
+    recording = result.recording
+    fields = ('stamps_ns', 'position', 'velocity', 'current', 'joint_torque')
+    cut = {k: getattr(recording, k)[tail] for k in fields if getattr(recording, k) is not None}
+    return replace(
+        result,
+        recording=replace(recording, **cut),
+        components={name: x[tail] for name, x in result.components.items()},
+        tau_u_clean=result.tau_u_clean[tail],
+        tau_joint_clean=result.tau_joint_clean[tail],
+        q_true=result.q_true[tail],
+        v_true=result.v_true[tail],
+        a_true=result.a_true[tail],
+    )
+
+
+def plot(
+    minutes: list[float], ratios: dict[str, np.ndarray], joints: list[str], path: Path
+) -> None:
+    """One panel per joint: test RMSE / floor against training minutes, a line per kind."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    columns = 3
+    rows = -(-len(joints) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(4.2 * columns, 3.2 * rows), squeeze=False)
+    colours = [*plt.get_cmap('tab10').colors, 'black', 'dimgray']
+    markers = 'osD^v<>phX*'
+    for j, joint in enumerate(joints):
+        ax = axes[j // columns][j % columns]
+        for k, (kind, ratio) in enumerate(ratios.items()):
+            style = {'color': colours[k % len(colours)], 'marker': markers[k % len(markers)]}
+            ax.plot(minutes, ratio[:, j], label=kind, **style)
+        ax.axhline(1.0, color='black', linewidth=0.8, linestyle='--')
+        ax.set_xscale('log', base=2)
+        ax.set_yscale('log')
+        ax.set_xticks(minutes, [f'{m:g}' for m in minutes])
+        ax.set_title(joint)
+        ax.set_xlabel('training data [min]')
+        ax.set_ylabel('test RMSE / noise floor')
+    for k in range(len(joints), rows * columns):
+        axes[k // columns][k % columns].axis('off')
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc='lower center', ncol=min(6, len(labels)), fontsize='small')
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--seed', type=int, default=61, help='twin seed (robot and recording)')
+    parser.add_argument('--minutes', default='5,10,20,40', help='training durations [min]')
+    parser.add_argument('--test-minutes', type=float, default=8.0, help='common held-out tail')
+    parser.add_argument('--kinds', default=','.join(MODEL_KINDS), help='model kinds (all)')
+    parser.add_argument('--seconds-per-model', type=float, default=120.0)
+    parser.add_argument('--out', type=Path, help='keep the bags and the runs here')
+    parser.add_argument('--plot', type=Path, default=REPO / 'out/benchmarks/data_scaling.png')
+    args = parser.parse_args()
+    minutes = sorted(float(m) for m in args.minutes.split(','))
+    kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
+    robot = load_robot_config(DEFAULT_ROBOT)
+    began = time.monotonic()
+    config = load_twin_config(REPO / 'config/twin_default.yaml', {'seed': args.seed})
+    total_s = 60.0 * (minutes[-1] + args.test_minutes) + 30.0  # rests shorten the motion
+    config = replace(config, excitation=replace(config.excitation, duration_s=total_s))
+    print(f'simulating {total_s / 60:.0f} min (seed {args.seed}) ...', file=sys.stderr, flush=True)
+    result = simulate(config)
+    period = robot.ipo_period_s
+    test_n = round(60.0 * args.test_minutes / period)
+    ratios = {kind: np.zeros((len(minutes), robot.n_joints)) for kind in kinds}
+    rmse: dict[str, list[list[float]]] = {kind: [] for kind in kinds}
+    seconds: dict[str, list[float]] = {kind: [] for kind in kinds}
+    floors = []
+    with tempfile.TemporaryDirectory() as scratch:
+        out = args.out or Path(scratch)
+        for i, m in enumerate(minutes):
+            train_n = round(60.0 * m / period)
+            bag = write_twin_output(
+                last_samples(result, train_n + test_n), config, out / f'bag_{m:g}min',
+                overwrite=True,
+            )  # fmt: skip
+            print(f'training {len(kinds)} kinds on {m:g} min ...', file=sys.stderr, flush=True)
+            run = train_run(
+                [bag],
+                robot,
+                'motor',
+                kinds,
+                out / f'run_{m:g}min',
+                max_seconds_per_model=args.seconds_per_model,
+                progress=False,
+                device='cpu',
+                preprocess=PreprocessConfig(train_fraction=train_n / (train_n + test_n)),
+            )
+            floors.append(run.metrics['label_noise_floor_nm'])
+            for kind in kinds:
+                entry = run.metrics['models'][kind]
+                ratios[kind][i] = entry['rmse_through_filter_over_floor']
+                rmse[kind].append(entry['rmse_through_filter_nm'])
+                seconds[kind].append(entry['train_seconds'])
+    joints = list(robot.joints)
+    plot(minutes, ratios, joints, args.plot)
+    for j, joint in enumerate(joints):
+        print(f'\n{joint}: test RMSE / floor' + ''.join(f'{m:>9g} min' for m in minutes))
+        for kind in kinds:
+            print(f'  {kind:<28}' + ''.join(f'{x:>13.3g}' for x in ratios[kind][:, j]))
+    print(f'\nfloor per duration [N*m]: {np.round(floors, 3).tolist()}; plot: {args.plot}')
+    document: dict[str, Any] = {
+        'benchmark': 'data_scaling',
+        'seed': args.seed,
+        'minutes': minutes,
+        'test_minutes': args.test_minutes,
+        'seconds_per_model': args.seconds_per_model,
+        'joints': joints,
+        'label_noise_floor_nm': floors,
+        'rmse_through_filter_nm': rmse,
+        'ratio_to_floor': {k: v.tolist() for k, v in ratios.items()},
+        'train_seconds': seconds,
+        'wall_s': time.monotonic() - began,
+        'environment': environment(),
+    }
+    print(json.dumps(document))
+
+
+if __name__ == '__main__':
+    main()
