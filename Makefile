@@ -6,6 +6,8 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BAG ?= bags/default
 OUT ?= out/demo
+# The reference study's Table 1 (not part of the package), placed beside ours when present.
+STUDY_TABLE ?= $(wildcard ../shared/data/study_table1/table1.json)
 
 .PHONY: demo test lint typecheck venv clean bag
 
@@ -16,7 +18,8 @@ $(VENV)/.ready: tools/bootstrap_venv.sh requirements.txt pyproject.toml setup.py
 	touch $@
 
 demo: venv
-	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(BAG) --out $(OUT)
+	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(BAG) --out $(OUT) \
+		$(if $(STUDY_TABLE),--study-table $(STUDY_TABLE))
 
 # pytest exits 5 when it collects no test: make treats that as the failure it is.
 test: venv typecheck

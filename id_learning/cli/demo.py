@@ -75,6 +75,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         max_seconds_per_model=args.train_seconds,
         device=args.device,
         preprocess=preprocess,
+        study_table=options.study_table(args, robot),
     )
     print(metrics_table(run.metrics))
     print(f'report: {run.report}', flush=True)
@@ -160,5 +161,6 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         help='seconds of the test part replayed through the predictor node (0: skip)',
     )
     p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
+    options.study_table_option(p)
     options.robot_option(p)
     p.set_defaults(func=cmd_demo)

@@ -9,10 +9,14 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from id_learning.cli.paths import default_robot_config
 from id_learning.errors import ConfigError
+
+if TYPE_CHECKING:
+    from id_learning.evaluation.study import StudyTable
+    from id_learning.robot.config import RobotConfig
 
 __all__ = [
     'PREPROCESSING_CHOICES',
@@ -58,6 +62,24 @@ def preprocessing_option(p: argparse.ArgumentParser) -> None:
         "filtered like the labels before it meets them; study: the reference study's pipeline "
         '(low-passed inputs, torque compared with the low-passed labels as is), for comparison',
     )
+
+
+def study_table_option(p: argparse.ArgumentParser) -> None:
+    """The --study-table option: the reference study's Table 1 as JSON, for the report."""
+    p.add_argument(
+        '--study-table',
+        metavar='PATH',
+        help="the reference study's Table 1 as JSON (evaluation/study.py says the keys); the "
+        'report places it beside our numbers',
+    )
+
+
+def study_table(args: argparse.Namespace, robot: RobotConfig) -> StudyTable | None:
+    """The study table --study-table names, checked against the robot's joint count."""
+    from id_learning.evaluation.study import load_study_table
+
+    path = getattr(args, 'study_table', None)
+    return None if not path else load_study_table(path, robot.n_joints)
 
 
 def positive_float(text: str) -> float:

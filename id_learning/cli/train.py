@@ -80,6 +80,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         device=args.device,
         preprocess=PreprocessConfig(mode=args.preprocessing),
+        study_table=options.study_table(args, robot),
     )
     print(metrics_table(run.metrics))
     print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
@@ -114,6 +115,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     options.robot_option(p)
     options.target_option(p)
     options.preprocessing_option(p)
+    options.study_table_option(p)
     p.add_argument(
         '--models',
         default='all',

@@ -54,6 +54,7 @@ from id_learning.evaluation.report_tables import (
     timing_table,
 )
 from id_learning.evaluation.scoring import score_model
+from id_learning.evaluation.study import StudyTable
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.robot.config import RobotConfig
 
@@ -88,6 +89,7 @@ class ReportInput:
         predictions: per kind, (N_eval, n) predictions through the label filter on ``rows``
             [N*m] (``evaluation.scoring``); computed when absent.
         noise_floor: (n,) the label-noise floor on ``rows`` [N*m], where known.
+        study_table: the study's Table 1 to place beside ours (``evaluation.study``), if given.
     """
 
     title: str
@@ -100,6 +102,7 @@ class ReportInput:
     metrics: dict[str, dict[str, Any]]
     predictions: dict[str, np.ndarray] = field(default_factory=dict)
     noise_floor: np.ndarray | None = None
+    study_table: StudyTable | None = None
 
 
 def _predictions(report: ReportInput, kinds: list[str]) -> dict[str, np.ndarray]:
@@ -203,7 +206,7 @@ def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, A
         *identified_physics_section(report.models, report.robot),
         "### The study's Table 1",
         '',
-        study_table(kinds, study_way, ds.joints),
+        study_table(kinds, study_way, ds.joints, report.study_table),
         '',
         '## Training and inference time',
         '',

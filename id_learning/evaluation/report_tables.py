@@ -18,7 +18,7 @@ from id_learning.evaluation.findings import (
     Finding,
     model_label,
 )
-from id_learning.evaluation.study import STUDY_CITATION, STUDY_TABLE_1, STUDY_TABLE_1_CAPTION
+from id_learning.evaluation.study import STUDY_CITATION, StudyTable
 
 __all__ = [
     'MODES',
@@ -56,26 +56,45 @@ def markdown_table(head: list[str], rows: list[list[str]]) -> str:
     return '\n'.join(lines)
 
 
-def study_table(kinds: list[str], ours: dict[str, np.ndarray], joints: tuple[str, ...]) -> str:
+def study_table(
+    kinds: list[str],
+    ours: dict[str, np.ndarray],
+    joints: tuple[str, ...],
+    table: StudyTable | None,
+) -> str:
     """Our normalised RMSE (the study's way) beside the study's Table 1, or why it is absent."""
-    if STUDY_TABLE_1 is None:
+    if table is None:
         return (
-            "**The study's Table 1 is not bundled** with this package: its numbers could not be "
-            'consulted when the report was written, and none are made up. To place them beside '
-            'ours, copy them into `STUDY_TABLE_1` in `id_learning/evaluation/study.py`. '
-            f'Study: {STUDY_CITATION}.'
+            "**The study's Table 1 is not given**: it belongs to the paper and is not part of "
+            'this package. Pass it as JSON with `train --study-table PATH` to place it beside '
+            f'ours (see `id_learning/evaluation/study.py`). Study: {STUDY_CITATION}.'
         )
     head = ['model', *[f'{j} ours / study' for j in joints]]
     rows = []
     for kind in kinds:
-        study = STUDY_TABLE_1.get(kind)
+        study = table.rmse_normalised.get(kind)
         cells = [
             f'{ours[kind][j]:.3g} / {study[j]:.3g}' if study else f'{ours[kind][j]:.3g} / –'
             for j in range(len(joints))
         ]
         rows.append([model_label(kind), *cells])
-    caption = f'Study: {STUDY_CITATION}. {STUDY_TABLE_1_CAPTION or ""}'
-    return markdown_table(head, rows) + '\n\n' + caption
+    missing = [k for k in table.rmse_normalised if k not in kinds]
+    for kind in missing:
+        study_only = [f'– / {x:.3g}' for x in table.rmse_normalised[kind]]
+        rows.append([f'{model_label(kind)} (not trained here)', *study_only])
+    notes = [
+        f'Study: {table.source or STUDY_CITATION} (from `{table.path}`; its axes '
+        f'{", ".join(table.joints)} are our {", ".join(joints)}).',
+    ]
+    if table.metric:
+        notes.append(f'Its metric: {table.metric}.')
+    if table.split_note:
+        notes.append(f'Its split: {table.split_note}.')
+    lines = [markdown_table(head, rows), '', ' '.join(notes)]
+    if table.findings:
+        lines += ['', "The study's findings, in its words:", '']
+        lines += [f'- {finding}' for finding in table.findings]
+    return '\n'.join(lines)
 
 
 def _through_filter_tables(

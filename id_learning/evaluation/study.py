@@ -4,22 +4,28 @@ Trinh, Geist, Monnet, Vilceanu, Trimpe, Brecher: "Newtonian and Lagrangian Neura
 Comparison Towards Efficient Inverse Dynamics Identification", 14th IFAC Symposium on Robotics,
 2025 (arXiv:2506.17994). Data: a MABI MAX 100 with motor torques estimated from currents.
 
-NOT BUNDLED: the study's Table 1 (per-axis test RMSE of its seven models). Only the paper's
-abstract and summaries could be consulted when this module was written, never the table itself,
-and numbers are never made up: ``STUDY_TABLE_1`` stays None until someone copies the values from
-the paper (one list of six normalised RMSEs per model kind, axes 1..6, in ``STUDY_MODELS`` order),
-with the table's exact caption in ``STUDY_TABLE_1_CAPTION``. The report then shows them beside
-ours; while it is None, the report says that they are not bundled.
+Its Table 1 (per-axis test RMSE of the seven models on the normalised scale) is not part of
+this package: the table belongs to the paper. ``load_study_table`` reads it from a JSON file the
+user points at (``train --study-table PATH``); the report then places it beside our numbers, and
+says that it is absent otherwise. The file holds ``rmse_normalised`` (model kind -> six values,
+axes 1..6), ``joints``, and optionally ``source``, ``metric``, ``split_note`` and ``findings``.
 """
 
 from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from id_learning.errors import ConfigError
 
 __all__ = [
     'MODEL_LABELS',
     'STUDY_CITATION',
     'STUDY_FINDINGS',
-    'STUDY_TABLE_1',
-    'STUDY_TABLE_1_CAPTION',
+    'StudyTable',
+    'load_study_table',
 ]
 
 STUDY_CITATION = (
@@ -28,9 +34,73 @@ STUDY_CITATION = (
     'Robotics, 2025. arXiv:2506.17994'
 )
 
-#: Per model kind, the study's six per-axis test RMSEs on its normalised scale; None: not bundled.
-STUDY_TABLE_1: dict[str, tuple[float, ...]] | None = None
-STUDY_TABLE_1_CAPTION: str | None = None
+
+@dataclass(frozen=True)
+class StudyTable:
+    """The study's Table 1 as read from a file.
+
+    Attributes:
+        path: the file it came from.
+        rmse_normalised: model kind -> per-axis test RMSE on the study's normalised scale.
+        joints: the study's axis names, in order.
+        source: where the numbers are from (citation, table).
+        metric: what the numbers are, in the study's words.
+        split_note: what the study says of its train/test split.
+        findings: the study's findings, in its words.
+    """
+
+    path: Path
+    rmse_normalised: dict[str, tuple[float, ...]]
+    joints: tuple[str, ...]
+    source: str = ''
+    metric: str = ''
+    split_note: str = ''
+    findings: tuple[str, ...] = field(default_factory=tuple)
+
+
+def load_study_table(path: Path | str, n_joints: int | None = None) -> StudyTable:
+    """Read the study's Table 1 from JSON (module docstring).
+
+    Raises:
+        ConfigError: the file is missing or unreadable, a key is missing, a model row has the
+            wrong number of values or a non-finite one, or the axes do not match ``n_joints``.
+    """
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding='utf-8'))
+    except (OSError, ValueError) as err:
+        raise ConfigError(f'{path}: cannot read the study table: {err}') from err
+    if not isinstance(data, dict):
+        raise ConfigError(f'{path}: the study table must be a JSON object')
+    for key in ('rmse_normalised', 'joints'):
+        if key not in data:
+            raise ConfigError(f'{path}: the study table lacks {key!r}')
+    joints = tuple(str(j) for j in data['joints'])
+    if n_joints is not None and len(joints) != n_joints:
+        raise ConfigError(
+            f'{path}: the study table has {len(joints)} axes, the robot {n_joints} joints'
+        )
+    rows: dict[str, tuple[float, ...]] = {}
+    for kind, values in dict(data['rmse_normalised']).items():
+        try:
+            row = tuple(float(x) for x in values)
+        except (TypeError, ValueError) as err:
+            raise ConfigError(f'{path}: rmse_normalised.{kind}: {err}') from err
+        if len(row) != len(joints) or not all(math.isfinite(x) for x in row):
+            raise ConfigError(
+                f'{path}: rmse_normalised.{kind} needs {len(joints)} finite values, got {values}'
+            )
+        rows[str(kind)] = row
+    return StudyTable(
+        path=path,
+        rmse_normalised=rows,
+        joints=joints,
+        source=str(data.get('source', '')),
+        metric=str(data.get('metric', '')),
+        split_note=str(data.get('split_note', '')),
+        findings=tuple(str(f) for f in data.get('findings', ())),
+    )
+
 
 #: The model names as the study writes them.
 MODEL_LABELS = {

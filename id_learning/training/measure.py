@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from id_learning.dataset.preprocess import Dataset
+from id_learning.evaluation.study import StudyTable
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.robot.config import RobotConfig
 from id_learning.training.fitting import ModelResult
@@ -197,6 +198,7 @@ def write_run_report(
     scale: np.ndarray,
     evaluated_on: str,
     predictions: dict[str, np.ndarray],
+    study_table: StudyTable | None = None,
 ) -> tuple[Path, list[dict[str, Any]]]:
     """Write report.md and its figures into ``out`` (``evaluation.report.write_report``).
 
@@ -217,5 +219,6 @@ def write_run_report(
         metrics={kind: r.metrics for kind, r in results.items()},
         predictions=predictions,
         noise_floor=label_noise_floor(dataset),
+        study_table=study_table,
     )
     return write_report(report, out)

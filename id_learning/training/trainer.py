@@ -30,6 +30,7 @@ from typing import Any
 
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, Target
 from id_learning.errors import CheckpointError
+from id_learning.evaluation.study import StudyTable
 from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import configure_torch
@@ -132,6 +133,7 @@ def train_run(
     progress: bool = True,
     device: str = 'auto',
     preprocess: PreprocessConfig | None = None,
+    study_table: StudyTable | None = None,
 ) -> RunResult:
     """Train models on bags and write a run folder (models, metrics.json, report.md).
 
@@ -146,6 +148,7 @@ def train_run(
         progress: show progress bars.
         device: 'auto' (CUDA when present), 'cpu' or 'cuda'.
         preprocess: preprocessing settings; the default is the study's, with ``target``.
+        study_table: the study's Table 1 for the report (``evaluation.study``), if given.
 
     Raises:
         ConfigError: unknown kind or hyper-parameter, or an unavailable device.
@@ -202,6 +205,7 @@ def train_run(
         scale=scale,
         evaluated_on=evaluated_on,
         predictions=predictions,
+        study_table=study_table,
     )
     metrics = metrics_document(
         'training',

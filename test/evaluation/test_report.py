@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from typing import Any, ClassVar, Self
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from id_learning.dataset.preprocess import prepare_dataset
-from id_learning.evaluation import report_tables
+from id_learning.errors import ConfigError
 from id_learning.evaluation.report import (
     HIGH_FRICTION_SHARE,
     ReportInput,
@@ -19,6 +20,7 @@ from id_learning.evaluation.report import (
     write_report,
 )
 from id_learning.evaluation.scoring import label_noise_floor, score_model
+from id_learning.evaluation.study import load_study_table
 from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
 from id_learning.models.data import TrainingData, nominal_rnea
 
@@ -206,7 +208,7 @@ def test_the_report_has_both_rmse_tables_timings_findings_and_four_png_figures(
     assert 'Against the noise-free torque (twin ground truth)' in text
     assert "The study's way [N·m] (for comparison)" in text
     assert 'normalised [-1, 1] scale' in text
-    assert "**The study's Table 1 is not bundled**" in text
+    assert "**The study's Table 1 is not given**" in text
     assert 'arXiv:2506.17994' in text
     # Two models cannot decide the motor-label findings: they are listed as not checked.
     assert [f['holds'] for f in findings] == [None, None]
@@ -223,14 +225,56 @@ def test_the_report_has_both_rmse_tables_timings_findings_and_four_png_figures(
         assert f']({name})' in text
 
 
-def test_the_report_places_a_bundled_study_table_beside_ours(report_input, tmp_path, monkeypatch):
+def write_table(path, rows, joints=None, **extra):
+    joints = joints or [f'axis_{k}' for k in range(1, 7)]
+    path.write_text(json.dumps({'joints': joints, 'rmse_normalised': rows, **extra}))
+    return path
+
+
+def test_the_report_places_the_study_table_beside_ours(report_input, tmp_path):
     # Placeholder values, not the study's: they only exercise the table's layout.
-    monkeypatch.setattr(report_tables, 'STUDY_TABLE_1', {'rnea_lq': (0.5,) * 6})
-    monkeypatch.setattr(report_tables, 'STUDY_TABLE_1_CAPTION', 'Table 1 (test placeholder)')
-    path, _ = write_report(report_input, tmp_path)
-    text = path.read_text()
-    assert 'not bundled' not in text
+    path = write_table(
+        tmp_path / 'table1.json',
+        {'rnea_lq': [0.5] * 6, 'lstm': [0.25] * 6},
+        metric='test RMSE (placeholder)',
+        findings=['placeholder finding'],
+    )
+    table = load_study_table(path, n_joints=6)
+    out, _ = write_report(replace(report_input, study_table=table), tmp_path / 'report')
+    text = out.read_text()
+    assert 'not given' not in text
     assert 'joint_1 ours / study' in text
-    assert '/ 0.5 |' in text
-    assert '/ – |' in text  # RNEA+MLP has no study row in the placeholder
-    assert 'Table 1 (test placeholder)' in text
+    ours = report_input.metrics['rnea_lq']['study_way']['rmse_normalised']
+    assert f'| RNEA+LQ | {ours[0]:.3g} / 0.5 |' in text
+    assert '/ – |' in text  # a model the table lacks
+    assert '| LSTM (not trained here) | – / 0.25 |' in text
+    assert 'Its metric: test RMSE (placeholder).' in text
+    assert '- placeholder finding' in text
+    assert str(path) in text
+
+
+@pytest.mark.parametrize(
+    ('content', 'message'),
+    [
+        ({'joints': ['a'] * 6}, "lacks 'rmse_normalised'"),
+        ({'joints': ['a'] * 6, 'rmse_normalised': {'mlp': [0.1] * 5}}, 'needs 6 finite values'),
+        (
+            {'joints': ['a'] * 6, 'rmse_normalised': {'mlp': [0.1] * 5 + ['x']}},
+            'rmse_normalised.mlp',
+        ),
+        ({'joints': ['a'] * 6, 'rmse_normalised': {'mlp': [0.1] * 5 + [float('nan')]}}, 'finite'),
+        ({'joints': ['a'] * 7, 'rmse_normalised': {}}, '7 axes, the robot 6 joints'),
+        ([1, 2], 'must be a JSON object'),
+    ],
+)
+def test_a_bad_study_table_is_refused_naming_file_and_key(tmp_path, content, message):
+    path = tmp_path / 'bad.json'
+    path.write_text(json.dumps(content))
+    with pytest.raises(ConfigError, match=message) as err:
+        load_study_table(path, n_joints=6)
+    assert str(path) in str(err.value)
+
+
+def test_a_missing_study_table_file_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match='cannot read the study table'):
+        load_study_table(tmp_path / 'absent.json')
