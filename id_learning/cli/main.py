@@ -1,4 +1,8 @@
-"""``id-learning``: the offline tool (simulate, import, inspect, bag, train, evaluate, demo)."""
+"""``id-learning``: the offline tool.
+
+Commands: simulate, import, inspect, bag, diagnose, train, evaluate, sweep, demo; see each
+command's --help.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ from id_learning import __version__
 from id_learning.cli.data import add_data_commands
 from id_learning.cli.demo import add_demo_command
 from id_learning.cli.diagnose import add_diagnose_command
+from id_learning.cli.sweep import add_sweep_command
 from id_learning.cli.train import add_train_commands
 from id_learning.errors import IdLearningError
 
@@ -28,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_data_commands(sub)  # simulate, import, inspect, bag
     add_diagnose_command(sub)
     add_train_commands(sub)  # train, evaluate
+    add_sweep_command(sub)
     add_demo_command(sub)
     return parser
 

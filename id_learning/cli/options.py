@@ -145,6 +145,26 @@ def hyper_parameters(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
     return hyper
 
 
+def hyper_file(path: str | None) -> dict[str, dict[str, Any]]:
+    """Per-kind hyper-parameters from a YAML file {kind: {key: value}} (a sweep's best.yaml).
+
+    Raises:
+        ConfigError: the file is unreadable or not of that form.
+    """
+    import yaml
+
+    if not path:
+        return {}
+    try:
+        with open(path, encoding='utf-8') as stream:
+            data = yaml.safe_load(stream)
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f'--hyper-file {path}: cannot read it: {err}') from err
+    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+        raise ConfigError(f'--hyper-file {path}: expected a mapping kind -> {{key: value}}')
+    return {str(kind): dict(values) for kind, values in data.items()}
+
+
 def comma_names(text: str) -> list[str]:
     """The non-empty items of a comma-separated list, stripped."""
     return [item.strip() for item in text.split(',') if item.strip()]

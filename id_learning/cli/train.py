@@ -75,7 +75,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         args.target,
         options.model_kinds(args.models),
         Path(args.out),
-        hyper=options.hyper_parameters(args.hyper),
+        hyper=_merged_hyper(args),
         max_seconds_per_model=args.max_seconds_per_model,
         progress=not args.quiet,
         device=args.device,
@@ -107,6 +107,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _merged_hyper(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """--hyper-file, then the --hyper items on top."""
+    merged = options.hyper_file(getattr(args, 'hyper_file', None))
+    for kind, values in options.hyper_parameters(args.hyper).items():
+        merged.setdefault(kind, {}).update(values)
+    return merged
+
+
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``train`` (shared by ``id-learning train`` and ``ros2 run ... train``)."""
     p.add_argument(
@@ -133,6 +141,12 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
         '--max-seconds-per-model',
         type=options.positive_float,
         help='wall-clock budget per model fit [s] (default: none, early stopping decides)',
+    )
+    p.add_argument(
+        '--hyper-file',
+        metavar='PATH',
+        help="YAML {kind: {key: value}} of hyper-parameters (a sweep's best.yaml); --hyper "
+        'items override it',
     )
     p.add_argument(
         '--hyper',

@@ -23,6 +23,7 @@ from id_learning.models.data import TrainingData
 from id_learning.models.through_filter import ThroughFilterLoss, WindowPredictor
 
 __all__ = [
+    'EpochHook',
     'NetworkSettings',
     'OptimConfig',
     'TrainHistory',
@@ -35,6 +36,8 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 
 LossFn = Callable[..., torch.Tensor]
+#: Called with (epoch, validation loss) after each epoch; True stops the fit.
+EpochHook = Callable[[int, float], bool]
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,7 @@ def train_module(
     *,
     progress: bool = False,
     description: str = 'training',
+    on_epoch: EpochHook | None = None,
 ) -> TrainHistory:
     """Fit ``module`` by minimising ``loss_fn(*batch)``; keep the best validation weights.
 
@@ -135,6 +139,8 @@ def train_module(
         config: optimiser settings.
         progress: show a progress bar over epochs.
         description: progress bar label.
+        on_epoch: called with (epoch, validation loss) after each epoch; True stops the fit
+            (``stopped_by='pruned'``), as a sweep's pruner asks.
     """
     generator = torch.Generator().manual_seed(config.seed)
     optimiser = torch.optim.Adam(
@@ -172,6 +178,9 @@ def train_module(
         else:
             stale += 1
         bar.set_postfix(train=f'{history.train_loss[-1]:.2e}', val=f'{validation:.2e}')
+        if on_epoch is not None and on_epoch(epoch, validation):
+            history.stopped_by = 'pruned'
+            break
         if stale >= config.patience:
             history.stopped_by = 'early_stopping'
             break
@@ -228,6 +237,7 @@ def fit_network(
     device: torch.device,
     progress: bool = False,
     history: int = 0,
+    on_epoch: EpochHook | None = None,
 ) -> TrainHistory:
     """Fit a network the dataset's way; leave it on the CPU in evaluation mode.
 
@@ -249,6 +259,7 @@ def fit_network(
         device: where to fit.
         progress: show a progress bar over epochs.
         history: samples before each evaluated one that ``predict`` reads (sequence models).
+        on_epoch: see ``train_module``.
 
     Raises:
         DatasetError: the training part is too short to fit through the filter.
@@ -278,6 +289,7 @@ def fit_network(
             replace(config.optim(), batch_size=config.windows_per_batch),
             progress=progress,
             description=f'{config.kind} (through the filter)',
+            on_epoch=on_epoch,
         )
     else:
         target_t = torch.as_tensor(np.ascontiguousarray(target), dtype=torch.float32).to(device)
@@ -301,6 +313,7 @@ def fit_network(
             config.optim(),
             progress=progress,
             description=config.kind,
+            on_epoch=on_epoch,
         )
     network.to('cpu').eval()
     return history_

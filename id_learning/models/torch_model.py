@@ -18,6 +18,7 @@ from torch import nn
 from id_learning.models.base import InverseDynamicsModel, ModelConfig
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import (
+    EpochHook,
     NetworkSettings,
     TrainHistory,
     WindowPredictor,
@@ -43,6 +44,9 @@ class TorchModel(InverseDynamicsModel, Generic[_Net]):
 
     #: The fitted-metadata key of the training summary (the Lagrangian kinds write 'history').
     history_key: ClassVar[str] = 'training'
+    #: Called with (epoch, validation loss) after each epoch of a fit; True stops it (a
+    #: sweep's pruner). Not saved with the model.
+    epoch_hook: EpochHook | None = None
 
     def __init__(self, config: ModelConfig, robot: RobotConfig) -> None:
         """Store the settings; no I/O, no fitting."""
@@ -95,6 +99,7 @@ class TorchModel(InverseDynamicsModel, Generic[_Net]):
             device=device,
             progress=progress,
             history=history,
+            on_epoch=self.epoch_hook,
         )
         self.network_ = network
         self.history_ = summary

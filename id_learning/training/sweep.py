@@ -1,0 +1,286 @@
+"""Hyper-parameter sweeps on Optuna: one study, as many worker processes as you start.
+
+A trial draws a kind's hyper-parameters from its search space (``SEARCH_SPACES``), fits the model
+on the training part of the bags and scores it on that part's validation tail (the last
+``TrainingData.validation_fraction`` of it), through the label filter like every figure of the
+package, as the mean normalised RMSE over joints. The test part stays unseen, so the test figure
+of ``train --hyper-file DIR/best.yaml`` is honest. Networks report their validation loss every
+epoch, and the median pruner stops trials that fall behind. The storage is any Optuna URL:
+SQLite by default; PostgreSQL (``postgresql+psycopg://...``) lets workers on several machines
+share one study.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import yaml
+
+from id_learning.dataset.preprocess import PreprocessConfig, Target
+from id_learning.errors import ConfigError
+from id_learning.models.data import TrainingData
+from id_learning.models.fitting import configure_torch
+from id_learning.models.registry import MODEL_KINDS, make_model
+from id_learning.models.torch_model import TorchModel
+from id_learning.robot.config import RobotConfig
+from id_learning.training.datasets import combine_datasets, load_datasets
+
+if TYPE_CHECKING:
+    import optuna
+
+__all__ = ['SEARCH_SPACES', 'SweepResult', 'run_sweep', 'validation_error']
+
+_LOG = logging.getLogger(__name__)
+
+#: Tries to create or join a study while other workers create it too.
+STORAGE_ATTEMPTS = 10
+#: A hyper-parameter's range: ('log', low, high), ('int', low, high) or ('choice', options).
+Space = tuple[Any, ...]
+
+_NETWORK = {
+    'learning_rate': ('log', 1e-4, 1e-2),
+    'weight_decay': ('choice', (0.0, 1e-6, 1e-5, 1e-4, 1e-3)),
+}
+_MLP = {'width': ('choice', (32, 64, 128, 256)), 'depth': ('int', 1, 4), **_NETWORK}
+_LAGRANGIAN = {**_MLP, 'activation': ('choice', ('tanh', 'softplus'))}
+
+#: Per kind, the hyper-parameters a sweep draws and their ranges (the config's field names).
+SEARCH_SPACES: dict[str, dict[str, Space]] = {
+    'rnea_lq': {'friction': ('choice', ('viscous', 'viscous_coulomb', 'viscous_coulomb_offset'))},
+    'rnea_mlp': _MLP,
+    'delan': _LAGRANGIAN,
+    'lnn': _LAGRANGIAN,
+    'lnn_mlp': _LAGRANGIAN,
+    'mlp': {**_MLP, 'activation': ('choice', ('tanh', 'relu'))},
+    'lstm': {
+        'hidden_size': ('choice', (32, 64, 128)),
+        'num_layers': ('int', 1, 3),
+        'sequence_length': ('choice', (10, 20, 40)),
+        **_NETWORK,
+    },
+    'rnea_id': {
+        'mass_rel_std': ('log', 0.02, 0.3),
+        'com_std_m': ('log', 0.005, 0.1),
+        'gain_std': ('log', 0.01, 0.2),
+    },
+    'rnea_id_mlp': _MLP,
+}
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """What a worker leaves behind.
+
+    Attributes:
+        study_name: the Optuna study.
+        storage: its storage URL.
+        kind: the swept model kind.
+        finished: trials of the study that completed (all workers).
+        best_value: the best validation error (mean normalised RMSE).
+        best_params: the best trial's hyper-parameters.
+        best_file: DIR/best.yaml, which ``train --hyper-file`` reads.
+        figures: the plots written (optimisation history, parameter importances).
+    """
+
+    study_name: str
+    storage: str
+    kind: str
+    finished: int
+    best_value: float
+    best_params: dict[str, Any]
+    best_file: Path
+    figures: tuple[Path, ...]
+
+
+def validation_error(model: Any, data: TrainingData) -> float:
+    """Mean normalised RMSE over joints on the validation tail, the way the model was fitted.
+
+    Through the filter, the torque along each whole recording on a controller's inputs,
+    filtered like the labels; the study's way, the torque on its inputs as is.
+    """
+    from id_learning.evaluation.metrics import error_metrics
+    from id_learning.evaluation.scoring import predict_along
+
+    ds = data.dataset
+    rows = np.arange(data.validation_rows.start, data.validation_rows.stop)
+    if ds.is_through_filter:
+        torque = ds.filter_like_labels(predict_along(model, ds.controller, ds.recording_rows()))
+    else:
+        torque = predict_along(model, ds.study, [rows])
+    metrics = error_metrics(torque[rows], ds.tau[rows], ds.target_scaler.scale())
+    return float(np.mean(metrics.rmse_normalised))
+
+
+def _suggest(trial: optuna.Trial, name: str, space: Space) -> Any:
+    kind = space[0]
+    if kind == 'log':
+        return trial.suggest_float(name, space[1], space[2], log=True)
+    if kind == 'int':
+        return trial.suggest_int(name, space[1], space[2])
+    return trial.suggest_categorical(name, list(space[1]))
+
+
+def _check_kind(kind: str) -> dict[str, Space]:
+    if kind not in MODEL_KINDS:
+        raise ConfigError(f'sweep: unknown model kind {kind!r}; known: {sorted(MODEL_KINDS)}')
+    if kind not in SEARCH_SPACES:
+        raise ConfigError(
+            f'sweep: {kind!r} has no search space (its settings come from a diagnosis); '
+            f'sweepable: {sorted(SEARCH_SPACES)}'
+        )
+    return SEARCH_SPACES[kind]
+
+
+def run_sweep(
+    bags: Sequence[Path],
+    robot: RobotConfig,
+    target: Target,
+    kind: str,
+    out: Path,
+    *,
+    trials: int,
+    storage: str | None = None,
+    study_name: str | None = None,
+    max_seconds_per_trial: float | None = None,
+    preprocess: PreprocessConfig | None = None,
+    progress: bool = True,
+    seed: int | None = None,
+) -> SweepResult:
+    """Run ``trials`` trials of one kind into a (possibly shared) study; write DIR/best.yaml.
+
+    Raises:
+        ConfigError: unknown or unsweepable kind, trials < 1, or an unusable storage.
+        DatasetError, BagError: a bag is unusable.
+    """
+    import optuna
+
+    space = _check_kind(kind)
+    if trials < 1:
+        raise ConfigError(f'sweep: --trials must be >= 1, got {trials}')
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    storage = storage or f'sqlite:///{(out / "sweep.db").resolve()}'
+    study_name = study_name or f'{kind}-{target}'
+    config = PreprocessConfig(target=target) if preprocess is None else preprocess
+    datasets = load_datasets([Path(b) for b in bags], robot, config, progress=progress)
+    data = TrainingData(combine_datasets(datasets), robot)
+    configure_torch(1)
+    study = _open_study(storage, study_name, seed)
+    names = {f.name for f in fields(make_model(kind, robot).config)}
+
+    def objective(trial: optuna.Trial) -> float:
+        params = {name: _suggest(trial, name, s) for name, s in space.items() if name in names}
+        if max_seconds_per_trial is not None and 'max_seconds' in names:
+            params['max_seconds'] = max_seconds_per_trial
+        if 'device' in names:
+            params['device'] = 'cpu'
+        model = make_model(kind, robot, **params)
+        if isinstance(model, TorchModel):
+
+            def report(epoch: int, loss: float) -> bool:
+                trial.report(loss, epoch)
+                return trial.should_prune()
+
+            model.epoch_hook = report
+        model.fit(data)
+        history = model.history_ if isinstance(model, TorchModel) else None
+        if history is not None and history.stopped_by == 'pruned':
+            raise optuna.TrialPruned()
+        return validation_error(model, data)
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study.optimize(objective, n_trials=trials, show_progress_bar=progress)
+    complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    if not complete:
+        raise ConfigError(f'sweep: no trial of study {study_name!r} completed')
+    best = study.best_trial
+    params = dict(best.params)
+    value = float(best.value) if best.value is not None else float('nan')
+    best_file = out / 'best.yaml'
+    best_file.write_text(
+        yaml.safe_dump({kind: params}, sort_keys=True)
+        + f'# study {study_name}: validation error {value:.6g} '
+        f"(mean normalised RMSE on the training part's validation tail), trial {best.number}\n",
+        encoding='utf-8',
+    )
+    return SweepResult(
+        study_name=study_name,
+        storage=storage,
+        kind=kind,
+        finished=len(complete),
+        best_value=value,
+        best_params=params,
+        best_file=best_file,
+        figures=_plots(study, out),
+    )
+
+
+def _open_study(storage: str, study_name: str, seed: int | None) -> optuna.Study:
+    """Create or join the study; workers starting together race to create the schema.
+
+    Raises:
+        ConfigError: the storage cannot be opened (names the URL and the reason).
+    """
+    import optuna
+    from sqlalchemy.exc import IntegrityError, OperationalError, SQLAlchemyError
+
+    # SQLite: wait for a busy database instead of failing at once (several local workers).
+    engine = {'connect_args': {'timeout': 60}} if storage.startswith('sqlite') else {}
+    last: Exception | None = None
+    for attempt in range(STORAGE_ATTEMPTS):
+        try:
+            return optuna.create_study(
+                study_name=study_name,
+                storage=optuna.storages.RDBStorage(storage, engine_kwargs=engine),
+                load_if_exists=True,
+                direction='minimize',
+                sampler=optuna.samplers.TPESampler(seed=seed),
+                pruner=optuna.pruners.MedianPruner(n_startup_trials=2, n_warmup_steps=5),
+            )
+        except (IntegrityError, OperationalError) as err:  # another worker was first
+            last = err
+            time.sleep(0.2 * (attempt + 1))
+        except (
+            SQLAlchemyError,
+            ValueError,
+            ImportError,
+            optuna.exceptions.StorageInternalError,
+        ) as err:
+            raise ConfigError(f'sweep: cannot open the storage {storage!r}: {err}') from err
+    raise ConfigError(f'sweep: cannot open the storage {storage!r}: {last}')
+
+
+def _plots(study: optuna.Study, out: Path) -> tuple[Path, ...]:
+    """The optimisation history and, with enough trials, the parameter importances."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from optuna.exceptions import ExperimentalWarning
+    from optuna.visualization import matplotlib as optuna_plots
+
+    written = []
+    for name, draw in (
+        ('optimisation_history.png', optuna_plots.plot_optimization_history),
+        ('parameter_importances.png', optuna_plots.plot_param_importances),
+    ):
+        try:
+            with warnings.catch_warnings():  # optuna's matplotlib plots are 'experimental'
+                warnings.simplefilter('ignore', ExperimentalWarning)
+                axes = draw(study)
+        except (ValueError, RuntimeError) as err:  # importances need >= 2 finished trials
+            _LOG.info('sweep: no %s (%s)', name, err)
+            continue
+        figure = axes.get_figure(root=True)
+        assert figure is not None
+        figure.savefig(out / name, dpi=110, bbox_inches='tight')
+        plt.close(figure)
+        written.append(out / name)
+    return tuple(written)
