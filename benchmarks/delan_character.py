@@ -14,8 +14,9 @@ of one seed (build, train, evaluate) is compared with the reference's timed sing
 
 Training (``SETTINGS``): Adam with a step schedule, the learning rate divided by about 3 at 40 %,
 67 % and 87 % of the epochs (each step a fresh ``train_module`` call from the best weights so
-far). The LNN's weights are drawn fan-in scaled (truncated normal, std 1/sqrt(fan_in), as the
-reference's haiku layers are) instead of AnalyticMLP's Xavier-uniform: with 4 inputs and 64
+far). The LNN's weights are drawn fan-in scaled (``init='fan_in'``: truncated normal, std
+1/sqrt(fan_in), as the reference's haiku layers are) instead of AnalyticMLP's default
+Xavier-uniform: with 4 inputs and 64
 units Xavier draws the first layer about 3 times smaller, its tanh units start almost linear,
 and within the same epochs the LNN fits the training set about half as well (training loss 2x).
 
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -41,7 +41,6 @@ from common import REPO, environment
 
 from id_learning.models.fitting import OptimConfig, configure_torch, train_module
 from id_learning.models.lagrangian import DelanNetwork, LagrangianScaling, LnnNetwork
-from id_learning.models.nets import AnalyticMLP
 from id_learning.models.torch_utils import normalised_mse, to_numpy, to_tensor
 
 DEFAULT_DATA = REPO.parent / 'shared' / 'data' / 'delan_character'
@@ -113,18 +112,6 @@ def schedule(learning_rate: float, epochs: int) -> list[tuple[float, int]]:
     return [(rate, n) for rate, n in steps if n > 0]
 
 
-def fan_in_init(network: torch.nn.Module, generator: torch.Generator) -> None:
-    """Redraw every AnalyticMLP weight from a truncated normal, std 1/sqrt(fan_in); biases 0."""
-    with torch.no_grad():
-        for mlp in (m for m in network.modules() if isinstance(m, AnalyticMLP)):
-            for layer in mlp.linears():
-                std = 1.0 / math.sqrt(layer.weight.shape[1])
-                torch.nn.init.trunc_normal_(
-                    layer.weight, std=std, a=-2 * std, b=2 * std, generator=generator
-                )
-                layer.bias.zero_()
-
-
 def run_seed(
     kind: str, split: dict[str, dict[str, np.ndarray]], args: argparse.Namespace, seed: int
 ) -> dict[str, Any]:
@@ -136,11 +123,19 @@ def run_seed(
     generator = torch.Generator().manual_seed(seed)
     network: torch.nn.Module
     if kind == 'delan':
-        network = DelanNetwork(scaling, activation=settings['activation'], generator=generator)
+        network = DelanNetwork(
+            scaling,
+            activation=settings['activation'],
+            generator=generator,
+            init=settings['init'],
+        )
     else:
-        network = LnnNetwork(scaling, activation=settings['activation'], generator=generator)
-    if settings['init'] == 'fan_in':
-        fan_in_init(network, generator)
+        network = LnnNetwork(
+            scaling,
+            activation=settings['activation'],
+            generator=generator,
+            init=settings['init'],
+        )
     tensors = [to_tensor(train[name]) for name in ('q', 'v', 'a', 'tau')]
     scale = to_tensor(scaling.torque.scale())
 

@@ -84,6 +84,7 @@ class DelanNetwork(LagrangianNetwork):
         diagonal_epsilon: float = 1e-3,
         diagonal_shift: float = 0.0,
         generator: torch.Generator | None = None,
+        init: str = 'xavier',
     ) -> None:
         super().__init__(scaling)
         n = self.n_dof
@@ -91,9 +92,11 @@ class DelanNetwork(LagrangianNetwork):
         self.diagonal_epsilon = diagonal_epsilon
         self.diagonal_shift = diagonal_shift
         self.cholesky_net = AnalyticMLP(
-            n, n_entries, width, depth, activation, generator=generator
+            n, n_entries, width, depth, activation, generator=generator, init=init
         )
-        self.potential_net = AnalyticMLP(n, 1, width, depth, activation, generator=generator)
+        self.potential_net = AnalyticMLP(
+            n, 1, width, depth, activation, generator=generator, init=init
+        )
         # placement[i * n + j, e] = sqrt(e_i) / h_v[i] where entry e of the network's output goes
         # to L[i, j]: placing the entries and scaling the rows is one matrix product.
         rows, cols = torch.tril_indices(n, n, offset=-1)

@@ -43,7 +43,7 @@ from id_learning.models.delan import DelanNetwork, euler_lagrange_torque
 from id_learning.models.fitting import OptimConfig, select_device
 from id_learning.models.lagrangian_base import LagrangianNetwork, LagrangianScaling, energy_scale
 from id_learning.models.lnn import LnnMlpNetwork, LnnNetwork
-from id_learning.models.nets import SMOOTH_ACTIVATIONS
+from id_learning.models.nets import INITIALISATIONS, SMOOTH_ACTIVATIONS
 from id_learning.models.torch_model import TorchModel
 from id_learning.models.torch_utils import to_numpy, to_tensor
 from id_learning.robot.config import RobotConfig
@@ -83,6 +83,9 @@ class _LagrangianConfig(ModelConfig):
         width: units per hidden layer.
         depth: hidden layers.
         activation: 'tanh' or 'softplus' (needs a smooth second derivative).
+        init: the networks' initial weights, 'xavier' (the default) or 'fan_in' (truncated
+            normal, std 1 / sqrt(fan_in): the DeLaN reference's; what the LNN needs on the
+            character benchmark).
         learning_rate: Adam step size.
         batch_size: samples per mini-batch.
         max_epochs: upper bound on epochs.
@@ -102,6 +105,7 @@ class _LagrangianConfig(ModelConfig):
     width: int = 64
     depth: int = 2
     activation: str = 'tanh'
+    init: str = 'xavier'
     learning_rate: float = 1e-3
     batch_size: int = 256
     max_epochs: int = 300
@@ -127,6 +131,10 @@ class _LagrangianConfig(ModelConfig):
                     f'{self.kind}: {key} must be one of {sorted(SMOOTH_ACTIVATIONS)} '
                     f'(a Lagrangian needs smooth second derivatives), got {getattr(self, key)!r}'
                 )
+        if self.init not in INITIALISATIONS:
+            raise ConfigError(
+                f'{self.kind}: init must be one of {INITIALISATIONS}, got {self.init!r}'
+            )
         if not self.learning_rate > 0:
             raise ConfigError(f'{self.kind}: learning_rate must be > 0, got {self.learning_rate}')
         if self.weight_decay < 0:
@@ -367,6 +375,7 @@ class DelanModel(_LagrangianModel):
             diagonal_epsilon=config.diagonal_epsilon,
             diagonal_shift=config.diagonal_shift,
             generator=generator,
+            init=config.init,
         )
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
@@ -398,6 +407,7 @@ class LnnModel(_LagrangianModel):
             depth=config.depth,
             activation=config.activation,
             generator=generator,
+            init=config.init,
         )
 
 
@@ -421,4 +431,5 @@ class LnnMlpModel(_LagrangianModel):
             dissipation_depth=config.dissipation_depth,
             dissipation_activation=config.dissipation_activation,
             generator=generator,
+            init=config.init,
         )

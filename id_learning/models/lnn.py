@@ -32,10 +32,11 @@ class LnnNetwork(LagrangianNetwork):
         depth: int = 2,
         activation: str = 'softplus',
         generator: torch.Generator | None = None,
+        init: str = 'xavier',
     ) -> None:
         super().__init__(scaling)
         self.lagrangian_net = AnalyticMLP(
-            2 * self.n_dof, 1, width, depth, activation, generator=generator
+            2 * self.n_dof, 1, width, depth, activation, generator=generator, init=init
         )
 
     def _parts(
@@ -111,10 +112,16 @@ class LnnMlpNetwork(LagrangianNetwork):
         dissipation_depth: int = 2,
         dissipation_activation: str = 'tanh',
         generator: torch.Generator | None = None,
+        init: str = 'xavier',
     ) -> None:
         super().__init__(scaling)
         self.lnn = LnnNetwork(
-            scaling, width=width, depth=depth, activation=activation, generator=generator
+            scaling,
+            width=width,
+            depth=depth,
+            activation=activation,
+            generator=generator,
+            init=init,
         )
         self.dissipation_net = AnalyticMLP(
             2 * self.n_dof,
@@ -123,6 +130,7 @@ class LnnMlpNetwork(LagrangianNetwork):
             dissipation_depth,
             dissipation_activation,
             generator=generator,
+            init=init,
         )
 
     def dissipation(self, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:

@@ -70,6 +70,10 @@ SMOOTH_ACTIVATIONS: dict[
 }
 
 
+#: Initialisations of AnalyticMLP's weights.
+INITIALISATIONS = ('xavier', 'fan_in')
+
+
 class AnalyticMLP(nn.Module):
     """``depth`` hidden layers of ``width`` units with a smooth activation, and a linear output.
 
@@ -89,11 +93,16 @@ class AnalyticMLP(nn.Module):
         *,
         output_gain: float = 1.0,
         generator: torch.Generator | None = None,
+        init: str = 'xavier',
     ) -> None:
         """Build the layers and draw the initial weights.
 
+        ``init``: 'xavier' (uniform, bound sqrt(6 / (fan_in + fan_out))) or 'fan_in' (truncated
+        normal at two std, std 1 / sqrt(fan_in): the DeLaN reference's, which starts tanh units
+        out of their linear range).
+
         Raises:
-            ValueError: an unknown activation, or a size below 1.
+            ValueError: an unknown activation or initialisation, or a size below 1.
         """
         super().__init__()
         if activation not in SMOOTH_ACTIVATIONS:
@@ -101,6 +110,8 @@ class AnalyticMLP(nn.Module):
                 f'activation {activation!r} has no smooth second derivative; '
                 f'use one of {sorted(SMOOTH_ACTIVATIONS)}'
             )
+        if init not in INITIALISATIONS:
+            raise ValueError(f'init must be one of {INITIALISATIONS}, got {init!r}')
         if min(n_in, n_out, width, depth) < 1:
             raise ValueError(
                 f'n_in, n_out, width and depth must be >= 1, got {n_in}, {n_out}, {width}, {depth}'
@@ -118,10 +129,16 @@ class AnalyticMLP(nn.Module):
         with torch.no_grad():
             for index, layer in enumerate(self.linears()):
                 fan_out, fan_in = layer.weight.shape
-                bound = math.sqrt(6.0 / (fan_in + fan_out))
-                if index == depth:
-                    bound *= output_gain
-                layer.weight.uniform_(-bound, bound, generator=generator)
+                gain = output_gain if index == depth else 1.0
+                if init == 'fan_in':
+                    std = 1.0 / math.sqrt(fan_in)
+                    nn.init.trunc_normal_(
+                        layer.weight, std=std, a=-2 * std, b=2 * std, generator=generator
+                    )
+                    layer.weight.mul_(gain)
+                else:
+                    bound = gain * math.sqrt(6.0 / (fan_in + fan_out))
+                    layer.weight.uniform_(-bound, bound, generator=generator)
                 layer.bias.zero_()
 
     def _weights_and_biases(self) -> list[tuple[torch.Tensor, torch.Tensor]]:

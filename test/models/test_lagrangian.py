@@ -453,3 +453,23 @@ def test_fit_on_any_device_predicts_on_the_cpu_the_torque_of_its_lagrangian(
         not torch.equal(trained, initial)
         for trained, initial in zip(network.parameters(), untrained.parameters(), strict=True)
     )
+
+
+@pytest.mark.parametrize('kind', ['delan', 'lnn', 'lnn_mlp'])
+def test_the_init_setting_reaches_every_network_and_is_checked(kind, mabi):
+    from id_learning.models.registry import make_model
+
+    with pytest.raises(ConfigError, match='init must be one of'):
+        make_model(kind, mabi, init='orthogonal')
+    scaling = LagrangianScaling.from_data(
+        np.zeros((2, 6)), np.ones((2, 6)), np.ones((2, 6)) * 10.0
+    )
+    nets = {}
+    for init in ('xavier', 'fan_in'):
+        model = make_model(kind, mabi, init=init)
+        network = model.make_network(scaling, torch.Generator().manual_seed(0))
+        nets[init] = [p.detach().clone() for n, p in network.named_parameters() if 'weight' in n]
+    # Xavier's first layer (6 or 12 inputs, 64 units) is narrower than fan-in's 1/sqrt(fan_in).
+    for xavier, fan_in in zip(nets['xavier'], nets['fan_in'], strict=True):
+        if xavier.shape[1] in (6, 12):
+            assert float(fan_in.std()) > 1.5 * float(xavier.std())

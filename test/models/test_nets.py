@@ -157,3 +157,21 @@ def test_gradient_of_a_vector_output_net_is_refused() -> None:
 def test_activation_without_a_second_derivative_is_refused() -> None:
     with pytest.raises(ValueError, match=r"'relu'.*softplus"):
         AnalyticMLP(3, 1, activation='relu')
+
+
+def test_fan_in_initialisation_draws_a_truncated_normal_of_std_one_over_sqrt_fan_in() -> None:
+    net = AnalyticMLP(400, 300, width=500, depth=1, init='fan_in', output_gain=0.5,
+                      generator=torch.Generator().manual_seed(3))  # fmt: skip
+    first, last = net.linears()
+    std = 1.0 / 400**0.5
+    # A normal truncated at two std keeps 0.88 of its variance: std 0.8796 sigma.
+    assert float(first.weight.std()) == pytest.approx(0.8796 * std, rel=0.02)
+    assert float(first.weight.abs().max()) <= 2 * std
+    # The output layer: fan-in 500, scaled by the output gain.
+    assert float(last.weight.std()) == pytest.approx(0.5 * 0.8796 / 500**0.5, rel=0.02)
+    assert torch.count_nonzero(first.bias) == 0
+    xavier = AnalyticMLP(400, 300, width=500, depth=1, generator=torch.Generator().manual_seed(3))
+    bound = (6.0 / (400 + 500)) ** 0.5
+    assert float(xavier.linears()[0].weight.std()) == pytest.approx(bound / 3**0.5, rel=0.02)
+    with pytest.raises(ValueError, match='init must be one of'):
+        AnalyticMLP(2, 1, init='orthogonal')
