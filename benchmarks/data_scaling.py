@@ -132,6 +132,7 @@ def main() -> None:
                 max_seconds_per_model=args.seconds_per_model,
                 progress=False,
                 device='cpu',
+                overwrite=True,
                 preprocess=PreprocessConfig(train_fraction=train_n / (train_n + test_n)),
             )
             floors.append(run.metrics['label_noise_floor_nm'])

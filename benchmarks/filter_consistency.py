@@ -106,6 +106,7 @@ def main() -> None:
                 max_seconds_per_model=args.seconds_per_model,
                 progress=False,
                 device='cpu',
+                overwrite=True,
                 preprocess=PreprocessConfig(mode=way),
             )
             runs[way] = run.metrics

@@ -76,6 +76,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         device=args.device,
         preprocess=preprocess,
         study_table=options.study_table(args, robot),
+        overwrite=True,  # the demo's own folder: each run replaces the last
     )
     print(metrics_table(run.metrics))
     print(f'report: {run.report}', flush=True)

@@ -81,6 +81,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         device=args.device,
         preprocess=PreprocessConfig(mode=args.preprocessing),
         study_table=options.study_table(args, robot),
+        overwrite=args.force,
     )
     print(metrics_table(run.metrics))
     print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
@@ -155,6 +156,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
         help='hyper-parameter override, e.g. mlp.max_epochs=50 (repeatable)',
     )
     p.add_argument('--quiet', action='store_true', help='no progress bars')
+    p.add_argument('--force', action='store_true', help='replace a run already in --out')
 
 
 def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, Target
-from id_learning.errors import CheckpointError
+from id_learning.errors import CheckpointError, ConfigError
 from id_learning.evaluation.study import StudyTable
 from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.models.data import TrainingData
@@ -134,6 +134,7 @@ def train_run(
     device: str = 'auto',
     preprocess: PreprocessConfig | None = None,
     study_table: StudyTable | None = None,
+    overwrite: bool = False,
 ) -> RunResult:
     """Train models on bags and write a run folder (models, metrics.json, report.md).
 
@@ -149,9 +150,11 @@ def train_run(
         device: 'auto' (CUDA when present), 'cpu' or 'cuda'.
         preprocess: preprocessing settings; the default is the study's, with ``target``.
         study_table: the study's Table 1 for the report (``evaluation.study``), if given.
+        overwrite: replace a run already in ``out``; without it such a run is left intact.
 
     Raises:
-        ConfigError: unknown kind or hyper-parameter, or an unavailable device.
+        ConfigError: unknown kind or hyper-parameter, an unavailable device, or ``out`` holds
+            a run and ``overwrite`` is not set.
         DatasetError, BagError: a bag is unusable.
     """
     kinds = list(dict.fromkeys(kinds))
@@ -163,6 +166,11 @@ def train_run(
     # Measured on a shared 2-core machine: a DeLaN step took 14 ms on one thread, 1.4 s on two.
     configure_torch(TRAIN_THREADS)
     out = Path(out)
+    if (out / RUN_FILE).exists() and not overwrite:
+        raise ConfigError(
+            f'{out}: holds a training run already ({RUN_FILE}); choose another --out, or pass '
+            '--force to replace it'
+        )
     bags = [Path(b) for b in bags]
     # Bad bags are refused before anything is written.
     dataset = combine_datasets(load_datasets(bags, robot, config, progress=progress))

@@ -344,6 +344,17 @@ def test_evaluate_takes_the_test_part_of_a_training_bag_and_all_of_a_new_one(
     assert set(result.metrics['models']) == {'rnea_lq', 'mlp'}
 
 
+def test_a_run_in_the_out_folder_is_kept_unless_force_is_given(bags, mabi, tmp_path):
+    out = tmp_path / 'run'
+    first = train_run(bags[:1], mabi, 'motor', ['rnea_lq'], out, progress=False)
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    with pytest.raises(ConfigError, match=r'holds a training run already.*--force'):
+        train_run(bags[1:], mabi, 'motor', ['rnea_lq'], out, progress=False)
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+    second = train_run(bags[1:], mabi, 'motor', ['rnea_lq'], out, progress=False, overwrite=True)
+    assert second.metrics['bags'] != first.metrics['bags']
+
+
 def test_unknown_kinds_and_hyper_parameters_are_refused_before_any_bag_is_read(mabi, tmp_path):
     missing = [tmp_path / 'no_such_bag']
     with pytest.raises(ConfigError, match='known kinds'):
