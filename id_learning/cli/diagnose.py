@@ -25,6 +25,7 @@ def diagnose_bags(
     effects: Sequence[str] | None = None,
     progress: bool = True,
     recordings: Sequence[Any] | None = None,
+    trim_unpaired_tail: bool = False,
 ) -> Any:
     """Diagnose bags; write report.md, effects.json, figures and the rnea_effects model to ``out``.
 
@@ -50,7 +51,11 @@ def diagnose_bags(
             print(f'loading {bag} ...', flush=True)
             recordings.append(
                 load_recording(
-                    Path(bag), robot, require_current=target == 'motor', progress=progress
+                    Path(bag),
+                    robot,
+                    require_current=target == 'motor',
+                    progress=progress,
+                    trim_unpaired_tail=trim_unpaired_tail,
                 )
             )
     print('diagnosing: nominal model vs measurements, forward selection of named effects ...',
@@ -76,6 +81,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         out,
         effects=options.comma_names(args.effects) if args.effects else None,
         progress=not args.quiet,
+        trim_unpaired_tail=args.trim_unpaired_tail,
     )
     print(render_summary(result))
     print(
@@ -102,5 +108,6 @@ def add_diagnose_command(sub: argparse._SubParsersAction[argparse.ArgumentParser
         help='comma-separated candidate effects to try (default: the whole library)',
     )
     p.add_argument('--quiet', action='store_true', help='no progress bars')
+    options.trim_option(p)
     options.robot_option(p)
     p.set_defaults(func=cmd_diagnose)

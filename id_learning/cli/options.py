@@ -64,6 +64,16 @@ def preprocessing_option(p: argparse.ArgumentParser) -> None:
     )
 
 
+def trim_option(p: argparse.ArgumentParser) -> None:
+    """The --trim-unpaired-tail option of the commands that read bags."""
+    p.add_argument(
+        '--trim-unpaired-tail',
+        action='store_true',
+        help="drop a torn recording's last messages that have no partner on the other topic "
+        '(with a warning) instead of refusing the bag',
+    )
+
+
 def study_table_option(p: argparse.ArgumentParser) -> None:
     """The --study-table option: the reference study's Table 1 as JSON, for the report."""
     p.add_argument(

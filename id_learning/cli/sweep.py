@@ -33,6 +33,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         preprocess=PreprocessConfig(target=args.target, mode=args.preprocessing),
         progress=not args.quiet,
         seed=args.seed,
+        trim_unpaired_tail=args.trim_unpaired_tail,
     )
     print(
         f'study {result.study_name} ({result.storage}): {result.finished} finished trials; '
@@ -69,4 +70,5 @@ def add_sweep_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     p.add_argument('--seed', type=int, help="the sampler's seed (default: random)")
     p.add_argument('--quiet', action='store_true', help='no progress bar')
+    options.trim_option(p)
     p.set_defaults(func=cmd_sweep)

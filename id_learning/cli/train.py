@@ -82,6 +82,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         preprocess=PreprocessConfig(mode=args.preprocessing),
         study_table=options.study_table(args, robot),
         overwrite=args.force,
+        trim_unpaired_tail=args.trim_unpaired_tail,
     )
     print(metrics_table(run.metrics))
     print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
@@ -157,6 +158,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument('--quiet', action='store_true', help='no progress bars')
     p.add_argument('--force', action='store_true', help='replace a run already in --out')
+    options.trim_option(p)
 
 
 def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -243,7 +243,8 @@ def load_recording(
                 raise DatasetError(
                     f'{path}: the last {extra} message(s) of {longer} have no partner on the '
                     f'other topic (samples {size} on), as a torn recording leaves them; pass '
-                    'trim_unpaired_tail (CLI: --trim-unpaired-tail) to drop them'
+                    '--trim-unpaired-tail (train, sweep, diagnose; trim_unpaired_tail in '
+                    'load_recording) to drop them'
                 )
             _LOG.warning('%s: dropped the last %d unpaired message(s) of %s', path, extra, longer)
             states = replace(

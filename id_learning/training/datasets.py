@@ -119,15 +119,27 @@ def preprocess_from_dict(data: dict[str, Any]) -> PreprocessConfig:
 
 
 def load_datasets(
-    bags: Sequence[Path], robot: RobotConfig, config: PreprocessConfig, *, progress: bool = True
+    bags: Sequence[Path],
+    robot: RobotConfig,
+    config: PreprocessConfig,
+    *,
+    progress: bool = True,
+    trim_unpaired_tail: bool = False,
 ) -> list[Dataset]:
-    """Load and preprocess each bag on its own (filtering never crosses two recordings)."""
+    """Load and preprocess each bag on its own (filtering never crosses two recordings).
+
+    ``trim_unpaired_tail``: drop a torn recording's last unpaired messages (``load_recording``).
+    """
     if not bags:
         raise ConfigError('no bag given: pass at least one --bag')
     datasets = []
     for bag in tqdm(bags, desc='loading bags', unit='bag', disable=not progress or len(bags) < 2):
         recording = load_recording(
-            Path(bag), robot, require_current=config.target == 'motor', progress=progress
+            Path(bag),
+            robot,
+            require_current=config.target == 'motor',
+            progress=progress,
+            trim_unpaired_tail=trim_unpaired_tail,
         )
         dataset = prepare_dataset(recording, robot, config)
         clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)

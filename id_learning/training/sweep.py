@@ -152,6 +152,7 @@ def run_sweep(
     preprocess: PreprocessConfig | None = None,
     progress: bool = True,
     seed: int | None = None,
+    trim_unpaired_tail: bool = False,
 ) -> SweepResult:
     """Run ``trials`` trials of one kind into a (possibly shared) study; write DIR/best.yaml.
 
@@ -169,7 +170,13 @@ def run_sweep(
     storage = storage or f'sqlite:///{(out / "sweep.db").resolve()}'
     study_name = study_name or f'{kind}-{target}'
     config = PreprocessConfig(target=target) if preprocess is None else preprocess
-    datasets = load_datasets([Path(b) for b in bags], robot, config, progress=progress)
+    datasets = load_datasets(
+        [Path(b) for b in bags],
+        robot,
+        config,
+        progress=progress,
+        trim_unpaired_tail=trim_unpaired_tail,
+    )
     data = TrainingData(combine_datasets(datasets), robot)
     configure_torch(1)
     study = _open_study(storage, study_name, seed)

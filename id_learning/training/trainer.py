@@ -135,6 +135,7 @@ def train_run(
     preprocess: PreprocessConfig | None = None,
     study_table: StudyTable | None = None,
     overwrite: bool = False,
+    trim_unpaired_tail: bool = False,
 ) -> RunResult:
     """Train models on bags and write a run folder (models, metrics.json, report.md).
 
@@ -151,6 +152,7 @@ def train_run(
         preprocess: preprocessing settings; the default is the study's, with ``target``.
         study_table: the study's Table 1 for the report (``evaluation.study``), if given.
         overwrite: replace a run already in ``out``; without it such a run is left intact.
+        trim_unpaired_tail: drop a torn recording's last unpaired messages, with a warning.
 
     Raises:
         ConfigError: unknown kind or hyper-parameter, an unavailable device, or ``out`` holds
@@ -173,7 +175,11 @@ def train_run(
         )
     bags = [Path(b) for b in bags]
     # Bad bags are refused before anything is written.
-    dataset = combine_datasets(load_datasets(bags, robot, config, progress=progress))
+    dataset = combine_datasets(
+        load_datasets(
+            bags, robot, config, progress=progress, trim_unpaired_tail=trim_unpaired_tail
+        )
+    )
     (out / MODELS_DIR).mkdir(parents=True, exist_ok=True)
     data = TrainingData(dataset, robot)
     scale = dataset.target_scaler.scale()
