@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -146,8 +147,39 @@ def read_artifact(
     shapes = {name: list(value.shape) for name, value in tensors.items()}
     if shapes != metadata.get('tensors'):
         raise CheckpointError(f'{weights_path}: tensors {shapes} differ from the metadata')
+    for name, value in tensors.items():
+        bad = np.flatnonzero(~np.isfinite(np.asarray(value, dtype=float)))
+        if bad.size:
+            raise CheckpointError(
+                f'{weights_path}: tensor {name} holds {bad.size} non-finite value(s) (first at '
+                f'flat index {int(bad[0])}); a model never predicts from them'
+            )
+    for key in ('fitted', 'target_scaler'):
+        _check_finite(metadata.get(key), key, meta_path)
     _check_robot(metadata.get('robot', {}), robot, folder)
     return metadata, tensors
+
+
+#: Summaries in the fitted metadata that describe the fit and never enter a prediction (a loss
+#: may be inf before the first epoch, a condition number inf for a rank-deficient recording).
+SUMMARY_KEYS = ('training', 'history', 'report', 'diagnosis')
+
+
+def _check_finite(value: Any, where: str, path: Path) -> None:
+    """Refuse NaN or inf anywhere in the numbers a model predicts from, naming the field.
+
+    Raises:
+        CheckpointError: names the file and the field (e.g. fitted.input_scaler.low[3]).
+    """
+    if isinstance(value, float) and not math.isfinite(value):
+        raise CheckpointError(f'{path}: {where} is {value}; a model file holds finite numbers')
+    if isinstance(value, dict):
+        for key, item in value.items():
+            if key not in SUMMARY_KEYS:
+                _check_finite(item, f'{where}.{key}', path)
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            _check_finite(item, f'{where}[{index}]', path)
 
 
 def artifact_inputs(

@@ -294,6 +294,25 @@ def test_a_tampered_weights_file_is_refused(artifact_copy, mabi):
         load_model(artifact_copy, mabi)
 
 
+def test_a_weights_file_with_nan_is_refused_even_with_a_matching_hash(artifact_copy, mabi):
+    import hashlib
+    import json
+
+    from safetensors.numpy import load_file, save_file
+
+    weights, meta = artifact_copy / 'weights.safetensors', artifact_copy / 'model.json'
+    tensors = load_file(str(weights))
+    name = sorted(tensors)[0]
+    tensors[name] = tensors[name].copy()
+    tensors[name].flat[2] = np.nan
+    save_file(tensors, str(weights))
+    data = json.loads(meta.read_text())
+    data['weights_sha256'] = hashlib.sha256(weights.read_bytes()).hexdigest()
+    meta.write_text(json.dumps(data))
+    with pytest.raises(CheckpointError, match=rf'tensor {name} holds 1 non-finite.*index 2'):
+        load_model(artifact_copy, mabi)
+
+
 @pytest.mark.parametrize(
     ('edit', 'message'),
     [
@@ -301,8 +320,21 @@ def test_a_tampered_weights_file_is_refused(artifact_copy, mabi):
         (lambda d: {**d, 'kind': 'rnea_lq'}, 'hyper-parameters do not fit rnea_lq'),
         (lambda d: {**d, 'tensors': {**d['tensors'], 'extra': [1]}}, 'differ from the metadata'),
         (lambda d: {**d, 'units': {**d['units'], 'tau': 'kN*m'}}, 'units'),
+        (
+            lambda d: {
+                **d,
+                'fitted': {
+                    **d['fitted'],
+                    'input_scaler': {
+                        **d['fitted']['input_scaler'],
+                        'low': [float('nan'), *d['fitted']['input_scaler']['low'][1:]],
+                    },
+                },
+            },
+            r'fitted\.input_scaler\.low\[0\] is nan',
+        ),
     ],
-    ids=['format', 'kind', 'tensor-list', 'units'],
+    ids=['format', 'kind', 'tensor-list', 'units', 'nan-in-a-scaler'],
 )
 def test_a_model_json_that_is_not_what_it_claims_is_refused(artifact_copy, mabi, edit, message):
     meta = artifact_copy / 'model.json'
