@@ -53,6 +53,7 @@ class TorchModel(InverseDynamicsModel, Generic[_Net]):
         super().__init__(config, robot)
         self.network_: _Net | None = None
         self.history_: TrainHistory | None = None
+        #: The summary a loaded model's metadata held (a fitted one derives it from history_).
         self._history_summary: dict[str, Any] | None = None
 
     @property
@@ -103,7 +104,7 @@ class TorchModel(InverseDynamicsModel, Generic[_Net]):
         )
         self.network_ = network
         self.history_ = summary
-        self._history_summary = summary.to_dict()
+        self._history_summary = None
 
     def _load_network(
         self, network: _Net, tensors: dict[str, np.ndarray], fitted: dict[str, Any]
@@ -125,5 +126,5 @@ class TorchModel(InverseDynamicsModel, Generic[_Net]):
 
     def _history_metadata(self) -> dict[str, Any]:
         """The training summary under ``history_key``, when there is one."""
-        summary = self._history_summary
+        summary = self.history_.to_dict() if self.history_ is not None else self._history_summary
         return {} if summary is None else {self.history_key: summary}

@@ -186,41 +186,14 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
         segment['test'] = [start, stop]
         start = stop
 
-    def stack(name: str) -> np.ndarray:
-        parts = [getattr(d, name)[rows] for d, rows in zip(datasets, train_rows, strict=True)]
-        parts += [getattr(d, name)[rows] for d, rows in zip(datasets, test_rows, strict=True)]
-        return np.concatenate(parts, axis=0)
-
-    def stack_motion(name: str) -> Motion:
-        parts = [getattr(d, name).take(rows) for d, rows in zip(datasets, train_rows, strict=True)]
-        parts += [getattr(d, name).take(rows) for d, rows in zip(datasets, test_rows, strict=True)]
-        return Motion.concatenate(parts)
-
-    q, v, a, tau = stack('q'), stack('v'), stack('a'), stack('tau')
-    has_clean = all(d.tau_clean is not None for d in datasets)
-    return Dataset(
-        joints=first.joints,
-        target=first.target,
-        period_s=first.period_s,
-        stamps_ns=stack('stamps_ns'),
-        q=q,
-        v=v,
-        a=a,
-        tau=tau,
-        tau_raw=stack('tau_raw'),
+    pieces = [(d, rows) for d, rows in zip(datasets, train_rows, strict=True)]
+    pieces += [(d, rows) for d, rows in zip(datasets, test_rows, strict=True)]
+    return _joined(
+        datasets,
+        pieces,
         n_train=n_train,
-        input_scaler=MinMaxScaler().fit(np.hstack([q, v, a])[:n_train]),
-        target_scaler=MinMaxScaler().fit(tau[:n_train]),
-        cutoff_hz=first.cutoff_hz,
-        filter_order=first.filter_order,
-        mode=first.mode,
-        controller=stack_motion('controller'),
-        study=stack_motion('study'),
-        controller_inputs=first.controller_inputs,
-        tau_clean=stack('tau_clean') if has_clean else None,
+        segments=segments,
         regularise_report=first.regularise_report if len(datasets) == 1 else None,
-        source=' + '.join(d.source for d in datasets),
-        extra={'segments': segments},
     )
 
 
@@ -246,14 +219,34 @@ def concatenate_for_evaluation(
     if sum(s['test'][1] - s['test'][0] for s in segments) == 0:
         raise DatasetError('no samples left to evaluate')
 
+    pieces = [(d, slice(0, len(d.q))) for d in datasets]
+    return _joined(datasets, pieces, n_train=0, segments=segments, target_scaler=target_scaler)
+
+
+def _joined(
+    datasets: Sequence[Dataset],
+    pieces: Sequence[tuple[Dataset, slice]],
+    *,
+    n_train: int,
+    segments: list[dict[str, Any]],
+    target_scaler: MinMaxScaler | None = None,
+    regularise_report: Any = None,
+) -> Dataset:
+    """One dataset of row ranges of recordings, in the order given.
+
+    The input scaler is fitted on the first ``n_train`` rows (all of them when 0), the target
+    scaler likewise unless one is given.
+    """
+    first = datasets[0]
+
     def stack(name: str) -> np.ndarray:
-        return np.concatenate([getattr(d, name) for d in datasets], axis=0)
+        return np.concatenate([getattr(d, name)[rows] for d, rows in pieces], axis=0)
 
     def stack_motion(name: str) -> Motion:
-        return Motion.concatenate([getattr(d, name) for d in datasets])
+        return Motion.concatenate([getattr(d, name).take(rows) for d, rows in pieces])
 
-    q, v, a = stack('q'), stack('v'), stack('a')
-    first = datasets[0]
+    q, v, a, tau = stack('q'), stack('v'), stack('a'), stack('tau')
+    fit = slice(0, n_train) if n_train else slice(None)
     has_clean = all(d.tau_clean is not None for d in datasets)
     return Dataset(
         joints=first.joints,
@@ -263,11 +256,11 @@ def concatenate_for_evaluation(
         q=q,
         v=v,
         a=a,
-        tau=stack('tau'),
+        tau=tau,
         tau_raw=stack('tau_raw'),
-        n_train=0,
-        input_scaler=MinMaxScaler().fit(np.hstack([q, v, a])),
-        target_scaler=target_scaler,
+        n_train=n_train,
+        input_scaler=MinMaxScaler().fit(np.hstack([q, v, a])[fit]),
+        target_scaler=target_scaler or MinMaxScaler().fit(tau[fit]),
         cutoff_hz=first.cutoff_hz,
         filter_order=first.filter_order,
         mode=first.mode,
@@ -275,6 +268,7 @@ def concatenate_for_evaluation(
         study=stack_motion('study'),
         controller_inputs=first.controller_inputs,
         tau_clean=stack('tau_clean') if has_clean else None,
+        regularise_report=regularise_report,
         source=' + '.join(d.source for d in datasets),
         extra={'segments': segments},
     )
