@@ -23,6 +23,23 @@ training ranges. A torque is an energy per radian, so joint ``i`` has the energy
   RMSE 2.67 and 1.02 of its half range). ``S`` is fixed and invertible, so every symmetric
   positive definite ``M`` stays representable.
 - LNN+MLP: the dissipation network's output is multiplied by the torque half ranges ``h_tau``.
+
+Balance (the potential's and the LNN's inputs): a scalar energy serves every joint, and on a
+heavy arm the ``e_i`` span three to four orders of magnitude (MABI: 2.3 J wrist roll, 5900 J
+shoulder). With plain inputs a joint's normalised torque is ``E / e_i`` times the net's input
+gradient: the wrist's error is amplified a hundredfold and its noisy gradients on the shared
+weights starve the shoulder, whose gravity is then never learned (supervised on the true
+gravity alone: shoulder error 0.46 of its half range after 100 epochs, 0.016 without the wrist
+in the loss). So the scalar nets see ``r_i q_s,i`` (and ``r_i v_s,i``) with
+``r_i = (e_i / e_max)^b`` and the energy scale is ``E_b = E (e_max / E)^b``: at ``b = 1`` every
+joint's normalised torque is equally sensitive to the net's input gradient. DeLaN's factor gets
+the same treatment: an entry ``L_ij`` below the diagonal is scaled by
+``(min(e_i, e_j) / max(e_i, e_j))^(b / 2)``, so that the optimiser's step noise on the coupling
+of a shoulder and a wrist does not leak hundreds of times the wrist's torque scale into it. These
+are changes of coordinates, not of model: the first layer (and the fixed entry gains) absorb
+them, every Lagrangian stays representable. ``b = 0`` is the plain scaling (models saved before
+the balance existed); smaller ``b`` keeps more of a small joint's nonlinear dependence within the
+net's reach (its inputs span ``r_i`` of [-1, 1]), larger ``b`` conditions the fit better.
 """
 
 from __future__ import annotations
@@ -57,21 +74,36 @@ class LagrangianScaling:
         position: q [rad] -> [-1, 1], per joint.
         velocity: v [rad/s] -> [-1, 1], per joint.
         torque: tau [N*m] -> [-1, 1], per joint: the loss scale and the dissipation output scale.
-        energy: E [J], the factor from the networks' dimensionless Lagrangian to joules.
+        energy: E [J], the geometric mean of the joints' energy scales ``e_i``.
+        balance: exponent b of the scalar nets' input gains (module docstring); 0 for none.
     """
 
     position: MinMaxScaler
     velocity: MinMaxScaler
     torque: MinMaxScaler
     energy: float
+    balance: float = 0.0
 
     @property
     def n_dof(self) -> int:
         """Number of joints."""
         return len(self.position.scale())
 
+    def joint_energies(self) -> np.ndarray:
+        """e_i = h_tau,i * h_q,i (n,) [J]."""
+        return self.torque.scale() * self.position.scale()
+
+    def balanced(self) -> tuple[np.ndarray, float]:
+        """The scalar nets' input gains ``r`` (n,) and energy scale ``E_b`` [J]."""
+        energies = self.joint_energies()
+        peak = float(np.max(energies))
+        gains = (energies / peak) ** self.balance
+        return gains, self.energy * (peak / self.energy) ** self.balance
+
     @classmethod
-    def from_data(cls, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> LagrangianScaling:
+    def from_data(
+        cls, q: np.ndarray, v: np.ndarray, tau: np.ndarray, *, balance: float = 0.0
+    ) -> LagrangianScaling:
         """Fit the scalers on training arrays (N, n) and derive the energy scale."""
         position = MinMaxScaler().fit(np.asarray(q, float))
         torque = MinMaxScaler().fit(np.asarray(tau, float))
@@ -80,10 +112,11 @@ class LagrangianScaling:
             MinMaxScaler().fit(np.asarray(v, float)),
             torque,
             energy_scale(position.scale(), torque.scale()),
+            balance,
         )
 
     @classmethod
-    def from_dataset(cls, dataset: Dataset) -> LagrangianScaling:
+    def from_dataset(cls, dataset: Dataset, *, balance: float = 0.0) -> LagrangianScaling:
         """Reuse the dataset's scalers (fitted on its training part): q and v columns, target."""
         inputs = dataset.input_scaler
         if inputs.low_ is None or inputs.high_ is None:
@@ -92,7 +125,8 @@ class LagrangianScaling:
         position = MinMaxScaler(inputs.low_[:n].copy(), inputs.high_[:n].copy())
         velocity = MinMaxScaler(inputs.low_[n : 2 * n].copy(), inputs.high_[n : 2 * n].copy())
         torque = MinMaxScaler.from_dict(dataset.target_scaler.to_dict())
-        return cls(position, velocity, torque, energy_scale(position.scale(), torque.scale()))
+        energy = energy_scale(position.scale(), torque.scale())
+        return cls(position, velocity, torque, energy, balance)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready state."""
@@ -101,16 +135,18 @@ class LagrangianScaling:
             'velocity': self.velocity.to_dict(),
             'torque': self.torque.to_dict(),
             'energy_scale_j': self.energy,
+            'energy_balance': self.balance,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> LagrangianScaling:
-        """Rebuild from ``to_dict`` output."""
+        """Rebuild from ``to_dict`` output (no balance saved: a model from before it, 0)."""
         return cls(
             MinMaxScaler.from_dict(data['position']),
             MinMaxScaler.from_dict(data['velocity']),
             MinMaxScaler.from_dict(data['torque']),
             float(data['energy_scale_j']),
+            float(data.get('energy_balance', 0.0)),
         )
 
 
@@ -118,7 +154,8 @@ class LagrangianNetwork(nn.Module):
     """Base of the torque networks: maps SI states to torque through a scaled Lagrangian.
 
     The scaling is kept as non-persistent buffers: they move with ``.to()`` but are not
-    weights (they are saved as fitted metadata).
+    weights (they are saved as fitted metadata). ``lagrangian_q_half``, ``lagrangian_v_half``
+    and ``lagrangian_energy`` are the balanced maps of the scalar nets (``h / r`` and ``E_b``).
     """
 
     q_centre: torch.Tensor
@@ -127,6 +164,9 @@ class LagrangianNetwork(nn.Module):
     v_half: torch.Tensor
     tau_half: torch.Tensor
     energy: torch.Tensor
+    lagrangian_q_half: torch.Tensor
+    lagrangian_v_half: torch.Tensor
+    lagrangian_energy: torch.Tensor
 
     def __init__(self, scaling: LagrangianScaling) -> None:
         super().__init__()
@@ -146,6 +186,10 @@ class LagrangianNetwork(nn.Module):
             'tau_half': scaling.torque.scale(),
             'energy': np.asarray(scaling.energy),
         }
+        gains, balanced_energy = scaling.balanced()
+        buffers['lagrangian_q_half'] = buffers['q_half'] / gains
+        buffers['lagrangian_v_half'] = buffers['v_half'] / gains
+        buffers['lagrangian_energy'] = np.asarray(balanced_energy)
         dtype = torch.get_default_dtype()
         for name, value in buffers.items():
             self.register_buffer(name, torch.as_tensor(value, dtype=dtype), persistent=False)
@@ -164,7 +208,10 @@ class LagrangianNetwork(nn.Module):
 
     def numpy_scaling(self) -> dict[str, np.ndarray]:
         """The scaling buffers as float64 numpy arrays, by name (energy as a 0-d array)."""
-        names = ('q_centre', 'q_half', 'v_centre', 'v_half', 'tau_half', 'energy')
+        names = (
+            *('q_centre', 'q_half', 'v_centre', 'v_half', 'tau_half', 'energy'),
+            *('lagrangian_q_half', 'lagrangian_v_half', 'lagrangian_energy'),
+        )
         return {name: float64_array(getattr(self, name)) for name in names}
 
     @abstractmethod

@@ -44,17 +44,16 @@ class LnnNetwork(LagrangianNetwork):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """(d2L/dv2) a + (d2L/dq dv) v_direction and dL/dq at (q, v), physical units."""
         n = self.n_dof
-        q_s, v_s = self.scaled_state(q, v)
-        # The Hessian in physical units is D H_s D with D = diag(1/h_q, 1/h_v), so
-        # [H u]_v = (1/h_v) [H_s (D u)]_v and dL/dq = (1/h_q) [grad_s]_q.
-        direction = torch.cat([v_direction / self.q_half, a / self.v_half], dim=1)
+        q_half, v_half = self.lagrangian_q_half, self.lagrangian_v_half
+        q_s, v_s = (q - self.q_centre) / q_half, (v - self.v_centre) / v_half
+        # The Hessian in physical units is D H_s D with D = diag(1/h_q, 1/h_v) (the balanced
+        # half ranges), so [H u]_v = (1/h_v) [H_s (D u)]_v and dL/dq = (1/h_q) [grad_s]_q.
+        direction = torch.cat([v_direction / q_half, a / v_half], dim=1)
         _, gradient, hvp = self.lagrangian_net.gradient_and_hvp(
             torch.cat([q_s, v_s], dim=1), direction
         )
-        return (
-            self.energy * hvp[:, n:] / self.v_half,
-            self.energy * gradient[:, :n] / self.q_half,
-        )
+        energy = self.lagrangian_energy
+        return energy * hvp[:, n:] / v_half, energy * gradient[:, :n] / q_half
 
     def forward(self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         """Torque (B, n) [N*m]: (d2L/dv2) a + (d2L/dq dv) v - dL/dq, one analytic pass."""
@@ -65,9 +64,11 @@ class LnnNetwork(LagrangianNetwork):
         """forward() for one sample, q, v, a (n,) -> tau (n,), in float64 numpy."""
         n = self.n_dof
         s = self.numpy_scaling()
+        q_half, v_half = s['lagrangian_q_half'], s['lagrangian_v_half']
         centre = np.concatenate([s['q_centre'], s['v_centre']])
-        half = np.concatenate([s['q_half'], s['v_half']])
-        hvp_scale, gradient_scale = s['energy'] / s['v_half'], s['energy'] / s['q_half']
+        half = np.concatenate([q_half, v_half])
+        energy = s['lagrangian_energy']
+        hvp_scale, gradient_scale = energy / v_half, energy / q_half
         net = NumpyAnalyticMLP(self.lagrangian_net)
         concatenate = np.concatenate
 

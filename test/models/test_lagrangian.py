@@ -59,12 +59,12 @@ def float64():
     torch.set_default_dtype(previous)
 
 
-def random_scaling(seed: int = 0) -> LagrangianScaling:
+def random_scaling(seed: int = 0, balance: float = 0.0) -> LagrangianScaling:
     rng = np.random.default_rng(seed)
     q = rng.uniform(-2.0, 2.0, (200, N_DOF)) + np.array([0.3, -0.5, 1.0])
     v = rng.uniform(-1.5, 1.5, (200, N_DOF)) * np.array([1.0, 0.5, 2.0])
     tau = rng.normal(0.0, 1.0, (200, N_DOF)) * np.array([50.0, 20.0, 3.0])
-    return LagrangianScaling.from_data(q, v, tau)
+    return LagrangianScaling.from_data(q, v, tau, balance=balance)
 
 
 def random_state(seed: int, batch: int = 7) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -122,10 +122,11 @@ def test_euler_lagrange_torque_of_a_two_link_arm_matches_the_closed_form(float64
 # Networks against autograd on the same functions
 
 
+@pytest.mark.parametrize('balance', [0.0, 1.0])
 def test_delan_torque_matches_autograd_euler_lagrange_of_its_mass_matrix_and_potential(
-    float64,
+    float64, balance: float
 ) -> None:
-    network = DelanNetwork(random_scaling(), generator=generator(2))
+    network = DelanNetwork(random_scaling(balance=balance), generator=generator(2))
     q, v, a = random_state(seed=3)
 
     def mass(row: torch.Tensor) -> torch.Tensor:
@@ -184,9 +185,19 @@ def test_delan_at_rest_predicts_its_gravity_torque_only(float64) -> None:
 def lnn_reference(network: LnnNetwork, q, v, a) -> torch.Tensor:
     """(d2L/dv2) a + (d2L/dq dv) v - dL/dq with torch.func on the same physical Lagrangian."""
 
+    scaling = network.scaling
+
+    def tensor(x) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=q.dtype)
+
+    gains, energy = (tensor(x) for x in scaling.balanced())
+
+    def unit(x: torch.Tensor, scaler) -> torch.Tensor:
+        return (x - tensor(0.5 * (scaler.low_ + scaler.high_))) / tensor(scaler.scale())
+
     def lagrangian(q1: torch.Tensor, v1: torch.Tensor) -> torch.Tensor:
-        q_s, v_s = network.scaled_state(q1.unsqueeze(0), v1.unsqueeze(0))
-        return network.energy * network.lagrangian_net(torch.cat([q_s, v_s], dim=1))[0, 0]
+        x = torch.cat([unit(q1, scaling.position) * gains, unit(v1, scaling.velocity) * gains])
+        return energy * network.lagrangian_net(x.unsqueeze(0))[0, 0]
 
     def one(q1: torch.Tensor, v1: torch.Tensor, a1: torch.Tensor) -> torch.Tensor:
         hessian_vv = hessian(lagrangian, argnums=1)(q1, v1)
@@ -196,9 +207,14 @@ def lnn_reference(network: LnnNetwork, q, v, a) -> torch.Tensor:
     return vmap(one)(q, v, a)
 
 
-@pytest.mark.parametrize('activation', ['softplus', 'tanh'])
-def test_lnn_torque_matches_torch_func_euler_lagrange(float64, activation: str) -> None:
-    network = LnnNetwork(random_scaling(), activation=activation, generator=generator(10))
+@pytest.mark.parametrize(
+    ('activation', 'balance'), [('softplus', 0.0), ('tanh', 0.0), ('tanh', 1.0)]
+)
+def test_lnn_torque_matches_torch_func_euler_lagrange(
+    float64, activation: str, balance: float
+) -> None:
+    scaling = random_scaling(balance=balance)
+    network = LnnNetwork(scaling, activation=activation, generator=generator(10))
     q, v, a = random_state(seed=11)
     expected = lnn_reference(network, q, v, a)
     assert expected.abs().max() > 1.0
@@ -236,6 +252,39 @@ def test_scaling_survives_a_json_round_trip_exactly() -> None:
         np.testing.assert_array_equal(getattr(again, name).scale(), getattr(scaling, name).scale())
     expected = np.exp(np.mean(np.log(scaling.torque.scale() * scaling.position.scale())))
     assert scaling.energy == pytest.approx(expected, rel=1e-12)
+    balanced = random_scaling(seed=16, balance=0.75)
+    assert LagrangianScaling.from_dict(json.loads(json.dumps(balanced.to_dict()))).balance == 0.75
+    # A model saved before the balance existed has none.
+    old = {k: v for k, v in balanced.to_dict().items() if k != 'energy_balance'}
+    assert LagrangianScaling.from_dict(old).balance == 0.0
+
+
+@pytest.mark.parametrize('balance', [0.0, 0.5, 1.0])
+def test_balance_sets_each_joints_sensitivity_to_the_scalar_net(balance: float) -> None:
+    """Joint i's normalised torque is ``E_b r_i / e_i`` times the net's input gradient: equal
+    for every joint at b = 1, ``E / e_i`` (the plain scaling) at b = 0."""
+    scaling = random_scaling(seed=17, balance=balance)
+    energies = scaling.joint_energies()
+    assert energies.max() / energies.min() > 10.0
+    gains, energy = scaling.balanced()
+    sensitivity = energy * gains / energies
+    np.testing.assert_allclose(sensitivity, (scaling.energy / energies) ** (1.0 - balance))
+    assert gains.max() == pytest.approx(1.0)
+
+
+def test_delan_gravity_is_the_balanced_potentials_gradient_in_physical_units(float64) -> None:
+    scaling = random_scaling(seed=18, balance=1.0)
+    network = DelanNetwork(scaling, generator=generator(19))
+    q, _, _ = random_state(seed=20)
+    gains, energy = scaling.balanced()
+    centre = torch.as_tensor(0.5 * (scaling.position.low_ + scaling.position.high_))
+    half = torch.as_tensor(scaling.position.scale())
+
+    def potential(row: torch.Tensor) -> torch.Tensor:
+        x = (row - centre) / half * torch.as_tensor(gains)
+        return energy * network.potential_net(x.unsqueeze(0))[0, 0]
+
+    torch.testing.assert_close(network.gravity(q), vmap(grad(potential))(q), rtol=0, atol=1e-10)
 
 
 # --------------------------------------------------------------------------------------------
@@ -405,6 +454,7 @@ def test_weights_of_another_network_are_refused(fitted, mabi) -> None:
         (LnnConfig, {'stride': 0}, 'stride'),
         (LnnConfig, {'device': 'tpu'}, 'device'),
         (DelanConfig, {'diagonal_epsilon': 0.0}, 'diagonal_epsilon'),
+        (LnnConfig, {'energy_balance': 1.5}, 'energy_balance'),
         (LnnConfig, {'max_seconds': -1.0}, 'max_seconds'),
     ],
 )
