@@ -52,6 +52,10 @@ class OptimConfig:
         weight_decay: L2 penalty (Adam's weight_decay).
         seed: seeds the initial weights and the batch order.
         max_seconds: wall-clock budget for the fit [s], or None for no limit.
+        lr_decay: on a plateau (``lr_decay_patience`` epochs without a better validation loss)
+            the learning rate is multiplied by this and the fit goes on from the best weights;
+            1 for a constant rate. Early stopping still counts every epoch since the best.
+        lr_decay_patience: epochs without progress before each decay.
     """
 
     learning_rate: float = 1e-3
@@ -61,11 +65,17 @@ class OptimConfig:
     weight_decay: float = 0.0
     seed: int = 0
     max_seconds: float | None = None
+    lr_decay: float = 1.0
+    lr_decay_patience: int = 10
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
         if self.learning_rate <= 0:
             raise ConfigError(f'learning_rate must be > 0, got {self.learning_rate}')
+        if not 0.0 < self.lr_decay <= 1.0:
+            raise ConfigError(f'lr_decay must be in (0, 1], got {self.lr_decay}')
+        if self.lr_decay_patience < 1:
+            raise ConfigError(f'lr_decay_patience must be >= 1, got {self.lr_decay_patience}')
         if self.batch_size < 1 or self.max_epochs < 1 or self.patience < 1:
             raise ConfigError('batch_size, max_epochs and patience must be >= 1')
 
@@ -184,6 +194,11 @@ def train_module(
         if stale >= config.patience:
             history.stopped_by = 'early_stopping'
             break
+        if config.lr_decay < 1.0 and stale and stale % config.lr_decay_patience == 0:
+            # A plateau: a smaller step from the best weights (Adam's moments kept).
+            module.load_state_dict(best_state)
+            for group in optimiser.param_groups:
+                group['lr'] *= config.lr_decay
         if is_over(config, start):
             history.stopped_by = 'time_budget'
             break

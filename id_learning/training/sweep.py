@@ -49,7 +49,12 @@ _NETWORK = {
     'weight_decay': ('choice', (0.0, 1e-6, 1e-5, 1e-4, 1e-3)),
 }
 _MLP = {'width': ('choice', (32, 64, 128, 256)), 'depth': ('int', 1, 4), **_NETWORK}
-_LAGRANGIAN = {**_MLP, 'activation': ('choice', ('tanh', 'softplus'))}
+_LAGRANGIAN = {
+    **_MLP,
+    'activation': ('choice', ('tanh', 'softplus')),
+    'energy_balance': ('choice', (0.0, 0.5, 0.75, 1.0)),
+    'lr_decay': ('choice', (1.0, 0.3)),
+}
 
 #: Per kind, the hyper-parameters a sweep draws and their ranges (the config's field names).
 SEARCH_SPACES: dict[str, dict[str, Space]] = {
