@@ -78,6 +78,16 @@ def test_nominal_twin_without_effects_equals_the_urdf_model_plus_datasheet_drive
     np.testing.assert_allclose(result.recording.current * n * kt, expected, rtol=1e-10, atol=1e-8)
 
 
+def test_the_rigid_body_config_is_the_default_twin_with_every_effect_off_and_torque_sensors():
+    rigid = load_twin_config(REPO / 'config/twin_rigid_body.yaml')
+    default = load_twin_config(REPO / 'config/twin_default.yaml')
+    assert rigid.effects.enabled_names() == []
+    assert rigid.joint_torque_sensors
+    assert rigid.robot.name == default.robot.name
+    assert rigid.excitation == default.excitation
+    assert set(rigid.effects.effects) == set(default.effects.effects)
+
+
 def test_components_sum_to_the_clean_motor_torque(short_twin):
     _, result = short_twin
     total = np.sum(list(result.components.values()), axis=0)
