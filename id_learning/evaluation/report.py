@@ -180,6 +180,20 @@ def _figures_section(figures: list[tuple[str, str]]) -> list[str]:
     return lines
 
 
+def _study_table_findings(
+    table: StudyTable | None, joints: tuple[str, ...], share: np.ndarray
+) -> list[Finding] | None:
+    """The motor-label findings decided on the study's own Table 1 (motor-current labels).
+
+    Its high-friction axes are taken from this recording's friction share (same robot class):
+    the table has no data to decide them from.
+    """
+    if table is None or len(table.joints) != len(joints):
+        return None
+    errors = {kind: np.asarray(row) for kind, row in table.rmse_normalised.items()}
+    return check_findings('motor', joints, errors, share)
+
+
 def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, Any]]]:
     """Write ``report.md`` and its PNG figures into ``out``.
 
@@ -197,6 +211,7 @@ def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, A
     components = nominal_components(ds, report.robot)
     share = friction_share(ds.tau, components['remainder'], ds.study.v)
     findings = check_findings(ds.target, ds.joints, rmse_norm, share, stopped_by)
+    on_table = _study_table_findings(report.study_table, ds.joints, share)
     figures = _figures(report, predictions, rmse_norm, components, out)
 
     study_way = {k: np.asarray(metrics[k]['study_way']['rmse_normalised']) for k in kinds}
@@ -212,7 +227,7 @@ def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, A
         '',
         timing_table(metrics, kinds, stopped_by),
         '',
-        *findings_section(findings, ds.target),
+        *findings_section(findings, ds.target, on_table),
         *_figures_section(figures),
     ]
     path = out / 'report.md'

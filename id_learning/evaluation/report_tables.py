@@ -257,19 +257,8 @@ def timing_table(
     )
 
 
-def findings_section(findings: list[Finding], target: str) -> list[str]:
-    """Section (e): how high-friction axes are found, then each finding's verdict and numbers."""
-    lines = [
-        "## (e) Do the study's findings hold on this data?",
-        '',
-        'High-friction axes are decided from the data, not from the models: per joint, viscous '
-        'and Coulomb friction (d_v v + d_c tanh(v / '
-        f'{FRICTION_SMOOTHING_VELOCITY:g} rad/s) + offset) is fitted by least squares to the '
-        'nominal remainder (label minus URDF rigid body and datasheet rotor inertia); an axis '
-        f'whose fitted friction carries at least {HIGH_FRICTION_SHARE:.0%} of the label RMS is '
-        'high-friction. Gravity the URDF lacks (payload, balancer) does not count as friction.',
-        '',
-    ]
+def _verdicts(findings: list[Finding]) -> list[str]:
+    lines: list[str] = []
     for finding in findings:
         verdict = {True: 'holds', False: 'does NOT hold', None: 'not checked'}[finding.holds]
         lines += [
@@ -281,6 +270,37 @@ def findings_section(findings: list[Finding], target: str) -> list[str]:
             lines.append(f'  - Why: {finding.why}.')
         if finding.caveat:
             lines.append(f'  - Caveat: {finding.caveat}; longer training may change the verdict.')
+    return lines
+
+
+def findings_section(
+    findings: list[Finding], target: str, on_table: list[Finding] | None = None
+) -> list[str]:
+    """Section (e): the findings' verdicts on this run and on the study's own Table 1.
+
+    How high-friction axes are found, then each finding's verdict and numbers; ``on_table``, if
+    given, holds the same rules applied to the study's Table 1.
+    """
+    lines = [
+        "## (e) Do the study's findings hold on this data?",
+        '',
+        'High-friction axes are decided from the data, not from the models: per joint, viscous '
+        'and Coulomb friction (d_v v + d_c tanh(v / '
+        f'{FRICTION_SMOOTHING_VELOCITY:g} rad/s) + offset) is fitted by least squares to the '
+        'nominal remainder (label minus URDF rigid body and datasheet rotor inertia); an axis '
+        f'whose fitted friction carries at least {HIGH_FRICTION_SHARE:.0%} of the label RMS is '
+        'high-friction. Gravity the URDF lacks (payload, balancer) does not count as friction.',
+        '',
+    ]
+    lines += _verdicts(findings)
+    if on_table is not None:
+        lines += [
+            '',
+            "The same rules on the study's own Table 1 (motor-current labels; its high-friction "
+            "axes taken from this recording's friction share, the table having no data):",
+            '',
+            *_verdicts(on_table),
+        ]
     other = 'joint' if target == 'motor' else 'motor'
     return [
         *lines,

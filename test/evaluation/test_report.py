@@ -253,6 +253,27 @@ def test_the_report_places_the_study_table_beside_ours(report_input, tmp_path):
     assert str(path) in text
 
 
+def test_the_studys_findings_are_also_decided_on_the_studys_own_numbers(report_input, tmp_path):
+    # Placeholder values built so that the rules give known verdicts: RNEA+MLP below DeLaN and
+    # LNN on every axis, and LNN+MLP closing a third of LNN's gap (below the rule's share).
+    rows = {
+        'rnea_mlp': [0.1] * 6,
+        'delan': [0.4] * 6,
+        'lnn': [0.4] * 6,
+        'lnn_mlp': [0.3] * 6,
+    }
+    table = load_study_table(write_table(tmp_path / 'table1.json', rows), n_joints=6)
+    out, _ = write_report(replace(report_input, study_table=table), tmp_path / 'report')
+    text = out.read_text()
+    after = text.split("The same rules on the study's own Table 1")[1]
+    assert '**rnea_mlp_beats_lagrangian: holds.**' in after
+    assert '**lnn_mlp_recovers_gap: does NOT hold.**' in after
+    assert 'gap recovered 33%' in after
+    # Without a table the section has no such part.
+    plain, _ = write_report(report_input, tmp_path / 'plain')
+    assert "study's own Table 1" not in plain.read_text()
+
+
 @pytest.mark.parametrize(
     ('content', 'message'),
     [
