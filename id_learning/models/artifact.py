@@ -1,13 +1,17 @@
 """Model artifacts: one folder per model with safetensors weights and JSON metadata. No pickle.
 
-Loading checks that the file is what it claims (format, kind, tensor names and shapes) and that
-it belongs to the robot it is used with (name, joints and order, URDF hash, drives, units).
+Loading checks that the file is what it claims (format, kind, tensor names and shapes), that it
+belongs to the robot it is used with (name, joints and order, URDF hash, drives, units), that
+every number a prediction uses is finite, and that nothing changed since it was written: the
+weights match ``weights_sha256`` and the whole of model.json (that hash included) matches
+``artifact_sha256``. Artifacts from before the whole-artifact hash load with a warning.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import math
 import subprocess
 from pathlib import Path
@@ -24,14 +28,18 @@ from id_learning.robot.config import RobotConfig
 
 __all__ = [
     'ARTIFACT_FORMAT',
+    'ARTIFACT_HASH',
     'METADATA_FILE',
     'UNITS',
     'WEIGHTS_FILE',
     'artifact_inputs',
+    'document_digest',
     'read_artifact',
     'robot_fingerprint',
     'write_artifact',
 ]
+
+_LOG = logging.getLogger(__name__)
 
 ARTIFACT_FORMAT = 'id_learning.model/1'
 METADATA_FILE = 'model.json'
@@ -90,8 +98,40 @@ def write_artifact(
         'git_commit': _git_commit(),
         **metadata,
     }
+    document[ARTIFACT_HASH] = document_digest(document)
     (folder / METADATA_FILE).write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
     return folder
+
+
+#: model.json's key for the hash of its own contents (which include the weights' hash).
+ARTIFACT_HASH = 'artifact_sha256'
+
+
+def document_digest(document: dict[str, Any]) -> str:
+    """SHA-256 of model.json's contents without its own hash, in a canonical JSON form.
+
+    A tool that edits model.json on purpose (a migration) stores this again as ``ARTIFACT_HASH``.
+    """
+    body = {key: value for key, value in document.items() if key != ARTIFACT_HASH}
+    canonical = json.dumps(body, sort_keys=True, separators=(',', ':'))
+    return hashlib.sha256(canonical.encode('utf-8')).hexdigest()
+
+
+def _check_unchanged(metadata: dict[str, Any], meta_path: Path) -> None:
+    """Refuse a model.json changed after it was written; warn for one from before the hash."""
+    saved = metadata.get(ARTIFACT_HASH)
+    if saved is None:
+        _LOG.warning(
+            '%s: written before artifacts hashed their metadata (no %s); only the weights are '
+            'verified',
+            meta_path,
+            ARTIFACT_HASH,
+        )
+    elif saved != document_digest(metadata):
+        raise CheckpointError(
+            f'{meta_path}: its contents do not match its {ARTIFACT_HASH}: a field was changed '
+            'after the model was written; retrain or restore the file'
+        )
 
 
 def _check_robot(saved: dict[str, Any], robot: RobotConfig, folder: Path) -> None:
@@ -119,7 +159,8 @@ def read_artifact(
 
     Raises:
         CheckpointError: missing files, wrong format or kind, a tensor list or hash that does not
-            match the metadata, wrong units, or a robot/joint/drive mismatch.
+            match the metadata, wrong units, a robot/joint/drive mismatch, a non-finite number,
+            or a model.json changed after it was written.
     """
     folder = Path(folder)
     meta_path, weights_path = folder / METADATA_FILE, folder / WEIGHTS_FILE
@@ -157,6 +198,8 @@ def read_artifact(
     for key in ('fitted', 'target_scaler'):
         _check_finite(metadata.get(key), key, meta_path)
     _check_robot(metadata.get('robot', {}), robot, folder)
+    # Last, so that a specific fault (another robot, a NaN field) is named as such.
+    _check_unchanged(metadata, meta_path)
     return metadata, tensors
 
 

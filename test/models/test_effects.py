@@ -12,6 +12,7 @@ from support import REPO, twin_config
 from id_learning.dataset import prepare_dataset
 from id_learning.diagnosis import diagnose, diagnose_training_part
 from id_learning.errors import CheckpointError, ConfigError
+from id_learning.models.artifact import ARTIFACT_HASH, document_digest
 from id_learning.models.data import DiagnosedEffects, TrainingData
 from id_learning.models.registry import load_model, make_model, save_model
 from id_learning.physics import AugmentedModel
@@ -78,6 +79,7 @@ def test_the_artifact_round_trips_and_is_checked(fitted, hidden_viscous, tmp_pat
         load_model(folder, robot, 'rnea_lq')
     meta = json.loads((folder / 'model.json').read_text())
     meta['fitted']['terms'].append(meta['fitted']['terms'][0])
+    meta[ARTIFACT_HASH] = document_digest(meta)  # consistent, as a faulty writer would leave it
     (folder / 'model.json').write_text(json.dumps(meta))
     with pytest.raises(CheckpointError, match='do not match 2 terms'):
         load_model(folder, robot)

@@ -19,6 +19,7 @@ from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.preprocess import PreprocessConfig, lowpass, prepare_dataset
 from id_learning.dataset.recording import load_recording
 from id_learning.errors import CheckpointError, ConfigError
+from id_learning.models.artifact import ARTIFACT_HASH, document_digest
 from id_learning.models.registry import load_model
 from id_learning.robot import load_robot_config
 from id_learning.training import (
@@ -337,10 +338,51 @@ def test_a_weights_file_with_nan_is_refused_even_with_a_matching_hash(artifact_c
     ids=['format', 'kind', 'tensor-list', 'units', 'nan-in-a-scaler'],
 )
 def test_a_model_json_that_is_not_what_it_claims_is_refused(artifact_copy, mabi, edit, message):
+    # Re-hashed: a file a faulty writer made consistent is still refused, naming its fault.
     meta = artifact_copy / 'model.json'
-    meta.write_text(json.dumps(edit(json.loads(meta.read_text()))))
+    edited = edit(json.loads(meta.read_text()))
+    meta.write_text(json.dumps({**edited, ARTIFACT_HASH: document_digest(edited)}))
     with pytest.raises(CheckpointError, match=message):
         load_model(artifact_copy, mabi)
+
+
+@pytest.mark.parametrize(
+    'edit',
+    [
+        lambda d: {**d, 'hyperparameters': {**d['hyperparameters'], 'width': 7}},
+        lambda d: {
+            **d,
+            'fitted': {
+                **d['fitted'],
+                'input_scaler': {
+                    **d['fitted']['input_scaler'],
+                    'low': [-1e3, *d['fitted']['input_scaler']['low'][1:]],
+                },
+            },
+        },
+        lambda d: {**d, 'weights_sha256': '0' * 64},
+    ],
+    ids=['hyper-parameter', 'finite-scaler-value', 'weights-hash'],
+)
+def test_a_model_json_changed_after_writing_is_refused(artifact_copy, mabi, edit):
+    meta = artifact_copy / 'model.json'
+    meta.write_text(json.dumps(edit(json.loads(meta.read_text()))))
+    changed = r'model\.json: its contents do not match its artifact_sha256|the hash in model\.json'
+    with pytest.raises(CheckpointError, match=changed):
+        load_model(artifact_copy, mabi)
+
+
+def test_an_artifact_from_before_the_whole_artifact_hash_loads_with_a_warning(
+    artifact_copy, mabi, caplog
+):
+    meta = artifact_copy / 'model.json'
+    data = json.loads(meta.read_text())
+    del data[ARTIFACT_HASH]
+    meta.write_text(json.dumps(data))
+    with caplog.at_level('WARNING'):
+        model = load_model(artifact_copy, mabi)
+    assert model.kind == data['kind']
+    assert 'only the weights are verified' in caplog.text
 
 
 def test_a_model_json_that_is_not_json_is_refused(artifact_copy, mabi):
