@@ -17,6 +17,10 @@ include messages a full subscription queue overwrote; with the events executor, 
 message-lost events -- or not written because the writer failed). They are published on
 /diagnostics every ``diagnostics_period_s``.
 
+A publisher of another message type on a recorded topic cannot be matched (nothing of it reaches
+the bag): the recorder looks at the topics' publishers on every diagnostics period, warns once per
+topic and type found, naming both types, and lists it on /diagnostics (level warn).
+
 Usage: ``ros2 run id_learning recorder --ros-args -p output:=runs/excitation_01``.
 """
 
@@ -103,6 +107,8 @@ class Recorder(Node):
         receive = self._on_message_info if self._has_sequence else self._on_message
         self._uses_system_time = not _ros_time_is_active(self)
         self._by_topic: dict[str, Any] = {}
+        self._expected_types = dict(zip(config.topics, config.msg_types, strict=True))
+        self.wrong_types: dict[str, set[str]] = {topic: set() for topic in config.topics}
         for topic, msg_type in zip(config.topics, config.msg_types, strict=True):
             msg_class = message_class(msg_type)
             self.writer.add_topic(topic, msg_type)
@@ -216,6 +222,18 @@ class Recorder(Node):
             dropped=sum(c.dropped for c in self.counts.values()),
         )
 
+    def check_publisher_types(self) -> None:
+        """Warn once per topic and type about publishers of a type the topic is not recorded as."""
+        for topic, expected in self._expected_types.items():
+            found = {info.topic_type for info in self.get_publishers_info_by_topic(topic)}
+            new = found - {expected} - self.wrong_types[topic]
+            if new:
+                self.wrong_types[topic] |= new
+                self.get_logger().warning(
+                    f'{topic}: a publisher sends {", ".join(sorted(new))}, but the topic is '
+                    f'recorded as {expected} (msg_types): none of its messages reach the bag'
+                )
+
     def report_values(self) -> dict[str, object]:
         """The diagnostics key-values: totals, then per topic."""
         total = self.totals()
@@ -230,16 +248,22 @@ class Recorder(Node):
             values[f'{topic} received'] = counts.received
             values[f'{topic} written'] = counts.written
             values[f'{topic} dropped'] = counts.dropped
+            if self.wrong_types[topic]:
+                values[f'{topic} wrong type'] = ', '.join(sorted(self.wrong_types[topic]))
         return values
 
     def _publish_diagnostics(self) -> None:
+        self.check_publisher_types()
         total = self.totals()
-        level = 'warn' if total.dropped else 'ok'
+        wrong = [topic for topic, types in self.wrong_types.items() if types]
+        level = 'warn' if total.dropped or wrong else 'ok'
         message = (
             f'{total.written} written, {total.dropped} dropped'
             if total.received
             else 'waiting for messages'
         )
+        if wrong:
+            message += f'; a publisher of another type on {", ".join(wrong)}'
         self._diagnostics.publish(
             diagnostic_array(
                 self.get_clock().now().nanoseconds,

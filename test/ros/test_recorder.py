@@ -1,4 +1,5 @@
-"""recorder, in its own process: replay -> recorder round trip, and a SIGKILL mid-recording."""
+"""recorder, in its own process: replay -> recorder round trip, a SIGKILL mid-recording, and a
+publisher of the wrong message type."""
 
 from __future__ import annotations
 
@@ -142,3 +143,34 @@ def test_a_sigkilled_recorder_leaves_everything_received_until_one_second_before
 def _stamps_s(path, topic) -> list[int]:
     series = read_joint_states(path, topic)
     return (series.stamps_ns // 1_000_000_000).tolist()
+
+
+def test_a_publisher_of_another_type_is_named_once_in_the_log_and_on_diagnostics(
+    tmp_path, nodes, listener
+):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import String
+
+    listener.subscribe(DiagnosticArray, '/diagnostics')
+    wrong = listener.node.create_publisher(String, '/motor_currents', 10)
+    recorder = nodes('recorder', {'output': str(tmp_path / 'bag'), 'diagnostics_period_s': 0.2})
+
+    def named() -> bool:
+        values = listener.diagnostics(recorder_name())
+        return values is not None and values.get('/motor_currents wrong type') == (
+            'std_msgs/msg/String'
+        )
+
+    listener.wait_for(named, 30, "the recorder's diagnostics to name std_msgs/msg/String")
+    # A few more diagnostics periods: the warning is not repeated.
+    seen = len(listener.messages['/diagnostics'])
+    listener.wait_for(
+        lambda: len(listener.messages['/diagnostics']) >= seen + 3, 10, 'three more diagnostics'
+    )
+    assert recorder.stop() == 0
+    log = recorder.log()
+    warning = 'a publisher sends std_msgs/msg/String, but the topic is recorded as'
+    assert log.count(warning) == 1, log
+    assert 'sensor_msgs/msg/JointState' in log
+    assert '/joint_states wrong type' not in listener.diagnostics(recorder_name())
+    listener.node.destroy_publisher(wrong)
