@@ -218,7 +218,8 @@ def _contract(
     names = (topics.joint_states, topics.motor_currents)
     missing = tuple(name for name in names if msgtypes.get(name) != JOINT_STATE)
     if missing:
-        return ContractReport(*names, missing, None, None, None)
+        wrong = tuple((name, msgtypes[name]) for name in missing if name in msgtypes)
+        return ContractReport(*names, missing, None, None, None, wrong)
     states, currents = decoded[topics.joint_states], decoded[topics.motor_currents]
     a = np.array(states.all_stamps, dtype=np.int64)
     b = np.array(currents.all_stamps, dtype=np.int64)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from id_learning.bag import JointStateSeries
+from id_learning.bag import JOINT_STATE, JointStateSeries
 from id_learning.errors import BagError
 
 __all__ = [
@@ -155,6 +155,7 @@ class ContractReport:
         joint_states: the contract's joint state topic.
         motor_currents: the contract's motor current topic.
         missing: contract topics the bag lacks (or holds with another type than JointState).
+        wrong_types: of those, the ones the bag holds with another type: (topic, type found).
         stamps_match: both topics carry the same header stamps, sample for sample; None when a
             topic is missing.
         first_mismatch: first sample index where the stamps differ (or the shorter topic ends).
@@ -167,6 +168,7 @@ class ContractReport:
     stamps_match: bool | None
     first_mismatch: int | None
     names_match: bool | None
+    wrong_types: tuple[tuple[str, str], ...] = ()
 
     @property
     def is_met(self) -> bool:
@@ -224,6 +226,8 @@ class BagReport:
         for topic in self.topics:
             lines += _topic_problems(topic)
         contract = self.contract
+        for topic, found in contract.wrong_types:
+            lines.append(f'contract: {topic} has type {found}, expected {JOINT_STATE}')
         if contract.missing:
             lines.append(f'contract: missing JointState topic(s) {list(contract.missing)}')
         elif contract.stamps_match is False:

@@ -171,7 +171,11 @@ def _verdict_lines(report: BagReport) -> list[str]:
     contract = report.contract
     pair = f'{contract.joint_states} / {contract.motor_currents}'
     if contract.missing:
-        verdict = f'missing {", ".join(contract.missing)}'
+        found = dict(contract.wrong_types)
+        verdict = 'missing ' + ', '.join(
+            f'{name} (it has type {found[name]})' if name in found else name
+            for name in contract.missing
+        )
     elif contract.stamps_match:
         verdict = 'stamps match sample for sample'
     else:

@@ -207,6 +207,27 @@ def test_contract_mismatch_names_the_first_differing_sample(tmp_path: Path) -> N
     assert contract.first_mismatch == 42
 
 
+def test_a_contract_topic_of_another_type_is_named_with_the_type_found(tmp_path: Path) -> None:
+    stamps = regular_stamps(10)
+    zeros = np.zeros(2)
+    string_cdr = b'\x00\x01\x00\x00' + (3).to_bytes(4, 'little') + b'hi\x00'
+    with BagWriter(tmp_path / 'bag') as writer:
+        writer.add_topic('/joint_states', JOINT_STATE)
+        writer.add_topic('/motor_currents', 'std_msgs/msg/String')
+        for stamp in stamps.tolist():
+            data = encode_joint_state(stamp, ('a', 'b'), zeros, zeros, zeros)
+            writer.write('/joint_states', stamp, data)
+            writer.write('/motor_currents', stamp, string_cdr)
+
+    report = inspect_bag(tmp_path / 'bag')
+
+    assert report.contract.missing == ('/motor_currents',)
+    assert report.contract.wrong_types == (('/motor_currents', 'std_msgs/msg/String'),)
+    expected = 'contract: /motor_currents has type std_msgs/msg/String, expected sensor_msgs'
+    assert any(problem.startswith(expected) for problem in report.problems)
+    assert 'missing /motor_currents (it has type std_msgs/msg/String)' in render_report(report)
+
+
 def test_contract_reports_where_a_shorter_topic_ends(tmp_path: Path, robot: RobotConfig) -> None:
     recording = make_recording(robot, regular_stamps(100))
     bag = write_recording(recording, tmp_path / 'bag', robot.topics)
