@@ -226,8 +226,8 @@ class BagReport:
         for topic in self.topics:
             lines += _topic_problems(topic)
         contract = self.contract
-        for topic, found in contract.wrong_types:
-            lines.append(f'contract: {topic} has type {found}, expected {JOINT_STATE}')
+        for name, found in contract.wrong_types:
+            lines.append(f'contract: {name} has type {found}, expected {JOINT_STATE}')
         if contract.missing:
             lines.append(f'contract: missing JointState topic(s) {list(contract.missing)}')
         elif contract.stamps_match is False:

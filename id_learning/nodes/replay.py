@@ -52,6 +52,7 @@ from trajectory_msgs.msg import JointTrajectory
 from id_learning.bag import JOINT_STATE, bag_info, decode_joint_state, iter_raw
 from id_learning.bag.messages import typestore
 from id_learning.dataset.inputs import InputDefinition
+from id_learning.dataset.plausibility import check_motion
 from id_learning.errors import BagError, ConfigError, DatasetError
 from id_learning.nodes.msg_conversions import (
     clock_message,
@@ -146,6 +147,14 @@ def _reference_bytes(
     stamps = np.array([msg.stamp_ns for msg in decoded], dtype=np.int64)
     q = np.vstack([msg.position for msg in decoded])
     v = np.vstack([msg.velocity for msg in decoded])
+    limits = None
+    if set(names) == set(robot.joints) and len(names) == len(robot.joints):
+        limits = robot.limits.take([robot.joints.index(name) for name in names])
+    try:
+        where = f'{config.bag}: {config.reference_source}'
+        check_motion(tuple(names), stamps, q, v, limits=limits, where=where)
+    except DatasetError as err:
+        raise BagError(f'{err}; nothing is played from an impossible reference') from err
     inputs = None
     if config.reference_inputs != 'recorded':
         if set(names) != set(robot.joints) or len(names) != len(robot.joints):

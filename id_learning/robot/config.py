@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -61,6 +62,17 @@ class JointLimits:
     velocity: np.ndarray
     acceleration: np.ndarray
     torque: np.ndarray
+
+    def take(self, order: Sequence[int]) -> JointLimits:
+        """The limits of the joints at ``order`` (indices into this joint order)."""
+        index = np.asarray(order, dtype=int)
+        return JointLimits(
+            self.position_lower[index],
+            self.position_upper[index],
+            self.velocity[index],
+            self.acceleration[index],
+            self.torque[index],
+        )
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -107,3 +109,27 @@ def test_a_plan_refuses_an_empty_span_or_a_missing_topic(bag, mabi):
         build_plan(ReplayConfig(bag=str(bag), start_offset_s=100.0, reference_mode='none'), mabi)
     with pytest.raises(BagError, match='/wrench'):
         build_plan(ReplayConfig(bag=str(bag), topics=('/wrench',)), mabi)
+
+
+@pytest.mark.parametrize(
+    ('field', 'sample', 'value', 'message'),
+    [
+        ('position', 57, np.nan, r'sample 57 .*joint_3: value nan is not finite'),
+        ('velocity', 80, 6 * 1.7, r'sample 80 .*joint_1: velocity 10.2 rad/s exceeds 1.5 x'),
+        ('position', 90, 1e300, r'sample 90 .*joint_2: position 1e\+300 rad is outside'),
+    ],
+)
+def test_a_plan_refuses_an_impossible_reference_naming_the_sample(
+    tmp_path, mabi, field, sample, value, message
+):
+    recording = sine_recording(200)
+    array = getattr(recording, field).copy()
+    column = {'position': 2, 'velocity': 0}[field] if value != 1e300 else 1
+    array[sample, column] = value
+    broken = write_recording(replace(recording, **{field: array}), tmp_path / 'broken')
+    with pytest.raises(BagError, match=message) as caught:
+        build_plan(ReplayConfig(bag=str(broken)), mabi)
+    assert 'nothing is played' in str(caught.value)
+    # Without a reference the recorded messages are replayed as recorded, NaN and all.
+    plan = build_plan(ReplayConfig(bag=str(broken), reference_mode='none'), mabi)
+    assert plan.message_count == 400

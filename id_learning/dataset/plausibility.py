@@ -1,0 +1,115 @@
+"""The plausibility gate: joint motion a real arm can have, checked before anything uses it.
+
+One place for the checks every door applies to recorded or commanded motion (the replay's
+reference now; import, train and the nodes as they adopt it): values finite, stamps strictly
+increasing, positions inside the joint limits plus a margin, velocities within a stated factor of
+their limits. A violation names where it was found, the sample, its stamp, the joint and the
+value, and, when positions outside the limits would fit them read as degrees, says so.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from id_learning.dataset.recording import check_finite
+from id_learning.errors import DatasetError
+from id_learning.robot.config import JointLimits
+
+__all__ = ['POSITION_MARGIN_RAD', 'VELOCITY_FACTOR', 'check_motion']
+
+#: Positions may lie this far outside the joint limits [rad] (encoder offsets, overshoot).
+POSITION_MARGIN_RAD = 0.05
+#: Velocities may reach this multiple of their limits (a drive's short overshoot).
+VELOCITY_FACTOR = 1.5
+
+
+def check_motion(
+    joints: tuple[str, ...],
+    stamps_ns: np.ndarray,
+    q: np.ndarray,
+    v: np.ndarray | None,
+    *,
+    limits: JointLimits | None,
+    where: str,
+) -> None:
+    """Refuse motion no arm of these limits can have; see the module docstring.
+
+    Args:
+        joints: the columns' joint names, in the order of ``limits``.
+        stamps_ns: (N,) sample stamps [ns].
+        q: (N, n) positions [rad].
+        v: (N, n) velocities [rad/s], or None.
+        limits: the robot's joint limits, or None to check finiteness and stamps only.
+        where: what the motion is (file and topic), for the message.
+
+    Raises:
+        DatasetError: the first violation, named as the module docstring says.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    check_finite(np.asarray(q, float), joints, stamps, f'{where}: position')
+    if v is not None:
+        check_finite(np.asarray(v, float), joints, stamps, f'{where}: velocity')
+    steps = np.diff(stamps)
+    if (steps <= 0).any():
+        sample = int(np.argmax(steps <= 0)) + 1
+        raise DatasetError(
+            f'{where}: stamps must increase: sample {sample} has {int(stamps[sample])} ns after '
+            f'{int(stamps[sample - 1])} ns'
+        )
+    if limits is None:
+        return
+    _check_positions(joints, stamps, np.asarray(q, float), limits, where)
+    if v is not None:
+        _check_velocities(joints, stamps, np.asarray(v, float), limits, where)
+
+
+def _first(outside: np.ndarray) -> tuple[int, int]:
+    sample, column = (int(i) for i in np.argwhere(outside)[0])
+    return sample, column
+
+
+def _check_positions(
+    joints: tuple[str, ...], stamps: np.ndarray, q: np.ndarray, limits: JointLimits, where: str
+) -> None:
+    low = limits.position_lower - POSITION_MARGIN_RAD
+    high = limits.position_upper + POSITION_MARGIN_RAD
+    outside = (q < low) | (q > high)
+    if not outside.any():
+        return
+    sample, column = _first(outside)
+    value = q[sample, column]
+    as_radians = np.radians(q[:, column])
+    degrees = bool(
+        np.all((as_radians >= low[column]) & (as_radians <= high[column]))
+        and np.ptp(q[:, column]) > 2.0 * math.pi
+    )
+    hint = (
+        '; read as degrees every sample of this joint fits its limits: the log is in degrees, '
+        'positions must be in radians'
+        if degrees
+        else ''
+    )
+    raise DatasetError(
+        f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
+        f'position {value:.6g} rad is outside the limits [{limits.position_lower[column]:.4g}, '
+        f'{limits.position_upper[column]:.4g}] rad plus {POSITION_MARGIN_RAD:g} rad '
+        f'({int(outside[:, column].sum())} samples of this joint){hint}'
+    )
+
+
+def _check_velocities(
+    joints: tuple[str, ...], stamps: np.ndarray, v: np.ndarray, limits: JointLimits, where: str
+) -> None:
+    bound = VELOCITY_FACTOR * limits.velocity
+    outside = np.abs(v) > bound
+    if not outside.any():
+        return
+    sample, column = _first(outside)
+    raise DatasetError(
+        f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
+        f'velocity {v[sample, column]:.6g} rad/s exceeds {VELOCITY_FACTOR:g} x its limit '
+        f'{limits.velocity[column]:.4g} rad/s ({int(outside[:, column].sum())} samples of this '
+        'joint)'
+    )
