@@ -17,12 +17,63 @@ from id_learning.dataset.recording import check_finite
 from id_learning.errors import DatasetError
 from id_learning.robot.config import JointLimits
 
-__all__ = ['POSITION_MARGIN_RAD', 'VELOCITY_FACTOR', 'check_motion']
+__all__ = [
+    'ACCELERATION_FACTOR',
+    'POSITION_MARGIN_RAD',
+    'VELOCITY_FACTOR',
+    'SampleGate',
+    'check_motion',
+]
 
 #: Positions may lie this far outside the joint limits [rad] (encoder offsets, overshoot).
 POSITION_MARGIN_RAD = 0.05
 #: Velocities may reach this multiple of their limits (a drive's short overshoot).
 VELOCITY_FACTOR = 1.5
+#: Accelerations may reach this multiple of their limits (estimates from differences are noisy).
+ACCELERATION_FACTOR = 2.0
+
+
+class SampleGate:
+    """The gate for one sample at a time (online nodes): the same bounds as ``check_motion``.
+
+    Args:
+        joints: the joint names, in the order of ``limits`` and of the samples.
+        limits: the robot's joint limits.
+    """
+
+    def __init__(self, joints: tuple[str, ...], limits: JointLimits) -> None:
+        self.joints = joints
+        self._low = limits.position_lower - POSITION_MARGIN_RAD
+        self._high = limits.position_upper + POSITION_MARGIN_RAD
+        self._velocity = VELOCITY_FACTOR * limits.velocity
+        self._acceleration = ACCELERATION_FACTOR * limits.acceleration
+
+    def violation(self, q: np.ndarray, v: np.ndarray, a: np.ndarray | None) -> str | None:
+        """Why no arm of these limits is in this state (finite q, v, a (n,)), or None."""
+        outside = (q < self._low) | (q > self._high)
+        if outside.any():
+            j = int(np.argmax(outside))
+            return (
+                f'position of {self.joints[j]} {q[j]:.6g} rad is outside its limits '
+                f'[{self._low[j] + POSITION_MARGIN_RAD:.4g}, '
+                f'{self._high[j] - POSITION_MARGIN_RAD:.4g}] rad plus {POSITION_MARGIN_RAD:g}'
+            )
+        fast = np.abs(v) > self._velocity
+        if fast.any():
+            j = int(np.argmax(fast))
+            return (
+                f'velocity of {self.joints[j]} {v[j]:.6g} rad/s exceeds {VELOCITY_FACTOR:g} x '
+                f'its limit'
+            )
+        if a is not None:
+            hard = np.abs(a) > self._acceleration
+            if hard.any():
+                j = int(np.argmax(hard))
+                return (
+                    f'acceleration of {self.joints[j]} {a[j]:.6g} rad/s^2 exceeds '
+                    f'{ACCELERATION_FACTOR:g} x its limit'
+                )
+        return None
 
 
 def check_motion(

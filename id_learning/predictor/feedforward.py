@@ -41,13 +41,14 @@ import numpy as np
 import torch
 
 from id_learning.dataset.inputs import InputDefinition
+from id_learning.dataset.plausibility import SampleGate
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.predictor.acceleration import CausalAccelerationEstimator
 from id_learning.predictor.config import GuardConfig
 from id_learning.predictor.ranges import TrainingRange, training_range
 from id_learning.predictor.sample import ReferenceSample
 from id_learning.predictor.timing import RollingStats
-from id_learning.robot.config import RobotConfig
+from id_learning.robot.config import JointLimits, RobotConfig
 
 __all__ = [
     'INFERENCE_BACKENDS',
@@ -135,6 +136,7 @@ class Reject(enum.Enum):
     STAMP_ORDER = 'stamp_order'
     TOO_OLD = 'too_old'
     OUT_OF_RANGE = 'out_of_range'
+    IMPOSSIBLE = 'impossible'
     NON_FINITE_OUTPUT = 'non_finite_output'
 
 
@@ -207,6 +209,9 @@ class FeedForwardPredictor:
         training_range: bounds to warn about (None: no range check).
         compute_stats: capacity of the compute-latency window.
         inference: 'numpy' (the model's float64 one-sample path) or 'torch' (its predict).
+        limits: the robot's joint limits in the model's joint order: a sample no arm of them can
+            be in (``dataset.plausibility.SampleGate``) gives no torque (``Reject.IMPOSSIBLE``),
+            whatever the training range and ``out_of_range`` say. None: no such gate.
 
     Raises:
         ValueError: bad torque limits or an unknown inference backend.
@@ -221,6 +226,7 @@ class FeedForwardPredictor:
         *,
         compute_stats: int = 4096,
         inference: InferenceBackend = 'numpy',
+        limits: JointLimits | None = None,
     ) -> None:
         """Keep the model and prepare the per-stream state."""
         if inference not in INFERENCE_BACKENDS:
@@ -240,6 +246,7 @@ class FeedForwardPredictor:
             None if training_range is None else training_range.widened(self.config.range_margin)
         )
         self.counters = PredictorCounters(n)
+        self._gate = None if limits is None else SampleGate(self.joint_names, limits)
         self.compute_s = RollingStats(compute_stats)
         self._n = n
         self._index = {name: k for k, name in enumerate(self.joint_names)}
@@ -295,6 +302,7 @@ class FeedForwardPredictor:
             config,
             training_range(model.fitted_metadata(), robot),
             inference=inference,
+            limits=robot.limits.take([robot.joints.index(name) for name in model.joint_names]),
         )
         metadata = json.loads((Path(folder) / METADATA_FILE).read_text(encoding='utf-8'))
         predictor.inputs, predictor.fitting_inputs = artifact_inputs(metadata)
@@ -445,6 +453,10 @@ class FeedForwardPredictor:
                 f'stamp {sample.stamp_ns} ns is not after the last accepted '
                 f'{self._last_stamp_ns} ns',
             )
+        if self._gate is not None:
+            violation = self._gate.violation(q, v, a)
+            if violation is not None:
+                return self._reject(sample, Reject.IMPOSSIBLE, violation)
         return (q, v) if a is None else (q, v, a)
 
     def step(

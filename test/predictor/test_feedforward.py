@@ -206,6 +206,40 @@ def test_predictor_rejects_bad_samples_and_keeps_running(linear, bad, reason):
     assert np.isfinite(follow_up.tau).all()
 
 
+@pytest.mark.parametrize(
+    ('change', 'detail'),
+    [
+        ({'v': 6.0}, 'velocity of joint_1 10.2 rad/s exceeds 1.5 x its limit'),
+        ({'q': 1e300}, 'position of joint_1 1e+300 rad is outside its limits'),
+        ({'a': 1e6}, 'acceleration of joint_1 1e+06 rad/s^2 exceeds 2 x its limit'),
+    ],
+)
+def test_a_sample_no_arm_can_be_in_gives_no_torque_and_the_next_valid_one_does(
+    tiny_artifacts, mabi, change, detail
+):
+    stamps, q, v, a = reference_run(6)
+    predictor = FeedForwardPredictor.from_artifact(tiny_artifacts['mlp'], mabi)
+
+    def at(k: int, **values) -> ReferenceSample:
+        state = [values.get(name, array[k]) for name, array in (('q', q), ('v', v), ('a', a))]
+        return ReferenceSample(int(stamps[k]), JOINTS, *state)
+
+    for k in range(3):
+        assert predictor.step(at(k), receive(k)).tau is not None
+    bad = {name: getattr(at(3), name).copy() for name in ('q', 'v', 'a')}
+    ((name, value),) = change.items()
+    bad[name][0] = value * mabi.limits.velocity[0] if name == 'v' else value
+    result = predictor.step(at(3, **bad), receive(3))
+    assert result.tau is None
+    assert result.reject is Reject.IMPOSSIBLE
+    assert detail in result.detail
+    assert predictor.counters.rejects[Reject.IMPOSSIBLE] == 1
+    # Valid input again: the torque the model gives for it, as if nothing had happened.
+    after = predictor.step(at(4), receive(4))
+    expected = predictor.model.predict(q[4:5], v[4:5], a[4:5])[0]
+    np.testing.assert_allclose(after.tau, expected, rtol=1e-5, atol=1e-6)
+
+
 def test_predictor_rejects_samples_older_than_max_age(mabi):
     predictor = FeedForwardPredictor(
         LinearModel(mabi), mabi.limits.torque, GuardConfig(max_age_s=0.1)
