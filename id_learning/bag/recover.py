@@ -4,7 +4,10 @@ Each ``.mcap`` file is scanned record by record with ``mcap.stream_reader.Stream
 stops at the first record that is incomplete (the torn tail) or does not decode (a chunk whose
 compressed data or CRC is damaged). Everything before it -- schemas, channels and every message of
 the complete chunks -- is written again with ``BagWriter``, message bytes and log times unchanged,
-so the recovered messages are a prefix of what was recorded.
+so the recovered messages are a prefix of what was recorded. A chunk torn by the cut is not lost
+whole: its compressed bytes are decompressed as a stream as far as they go (zstd or none), and
+every record complete within them is kept (the chunk's CRC cannot be checked; each record's
+length is).
 
 Safety: the rebuilt bag is written to a hidden sibling folder and read back (per-topic counts must
 match the scan) before anything of the original is touched. In place, the damaged files are then
@@ -21,13 +24,16 @@ import shutil
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from io import BytesIO
 from pathlib import Path
 from typing import BinaryIO
 
 import yaml
 import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, McapError
-from mcap.records import Channel, Chunk, Footer, Message, Schema
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Footer, McapRecord, Message, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from rosbags.typesys.base import TypesysError
 
@@ -173,6 +179,54 @@ class _Bounded:
         return self._stream.tell()
 
 
+def _torn_chunk_records(raw: bytes) -> list[McapRecord]:
+    """The records complete within a chunk record cut short (``raw`` from its opcode on).
+
+    Chunk layout: opcode, length (u64), start and end time (u64 each), uncompressed size (u64),
+    CRC (u32), compression (u32 length + text), records (u64 length + bytes).
+    """
+    fixed = struct.Struct('<BQQQQI')
+    if len(raw) < fixed.size + 4 or raw[0] != Opcode.CHUNK.value:
+        return []
+    pos = fixed.size
+    (name_length,) = struct.unpack_from('<I', raw, pos)
+    pos += 4
+    compression = raw[pos : pos + name_length].decode('utf-8', errors='replace')
+    pos += name_length + 8  # the records' byte length follows the name
+    compressed = raw[pos:]
+    if compression == 'zstd':
+        try:
+            data = zstandard.ZstdDecompressor().decompressobj().decompress(compressed)
+        except zstandard.ZstdError:
+            return []
+    elif compression == '':
+        data = compressed
+    else:
+        return []
+    readers: dict[int, Callable[[ReadDataStream], McapRecord]] = {
+        Opcode.SCHEMA.value: Schema.read,
+        Opcode.CHANNEL.value: Channel.read,
+    }
+    records: list[McapRecord] = []
+    at = 0
+    while at + 9 <= len(data):
+        opcode = data[at]
+        (length,) = struct.unpack_from('<Q', data, at + 1)
+        end = at + 9 + length
+        if end > len(data):
+            break  # the record the cut went through
+        stream = ReadDataStream(BytesIO(data[at + 9 : end]))
+        try:
+            if opcode == Opcode.MESSAGE.value:
+                records.append(Message.read(stream, length))
+            elif opcode in readers:
+                records.append(readers[opcode](stream))
+        except _DAMAGE:
+            break
+        at = end
+    return records
+
+
 def _scan_file(file: Path, topics: _Topics, sink: _MessageSink | None) -> FileScan:
     """Read the complete records of one MCAP file; pass each message to sink in file order."""
     size = file.stat().st_size
@@ -239,6 +293,17 @@ def _scan_file(file: Path, topics: _Topics, sink: _MessageSink | None) -> FileSc
                     if at_end
                     else f'damaged record: {err or type(err).__name__}'
                 )
+                if at_end:
+                    stream.seek(valid)
+                    torn = [r for r in _torn_chunk_records(stream.read()) if r is not None]
+                    before = messages
+                    for item in torn:
+                        take(item)
+                    if messages > before:
+                        stop_reason = (
+                            f'file ends inside a chunk; {messages - before} messages kept from '
+                            'its complete part'
+                        )
                 break
             if isinstance(record, Chunk):
                 try:

@@ -24,12 +24,12 @@ T0_NS = 1_700_000_000 * 1_000_000_000
 Messages = dict[str, list[tuple[int, bytes]]]
 
 
-def write_bag(path: Path) -> Messages:
+def write_bag(path: Path, chunk_bytes: int = 4096) -> Messages:
     """A two-topic bag in small chunks; returns each topic's (log time, bytes) in write order."""
     rng = np.random.default_rng(7)
     empty = np.zeros(0)
     written: Messages = {topic: [] for topic in TOPICS}
-    with BagWriter(path, chunk_bytes=4096) as writer:
+    with BagWriter(path, chunk_bytes=chunk_bytes) as writer:
         for topic in TOPICS:
             writer.add_topic(topic, JOINT_STATE)
         for k in range(N_SAMPLES):
@@ -125,6 +125,27 @@ def test_torn_bag_recovers_a_bit_exact_prefix_with_every_complete_chunk(
     assert states.names == JOINTS
     assert len(states.stamps_ns) == len(got[TOPICS[0]])
     assert [p.name for p in sorted(bag.iterdir())] == ['bag_0.mcap', 'metadata.yaml']
+
+
+def test_a_chunk_torn_by_the_cut_keeps_its_complete_messages(tmp_path: Path) -> None:
+    """One chunk holds the whole recording (as an offline writer's large chunks can): cut in
+    half, it still gives back about half of the messages, a bit-exact prefix."""
+    source = tmp_path / 'one_chunk'
+    written = write_bag(source, chunk_bytes=1 << 24)
+    bag = tmp_path / 'bag'
+    cut = torn_copy(source, bag, 0.5)
+    assert complete_chunk_messages(mcap_file(source), cut)[0] == 0  # no complete chunk
+
+    report = recover_bag(bag)
+
+    got = read_back(bag)
+    total = sum(len(messages) for messages in got.values())
+    assert 0.4 * 2 * N_SAMPLES <= total < 2 * N_SAMPLES
+    for topic in TOPICS:
+        assert got[topic] == written[topic][: len(got[topic])]
+    (scan,) = report.files
+    assert scan.messages == total
+    assert 'messages kept from its complete part' in (scan.stop_reason or '')
 
 
 def test_zero_byte_file_recovers_to_an_empty_valid_bag(
