@@ -102,7 +102,7 @@ def log_values() -> dict[str, np.ndarray]:
     rng = np.random.default_rng(17)
     return {
         't_ms': 5000.0 + 8.0 * np.arange(LOG_ROWS),
-        'q_deg': rng.uniform(-90.0, 90.0, (LOG_ROWS, 6)),
+        'q_deg': rng.uniform(-45.0, 45.0, (LOG_ROWS, 6)),  # inside every joint's limits
         'v_deg_s': rng.uniform(-30.0, 30.0, (LOG_ROWS, 6)),
         'i_a': rng.uniform(-5.0, 5.0, (LOG_ROWS, 6)),
     }

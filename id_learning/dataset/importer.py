@@ -34,6 +34,7 @@ from id_learning.dataset.import_mapping import (
 )
 from id_learning.dataset.import_readers import LogTable, is_float, read_table
 from id_learning.dataset.import_stamps import log_stamps
+from id_learning.dataset.plausibility import check_motion
 from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
@@ -275,7 +276,9 @@ def import_log(
         ConfigError: the mapping does not fit the log or the robot (missing column, joint names,
             no velocity while ``velocity_from_position`` is False).
         DatasetError: unreadable log, non-numeric or (under 'refuse') non-finite cells, stamps
-            backwards, off the grid or repeated, fewer than two rows left.
+            backwards, off the grid or repeated, fewer than two rows left, or motion the
+            plausibility gate refuses (non-finite after unit conversion; with a robot, positions
+            or velocities beyond its limits, degrees named as such).
         BagError: ``out`` exists and ``overwrite`` is False.
     """
     source, out = Path(source), Path(out)
@@ -307,6 +310,15 @@ def import_log(
         current=_si_matrix(rows, fields, 'current'),
         joint_torque=_si_matrix(rows, fields, 'torque'),
         source=str(source),
+    )
+    # Nothing impossible reaches a bag: the plausibility gate (the robot's limits when known).
+    check_motion(
+        recording.joints,
+        recording.stamps_ns,
+        position,
+        velocity,
+        limits=robot.limits if robot else None,
+        where=str(source),
     )
     write_recording(recording, out, topics=robot.topics if robot else None, overwrite=overwrite)
     report = ImportReport(

@@ -98,7 +98,8 @@ def test_example_mapping_round_trips_a_deg_ms_trace_to_si_through_the_bag(
         assert joint.torque is None
     rng = np.random.default_rng(RNG_SEED)
     n = 40
-    q_deg = rng.uniform(-90.0, 90.0, (n, 6))
+    lower, upper = robot.limits.position_lower, robot.limits.position_upper
+    q_deg = np.degrees(rng.uniform(0.9 * lower, 0.9 * upper, (n, 6)))  # a pose the arm can take
     v_deg_s = rng.uniform(-60.0, 60.0, (n, 6))
     i_a = rng.uniform(-5.0, 5.0, (n, 6))
     time_ms = 1234.5 + 8.0 * np.arange(n)
@@ -475,8 +476,9 @@ def test_joints_are_reordered_to_the_robot_order(tmp_path: Path, robot: RobotCon
     )
     assert [joint.name for joint in mapping.joints] != list(robot.joints)
     n = 8
-    # joint_k's position is k + row / 100, its velocity -k: each value tells its joint.
-    number = {name: float(name.removeprefix('joint_')) for name in robot.joints}
+    # joint_k's position is k / 10 + row / 100, its velocity -k / 10: each value tells its joint
+    # (and every pose and speed is one the arm can have).
+    number = {name: 0.1 * float(name.removeprefix('joint_')) for name in robot.joints}
     header = [f'q_{name}' for name in reversed_joints] + [f'v_{name}' for name in reversed_joints]
     rows = [
         [number[name] + k / 100 for name in reversed_joints]
@@ -569,3 +571,31 @@ def test_delimiter_and_header_are_detected(tmp_path: Path, delimiter: str) -> No
 
     assert states.position is not None
     np.testing.assert_allclose(states.position, values[:, :2], rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize(
+    ('scale', 'message'),
+    [
+        (180.0 / np.pi, r'joint joint_1: position .* outside the limits .* the log is in degrees'),
+        (1e306, r'joint joint_1: position -1.2e\+306 rad is outside the limits'),
+    ],
+    ids=['degrees-mapped-as-radians', 'absurd-values'],
+)
+def test_motion_no_arm_can_have_is_refused_and_nothing_is_written(
+    tmp_path: Path, robot: RobotConfig, scale: float, message: str
+) -> None:
+    mapping = ImportMapping(
+        period_s=robot.ipo_period_s,
+        joints=tuple(
+            JointColumns(name, ColumnSpec(f'q_{name}', 'rad'), ColumnSpec(f'v_{name}', 'rad/s'))
+            for name in robot.joints
+        ),
+    )
+    n = 40
+    swing = np.linspace(-1.2, 1.2, n)[:, None] * np.ones(6)  # rad, inside every joint's limits
+    rows = np.hstack([swing * scale, np.zeros((n, 6))]).tolist()
+    header = [f'q_{name}' for name in robot.joints] + [f'v_{name}' for name in robot.joints]
+    csv = write_csv(tmp_path / 'log.csv', header, rows)
+    with pytest.raises(DatasetError, match=message):
+        import_log(csv, mapping, tmp_path / 'bag', robot=robot, velocity_from_position=False)
+    assert not (tmp_path / 'bag').exists()
