@@ -40,7 +40,13 @@ import torch
 from common import REPO, environment
 
 from id_learning.models.fitting import OptimConfig, configure_torch, train_module
-from id_learning.models.lagrangian import DelanNetwork, LagrangianScaling, LnnNetwork
+from id_learning.models.lagrangian import (
+    DelanConfig,
+    DelanNetwork,
+    LagrangianScaling,
+    LnnConfig,
+    LnnNetwork,
+)
 from id_learning.models.torch_utils import normalised_mse, to_numpy, to_tensor
 
 DEFAULT_DATA = REPO.parent / 'shared' / 'data' / 'delan_character'
@@ -74,10 +80,21 @@ REFERENCE: dict[str, dict[str, Any]] = {
     },
 }
 
-#: Our training per model (see the module docstring); both 2 x 64 tanh, as the reference.
+#: Our training per model (see the module docstring); both 2 x 64 tanh, as the reference; the
+#: energy balance is ``train``'s default.
 SETTINGS: dict[str, dict[str, Any]] = {
-    'delan': {'epochs': 1500, 'init': 'xavier', 'activation': 'tanh'},
-    'lnn': {'epochs': 2500, 'init': 'fan_in', 'activation': 'tanh'},
+    'delan': {
+        'epochs': 1500,
+        'init': 'xavier',
+        'activation': 'tanh',
+        'energy_balance': DelanConfig().energy_balance,
+    },
+    'lnn': {
+        'epochs': 2500,
+        'init': 'fan_in',
+        'activation': 'tanh',
+        'energy_balance': LnnConfig().energy_balance,
+    },
 }
 
 #: Step schedule: (learning-rate factor, share of the epochs).
@@ -119,7 +136,9 @@ def run_seed(
     start, start_cpu = time.perf_counter(), time.process_time()
     settings = model_settings(kind, args)
     train, test = split['train'], split['test']
-    scaling = LagrangianScaling.from_data(train['q'], train['v'], train['tau'])
+    scaling = LagrangianScaling.from_data(
+        train['q'], train['v'], train['tau'], balance=settings['energy_balance']
+    )
     generator = torch.Generator().manual_seed(seed)
     network: torch.nn.Module
     if kind == 'delan':
@@ -169,7 +188,7 @@ def run_seed(
 def model_settings(kind: str, args: argparse.Namespace) -> dict[str, Any]:
     """SETTINGS[kind] with the command line's overrides, and its (learning rate, epochs) steps."""
     settings = dict(SETTINGS[kind])
-    for key in ('epochs', 'init', 'activation'):
+    for key in ('epochs', 'init', 'activation', 'energy_balance'):
         value = getattr(args, f'{kind}_{key}')
         if value is not None:
             settings[key] = value
@@ -214,6 +233,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.add_argument(f'--{kind}-epochs', type=int, help=f'default {defaults["epochs"]}')
         parser.add_argument(f'--{kind}-init', choices=('xavier', 'fan_in'))
         parser.add_argument(f'--{kind}-activation', choices=('tanh', 'softplus'))
+        parser.add_argument(
+            f'--{kind}-energy-balance',
+            type=float,
+            help=f"default {defaults['energy_balance']} (train's)",
+        )
     parser.add_argument(
         '--threads', type=int, default=1, help='torch threads (the networks are too small to gain)'
     )
