@@ -1,9 +1,10 @@
 """The plausibility gate: joint motion a real arm can have, checked before anything uses it.
 
-One place for the checks every door applies to recorded or commanded motion (the replay's
-reference now; import, train and the nodes as they adopt it): values finite, stamps strictly
-increasing, positions inside the joint limits plus a margin, velocities within a stated factor of
-their limits. A violation names where it was found, the sample, its stamp, the joint and the
+One place for the checks every door applies to recorded or commanded motion (``load_recording``,
+so train, evaluate and diagnose; import; the replay's reference; the predictor, one sample at a
+time with ``SampleGate``): values finite, stamps strictly increasing (and, for recordings, no gap
+longer than a few IPO periods), positions inside the joint limits plus a margin, velocities within
+a stated factor of their limits. A violation names where it was found, the sample, its stamp, the joint and the
 value, and, when positions outside the limits would fit them read as degrees, says so.
 """
 
@@ -13,7 +14,6 @@ import math
 
 import numpy as np
 
-from id_learning.dataset.recording import check_finite
 from id_learning.errors import DatasetError
 from id_learning.robot.config import JointLimits
 
@@ -22,7 +22,10 @@ __all__ = [
     'POSITION_MARGIN_RAD',
     'VELOCITY_FACTOR',
     'SampleGate',
+    'check_finite',
+    'check_limits',
     'check_motion',
+    'check_stamps',
 ]
 
 #: Positions may lie this far outside the joint limits [rad] (encoder offsets, overshoot).
@@ -76,6 +79,50 @@ class SampleGate:
         return None
 
 
+def check_finite(
+    array: np.ndarray, joints: tuple[str, ...], stamps_ns: np.ndarray, where: str
+) -> None:
+    """Raise on the first NaN or Inf, naming the sample, its stamp and the joint.
+
+    Raises:
+        DatasetError: a value is NaN or infinite.
+    """
+    bad = ~np.isfinite(array)
+    if bad.any():
+        sample, column = (int(i) for i in np.argwhere(bad)[0])
+        raise DatasetError(
+            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), '
+            f'joint {joints[column]}: '
+            f'value {array[sample, column]} is not finite ({int(bad.sum())} bad values in all)'
+        )
+
+
+def check_stamps(
+    stamps_ns: np.ndarray, period_s: float, max_gap_periods: float, where: str
+) -> None:
+    """Require strictly increasing stamps without gaps longer than ``max_gap_periods`` periods.
+
+    Raises:
+        DatasetError: a stamp repeats or goes backwards, or a gap is too long (names the sample).
+    """
+    steps = np.diff(stamps_ns)
+    if (steps <= 0).any():
+        sample = int(np.argmax(steps <= 0)) + 1
+        kind = 'repeats' if steps[sample - 1] == 0 else 'goes backwards'
+        raise DatasetError(
+            f'{where}: time stamp {kind} at sample {sample}: {int(stamps_ns[sample - 1])} ns -> '
+            f'{int(stamps_ns[sample])} ns'
+        )
+    limit_ns = max_gap_periods * period_s * 1e9
+    if (steps > limit_ns).any():
+        sample = int(np.argmax(steps > limit_ns)) + 1
+        raise DatasetError(
+            f'{where}: gap of {steps[sample - 1] * 1e-6:.1f} ms before sample {sample} '
+            f'(stamp {int(stamps_ns[sample])} ns) exceeds {max_gap_periods:g} IPO periods of '
+            f'{period_s * 1e3:g} ms'
+        )
+
+
 def check_motion(
     joints: tuple[str, ...],
     stamps_ns: np.ndarray,
@@ -109,8 +156,26 @@ def check_motion(
             f'{where}: stamps must increase: sample {sample} has {int(stamps[sample])} ns after '
             f'{int(stamps[sample - 1])} ns'
         )
-    if limits is None:
-        return
+    if limits is not None:
+        check_limits(joints, stamps, q, v, limits=limits, where=where)
+
+
+def check_limits(
+    joints: tuple[str, ...],
+    stamps_ns: np.ndarray,
+    q: np.ndarray,
+    v: np.ndarray | None,
+    *,
+    limits: JointLimits,
+    where: str,
+) -> None:
+    """The limit part of ``check_motion`` for finite values (positions, then velocities).
+
+    Raises:
+        DatasetError: the first position outside the limits plus the margin, or velocity beyond
+            the factor, named as the module docstring says.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
     _check_positions(joints, stamps, np.asarray(q, float), limits, where)
     if v is not None:
         _check_velocities(joints, stamps, np.asarray(v, float), limits, where)

@@ -21,6 +21,7 @@ from id_learning.bag import (
     encode_joint_state,
     read_joint_states,
 )
+from id_learning.dataset.plausibility import check_finite, check_limits, check_stamps
 from id_learning.errors import DatasetError
 from id_learning.robot.config import RobotConfig, TopicConfig
 
@@ -124,50 +125,6 @@ def write_recording(
     return path
 
 
-def check_finite(
-    array: np.ndarray, joints: tuple[str, ...], stamps_ns: np.ndarray, where: str
-) -> None:
-    """Raise on the first NaN or Inf, naming the sample, its stamp and the joint.
-
-    Raises:
-        DatasetError: a value is NaN or infinite.
-    """
-    bad = ~np.isfinite(array)
-    if bad.any():
-        sample, column = (int(i) for i in np.argwhere(bad)[0])
-        raise DatasetError(
-            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), '
-            f'joint {joints[column]}: '
-            f'value {array[sample, column]} is not finite ({int(bad.sum())} bad values in all)'
-        )
-
-
-def check_stamps(
-    stamps_ns: np.ndarray, period_s: float, max_gap_periods: float, where: str
-) -> None:
-    """Require strictly increasing stamps without gaps longer than ``max_gap_periods`` periods.
-
-    Raises:
-        DatasetError: a stamp repeats or goes backwards, or a gap is too long (names the sample).
-    """
-    steps = np.diff(stamps_ns)
-    if (steps <= 0).any():
-        sample = int(np.argmax(steps <= 0)) + 1
-        kind = 'repeats' if steps[sample - 1] == 0 else 'goes backwards'
-        raise DatasetError(
-            f'{where}: time stamp {kind} at sample {sample}: {int(stamps_ns[sample - 1])} ns -> '
-            f'{int(stamps_ns[sample])} ns'
-        )
-    limit_ns = max_gap_periods * period_s * 1e9
-    if (steps > limit_ns).any():
-        sample = int(np.argmax(steps > limit_ns)) + 1
-        raise DatasetError(
-            f'{where}: gap of {steps[sample - 1] * 1e-6:.1f} ms before sample {sample} '
-            f'(stamp {int(stamps_ns[sample])} ns) exceeds {max_gap_periods:g} IPO periods of '
-            f'{period_s * 1e3:g} ms'
-        )
-
-
 def _reorder(series: JointStateSeries, joints: tuple[str, ...], where: str) -> np.ndarray:
     """Column permutation that puts a topic's joints in config order (by name)."""
     if set(series.names) != set(joints) or len(series.names) != len(joints):
@@ -219,6 +176,9 @@ def load_recording(
     check_finite(velocity, robot.joints, states.stamps_ns, f'{where_js} velocity')
     if joint_torque is not None:
         check_finite(joint_torque, robot.joints, states.stamps_ns, f'{where_js} effort')
+    check_limits(
+        robot.joints, states.stamps_ns, position, velocity, limits=robot.limits, where=where_js
+    )
 
     current = None
     if require_current:

@@ -74,6 +74,24 @@ def test_non_finite_samples_are_refused_naming_sample_and_joint(tmp_path, mabi, 
         load_recording(path, mabi)
 
 
+@pytest.mark.parametrize(
+    ('field', 'value', 'message'),
+    [
+        ('position', 1e300, r'joint joint_2: position 1e\+300 rad is outside the limits'),
+        ('velocity', 10.0, r'joint joint_2: velocity 10 rad/s exceeds 1.5 x its limit'),
+    ],
+)
+def test_motion_beyond_the_robots_limits_is_refused_naming_sample_and_joint(
+    tmp_path, mabi, field, value, message
+):
+    recording = sine_recording(300)
+    values = getattr(recording, field).copy()
+    values[77, 1] = value
+    path = write_contract_bag(tmp_path / 'bag', broken(recording, **{field: values}))
+    with pytest.raises(DatasetError, match=rf'/joint_states: sample 77 .*{message}'):
+        load_recording(path, mabi)
+
+
 def test_stamps_that_go_backwards_are_refused(tmp_path, mabi):
     recording = sine_recording(300)
     stamps = recording.stamps_ns.copy()
