@@ -4,8 +4,9 @@ One place for the checks every door applies to recorded or commanded motion (``l
 so train, evaluate and diagnose; import; the replay's reference; the predictor, one sample at a
 time with ``SampleGate``): values finite, stamps strictly increasing (and, for recordings, no gap
 longer than a few IPO periods), positions inside the joint limits plus a margin, velocities within
-a stated factor of their limits. A violation names where it was found, the sample, its stamp, the joint and the
-value, and, when positions outside the limits would fit them read as degrees, says so.
+a stated factor of their limits. A violation names where it was found, the sample, its stamp, the
+joint and the value, and, when positions outside the limits would fit them read as degrees, says
+so.
 """
 
 from __future__ import annotations
@@ -61,20 +62,16 @@ class SampleGate:
                 f'[{self._low[j] + POSITION_MARGIN_RAD:.4g}, '
                 f'{self._high[j] - POSITION_MARGIN_RAD:.4g}] rad plus {POSITION_MARGIN_RAD:g}'
             )
-        fast = np.abs(v) > self._velocity
-        if fast.any():
-            j = int(np.argmax(fast))
-            return (
-                f'velocity of {self.joints[j]} {v[j]:.6g} rad/s exceeds {VELOCITY_FACTOR:g} x '
-                f'its limit'
-            )
+        rates = [('velocity', v, 'rad/s', self._velocity, VELOCITY_FACTOR)]
         if a is not None:
-            hard = np.abs(a) > self._acceleration
-            if hard.any():
-                j = int(np.argmax(hard))
+            rates.append(('acceleration', a, 'rad/s^2', self._acceleration, ACCELERATION_FACTOR))
+        for name, values, unit, bound, factor in rates:
+            beyond = np.abs(values) > bound
+            if beyond.any():
+                j = int(np.argmax(beyond))
                 return (
-                    f'acceleration of {self.joints[j]} {a[j]:.6g} rad/s^2 exceeds '
-                    f'{ACCELERATION_FACTOR:g} x its limit'
+                    f'{name} of {self.joints[j]} {values[j]:.6g} {unit} exceeds {factor:g} x '
+                    'its limit'
                 )
         return None
 
