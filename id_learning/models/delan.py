@@ -66,8 +66,9 @@ class DelanNetwork(LagrangianNetwork):
 
     The Cholesky network outputs the n diagonal entries first (made positive by
     ``softplus(x + diagonal_shift) + diagonal_epsilon``), then the strictly lower entries row by
-    row, forming the dimensionless factor ``L_s``; ``L = S L_s`` with
-    ``S = diag(sqrt(e_i) / h_v,i)`` (see ``models.lagrangian_base``). State-dict keys:
+    row, forming the dimensionless factor ``L_s``; ``L = S (G * L_s)`` with
+    ``S = diag(sqrt(e_i) / h_v,i)`` and ``G`` the fixed entry gains of the energy balance (see
+    ``models.lagrangian_base``). State-dict keys:
     ``cholesky_net.layers.<i>.{weight,bias}``, ``potential_net.layers.<i>.{weight,bias}``.
     """
 

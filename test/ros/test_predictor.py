@@ -128,6 +128,11 @@ def test_replay_to_predictor_gives_the_offline_prediction_for_every_model_kind(
     check('/mlp_js/tau_u', expected, states.stamps_ns.tolist())
 
 
+#: The bad-input test's output limit, as a share of the robot's (so that hard but possible
+#: accelerations are clamped).
+LIMIT_SCALE = 0.3
+
+
 def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     nodes, listener, tiny_artifacts, mabi
 ):
@@ -154,6 +159,7 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
             'diagnostics_period_s': 0.1,
             'log_throttle_s': 0.2,
             'command_topic': '/ff/commands',
+            'torque_limit_scale': LIMIT_SCALE,
         },
     )
     listener.wait_for(
@@ -166,9 +172,14 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     )
     joints = list(mabi.joints)
     _, q, v, a = reference_run(20)
-    a_big = np.full(6, 1e4)  # far beyond the robot's acceleration limits
-    raw = load_model(tiny_artifacts[kind], mabi).predict(q[:1], v[:1], a_big[None])[0]
-    assert np.any(np.abs(raw) > mabi.limits.torque)  # precondition: these will be clamped
+    limit = LIMIT_SCALE * mabi.limits.torque
+    a_big = 1.9 * mabi.limits.acceleration  # hard, but within what an arm can do (2x)
+    a_impossible = np.full(6, 1e4)  # far beyond the robot's acceleration limits
+    model = load_model(tiny_artifacts[kind], mabi)
+    raw = model.predict(q[10:14], v[10:14], np.tile(a_big, (4, 1)))
+    assert np.all(np.any(np.abs(raw) > limit, axis=1))  # precondition: these will be clamped
+    normal = model.predict(q, v, a)
+    assert np.all(np.abs(normal) < limit)  # and the others will not
     sent_ok: list[int] = []
 
     def send(k, *, names=joints, q_k=None, v_k=None, a_k=None, age_s=0.0, valid=True):
@@ -201,6 +212,8 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
         send(10 + k, a_k=a_big)
     for k in range(3):
         send(k, age_s=5.0, valid=False)
+    for k in range(2):
+        send(k, a_k=a_impossible, valid=False)
 
     def diagnostics():
         return listener.diagnostics('id_learning/predictor') or {}
@@ -211,13 +224,14 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
         send(k)
 
     expected = {
-        'received': 38,
+        'received': 40,
         'published': 24,
         'rejected_non_finite': 5,
         'rejected_joint_count': 3,
         'rejected_joint_names': 3,
         'rejected_too_old': 3,
-        'rejected': 14,
+        'rejected_impossible': 2,
+        'rejected': 16,
         'clamped_samples': 4,
         'out_of_range_samples': 4,
     }
@@ -246,9 +260,9 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
         assert list(msg.name) == joints
         effort = np.array(msg.effort)
         assert np.isfinite(effort).all()
-        assert np.all(np.abs(effort) <= mabi.limits.torque)
+        assert np.all(np.abs(effort) <= limit)
     clamped = np.array([m.effort for m in published[10:14]])
-    assert np.any(np.isclose(np.abs(clamped), mabi.limits.torque), axis=1).all()
+    assert np.any(np.isclose(np.abs(clamped), limit), axis=1).all()
     # The forward-command copy: the same torques, plus one zero command when it went stale.
     listener.wait_for(
         lambda: len(listener.messages['/ff/commands']) >= 25, 10, 'the command copies'
