@@ -23,7 +23,9 @@ reference resumes.
 
 Diagnostics (/diagnostics, every ``diagnostics_period_s``): input rate, receive-to-publish
 latency and compute latency (median, p99, max), counts of predictions, clamps per joint, rejects
-per reason, out-of-range samples, stale episodes. ``latency_from`` says where the latency
+per reason, out-of-range samples, stale episodes, IPO cycles the reference's stamps skipped
+(samples that never arrived: not sent, lost, or overwritten in a full input queue) and samples
+published later than one IPO period after they arrived. ``latency_from`` says where the latency
 starts: with rclpy's executors at the middleware's receive timestamp (``middleware_receive``);
 with the events executor, which cannot pass that timestamp to the callback, at the callback's
 start (``callback_start``), which leaves out the wait between arrival and dispatch.
@@ -198,6 +200,8 @@ class Predictor(Node):
         self.names = list(self.core.joint_names)
         self.latency_s = RollingStats(config.latency_window)
         self.callback_errors = 0
+        #: Published later than one IPO period after the sample arrived (see latency_from).
+        self.late_samples = 0
         self._window_start = (time.monotonic(), 0)
         self._stale_logged_ns = 0
         self._is_closed = False
@@ -295,9 +299,12 @@ class Predictor(Node):
             if self._command is not None:
                 self._command.publish(self._command_bytes.serialize(0, tau))
             if received_wall_ns:
-                self.latency_s.add((time.time_ns() - received_wall_ns) * 1e-9)
+                latency_s = (time.time_ns() - received_wall_ns) * 1e-9
             else:  # no middleware timestamp: from the callback's start
-                self.latency_s.add((time.monotonic_ns() - receive_ns) * 1e-9)
+                latency_s = (time.monotonic_ns() - receive_ns) * 1e-9
+            self.latency_s.add(latency_s)
+            if latency_s > self.core.config.period_s:
+                self.late_samples += 1
             if result.resumed_after_stale or result.is_out_of_range or result.is_clamped:
                 self._log_result(result)
             self.core.prepare_next()  # off the path from sample to torque
@@ -388,6 +395,8 @@ class Predictor(Node):
                 'stale': self.core.is_stale,
                 'stale_episodes': counters.stale_episodes,
                 'history_resets': counters.history_resets,
+                'skipped_cycles': counters.skipped_cycles,
+                'late_samples': self.late_samples,
                 'callback_errors': self.callback_errors,
                 # Matched on the writer side: a consumer listed here receives every tau_u.
                 'tau_u_subscriptions': self._tau_u.get_subscription_count(),
@@ -416,11 +425,18 @@ class Predictor(Node):
             level, message = 'error', 'reference stale: not publishing'
         elif counters.received == 0:
             level, message = 'ok', 'waiting for the reference'
-        elif counters.rejected or counters.clamped_samples or counters.out_of_range:
+        elif (
+            counters.rejected
+            or counters.clamped_samples
+            or counters.out_of_range
+            or counters.skipped_cycles
+            or self.late_samples
+        ):
             level = 'warn'
             message = (
                 f'{counters.rejected} rejected, {counters.clamped_samples} clamped, '
-                f'{counters.out_of_range} out of range'
+                f'{counters.out_of_range} out of range, {counters.skipped_cycles} cycles '
+                f'skipped, {self.late_samples} late'
             )
         else:
             level, message = 'ok', f'{counters.predicted} published'
@@ -447,7 +463,8 @@ class Predictor(Node):
             f'{counters.rejected} rejected '
             f'{ {r.value: c for r, c in counters.rejects.items() if c} }, '
             f'{counters.clamped_samples} clamped, {counters.out_of_range} out of range, '
-            f'{counters.stale_episodes} stale episodes; receive-to-publish latency median '
+            f'{counters.stale_episodes} stale episodes, {counters.skipped_cycles} cycles skipped, '
+            f'{self.late_samples} late; receive-to-publish latency median '
             f'{latency.median * 1e3:.3f} ms, p99 {latency.p99 * 1e3:.3f} ms'
         )
 

@@ -177,6 +177,9 @@ class PredictorCounters:
         out_of_range: samples outside the training range (warned or rejected).
         stale_episodes: times the reference went stale after having been live.
         history_resets: times the history was reset (after a stale episode or a stamp gap).
+        skipped_cycles: IPO cycles the stamps of consecutive accepted samples jump over, within
+            the stale threshold: samples that never reached the predictor (not sent, lost on the
+            way, or overwritten in a full queue) or were rejected.
     """
 
     n_joints: int
@@ -188,6 +191,7 @@ class PredictorCounters:
     out_of_range: int = 0
     stale_episodes: int = 0
     history_resets: int = 0
+    skipped_cycles: int = 0
 
     def __post_init__(self) -> None:
         self.clamped_per_joint = np.zeros(self.n_joints, dtype=np.int64)
@@ -496,6 +500,9 @@ class FeedForwardPredictor:
         resumed = self._is_stale or stamp_gap or receive_gap
         if stamp_gap:
             self.reset()
+        elif self._last_stamp_ns is not None:
+            step = (sample.stamp_ns - self._last_stamp_ns) * 1e-9 / config.period_s
+            counters.skipped_cycles += max(round(step) - 1, 0)
         self._is_stale = False
         self._last_stamp_ns = sample.stamp_ns
         self._last_receive_ns = receive_ns

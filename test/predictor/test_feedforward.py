@@ -240,6 +240,20 @@ def test_a_sample_no_arm_can_be_in_gives_no_torque_and_the_next_valid_one_does(
     np.testing.assert_allclose(after.tau, expected, rtol=1e-5, atol=1e-6)
 
 
+def test_cycles_the_stamps_jump_over_are_counted_as_skipped(linear):
+    for k in (0, 1, 2, 5, 6):  # samples 3 and 4 never arrive
+        assert linear.step(sample(k), receive(k)).tau is not None
+    assert linear.counters.skipped_cycles == 2
+    bad = sample(7, q=[np.nan] * 6)  # rejected: its cycle gives no torque either
+    assert linear.step(bad, receive(7)).tau is None
+    assert linear.step(sample(8), receive(8)).tau is not None
+    assert linear.counters.skipped_cycles == 3
+    # A jump beyond the stale threshold is a new run (a history reset), not skipped cycles.
+    assert linear.step(sample(100), receive(100)).tau is not None
+    assert linear.counters.skipped_cycles == 3
+    assert linear.counters.history_resets == 1
+
+
 def test_predictor_rejects_samples_older_than_max_age(mabi):
     predictor = FeedForwardPredictor(
         LinearModel(mabi), mabi.limits.torque, GuardConfig(max_age_s=0.1)

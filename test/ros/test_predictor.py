@@ -249,6 +249,8 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     assert int(values['stale_episodes']) >= 1
     assert int(values['history_resets']) >= 1
     assert values['rejected_stamp_order'] == '0'
+    assert int(values['skipped_cycles']) >= 0  # timing-dependent here; counted in the core tests
+    assert int(values['late_samples']) >= 0
     assert values['callback_errors'] == '0'
     assert published_while_stale == 14
 
