@@ -48,7 +48,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     """Convert a CSV/NPZ log into a bag of the bag contract."""
     from id_learning.dataset.importer import import_log, load_import_mapping
 
-    robot = options.load_robot(args) if args.robot else None
+    robot = options.load_robot(args)
     report = import_log(
         Path(args.source),
         load_import_mapping(args.mapping),
@@ -64,7 +64,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     """Print topics, counts, rates, jitter, gaps and ranges of a bag."""
     from id_learning.dataset.inspect import inspect_bag, plot_report, render_report
 
-    robot = options.load_robot(args) if args.robot else None
+    robot = options.load_robot(args)
     report = inspect_bag(Path(args.bag), robot=robot)
     print(render_report(report))
     if args.plot:
@@ -104,7 +104,9 @@ def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     p.add_argument('--out', required=True, help='bag folder to write')
     options.robot_option(
-        p, 'robot config: check joint names against it and use its IPO period and topics'
+        p,
+        'robot config YAML (default: MABI MAX 100): joint names and limits are checked against '
+        'it; its IPO period and topics are used',
     )
     p.add_argument('--force', action='store_true', help='overwrite an existing bag folder')
     p.set_defaults(func=cmd_import)

@@ -241,7 +241,8 @@ def _joint_order(mapping: ImportMapping, robot: RobotConfig | None) -> tuple[Joi
     if set(by_name) != set(robot.joints):
         raise ConfigError(
             f'{mapping.where}: mapped joints {list(by_name)} are not the joints of robot '
-            f'{robot.name} {list(robot.joints)}; map exactly the robot config joints'
+            f'{robot.name} {list(robot.joints)}; map exactly the robot config joints '
+            '(--robot names the robot config)'
         )
     return tuple(by_name[name] for name in robot.joints)
 

@@ -21,8 +21,10 @@ from id_learning.robot.config import JointLimits
 __all__ = [
     'ACCELERATION_FACTOR',
     'POSITION_MARGIN_RAD',
+    'TORQUE_FACTOR',
     'VELOCITY_FACTOR',
     'SampleGate',
+    'check_efforts',
     'check_finite',
     'check_limits',
     'check_motion',
@@ -35,6 +37,9 @@ POSITION_MARGIN_RAD = 0.05
 VELOCITY_FACTOR = 1.5
 #: Accelerations may reach this multiple of their limits (estimates from differences are noisy).
 ACCELERATION_FACTOR = 2.0
+#: Measured torques, and currents times gear ratio and torque constant, may reach this multiple of
+#: the torque limits (friction and a drive's peak current lie above the rated limit).
+TORQUE_FACTOR = 2.0
 
 
 class SampleGate:
@@ -215,14 +220,55 @@ def _check_positions(
 def _check_velocities(
     joints: tuple[str, ...], stamps: np.ndarray, v: np.ndarray, limits: JointLimits, where: str
 ) -> None:
-    bound = VELOCITY_FACTOR * limits.velocity
-    outside = np.abs(v) > bound
-    if not outside.any():
-        return
-    sample, column = _first(outside)
-    raise DatasetError(
-        f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
-        f'velocity {v[sample, column]:.6g} rad/s exceeds {VELOCITY_FACTOR:g} x its limit '
-        f'{limits.velocity[column]:.4g} rad/s ({int(outside[:, column].sum())} samples of this '
-        'joint)'
-    )
+    found = _beyond(v, VELOCITY_FACTOR * limits.velocity)
+    if found is not None:
+        sample, column, count = found
+        raise DatasetError(
+            f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
+            f'velocity {v[sample, column]:.6g} rad/s exceeds {VELOCITY_FACTOR:g} x its limit '
+            f'{limits.velocity[column]:.4g} rad/s ({count} samples of this joint)'
+        )
+
+
+def _beyond(values: np.ndarray, bound: np.ndarray) -> tuple[int, int, int] | None:
+    """(sample, joint, samples of that joint) of the first |value| above its bound, or None."""
+    beyond = np.abs(np.asarray(values, float)) > bound
+    if not beyond.any():
+        return None
+    sample, column = _first(beyond)
+    return sample, column, int(beyond[:, column].sum())
+
+
+def check_efforts(
+    joints: tuple[str, ...],
+    stamps_ns: np.ndarray,
+    torque: np.ndarray,
+    *,
+    torque_limit: np.ndarray,
+    where: str,
+    what: str = 'torque',
+    unit_per_nm: np.ndarray | None = None,
+) -> None:
+    """Refuse torques (or currents) beyond ``TORQUE_FACTOR`` times the torque limits.
+
+    Args:
+        torque: (N, n) the values as recorded.
+        torque_limit: (n,) the robot's joint-side torque limits [N*m].
+        what: the quantity's name and unit for the message (e.g. 'current [A]').
+        unit_per_nm: (n,) recorded units per N*m joint side (for currents
+            ``1 / (gear_ratio * torque_constant)``); None for torques in N*m.
+
+    Raises:
+        DatasetError: the first value beyond the bound, naming sample, stamp, joint and value.
+    """
+    needed = np.asarray(torque_limit, float)
+    if unit_per_nm is not None:
+        needed = needed * np.asarray(unit_per_nm, float)
+    found = _beyond(torque, TORQUE_FACTOR * needed)
+    if found is not None:
+        sample, column, count = found
+        raise DatasetError(
+            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), joint '
+            f'{joints[column]}: {what} {torque[sample, column]:.6g} exceeds {TORQUE_FACTOR:g} x '
+            f'what the torque limit needs ({needed[column]:.4g}; {count} samples of this joint)'
+        )

@@ -21,7 +21,12 @@ from id_learning.bag import (
     encode_joint_state,
     read_joint_states,
 )
-from id_learning.dataset.plausibility import check_finite, check_limits, check_stamps
+from id_learning.dataset.plausibility import (
+    check_efforts,
+    check_finite,
+    check_limits,
+    check_stamps,
+)
 from id_learning.errors import DatasetError
 from id_learning.robot.config import RobotConfig, TopicConfig
 
@@ -176,6 +181,14 @@ def load_recording(
     check_finite(velocity, robot.joints, states.stamps_ns, f'{where_js} velocity')
     if joint_torque is not None:
         check_finite(joint_torque, robot.joints, states.stamps_ns, f'{where_js} effort')
+        check_efforts(
+            robot.joints,
+            states.stamps_ns,
+            joint_torque,
+            torque_limit=robot.limits.torque,
+            where=f'{where_js} effort',
+            what='joint torque [N*m]',
+        )
     check_limits(
         robot.joints, states.stamps_ns, position, velocity, limits=robot.limits, where=where_js
     )
@@ -216,6 +229,16 @@ def load_recording(
             joint_torque = None if joint_torque is None else joint_torque[:size]
         current = currents.effort[:size, order_mc]
         check_finite(current, robot.joints, currents.stamps_ns[:size], f'{where_mc} effort')
+        drives = robot.drives
+        check_efforts(
+            robot.joints,
+            currents.stamps_ns[:size],
+            current,
+            torque_limit=robot.limits.torque,
+            where=f'{where_mc} effort',
+            what='current [A]',
+            unit_per_nm=1.0 / (drives.gear_ratio * drives.torque_constant),
+        )
     return Recording(
         joints=robot.joints,
         stamps_ns=states.stamps_ns,

@@ -173,7 +173,7 @@ def test_npz_with_2d_arrays_round_trips_torque_and_current_to_si(
         'q': rng.uniform(-1.0, 1.0, (n, 6)),
         'qd_rpm': rng.uniform(-10.0, 10.0, (n, 6)),
         'i_ma': rng.uniform(-4000.0, 4000.0, (n, 6)),
-        'tau_knm': rng.uniform(-2.0, 2.0, (n, 6)),
+        'tau_knm': rng.uniform(-0.5, 0.5, (n, 6)),  # within the MABI torque limits
         'meta': np.array([1.0, 2.0]),  # unused arrays of other lengths are ignored
     }
     np.savez(tmp_path / 'log.npz', **arrays)

@@ -92,6 +92,17 @@ def test_motion_beyond_the_robots_limits_is_refused_naming_sample_and_joint(
         load_recording(path, mabi)
 
 
+def test_a_current_no_drive_of_the_robot_can_carry_is_refused(tmp_path, mabi):
+    recording = sine_recording(300)
+    current = recording.current.copy()
+    current[88, 5] = -1e300
+    path = write_contract_bag(tmp_path / 'bag', broken(recording, current=current))
+    with pytest.raises(
+        DatasetError, match=r'/motor_currents effort: sample 88 .*joint_6: current \[A\] -1e\+300'
+    ):
+        load_recording(path, mabi)
+
+
 def test_stamps_that_go_backwards_are_refused(tmp_path, mabi):
     recording = sine_recording(300)
     stamps = recording.stamps_ns.copy()
