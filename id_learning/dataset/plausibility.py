@@ -31,6 +31,10 @@ __all__ = [
     'check_stamps',
 ]
 
+#: Where a refusal sends a user whose arm really moves there.
+LIMITS_HINT = (
+    "the limits are the robot config's (--robot): if the arm's are wider, correct them there"
+)
 #: Positions may lie this far outside the joint limits [rad] (encoder offsets, overshoot).
 POSITION_MARGIN_RAD = 0.05
 #: Velocities may reach this multiple of their limits (a drive's short overshoot).
@@ -207,7 +211,7 @@ def _check_positions(
         '; read as degrees every sample of this joint fits its limits: the log is in degrees, '
         'positions must be in radians'
         if degrees
-        else ''
+        else f'; {LIMITS_HINT}'
     )
     raise DatasetError(
         f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
@@ -226,7 +230,7 @@ def _check_velocities(
         raise DatasetError(
             f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
             f'velocity {v[sample, column]:.6g} rad/s exceeds {VELOCITY_FACTOR:g} x its limit '
-            f'{limits.velocity[column]:.4g} rad/s ({count} samples of this joint)'
+            f'{limits.velocity[column]:.4g} rad/s ({count} samples of this joint); {LIMITS_HINT}'
         )
 
 
