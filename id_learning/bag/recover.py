@@ -295,7 +295,7 @@ def _scan_file(file: Path, topics: _Topics, sink: _MessageSink | None) -> FileSc
                 )
                 if at_end:
                     stream.seek(valid)
-                    torn = [r for r in _torn_chunk_records(stream.read()) if r is not None]
+                    torn = _torn_chunk_records(stream.read())
                     before = messages
                     for item in torn:
                         take(item)

@@ -64,7 +64,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     """Print topics, counts, rates, jitter, gaps and ranges of a bag."""
     from id_learning.dataset.inspect import inspect_bag, plot_report, render_report
 
-    robot = options.load_robot(args)
+    robot = options.load_robot(args) if args.robot else None
     report = inspect_bag(Path(args.bag), robot=robot)
     print(render_report(report))
     if args.plot:

@@ -34,7 +34,7 @@ from id_learning.dataset.import_mapping import (
 )
 from id_learning.dataset.import_readers import LogTable, is_float, read_table
 from id_learning.dataset.import_stamps import log_stamps
-from id_learning.dataset.plausibility import check_motion
+from id_learning.dataset.plausibility import check_efforts, check_motion
 from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
@@ -247,6 +247,30 @@ def _joint_order(mapping: ImportMapping, robot: RobotConfig | None) -> tuple[Joi
     return tuple(by_name[name] for name in robot.joints)
 
 
+def _check_efforts(recording: Recording, robot: RobotConfig, where: str) -> None:
+    """Currents and torques within what the robot's torque limits can need (the gate)."""
+    drives = robot.drives
+    if recording.current is not None:
+        check_efforts(
+            recording.joints,
+            recording.stamps_ns,
+            recording.current,
+            torque_limit=robot.limits.torque,
+            where=where,
+            what='current [A]',
+            unit_per_nm=1.0 / (drives.gear_ratio * drives.torque_constant),
+        )
+    if recording.joint_torque is not None:
+        check_efforts(
+            recording.joints,
+            recording.stamps_ns,
+            recording.joint_torque,
+            torque_limit=robot.limits.torque,
+            where=where,
+            what='joint torque [N*m]',
+        )
+
+
 def import_log(
     source: Path | str,
     mapping: ImportMapping,
@@ -321,6 +345,8 @@ def import_log(
         limits=robot.limits if robot else None,
         where=str(source),
     )
+    if robot is not None:
+        _check_efforts(recording, robot, str(source))
     write_recording(recording, out, topics=robot.topics if robot else None, overwrite=overwrite)
     report = ImportReport(
         source=source,

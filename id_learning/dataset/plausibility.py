@@ -47,7 +47,10 @@ TORQUE_FACTOR = 2.0
 
 
 class SampleGate:
-    """The gate for one sample at a time (online nodes): the same bounds as ``check_motion``.
+    """The gate for one sample at a time (online nodes).
+
+    ``check_motion``'s bounds, plus accelerations (when the sample carries them) within
+    ``ACCELERATION_FACTOR`` x their limits.
 
     Args:
         joints: the joint names, in the order of ``limits`` and of the samples.
@@ -152,6 +155,12 @@ def check_motion(
         DatasetError: the first violation, named as the module docstring says.
     """
     stamps = np.asarray(stamps_ns, dtype=np.int64)
+    for name, values in (('position', q), ('velocity', v)):
+        if values is not None and np.shape(values) != (len(stamps), len(joints)):
+            raise DatasetError(
+                f'{where}: {name} has shape {np.shape(values)}, expected one value per joint '
+                f'{list(joints)} for each of {len(stamps)} samples'
+            )
     check_finite(np.asarray(q, float), joints, stamps, f'{where}: position')
     if v is not None:
         check_finite(np.asarray(v, float), joints, stamps, f'{where}: velocity')

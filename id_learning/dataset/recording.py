@@ -160,8 +160,10 @@ def load_recording(
 
     Raises:
         BagError: missing topic, wrong type, truncated or corrupt file.
-        DatasetError: joint names differ, NaN/Inf samples, stamps backwards/repeated/gapped, or
-            the two topics' stamps do not match (each names topic, joint and sample).
+        DatasetError: joint names differ, NaN/Inf samples, stamps backwards/repeated/gapped,
+            positions or velocities beyond the robot's limits, currents or joint torques beyond
+            what its torque limits need, or the two topics' stamps do not match (each names
+            topic, joint and sample; ``dataset.plausibility``).
     """
     path = Path(path)
     topics = robot.topics

@@ -76,6 +76,11 @@ class OptimConfig:
             raise ConfigError(f'lr_decay must be in (0, 1], got {self.lr_decay}')
         if self.lr_decay_patience < 1:
             raise ConfigError(f'lr_decay_patience must be >= 1, got {self.lr_decay_patience}')
+        if self.lr_decay < 1.0 and self.lr_decay_patience >= self.patience:
+            raise ConfigError(
+                f'lr_decay_patience ({self.lr_decay_patience}) must be below patience '
+                f'({self.patience}), or early stopping ends the fit before any decay'
+            )
         if self.batch_size < 1 or self.max_epochs < 1 or self.patience < 1:
             raise ConfigError('batch_size, max_epochs and patience must be >= 1')
 

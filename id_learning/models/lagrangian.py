@@ -26,7 +26,7 @@ by its half range ``h_tau``).
 from __future__ import annotations
 
 from abc import abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
@@ -374,6 +374,10 @@ class _LagrangianModel(TorchModel[LagrangianNetwork]):
                 f'{self.kind}: scaling is for {scaling.n_dof} joints, '
                 f'the robot has {len(self.joint_names)}'
             )
+        if scaling.balance != self.config.energy_balance:
+            # An artifact from before the balance (or edited): the scaling it was fitted with
+            # rules, and the config says so too.
+            self.config = replace(self.config, energy_balance=scaling.balance)
         network = self.make_network(scaling, torch.Generator().manual_seed(self.config.seed))
         self._load_network(network, tensors, fitted)
         self.scaling_ = scaling

@@ -573,6 +573,29 @@ def test_delimiter_and_header_are_detected(tmp_path: Path, delimiter: str) -> No
     np.testing.assert_allclose(states.position, values[:, :2], rtol=1e-12, atol=0)
 
 
+def test_a_current_no_drive_can_carry_is_refused_at_import(tmp_path: Path, robot: RobotConfig):
+    mapping = ImportMapping(
+        period_s=robot.ipo_period_s,
+        joints=tuple(
+            JointColumns(
+                name,
+                ColumnSpec(f'q_{name}', 'rad'),
+                ColumnSpec(f'v_{name}', 'rad/s'),
+                current=ColumnSpec(f'i_{name}', 'A'),
+            )
+            for name in robot.joints
+        ),
+    )
+    n = 20
+    rows = np.hstack([np.zeros((n, 12)), np.ones((n, 6))])
+    rows[7, 12 + 2] = -1e300
+    header = [f'{key}_{name}' for key in ('q', 'v', 'i') for name in robot.joints]
+    csv = write_csv(tmp_path / 'log.csv', header, rows.tolist())
+    with pytest.raises(DatasetError, match=r'sample 7 .*joint_3: current \[A\] -1e\+300'):
+        import_log(csv, mapping, tmp_path / 'bag', robot=robot, velocity_from_position=False)
+    assert not (tmp_path / 'bag').exists()
+
+
 @pytest.mark.parametrize(
     ('scale', 'message'),
     [

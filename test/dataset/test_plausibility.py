@@ -86,3 +86,9 @@ def test_a_velocity_beyond_the_stated_factor_of_its_limit_is_refused(mabi, motio
     v[6, 0] = 6.0 * limit
     with pytest.raises(DatasetError, match=r'sample 6 .*joint joint_1: velocity .* exceeds 1.5 x'):
         check(mabi, joints, stamps, q, v)
+
+
+def test_arrays_that_do_not_match_the_joints_are_named(mabi, motion):
+    joints, stamps, q, _ = motion
+    with pytest.raises(DatasetError, match=r'velocity has shape \(50, 0\)'):
+        check(mabi, joints, stamps, q, np.zeros((N, 0)))

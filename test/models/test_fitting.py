@@ -73,8 +73,14 @@ def test_a_plateau_restarts_from_the_best_weights_with_a_smaller_rate() -> None:
 
 
 @pytest.mark.parametrize(
-    ('key', 'value'), [('lr_decay', 0.0), ('lr_decay', 1.5), ('lr_decay_patience', 0)]
+    ('settings', 'key'),
+    [
+        ({'lr_decay': 0.0}, 'lr_decay'),
+        ({'lr_decay': 1.5}, 'lr_decay'),
+        ({'lr_decay_patience': 0}, 'lr_decay_patience'),
+        ({'lr_decay': 0.5, 'lr_decay_patience': 25, 'patience': 25}, 'lr_decay_patience'),
+    ],
 )
-def test_invalid_decay_settings_are_refused_naming_the_key(key: str, value: float) -> None:
+def test_invalid_decay_settings_are_refused_naming_the_key(settings: dict, key: str) -> None:
     with pytest.raises(ConfigError, match=key):
-        OptimConfig(**{key: value})
+        OptimConfig(**settings)

@@ -367,6 +367,22 @@ def test_saving_and_loading_gives_identical_predictions(
     }
 
 
+def test_a_model_saved_before_the_balance_loads_unbalanced_and_says_so(fitted, mabi) -> None:
+    model = fitted['delan']
+    assert model.config.energy_balance > 0
+    fitted_state = model.fitted_metadata()
+    old = {**fitted_state, 'scaling': {**fitted_state['scaling']}}
+    del old['scaling']['energy_balance']  # as written before the balance existed
+    loaded = DelanModel(model.config, mabi)
+    loaded.load_state(model.state(), old)
+    assert loaded.config.energy_balance == 0.0
+    assert loaded.scaling_ is not None
+    assert loaded.scaling_.balance == 0.0
+    network = loaded.network()
+    torch.testing.assert_close(network.lagrangian_energy, network.energy)
+    torch.testing.assert_close(network.lagrangian_q_half, network.q_half)
+
+
 def test_state_round_trip_through_safetensors_and_json_is_exact(fitted, mabi, tmp_path) -> None:
     model = fitted['delan']
     write_artifact(tmp_path, 'delan', mabi, model.state(), {'fitted': model.fitted_metadata()})
