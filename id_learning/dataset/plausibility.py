@@ -24,6 +24,7 @@ __all__ = [
     'TORQUE_FACTOR',
     'VELOCITY_FACTOR',
     'SampleGate',
+    'check_accelerations',
     'check_efforts',
     'check_finite',
     'check_limits',
@@ -284,4 +285,28 @@ def check_efforts(
             f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), joint '
             f'{joints[column]}: {what} {torque[sample, column]:.6g} exceeds {TORQUE_FACTOR:g} x '
             f'what the torque limit needs ({needed[column]:.4g}; {count} samples of this joint)'
+        )
+
+
+def check_accelerations(
+    joints: tuple[str, ...],
+    stamps_ns: np.ndarray,
+    a: np.ndarray,
+    *,
+    limits: JointLimits,
+    where: str,
+) -> None:
+    """Refuse accelerations beyond ``ACCELERATION_FACTOR`` times their limits (as SampleGate).
+
+    Raises:
+        DatasetError: the first one, naming sample, stamp, joint and value.
+    """
+    found = _beyond(a, ACCELERATION_FACTOR * limits.acceleration)
+    if found is not None:
+        sample, column, count = found
+        raise DatasetError(
+            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), joint '
+            f'{joints[column]}: acceleration {a[sample, column]:.6g} rad/s^2 exceeds '
+            f'{ACCELERATION_FACTOR:g} x its limit {limits.acceleration[column]:.4g} rad/s^2 '
+            f'({count} samples of this joint); {LIMITS_HINT}'
         )

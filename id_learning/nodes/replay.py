@@ -52,7 +52,7 @@ from trajectory_msgs.msg import JointTrajectory
 from id_learning.bag import JOINT_STATE, bag_info, decode_joint_state, iter_raw
 from id_learning.bag.messages import typestore
 from id_learning.dataset.inputs import InputDefinition
-from id_learning.dataset.plausibility import check_motion
+from id_learning.dataset.plausibility import check_accelerations, check_motion
 from id_learning.errors import BagError, ConfigError, DatasetError
 from id_learning.nodes.msg_conversions import (
     clock_message,
@@ -176,6 +176,13 @@ def _reference_bytes(
         )
     except DatasetError as err:
         raise BagError(f'{config.bag}: {config.reference_source}: {err}') from err
+    if limits is not None:  # the accelerations the predictor will be sent, bounded as it does
+        try:
+            check_accelerations(
+                tuple(names), reference.stamps_ns, reference.a, limits=limits, where=where
+            )
+        except DatasetError as err:
+            raise BagError(f'{err}; nothing is played from an impossible reference') from err
     out: list[bytes | None] = []
     for k, stamp in enumerate(reference.stamps_ns.tolist()):
         if not keep[k]:

@@ -133,3 +133,15 @@ def test_a_plan_refuses_an_impossible_reference_naming_the_sample(
     # Without a reference the recorded messages are replayed as recorded, NaN and all.
     plan = build_plan(ReplayConfig(bag=str(broken), reference_mode='none'), mabi)
     assert plan.message_count == 400
+
+
+def test_a_plan_refuses_a_reference_whose_accelerations_no_arm_reaches(tmp_path, mabi):
+    recording = sine_recording(200)
+    velocity = recording.velocity.copy()
+    velocity[100:, 3] += 1.0  # a 1 rad/s step in one IPO cycle: ~10^2 rad/s^2 after smoothing
+    broken = write_recording(replace(recording, velocity=velocity), tmp_path / 'step')
+    with pytest.raises(BagError, match=r'joint_4: acceleration .* exceeds 2 x its limit'):
+        build_plan(ReplayConfig(bag=str(broken)), mabi)
+    build_plan(
+        ReplayConfig(bag=str(broken), reference_inputs='recorded', reference_mode='none'), mabi
+    )
