@@ -25,10 +25,13 @@ Diagnostics (/diagnostics, every ``diagnostics_period_s``): input rate, receive-
 latency and compute latency (median, p99, max), counts of predictions, clamps per joint, rejects
 per reason, out-of-range samples, stale episodes, IPO cycles the reference's stamps skipped
 (samples that never arrived: not sent, lost, or overwritten in a full input queue) and samples
-published later than one IPO period after they arrived. ``latency_from`` says where the latency
-starts: with rclpy's executors at the middleware's receive timestamp (``middleware_receive``);
-with the events executor, which cannot pass that timestamp to the callback, at the callback's
-start (``callback_start``), which leaves out the wait between arrival and dispatch.
+published later than one IPO period after they arrived. The level is warn while rejects, clamps,
+out-of-range samples, skipped cycles or late samples occur (counts grown since the previous report;
+the totals stay in the values), error while the reference is stale. ``latency_from`` says where
+the latency starts: with rclpy's executors at the middleware's receive timestamp
+(``middleware_receive``); with the events executor, which cannot pass that timestamp to the
+callback, at the callback's start (``callback_start``), which leaves out the wait between arrival
+and dispatch.
 
 Real-time measures (the 8 ms IPO cycle, 125 Hz to 1 kHz): the events executor (C++, the
 default) dispatches a sample without rebuilding rclpy's wait set; the model runs its float64
@@ -92,6 +95,8 @@ from id_learning.robot.config import RobotConfig, load_robot_config
 
 __all__ = ['Predictor', 'SerializedOutput', 'guard_config', 'main']
 
+#: What turns the diagnostics level to warn while it grows (the counts of report_values).
+TROUBLES = ('rejected', 'clamped', 'out of range', 'cycles skipped', 'late')
 NODE_NAME = 'predictor'
 _NS_PER_S = 1_000_000_000
 
@@ -202,6 +207,8 @@ class Predictor(Node):
         self.callback_errors = 0
         #: Published later than one IPO period after the sample arrived (see latency_from).
         self.late_samples = 0
+        #: The TROUBLES counts at the last diagnostics report.
+        self._troubles = (0,) * len(TROUBLES)
         self._window_start = (time.monotonic(), 0)
         self._stale_logged_ns = 0
         self._is_closed = False
@@ -421,23 +428,23 @@ class Predictor(Node):
     def _publish_diagnostics(self) -> None:
         values = self.report_values()
         counters = self.core.counters
+        troubles = (
+            counters.rejected,
+            counters.clamped_samples,
+            counters.out_of_range,
+            counters.skipped_cycles,
+            self.late_samples,
+        )
         if self.core.is_stale:
             level, message = 'error', 'reference stale: not publishing'
         elif counters.received == 0:
             level, message = 'ok', 'waiting for the reference'
-        elif (
-            counters.rejected
-            or counters.clamped_samples
-            or counters.out_of_range
-            or counters.skipped_cycles
-            or self.late_samples
-        ):
+        elif any(now > before for now, before in zip(troubles, self._troubles, strict=True)):
+            # Warn while troubles occur (counts grew since the last report); totals stay in values.
+            grew = [f'{now - before} {name}' for name, now, before in zip(
+                TROUBLES, troubles, self._troubles, strict=True) if now > before]  # fmt: skip
             level = 'warn'
-            message = (
-                f'{counters.rejected} rejected, {counters.clamped_samples} clamped, '
-                f'{counters.out_of_range} out of range, {counters.skipped_cycles} cycles '
-                f'skipped, {self.late_samples} late'
-            )
+            message = f'since the last report: {", ".join(grew)}'
         else:
             level, message = 'ok', f'{counters.predicted} published'
         self._diagnostics.publish(
@@ -450,6 +457,7 @@ class Predictor(Node):
                 values=values,
             )
         )
+        self._troubles = troubles
 
     def close(self) -> None:
         """Log the final counts and latencies."""
