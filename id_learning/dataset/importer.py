@@ -250,25 +250,21 @@ def _joint_order(mapping: ImportMapping, robot: RobotConfig | None) -> tuple[Joi
 def _check_efforts(recording: Recording, robot: RobotConfig, where: str) -> None:
     """Currents and torques within what the robot's torque limits can need (the gate)."""
     drives = robot.drives
-    if recording.current is not None:
-        check_efforts(
-            recording.joints,
-            recording.stamps_ns,
-            recording.current,
-            torque_limit=robot.limits.torque,
-            where=where,
-            what='current [A]',
-            unit_per_nm=1.0 / (drives.gear_ratio * drives.torque_constant),
-        )
-    if recording.joint_torque is not None:
-        check_efforts(
-            recording.joints,
-            recording.stamps_ns,
-            recording.joint_torque,
-            torque_limit=robot.limits.torque,
-            where=where,
-            what='joint torque [N*m]',
-        )
+    checks = (
+        (recording.current, 'current [A]', 1.0 / (drives.gear_ratio * drives.torque_constant)),
+        (recording.joint_torque, 'joint torque [N*m]', None),
+    )
+    for values, what, unit_per_nm in checks:
+        if values is not None:
+            check_efforts(
+                recording.joints,
+                recording.stamps_ns,
+                values,
+                torque_limit=robot.limits.torque,
+                where=where,
+                what=what,
+                unit_per_nm=unit_per_nm,
+            )
 
 
 def import_log(

@@ -234,13 +234,25 @@ def _check_positions(
 def _check_velocities(
     joints: tuple[str, ...], stamps: np.ndarray, v: np.ndarray, limits: JointLimits, where: str
 ) -> None:
-    found = _beyond(v, VELOCITY_FACTOR * limits.velocity)
+    _check_rate(joints, stamps, v, (limits.velocity, VELOCITY_FACTOR, 'velocity', 'rad/s'), where)
+
+
+def _check_rate(
+    joints: tuple[str, ...],
+    stamps: np.ndarray,
+    values: np.ndarray,
+    bound: tuple[np.ndarray, float, str, str],
+    where: str,
+) -> None:
+    """Refuse |values| beyond factor x limit; ``bound`` is (limit, factor, name, unit)."""
+    limit, factor, name, unit = bound
+    found = _beyond(values, factor * limit)
     if found is not None:
         sample, column, count = found
         raise DatasetError(
             f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
-            f'velocity {v[sample, column]:.6g} rad/s exceeds {VELOCITY_FACTOR:g} x its limit '
-            f'{limits.velocity[column]:.4g} rad/s ({count} samples of this joint); {LIMITS_HINT}'
+            f'{name} {values[sample, column]:.6g} {unit} exceeds {factor:g} x its limit '
+            f'{limit[column]:.4g} {unit} ({count} samples of this joint); {LIMITS_HINT}'
         )
 
 
@@ -301,12 +313,5 @@ def check_accelerations(
     Raises:
         DatasetError: the first one, naming sample, stamp, joint and value.
     """
-    found = _beyond(a, ACCELERATION_FACTOR * limits.acceleration)
-    if found is not None:
-        sample, column, count = found
-        raise DatasetError(
-            f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), joint '
-            f'{joints[column]}: acceleration {a[sample, column]:.6g} rad/s^2 exceeds '
-            f'{ACCELERATION_FACTOR:g} x its limit {limits.acceleration[column]:.4g} rad/s^2 '
-            f'({count} samples of this joint); {LIMITS_HINT}'
-        )
+    bound = (limits.acceleration, ACCELERATION_FACTOR, 'acceleration', 'rad/s^2')
+    _check_rate(joints, np.asarray(stamps_ns), a, bound, where)
