@@ -13,6 +13,7 @@ from id_learning.bag.reader import (
     JointStateSeries,
     TopicInfo,
     bag_info,
+    iter_messages,
     iter_raw,
     read_joint_states,
 )
@@ -28,6 +29,7 @@ __all__ = [
     'bag_info',
     'decode_joint_state',
     'encode_joint_state',
+    'iter_messages',
     'iter_raw',
     'read_joint_states',
 ]

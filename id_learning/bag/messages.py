@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -12,6 +13,7 @@ from rosbags.typesys import Stores, get_typestore
 __all__ = [
     'JOINT_STATE',
     'JointStateMessage',
+    'canonical_cdr',
     'decode_joint_state',
     'encode_joint_state',
     'message_definition',
@@ -34,6 +36,31 @@ def message_definition(msgtype: str) -> tuple[str, str]:
     store = typestore()
     text, _ = store.generate_msgdef(msgtype, ros_version=2)
     return text, store.hash_rihs01(msgtype)
+
+
+def canonical_cdr(data: bytes | memoryview, msgtype: str) -> bytes:
+    """The CDR bytes of a message at their exact size, as every reader accepts them.
+
+    rclpy's serializer pads some messages (one ending in an empty array: 8 trailing bytes)
+    beyond what strict readers allow ("CDR message size mismatch" in rosbags and in the
+    package's reader), and fills alignment gaps with whatever was in memory; a raw subscription
+    records those bytes as published. This reads the message without the size check and writes
+    it again: same layout, zeroed gaps, no trailing bytes.
+
+    Raises:
+        ValueError: the bytes are not a CDR ``msgtype``.
+    """
+    store = typestore()
+    raw = bytes(data)
+    if len(raw) < 4 or raw[:2] not in (b'\x00\x00', b'\x00\x01'):
+        raise ValueError(f'not CDR-encapsulated {msgtype}: header {raw[:4]!r}')
+    msgdef = store.get_msgdef(msgtype)
+    read = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
+    try:
+        message, _ = read(raw[4:], 0, msgdef.cls, store)
+    except (struct.error, UnicodeDecodeError, ValueError) as err:
+        raise ValueError(f'not a CDR {msgtype}: {err}') from err
+    return bytes(store.serialize_cdr(message, msgtype, little_endian=bool(raw[1])))
 
 
 @dataclass(frozen=True, eq=False)

@@ -6,16 +6,25 @@ import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 from tqdm import tqdm
 
-from id_learning.bag.messages import JOINT_STATE, decode_joint_state
+from id_learning.bag.messages import JOINT_STATE, decode_joint_state, typestore
 from id_learning.errors import BagError, DatasetError
 
-__all__ = ['BagInfo', 'JointStateSeries', 'TopicInfo', 'bag_info', 'iter_raw', 'read_joint_states']
+__all__ = [
+    'BagInfo',
+    'JointStateSeries',
+    'TopicInfo',
+    'bag_info',
+    'iter_messages',
+    'iter_raw',
+    'read_joint_states',
+]
 
 RECOVER_HINT = 'if the recording was interrupted, `id-learning bag recover PATH` rebuilds it'
 
@@ -135,6 +144,31 @@ def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int
             raise
     finally:
         reader.close()
+
+
+def iter_messages(path: Path | str, topic: str) -> Iterator[tuple[int, Any]]:
+    """Yield (log time [ns], message) of any ROS 2 Jazzy message type on a topic, in log order.
+
+    Messages are decoded strictly: bytes beyond the message's size are an error, as in rosbags.
+
+    Raises:
+        BagError: missing topic, a type rosbags does not know, a message that does not decode
+            (named by index and log time), corrupt file.
+    """
+    path = Path(path)
+    msgtype = bag_info(path).topic(topic).msgtype
+    store = typestore()
+    if msgtype not in store.types:
+        raise BagError(f'{path}: topic {topic} has type {msgtype}, unknown to ROS 2 Jazzy')
+    for index, (_, log_ns, data) in enumerate(iter_raw(path, [topic])):
+        try:
+            message = store.deserialize_cdr(data, msgtype)
+        except Exception as err:  # rosbags raises SerdeError, struct and index errors alike
+            raise BagError(
+                f'{path}: {topic} message {index} (log time {log_ns} ns) is not a valid '
+                f'{msgtype}: {err}'
+            ) from err
+        yield log_ns, message
 
 
 @dataclass(frozen=True, eq=False)

@@ -47,7 +47,6 @@ Usage: ``ros2 run id_learning predictor --ros-args -p artifact:=out/demo/run/mod
 from __future__ import annotations
 
 import gc
-import struct
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -59,16 +58,17 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
-from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from id_learning.nodes.msg_conversions import (
+    SerializedOutput,
     diagnostic_array,
     joint_state_message,
     joint_state_to_sample,
+    serialize_exact,
     torque_command,
     trajectory_message,
     trajectory_to_sample,
@@ -93,12 +93,11 @@ from id_learning.predictor import (
 )
 from id_learning.robot.config import RobotConfig, load_robot_config
 
-__all__ = ['Predictor', 'SerializedOutput', 'guard_config', 'main']
+__all__ = ['Predictor', 'guard_config', 'main']
 
 #: What turns the diagnostics level to warn while it grows (the counts of report_values).
 TROUBLES = ('rejected', 'clamped', 'out of range', 'cycles skipped', 'late')
 NODE_NAME = 'predictor'
-_NS_PER_S = 1_000_000_000
 
 
 def guard_config(config: PredictorNodeConfig, robot: RobotConfig) -> GuardConfig:
@@ -112,65 +111,6 @@ def guard_config(config: PredictorNodeConfig, robot: RobotConfig) -> GuardConfig
         range_margin=config.range_margin,
         out_of_range=config.out_of_range,
     )
-
-
-class SerializedOutput:
-    """An output message serialized once, of which only the stamp and the values change.
-
-    ``make(stamp_ns, values)`` (a msg_conversions builder) is serialized once with recognisable
-    values; their byte offsets in the CDR buffer are found and checked by a round trip. Per
-    sample the buffer is copied and patched and the bytes published: ~2 us, against ~13 us to
-    build a JointState and have rclpy convert it, joint names included, on every publish.
-
-    Args:
-        make: builds the message from a stamp [ns] and n float64 values.
-        msg_type: the message class (for the start-up round trip).
-        n: values per message.
-        has_stamp: the message carries the stamp as header.stamp.
-
-    Raises:
-        RuntimeError: the values or the stamp cannot be located in the serialized buffer.
-    """
-
-    def __init__(
-        self,
-        make: Callable[[int, np.ndarray], Any],
-        msg_type: type,
-        n: int,
-        *,
-        has_stamp: bool = True,
-    ) -> None:
-        """Serialize the template and locate the fields to patch."""
-        stamp = (1_234_567_891, 987_654_321)
-        marker = np.pi + np.arange(1, n + 1) / 7.0
-        raw = serialize_message(make(stamp[0] * _NS_PER_S + stamp[1], marker))
-        if raw[:2] != b'\x00\x01':
-            raise RuntimeError(f'expected little-endian CDR, got encapsulation {raw[:4]!r}')
-        self._template = raw
-        self._n_bytes = 8 * n
-        self._values_at = self._find(raw, marker.astype('<f8').tobytes())
-        self._stamp_at = self._find(raw, struct.pack('<iI', *stamp)) if has_stamp else None
-        # Round trip: the patched bytes must read back as what make() builds.
-        values = np.arange(n, dtype=float) - 0.5
-        back = deserialize_message(self.serialize(2 * _NS_PER_S + 3, values), msg_type)
-        if back != make(2 * _NS_PER_S + 3, values):
-            raise RuntimeError(f'patched {msg_type.__name__} does not read back as built')
-
-    @staticmethod
-    def _find(raw: bytes, pattern: bytes) -> int:
-        at = raw.find(pattern)
-        if at < 0 or raw.find(pattern, at + 1) >= 0:
-            raise RuntimeError('cannot locate a field in the serialized template')
-        return at
-
-    def serialize(self, stamp_ns: int, values: np.ndarray) -> bytes:
-        """The serialized message for a stamp [ns] and n float64 values."""
-        buffer = bytearray(self._template)
-        if self._stamp_at is not None:
-            struct.pack_into('<iI', buffer, self._stamp_at, *divmod(stamp_ns, _NS_PER_S))
-        at = self._values_at
-        buffer[at : at + self._n_bytes] = values.astype('<f8', copy=False).tobytes()
-        return bytes(buffer)
 
 
 class Predictor(Node):
@@ -364,7 +304,7 @@ class Predictor(Node):
             self._stale_logged_ns = now
             self.get_logger().error(text)
         if became_stale and self._command is not None and self.config.zero_command_on_stale:
-            self._command.publish(torque_command(np.zeros(len(self.names))))
+            self._command.publish(self._command_bytes.serialize(0, np.zeros(len(self.names))))
 
     # -- parameters and reports -------------------------------------------------------------------
     def _on_set_parameters(self, parameters: Sequence[Any]) -> SetParametersResult:
@@ -448,13 +388,15 @@ class Predictor(Node):
         else:
             level, message = 'ok', f'{counters.predicted} published'
         self._diagnostics.publish(
-            diagnostic_array(
-                time.time_ns(),
-                name=f'id_learning{self.get_fully_qualified_name()}',
-                hardware_id=self.core.model.kind,
-                level=level,
-                message=message,
-                values=values,
+            serialize_exact(
+                diagnostic_array(
+                    time.time_ns(),
+                    name=f'id_learning{self.get_fully_qualified_name()}',
+                    hardware_id=self.core.model.kind,
+                    level=level,
+                    message=message,
+                    values=values,
+                )
             )
         )
         self._troubles = troubles

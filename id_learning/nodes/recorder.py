@@ -42,7 +42,7 @@ from rclpy.task import Future
 
 from id_learning.bag import BagWriter
 from id_learning.errors import BagError
-from id_learning.nodes.msg_conversions import diagnostic_array, message_class
+from id_learning.nodes.msg_conversions import diagnostic_array, message_class, serialize_exact
 from id_learning.nodes.params import (
     RecorderConfig,
     declare_parameters,
@@ -265,13 +265,15 @@ class Recorder(Node):
         if wrong:
             message += f'; a publisher of another type on {", ".join(wrong)}'
         self._diagnostics.publish(
-            diagnostic_array(
-                self.get_clock().now().nanoseconds,
-                name=f'id_learning{self.get_fully_qualified_name()}',
-                hardware_id=str(self.path),
-                level=level,
-                message=message,
-                values=self.report_values(),
+            serialize_exact(
+                diagnostic_array(
+                    self.get_clock().now().nanoseconds,
+                    name=f'id_learning{self.get_fully_qualified_name()}',
+                    hardware_id=str(self.path),
+                    level=level,
+                    message=message,
+                    values=self.report_values(),
+                )
             )
         )
 

@@ -43,7 +43,6 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.serialization import serialize_message
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -55,10 +54,12 @@ from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import check_accelerations, check_motion
 from id_learning.errors import BagError, ConfigError, DatasetError
 from id_learning.nodes.msg_conversions import (
+    SerializedOutput,
     clock_message,
     diagnostic_array,
     joint_state_message,
     message_class,
+    serialize_exact,
     trajectory_message,
 )
 from id_learning.nodes.params import (
@@ -82,6 +83,7 @@ NS_PER_S = 1_000_000_000
 START_LEAD_NS = 20_000_000
 #: Joint states read beyond each end of the span for the reference's zero-phase filter [s].
 REFERENCE_PAD_S = 10.0
+_NO_VALUES = np.empty(0)
 
 
 @dataclass
@@ -196,7 +198,7 @@ def _reference_bytes(
             msg = joint_state_message(
                 stamp, names, position=reference.q[k], velocity=reference.v[k]
             )
-        out.append(serialize_message(msg))
+        out.append(serialize_exact(msg))
     return out
 
 
@@ -317,6 +319,7 @@ class Replay(Node):
         self._clock_publisher = (
             self.create_publisher(Clock, '/clock', CLOCK_QOS) if config.publish_clock else None
         )
+        self._clock_bytes = SerializedOutput(lambda stamp_ns, _: clock_message(stamp_ns), Clock, 0)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.lateness_ns = RollingStats(1 << 16)
         self.cycles_published = 0
@@ -387,6 +390,7 @@ class Replay(Node):
         publishers = self._topic_publishers
         reference = self._reference
         clock = self._clock_publisher
+        clock_bytes = self._clock_bytes
         period_ns = self.plan.period_ns
         deadline = start_ns
         for cycle in self.plan.cycles:
@@ -396,7 +400,7 @@ class Replay(Node):
                 return deadline
             lateness = time.monotonic_ns() - deadline
             if clock is not None:
-                clock.publish(clock_message(cycle.stamp_ns))
+                clock.publish(clock_bytes.serialize(cycle.stamp_ns, _NO_VALUES))
             for topic_index, data in cycle.messages:
                 target = reference if topic_index < 0 else publishers[topic_index]
                 assert target is not None
@@ -458,13 +462,15 @@ class Replay(Node):
             **jitter,
         }
         self._diagnostics.publish(
-            diagnostic_array(
-                time.time_ns(),
-                name=f'id_learning{self.get_fully_qualified_name()}',
-                hardware_id=self.config.bag,
-                level=level,
-                message=f'{state}: {self.cycles_published}/{len(self.plan.cycles)} cycles',
-                values=values,
+            serialize_exact(
+                diagnostic_array(
+                    time.time_ns(),
+                    name=f'id_learning{self.get_fully_qualified_name()}',
+                    hardware_id=self.config.bag,
+                    level=level,
+                    message=f'{state}: {self.cycles_published}/{len(self.plan.cycles)} cycles',
+                    values=values,
+                )
             )
         )
 
