@@ -322,6 +322,12 @@ class PredictorNodeConfig:
     log_throttle_s: float = param(
         1.0, 'Minimum interval between repeated warnings and errors [s].', read_only=False
     )
+    stale_log_period_s: float = param(
+        60.0,
+        'A stale reference is logged once when it goes stale, then every this many seconds '
+        'while it lasts (it is on /diagnostics throughout); 0 = once [s].',
+        read_only=False,
+    )
     latency_window: int = param(
         4096, 'Samples kept for the latency statistics on /diagnostics [samples].'
     )
@@ -350,7 +356,14 @@ class PredictorNodeConfig:
             'latency_window',
             'diagnostics_period_s',
         )
-        _positive(self, 'max_age_s', 'acceleration_cutoff_hz', 'range_margin', allow_zero=True)
+        _positive(
+            self,
+            'max_age_s',
+            'acceleration_cutoff_hz',
+            'range_margin',
+            'stale_log_period_s',
+            allow_zero=True,
+        )
         if not 0 < self.torque_limit_scale <= 1:
             raise ConfigError(
                 f'torque_limit_scale must be in (0, 1], got {self.torque_limit_scale}'

@@ -272,11 +272,8 @@ class Predictor(Node):
 
     def _log_result(self, result: StepResult) -> None:
         throttle = self.config.log_throttle_s
-        if result.resumed_after_stale:
-            self.get_logger().info(
-                'reference resumed: publishing again (history reset)',
-                throttle_duration_sec=throttle,
-            )
+        if result.resumed_after_stale:  # resuming is normal: not worth a line at the INFO level
+            self.get_logger().debug('reference resumed: publishing again (history reset)')
         if result.is_out_of_range:
             self.get_logger().warning(
                 f'input outside the training range: {result.detail}',
@@ -294,17 +291,24 @@ class Predictor(Node):
         became_stale = self.core.check_stale(now)
         if not self.core.is_stale:
             return
-        silence = self.core.silence_ns(now) or 0
-        text = (
-            f'reference stale: no valid sample for {silence * 1e-6:.0f} ms (> '
-            f'{self.core.config.stale_after_cycles} cycles of '
-            f'{self.core.config.period_s * 1e3:g} ms): not publishing tau_u'
-        )
-        if became_stale or now - self._stale_logged_ns >= self.config.log_throttle_s * 1e9:
-            self._stale_logged_ns = now
-            self.get_logger().error(text)
         if became_stale and self._command is not None and self.config.zero_command_on_stale:
             self._command.publish(self._command_bytes.serialize(0, np.zeros(len(self.names))))
+        # Once when it goes stale, then at a slow pace: the end of a motion is stale too, and a
+        # predictor left running must not fill the log. /diagnostics carries the state.
+        period_ns = self.config.stale_log_period_s * 1e9
+        if not became_stale and (period_ns <= 0 or now - self._stale_logged_ns < period_ns):
+            return
+        self._stale_logged_ns = now
+        silence_ms = (self.core.silence_ns(now) or 0) * 1e-6
+        if became_stale:
+            self.get_logger().warning(
+                f'reference stale: no valid sample for {silence_ms:.0f} ms (> '
+                f'{self.core.config.stale_after_cycles} cycles of '
+                f'{self.core.config.period_s * 1e3:g} ms): not publishing tau_u until valid '
+                'input returns'
+            )
+        else:
+            self.get_logger().info(f'reference still stale ({silence_ms * 1e-3:.0f} s)')
 
     # -- parameters and reports -------------------------------------------------------------------
     def _on_set_parameters(self, parameters: Sequence[Any]) -> SetParametersResult:
@@ -376,7 +380,8 @@ class Predictor(Node):
             self.late_samples,
         )
         if self.core.is_stale:
-            level, message = 'error', 'reference stale: not publishing'
+            silence_s = (self.core.silence_ns(time.monotonic_ns()) or 0) * 1e-9
+            level, message = 'stale', f'reference stale for {silence_s:.1f} s: not publishing'
         elif counters.received == 0:
             level, message = 'ok', 'waiting for the reference'
         elif any(now > before for now, before in zip(troubles, self._troubles, strict=True)):

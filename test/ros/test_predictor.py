@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import time
 
 import numpy as np
@@ -136,7 +137,7 @@ LIMIT_SCALE = 0.3
 def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     nodes, listener, tiny_artifacts, mabi
 ):
-    from diagnostic_msgs.msg import DiagnosticArray
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -220,6 +221,14 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
 
     listener.wait_for(lambda: diagnostics().get('stale') == 'True', 30, 'the stale report')
     published_while_stale = len(listener.messages['/tau_u'])
+    with listener.condition:
+        levels = {
+            status.level
+            for msg in listener.messages['/diagnostics']
+            for status in msg.status
+            if status.name == 'id_learning/predictor'
+        }
+    assert DiagnosticStatus.STALE in levels
     for k in range(10, 20):
         send(k)
 
@@ -277,4 +286,9 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     assert predictor.stop() == 0
     log = predictor.log()
     assert 'rejected (non_finite)' in log
-    assert 'reference stale' in log
+    # Stale: one warning per episode (the slow repeat is a minute away), resumed silently.
+    episodes = int(re.search(r'(\d+) stale episodes', log).group(1))
+    assert episodes >= 1
+    assert log.count('reference stale: no valid sample') == episodes
+    assert 'still stale' not in log
+    assert 'resumed' not in log
