@@ -43,6 +43,33 @@ def test_simulate_writes_a_bag_with_ground_truth(twin_bag, mabi):
     assert np.isfinite(recording.current).all()
 
 
+def test_simulate_records_one_robot_twice_with_robot_seed_and_another_with_another(tmp_path, mabi):
+    def simulate(name: str, *seeds: str):
+        out = tmp_path / name
+        config = str(REPO / 'config/twin_default.yaml')
+        result = run_cli('simulate', '--config', config, '--out', str(out), '--duration', '8',
+                         *seeds, '--quiet')  # fmt: skip
+        assert result.returncode == 0, result.stderr
+        return ground_truth(out)[0], load_recording(out, mabi)
+
+    (first, one), (second, two) = (
+        simulate(name, '--robot-seed', '5', '--seed', seed)
+        for name, seed in (('a', '1'), ('b', '2'))
+    )
+    other, _ = simulate('c', '--robot-seed', '6', '--seed', '1')
+    assert (first['seed'], second['seed'], first['robot_seed'], second['robot_seed']) == (
+        1,
+        2,
+        5,
+        5,
+    )
+    assert first['true'] == second['true']  # the same robot ...
+    assert first['excitation'] != second['excitation']  # ... moved differently
+    assert not np.array_equal(one.position, two.position)
+    assert other['true']['body_masses_kg'] != first['true']['body_masses_kg']
+    assert yaml.safe_load((tmp_path / 'a/twin_config.yaml').read_text())['robot_seed'] == 5
+
+
 def test_inspect_reports_topics_counts_and_rate(twin_bag, tmp_path):
     plot = tmp_path / 'overview.png'
     result = run_cli(

@@ -27,6 +27,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     overrides = {}
     if args.seed is not None:
         overrides['seed'] = args.seed
+    if args.robot_seed is not None:
+        overrides['robot_seed'] = args.robot_seed
     if args.joint_torque_sensors:
         overrides['joint_torque_sensors'] = True
     config = load_twin_config(args.config, overrides)
@@ -88,7 +90,14 @@ def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
         '--config', required=True, help='twin config YAML (e.g. config/twin_default.yaml)'
     )
     p.add_argument('--out', required=True, help='bag folder to write')
-    p.add_argument('--seed', type=int, help='override the config seed')
+    p.add_argument(
+        '--seed', type=int, help="override the config's seed: excitation and sensor noise"
+    )
+    p.add_argument(
+        '--robot-seed',
+        type=int,
+        help="override the config's robot_seed: the robot's hidden parameters (default: seed)",
+    )
     p.add_argument('--duration', type=float, help='override the excitation duration [s]')
     p.add_argument(
         '--joint-torque-sensors', action='store_true', help='record joint torques in effort'

@@ -3,7 +3,9 @@
 It is recorded as the real robot would be (quantised encoders, noisy and quantised currents,
 optional delay).
 
-``simulate`` is deterministic: the same config and seed give the same samples and the same bag.
+``simulate`` is deterministic: the same config and seeds give the same samples and the same bag.
+``seed`` draws the recording (excitation, noise), ``robot_seed`` (default: ``seed``) the robot's
+hidden parameters, so one robot can be recorded many times.
 """
 
 from __future__ import annotations
@@ -102,12 +104,19 @@ class TwinConfig:
     effects: EffectSet
     measurement: MeasurementConfig
     joint_torque_sensors: bool = False
+    robot_seed: int | None = None
     raw: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def true_robot_seed(self) -> int:
+        """The seed of the robot's hidden parameters: ``robot_seed``, else ``seed``."""
+        return self.seed if self.robot_seed is None else self.robot_seed
 
 
 _TOP = (
     'robot',
     'seed',
+    'robot_seed',
     'start_time_ns',
     'excitation',
     'effects',
@@ -186,8 +195,16 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
     )
     seed = data.get('seed', 0)
     start = data.get('start_time_ns', 1_767_225_600_000_000_000)  # 2026-01-01T00:00:00Z
-    if not isinstance(seed, int) or seed < 0:
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise ConfigError(f'{where}: seed must be a non-negative integer, got {seed!r}')
+    robot_seed = data.get('robot_seed')
+    if robot_seed is not None and (
+        not isinstance(robot_seed, int) or isinstance(robot_seed, bool) or robot_seed < 0
+    ):
+        raise ConfigError(
+            f'{where}: robot_seed must be a non-negative integer or null (= seed), '
+            f'got {robot_seed!r}'
+        )
     if not isinstance(start, int) or start < 0:
         raise ConfigError(f'{where}: start_time_ns must be a non-negative integer, got {start!r}')
     sensors = data.get('joint_torque_sensors', False)
@@ -202,6 +219,7 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
         effects=effects_from_dict(data.get('effects'), robot.joints, f'{where}: effects'),
         measurement=measurement,
         joint_torque_sensors=sensors,
+        robot_seed=robot_seed,
         raw=data,
     )
 
@@ -288,6 +306,11 @@ def _rigid_body_terms(
     return gravity, coriolis, inertia
 
 
+def _streams(seed: int) -> list[np.random.Generator]:
+    """The twin's four random streams of a seed: excitation, robot, current noise, sensors."""
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)]
+
+
 def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     """Simulate an excitation run of the twin.
 
@@ -296,8 +319,10 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
             config's torque limits (names joint and time).
     """
     robot, effects = config.robot, config.effects
-    streams = [np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(4)]
-    excitation_rng, parameter_rng, noise_rng, sensor_rng = streams
+    excitation_rng, _, noise_rng, sensor_rng = _streams(config.seed)
+    # The robot's hidden parameters come from their own seed, drawn as ``seed`` would draw them:
+    # one robot, many recordings; robot_seed = seed reproduces the one-seed bags.
+    parameter_rng = _streams(config.true_robot_seed)[1]
     trajectory: ExcitationTrajectory = design_excitation(
         config.excitation, robot.limits, robot.ipo_period_s, excitation_rng
     )
@@ -376,7 +401,7 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
         velocity=v_measured,
         current=current,
         joint_torque=joint_torque,
-        source=f'twin seed {config.seed}',
+        source=f'twin seed {config.seed}, robot seed {config.true_robot_seed}',
     )
     parameters = _ground_truth_parameters(config, dynamics, rotor_inertia, kt_scale, delay_s)
     parameters['excitation'] = trajectory.to_dict()
@@ -463,6 +488,7 @@ def _ground_truth_parameters(
         'joints': list(robot.joints),
         'urdf_sha256': robot.urdf_sha256(),
         'seed': config.seed,
+        'robot_seed': config.true_robot_seed,
         'ipo_period_s': robot.ipo_period_s,
         'effects_enabled': config.effects.enabled_names(),
         'effects': config.effects.to_dict(),

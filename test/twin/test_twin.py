@@ -242,3 +242,18 @@ def test_shipped_default_bag_is_reproduced_by_its_own_config(mabi):
     np.testing.assert_array_equal(recorded.stamps_ns, result.recording.stamps_ns)
     np.testing.assert_array_equal(recorded.position, result.recording.position)
     np.testing.assert_array_equal(recorded.current, result.recording.current)
+
+
+@pytest.mark.parametrize('value', [-1, 1.5, 'five', True])
+def test_a_robot_seed_that_is_no_non_negative_integer_is_refused(value):
+    with pytest.raises(ConfigError, match=r'robot_seed must be a non-negative integer'):
+        load_twin_config(REPO / 'config/twin_default.yaml', {'robot_seed': value})
+
+
+def test_robot_seed_equal_to_seed_is_the_one_seed_twin(mabi):
+    config = twin_config(4.0)
+    same = simulate(replace(config, robot_seed=config.seed))
+    np.testing.assert_array_equal(same.recording.current, simulate(config).recording.current)
+    other = simulate(replace(config, robot_seed=config.seed + 1))
+    np.testing.assert_array_equal(other.recording.position, same.recording.position)
+    assert not np.array_equal(other.recording.current, same.recording.current)
