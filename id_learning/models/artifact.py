@@ -33,6 +33,7 @@ __all__ = [
     'UNITS',
     'WEIGHTS_FILE',
     'artifact_inputs',
+    'artifact_target',
     'document_digest',
     'read_artifact',
     'robot_fingerprint',
@@ -223,6 +224,19 @@ def _check_finite(value: Any, where: str, path: Path) -> None:
     elif isinstance(value, list):
         for index, item in enumerate(value):
             _check_finite(item, f'{where}[{index}]', path)
+
+
+def artifact_target(metadata: dict[str, Any]) -> str:
+    """What an artifact's model predicts: 'motor' (tau_u) or 'joint' torques.
+
+    From the run's preprocessing (``train`` writes it), else from what the model itself keeps;
+    'motor' where neither says.
+    """
+    fitted = metadata.get('fitted') or {}
+    for holder in (metadata.get('preprocessing'), fitted, fitted.get('physics')):
+        if isinstance(holder, dict) and holder.get('target') in ('motor', 'joint'):
+            return str(holder['target'])
+    return 'motor'
 
 
 def artifact_inputs(

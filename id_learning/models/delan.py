@@ -109,7 +109,7 @@ class DelanNetwork(LagrangianNetwork):
             row_of_target
         ] * self._entry_gains(rows, cols)
         self.register_buffer('placement', placement, persistent=False)
-        self.register_buffer('q_half_col', self.q_half.unsqueeze(-1), persistent=False)
+        self.register_buffer('q_half_col', self.lagrangian_q_half.unsqueeze(-1), persistent=False)
 
     def _entry_gains(self, rows: torch.Tensor, cols: torch.Tensor) -> torch.Tensor:
         """Fixed gains of the factor's entries, diagonal first, then below it row by row.
@@ -138,7 +138,7 @@ class DelanNetwork(LagrangianNetwork):
             L (B, n, n) with M = L L^T, and dL/dq (B, n, n, n) indexed (b, k, i, j) for
             dL_ij / dq_k.
         """
-        return self._cholesky((q - self.q_centre) / self.q_half)
+        return self._cholesky((q - self.q_centre) / self.lagrangian_q_half)
 
     def _cholesky(self, q_scaled: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         n = self.n_dof
@@ -174,7 +174,7 @@ class DelanNetwork(LagrangianNetwork):
         self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor
     ) -> dict[str, torch.Tensor]:
         """Inertial M a, Coriolis/centrifugal, and gravity dV/dq, each (B, n) [N*m]."""
-        q_scaled = (q - self.q_centre) / self.q_half
+        q_scaled = (q - self.q_centre) / self.lagrangian_q_half
         cholesky, derivative = self._cholesky(q_scaled)
         inertial, coriolis = euler_lagrange_torque(cholesky, derivative, v, a)
         return {'inertial': inertial, 'coriolis': coriolis, 'gravity': self.gravity(q)}
@@ -188,9 +188,9 @@ class DelanNetwork(LagrangianNetwork):
         """forward() for one sample, q, v, a (n,) -> tau (n,), in float64 numpy."""
         n = self.n_dof
         scaling = self.numpy_scaling()
-        q_centre, q_half = scaling['q_centre'], scaling['q_half']
-        potential_half, energy = scaling['lagrangian_q_half'], scaling['lagrangian_energy']
-        q_half_col = q_half[:, None]
+        q_centre, potential_half = scaling['q_centre'], scaling['lagrangian_q_half']
+        energy = scaling['lagrangian_energy']
+        q_half, q_half_col = potential_half, potential_half[:, None]
         cholesky_net = NumpyAnalyticMLP(self.cholesky_net)
         potential_net = NumpyAnalyticMLP(self.potential_net)
         placement_t = np.ascontiguousarray(float64_array(self.placement).T)

@@ -229,6 +229,10 @@ class RneaIdMlpModel(RneaMlpModel):
         """The identified physics' torque (B, n) [N*m]."""
         return self._physics().torque(q, v, a)
 
+    def physics_sample_predictor(self) -> SamplePredictor:
+        """The identified physics of one sample, without h."""
+        return self._physics().sample_function()
+
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque: the identified physics' path plus h in float64 numpy."""
         physics = self._physics().sample_function()

@@ -388,6 +388,15 @@ class RneaMlpModel(_NominalPhysics, TorchModel[NormalisedMlp]):
         torque: np.ndarray = self.dynamics.rnea(q, v, a) + self._rotor_torque(a)
         return torque
 
+    def physics_sample_predictor(self) -> SamplePredictor:
+        """``physics_torque`` of one sample, (n,) q, v, a -> (n,) [N*m]: the prior without h."""
+
+        def physics(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            tau: np.ndarray = self.physics_torque(q[None], v[None], a[None])[0]
+            return tau
+
+        return physics
+
     @property
     def _rotor_joint_side(self) -> np.ndarray:
         """J_m N^2 [kg*m^2] per joint for motor labels; zero for joint-torque labels."""

@@ -26,7 +26,8 @@ top, tau_u is clamped to the torque limits, and a sample the node's input queue 
 tau_u. To tell these input differences from an error in the node, the artifact is also run
 offline on exactly the references the predictor received: ``max_abs_node_error_nm`` must be at
 floating-point level (float32 rounding for the networks, batched against one sample at a time; 0
-for a float64 model such as RNEA+LQ).
+for a float64 model such as RNEA+LQ). The predictor runs with ``out_of_range: warn`` here, so that
+it serves the model itself everywhere; samples beyond the training range are counted.
 
 Isolation: both nodes run in a private namespace (also their /diagnostics, and the replayed joint
 states are remapped into it; no /clock), so the check cannot feed a live system that shares the

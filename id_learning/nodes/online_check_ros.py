@@ -240,6 +240,9 @@ def start_predictor(
             'robot_config': str(setup.robot_config_path.resolve()),
             'input_topic': 'reference',
             'output_topic': 'tau_u',
+            # The model itself, as offline: a sample beyond the training range is counted, not
+            # served by the physics prior (test/ros/test_predictor.py checks the fallback).
+            'out_of_range': 'warn',
             'diagnostics_period_s': 0.25,
             'latency_window': max(4096, round(seconds * NS_PER_S / setup.period_ns) + 64),
             **({} if input_depth is None else {'input_depth': input_depth}),

@@ -298,16 +298,23 @@ class PredictorNodeConfig:
         read_only=False,
     )
     range_margin: float = param(
-        0.05,
-        'Warn once an input leaves its training range widened by this share of the half range '
-        'on each side [-].',
+        0.1,
+        'Margin beyond the training range, as a share of its half range on each side [-]: '
+        'out_of_range acts beyond it; fallback blends the physics prior in across it.',
         read_only=False,
     )
     out_of_range: str = param(
-        'warn',
-        'Inputs outside the training range: warn (count, log, still publish) or reject.',
+        'auto',
+        'Inputs outside the training range: fallback (publish the physics prior, blended in '
+        'across the margin), warn (count, log, still publish the model), reject (publish '
+        'nothing), auto (fallback for models with a network, warn for physics models).',
         read_only=False,
-        choices=('warn', 'reject'),
+        choices=('auto', 'fallback', 'warn', 'reject'),
+    )
+    fallback_artifact: str = param(
+        '',
+        'Physics artifact (rnea_id, rnea_effects, rnea_lq) for fallback; empty = the rnea_id '
+        "beside the model in its run, else the model's own physics part, else the nominal model.",
     )
     torch_threads: int = param(
         1, 'torch intra-op and inter-op threads, and numpy OpenBLAS threads [threads].'

@@ -96,7 +96,14 @@ from id_learning.robot.config import RobotConfig, load_robot_config
 __all__ = ['Predictor', 'guard_config', 'main']
 
 #: What turns the diagnostics level to warn while it grows (the counts of report_values).
-TROUBLES = ('rejected', 'clamped', 'out of range', 'cycles skipped', 'late')
+TROUBLES = (
+    'rejected',
+    'clamped',
+    'out of range',
+    'with the physics prior',
+    'cycles skipped',
+    'late',
+)
 NODE_NAME = 'predictor'
 
 
@@ -140,6 +147,7 @@ class Predictor(Node):
             self.robot,
             guard_config(config, self.robot),
             inference=config.inference,
+            fallback_artifact=config.fallback_artifact or None,
         )
         self.done: Future = Future()  # never completes: runs until shut down
         self.names = list(self.core.joint_names)
@@ -201,7 +209,13 @@ class Predictor(Node):
             f'{config.input_type} on {self._subscription.topic_name} -> tau_u on '
             f'{self._tau_u.topic_name}'
             + (f' and {self._command.topic_name}' if self._command else '')
-            + f'; input range check: {source}; '
+            + f'; input range check: {source}, out of range: {self.core.out_of_range_action}'
+            + (
+                f' to the {self.core.fallback.source}'
+                if self.core.out_of_range_action == 'fallback' and self.core.fallback
+                else ''
+            )
+            + '; '
             + (self.core.inputs.describe() if self.core.inputs else 'inputs not recorded')
         )
         if self.core.fitting_inputs is None or self.core.fitting_inputs.name == 'study':
@@ -252,7 +266,12 @@ class Predictor(Node):
             self.latency_s.add(latency_s)
             if latency_s > self.core.config.period_s:
                 self.late_samples += 1
-            if result.resumed_after_stale or result.is_out_of_range or result.is_clamped:
+            if (
+                result.resumed_after_stale
+                or result.is_out_of_range
+                or result.is_clamped
+                or result.physics_share > 0
+            ):
                 self._log_result(result)
             self.core.prepare_next()  # off the path from sample to torque
         except Exception as err:  # the edge of the callback: report and keep running
@@ -274,7 +293,7 @@ class Predictor(Node):
         throttle = self.config.log_throttle_s
         if result.resumed_after_stale:  # resuming is normal: not worth a line at the INFO level
             self.get_logger().debug('reference resumed: publishing again (history reset)')
-        if result.is_out_of_range:
+        if result.is_out_of_range or result.physics_share > 0:
             self.get_logger().warning(
                 f'input outside the training range: {result.detail}',
                 throttle_duration_sec=throttle,
@@ -343,6 +362,9 @@ class Predictor(Node):
             {
                 'clamped_samples': counters.clamped_samples,
                 'out_of_range_samples': counters.out_of_range,
+                'out_of_range_action': self.core.out_of_range_action,
+                'fallback_samples': counters.fallback_samples,
+                'fallback': self.core.fallback.source if self.core.fallback else 'none',
                 'stale': self.core.is_stale,
                 'stale_episodes': counters.stale_episodes,
                 'history_resets': counters.history_resets,
@@ -376,6 +398,7 @@ class Predictor(Node):
             counters.rejected,
             counters.clamped_samples,
             counters.out_of_range,
+            counters.fallback_samples,
             counters.skipped_cycles,
             self.late_samples,
         )
@@ -418,6 +441,7 @@ class Predictor(Node):
             f'{counters.rejected} rejected '
             f'{ {r.value: c for r, c in counters.rejects.items() if c} }, '
             f'{counters.clamped_samples} clamped, {counters.out_of_range} out of range, '
+            f'{counters.fallback_samples} with the physics prior, '
             f'{counters.stale_episodes} stale episodes, {counters.skipped_cycles} cycles skipped, '
             f'{self.late_samples} late; receive-to-publish latency median '
             f'{latency.median * 1e3:.3f} ms, p99 {latency.p99 * 1e3:.3f} ms'

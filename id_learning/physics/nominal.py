@@ -9,7 +9,7 @@ regressor.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,6 +87,24 @@ class NominalModel:
         if self.target != 'motor':
             return np.zeros(self.robot.n_joints)
         return drives.rotor_inertia * drives.gear_ratio**2
+
+    def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """tau_nominal of one sample, (n,) q, v, a -> (n,) [N*m], with its own pinocchio data."""
+        model, data, index = self.dynamics.model, self.dynamics.model.createData(), self._index
+        rotor = self.rotor_inertia_joint_side
+        # Velocity index of each config joint; RNEA takes pinocchio's order, gives it back.
+        order = np.argsort(index)
+        is_identity = bool(np.array_equal(index, np.arange(len(index))))
+
+        def tau_nominal(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            if is_identity:
+                rigid: np.ndarray = pin.rnea(model, data, q, v, a)
+            else:
+                rigid = pin.rnea(model, data, q[order], v[order], a[order])[index]
+            tau: np.ndarray = rigid + rotor * a
+            return tau
+
+        return tau_nominal
 
     def evaluate(
         self,

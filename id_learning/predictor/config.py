@@ -9,8 +9,8 @@ from id_learning.errors import ConfigError
 
 __all__ = ['OUT_OF_RANGE_ACTIONS', 'GuardConfig']
 
-OUT_OF_RANGE_ACTIONS = ('warn', 'reject')
-OutOfRangeAction = Literal['warn', 'reject']
+OUT_OF_RANGE_ACTIONS = ('auto', 'fallback', 'warn', 'reject')
+OutOfRangeAction = Literal['auto', 'fallback', 'warn', 'reject']
 
 
 @dataclass(frozen=True)
@@ -32,7 +32,10 @@ class GuardConfig:
         torque_limit_scale: the output is clamped to this share of the robot's torque limits.
         range_margin: a value counts as outside the training range once it leaves
             [low - m * half, high + m * half], m = range_margin, half = half of the range.
-        out_of_range: 'warn' (count, log, still predict) or 'reject' (publish nothing).
+        out_of_range: what a sample outside the training range gets: 'fallback' (the physics
+            prior's torque, blended in across the margin: ``predictor.fallback``), 'warn' (count,
+            log, still predict), 'reject' (publish nothing), or 'auto' (fallback for a model
+            with a network, warn for a physics model, whose range is the joint limits).
     """
 
     period_s: float = 0.008
@@ -40,8 +43,8 @@ class GuardConfig:
     max_age_s: float = 0.0
     acceleration_cutoff_hz: float = 0.0
     torque_limit_scale: float = 1.0
-    range_margin: float = 0.05
-    out_of_range: OutOfRangeAction = 'warn'
+    range_margin: float = 0.1
+    out_of_range: OutOfRangeAction = 'auto'
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key and the allowed values."""

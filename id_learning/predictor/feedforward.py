@@ -7,8 +7,9 @@ Guards, in the order they run (the first that fails decides; nothing is returned
 2. finite: no NaN or Inf in q, v or a;
 3. age (optional): not older than ``max_age_s`` against the caller's clock;
 4. stamp: strictly newer than the last accepted sample;
-5. range: inside the training range widened by ``range_margin``; 'warn' counts and predicts,
-   'reject' drops the sample;
+5. range: inside the training range widened by ``range_margin``; 'fallback' blends in the
+   physics prior's torque across the margin and publishes it alone beyond
+   (``predictor.fallback``), 'warn' counts and predicts, 'reject' drops the sample;
 6. output: a non-finite prediction is dropped; a finite one is clamped to the torque limits.
 
 A rejected sample leaves the history untouched. A gap of more than ``stale_after_cycles``
@@ -25,7 +26,6 @@ one sample. 'torch' calls the model's own ``predict`` (``predict_window`` for th
 
 from __future__ import annotations
 
-import ctypes
 import enum
 import json
 import logging
@@ -45,6 +45,12 @@ from id_learning.dataset.plausibility import SampleGate
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.predictor.acceleration import CausalAccelerationEstimator
 from id_learning.predictor.config import GuardConfig
+from id_learning.predictor.fallback import (
+    PhysicsFallback,
+    blend_weight,
+    is_network,
+    physics_fallback,
+)
 from id_learning.predictor.ranges import TrainingRange, training_range
 from id_learning.predictor.sample import ReferenceSample
 from id_learning.predictor.timing import RollingStats
@@ -57,8 +63,6 @@ __all__ = [
     'ReferenceSample',
     'Reject',
     'StepResult',
-    'configure_inference_threads',
-    'set_openblas_threads',
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -67,63 +71,6 @@ INFERENCE_BACKENDS = ('numpy', 'torch')
 #: The column order of a sender whose joint order is the model's (no reordering).
 _IDENTITY = np.arange(0)
 InferenceBackend = Literal['numpy', 'torch']
-
-
-def configure_inference_threads(threads: int) -> None:
-    """Fix torch's and numpy's BLAS thread counts (one sample per call gains nothing from more).
-
-    numpy's OpenBLAS otherwise starts a thread per core for larger products; on a loaded 2-core
-    machine those threads wait for each other (LSTM windows in numpy: p99 72 ms per step with
-    the default, 4.8 ms with one thread).
-
-    Raises:
-        ValueError: threads < 1.
-    """
-    if threads < 1:
-        raise ValueError(f'threads must be >= 1, got {threads}')
-    torch.set_num_threads(threads)
-    # The inter-op pool can be sized once per process only, before any parallel work.
-    try:
-        torch.set_num_interop_threads(threads)
-    except RuntimeError:
-        _LOG.debug('inter-op thread count already fixed; left as it is')
-    if not set_openblas_threads(threads):
-        _LOG.debug('no OpenBLAS loaded with a known thread setter; numpy threads left as they are')
-
-
-#: OpenBLAS's thread setter under the names of its builds (plain, 64-bit index, numpy's wheels).
-_OPENBLAS_SETTERS = (
-    'openblas_set_num_threads',
-    'openblas_set_num_threads64_',
-    'scipy_openblas_set_num_threads',
-    'scipy_openblas_set_num_threads64_',
-)
-
-
-def set_openblas_threads(threads: int) -> bool:
-    """Set the thread count of every OpenBLAS loaded in this process (numpy's BLAS).
-
-    Returns:
-        Whether a setter was found and called.
-    """
-    try:
-        with open('/proc/self/maps', encoding='utf-8') as maps:
-            paths = {line.split()[-1] for line in maps if 'openblas' in line.lower()}
-    except OSError:
-        return False
-    found = False
-    for path in sorted(paths):
-        try:
-            library = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for name in _OPENBLAS_SETTERS:
-            setter = getattr(library, name, None)
-            if setter is not None:
-                setter(ctypes.c_int(threads))
-                found = True
-                break
-    return found
 
 
 class Reject(enum.Enum):
@@ -150,7 +97,9 @@ class StepResult:
         reject: why there is no torque, or None.
         detail: a human-readable reason (reject or range warning), or None.
         is_clamped: at least one joint was clamped.
-        is_out_of_range: the input left the training range.
+        is_out_of_range: the input left the training range (widened by its margin).
+        physics_share: the share of the physics prior in tau (out_of_range 'fallback'): 0 inside
+            the training range, 1 beyond its margin.
         resumed_after_stale: this sample ended a stale episode (the history was reset if the
             stamps jumped).
     """
@@ -162,6 +111,7 @@ class StepResult:
     is_clamped: bool = False
     is_out_of_range: bool = False
     resumed_after_stale: bool = False
+    physics_share: float = 0.0
 
 
 @dataclass
@@ -174,7 +124,10 @@ class PredictorCounters:
         clamped_samples: predictions with at least one clamped joint.
         clamped_per_joint: (n,) clamps per joint.
         rejects: count per reject reason.
-        out_of_range: samples outside the training range (warned or rejected).
+        out_of_range: samples outside the training range widened by its margin (warned,
+            rejected or served by the physics prior alone).
+        fallback_samples: samples whose torque holds a share of the physics prior (beyond the
+            training range itself, margin included).
         stale_episodes: times the reference went stale after having been live.
         history_resets: times the history was reset (after a stale episode or a stamp gap).
         skipped_cycles: IPO cycles the stamps of consecutive accepted samples jump over, within
@@ -189,6 +142,7 @@ class PredictorCounters:
     clamped_per_joint: np.ndarray = field(init=False)
     rejects: Counter[Reject] = field(default_factory=Counter)
     out_of_range: int = 0
+    fallback_samples: int = 0
     stale_episodes: int = 0
     history_resets: int = 0
     skipped_cycles: int = 0
@@ -216,9 +170,12 @@ class FeedForwardPredictor:
         limits: the robot's joint limits in the model's joint order: a sample no arm of them can
             be in (``dataset.plausibility.SampleGate``) gives no torque (``Reject.IMPOSSIBLE``),
             whatever the training range and ``out_of_range`` say. None: no such gate.
+        fallback: the physics prior for ``out_of_range`` 'fallback' (and 'auto' on a network);
+            None: 'auto' warns instead.
 
     Raises:
-        ValueError: bad torque limits or an unknown inference backend.
+        ValueError: bad torque limits, an unknown inference backend, or 'fallback' without a
+            physics prior.
     """
 
     def __init__(
@@ -231,11 +188,13 @@ class FeedForwardPredictor:
         compute_stats: int = 4096,
         inference: InferenceBackend = 'numpy',
         limits: JointLimits | None = None,
+        fallback: PhysicsFallback | None = None,
     ) -> None:
         """Keep the model and prepare the per-stream state."""
         if inference not in INFERENCE_BACKENDS:
             raise ValueError(f'inference must be one of {INFERENCE_BACKENDS}, got {inference!r}')
         self.model = model
+        self.fallback = fallback
         self.inference = inference
         self.config = config or GuardConfig()
         self.joint_names: tuple[str, ...] = tuple(model.joint_names)
@@ -249,6 +208,7 @@ class FeedForwardPredictor:
         self.range = (
             None if training_range is None else training_range.widened(self.config.range_margin)
         )
+        self.out_of_range_action = self._action(self.config)
         self.counters = PredictorCounters(n)
         self._gate = None if limits is None else SampleGate(self.joint_names, limits)
         self.compute_s = RollingStats(compute_stats)
@@ -280,6 +240,15 @@ class FeedForwardPredictor:
         self.inputs: InputDefinition | None = None
         self.fitting_inputs: InputDefinition | None = None
 
+    def _action(self, config: GuardConfig) -> str:
+        """The out-of-range action ``config`` asks for, 'auto' resolved."""
+        action = config.out_of_range
+        if action == 'auto':
+            return 'fallback' if is_network(self.model) and self.fallback is not None else 'warn'
+        if action == 'fallback' and self.fallback is None:
+            raise ValueError("out_of_range 'fallback' needs a physics prior (fallback=...)")
+        return action
+
     # -- construction -----------------------------------------------------------------------------
     @classmethod
     def from_artifact(
@@ -289,17 +258,25 @@ class FeedForwardPredictor:
         config: GuardConfig | None = None,
         *,
         inference: InferenceBackend = 'numpy',
+        fallback_artifact: Path | str | None = None,
     ) -> FeedForwardPredictor:
         """Load an artifact of any model kind for a robot and guard it with its training range.
 
+        Args:
+            fallback_artifact: a physics artifact to fall back to outside the training range;
+                None: the run's rnea_id beside the model, else the model's own physics part,
+                else the nominal model (``predictor.fallback``).
+
         Raises:
-            CheckpointError: the artifact is invalid or belongs to another robot.
+            CheckpointError: the artifact (or the fallback artifact) is invalid, belongs to
+                another robot, or the fallback is no physics model of the same target.
         """
-        from id_learning.models.artifact import METADATA_FILE, artifact_inputs
+        from id_learning.models.artifact import METADATA_FILE, artifact_inputs, artifact_target
         from id_learning.models.registry import load_model
 
         config = config or GuardConfig(period_s=robot.ipo_period_s)
         model = load_model(Path(folder), robot)
+        metadata = json.loads((Path(folder) / METADATA_FILE).read_text(encoding='utf-8'))
         predictor = cls(
             model,
             robot.limits.torque,
@@ -307,8 +284,12 @@ class FeedForwardPredictor:
             training_range(model.fitted_metadata(), robot),
             inference=inference,
             limits=robot.limits.take([robot.joints.index(name) for name in model.joint_names]),
+            fallback=physics_fallback(
+                model, robot, artifact_target(metadata), fallback_artifact, beside=folder
+            )
+            if is_network(model)
+            else None,
         )
-        metadata = json.loads((Path(folder) / METADATA_FILE).read_text(encoding='utf-8'))
         predictor.inputs, predictor.fitting_inputs = artifact_inputs(metadata)
         return predictor
 
@@ -337,6 +318,7 @@ class FeedForwardPredictor:
 
         The history is kept; a new acceleration cut-off applies from the next sample.
         """
+        self.out_of_range_action = self._action(config)
         self.config = config
         self.torque_limit = self._robot_limit * config.torque_limit_scale
         self.range = (
@@ -510,18 +492,23 @@ class FeedForwardPredictor:
         start = time.perf_counter()
         q, v = checked[0], checked[1]
         a = checked[2] if len(checked) == 3 else self._estimator.update(sample.stamp_ns, v)
-        out_of_range = False
-        detail = None
-        if self.range is not None:
-            violation = self.range.first_violation(q, v, a)
-            if violation is not None:
-                out_of_range = True
-                counters.out_of_range += 1
-                detail = f'{violation.describe()} ({self.range.source})'
-        if out_of_range and config.out_of_range == 'reject':
-            self._push_window(q, v, a)  # the motion happened: keep the history continuous
-            return self._reject(sample, Reject.OUT_OF_RANGE, detail or '')
-        tau = self._predict(q, v, a)
+        if self.out_of_range_action == 'fallback':
+            tau, share, detail = self._predict_or_fall_back(q, v, a)
+            out_of_range = share >= 1.0
+        else:
+            share = 0.0
+            out_of_range = False
+            detail = None
+            if self.range is not None:
+                violation = self.range.first_violation(q, v, a)
+                if violation is not None:
+                    out_of_range = True
+                    counters.out_of_range += 1
+                    detail = f'{violation.describe()} ({self.range.source})'
+            if out_of_range and self.out_of_range_action == 'reject':
+                self._push_window(q, v, a)  # the motion happened: keep the history continuous
+                return self._reject(sample, Reject.OUT_OF_RANGE, detail or '')
+            tau = self._predict(q, v, a)
         self.compute_s.add(time.perf_counter() - start)
         if not np.isfinite(tau).all():
             return self._reject(
@@ -541,7 +528,40 @@ class FeedForwardPredictor:
             is_clamped=is_clamped,
             is_out_of_range=out_of_range,
             resumed_after_stale=resumed,
+            physics_share=share,
         )
+
+    def _predict_or_fall_back(
+        self, q: np.ndarray, v: np.ndarray, a: np.ndarray
+    ) -> tuple[np.ndarray, float, str | None]:
+        """(tau, physics share, detail) under out_of_range 'fallback'.
+
+        The network's torque inside the training range, the physics prior's beyond its margin,
+        blended between.
+        """
+        assert self.fallback is not None
+        trained = self._training_range
+        excess = 0.0 if trained is None else trained.excess(q, v, a)
+        share = blend_weight(excess, self.config.range_margin)
+        if share <= 0.0:
+            return self._predict(q, v, a), 0.0, None
+        assert trained is not None
+        counters = self.counters
+        counters.fallback_samples += 1
+        violation = trained.first_violation(q, v, a)
+        detail = (
+            f'{violation.describe() if violation else "outside"} ({trained.source}): '
+            f'physics share {share:.2f} ({self.fallback.source})'
+        )
+        physics = self.fallback.predict_one(q, v, a)
+        if share >= 1.0:
+            counters.out_of_range += 1
+            self._push_window(q, v, a)  # the motion happened: keep the history continuous
+            return physics, 1.0, detail
+        network = self._predict(q, v, a)
+        if not np.isfinite(network).all():  # the prior is the safe answer here too
+            return physics, share, detail
+        return (1.0 - share) * network + share * physics, share, detail
 
     def prepare_next(self) -> None:
         """Do ahead of the next sample what depends on the past alone (after a publish).

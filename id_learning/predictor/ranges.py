@@ -74,6 +74,19 @@ class TrainingRange:
         high = np.concatenate([self.bounds[name][1] for name in names]) if names else low
         return names, low, high
 
+    def excess(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> float:
+        """How far (n,) q, v, a reach beyond the bounds, in half ranges; 0 inside.
+
+        The largest overshoot of any bounded value, each in units of its own half range.
+        """
+        names, low, high = self._stacked
+        if not names:
+            return 0.0
+        given = {'q': q, 'v': v, 'a': a}
+        values = np.concatenate([given[name] for name in names])
+        half = np.maximum(0.5 * (high - low), 1e-12)
+        return float(np.max(np.maximum(low - values, values - high) / half).clip(min=0.0))
+
     def first_violation(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray
     ) -> RangeViolation | None:

@@ -15,6 +15,7 @@ from support import quick_preprocess, sine_recording
 #: Per kind, the smallest hyper-parameters that still exercise the model's code paths.
 TINY_HYPER: dict[str, dict[str, object]] = {
     'rnea_lq': {},
+    'rnea_id': {},
     'rnea_mlp': {'width': 8, 'depth': 1, 'max_epochs': 1, 'device': 'cpu', 'stride': 16},
     'delan': {'width': 8, 'depth': 1, 'max_epochs': 1, 'device': 'cpu', 'stride': 16},
     'lnn': {'width': 8, 'depth': 1, 'max_epochs': 1, 'device': 'cpu', 'stride': 16},

@@ -292,3 +292,77 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     assert log.count('reference stale: no valid sample') == episodes
     assert 'still stale' not in log
     assert 'resumed' not in log
+
+
+def test_far_outside_its_envelope_a_network_publishes_the_physics_torque_and_counts_it(
+    nodes, listener, tiny_artifacts, mabi
+):
+    import pinocchio as pin
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from support import REPO
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from id_learning.nodes.qos import reference_qos
+    from id_learning.predictor import training_range
+
+    listener.subscribe(JointState, '/tau_u')
+    listener.subscribe(DiagnosticArray, '/diagnostics')
+    publisher = listener.node.create_publisher(JointTrajectory, '/reference', reference_qos(100))
+    predictor = nodes(
+        'predictor',
+        {
+            'artifact': str(tiny_artifacts['mlp']),  # out_of_range: auto -> fallback
+            'input_topic': '/reference',
+            'input_depth': 100,
+            'stale_after_cycles': 500,
+            'diagnostics_period_s': 0.1,
+        },
+    )
+    listener.wait_for(
+        lambda: (
+            publisher.get_subscription_count() >= 1
+            and tau_u_subscriptions(listener, 'id_learning/predictor') >= 1
+        ),
+        STARTUP_S,
+        'the predictor to connect (both ways)',
+    )
+    model = load_model(tiny_artifacts['mlp'], mabi)
+    low, high = training_range(model.fitted_metadata(), mabi).bounds['v']
+    _, q, v, a = reference_run(6)
+    far_v = v.copy()
+    far_v[2:4, 1] = high[1] + 0.5 * (high[1] - low[1])  # joint_2 a half range faster
+    stamps = [1_000_000_000 + 8_000_000 * k for k in range(6)]
+    for k in range(6):
+        msg = JointTrajectory(joint_names=list(mabi.joints))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamps[k], 1_000_000_000)
+        point = JointTrajectoryPoint(
+            positions=list(q[k]), velocities=list(far_v[k]), accelerations=list(a[k])
+        )
+        msg.points = [point]
+        publisher.publish(msg)
+    listener.wait_for(lambda: len(listener.messages['/tau_u']) >= 6, 30, 'six tau_u')
+    listener.wait_for(
+        lambda: (
+            (listener.diagnostics('id_learning/predictor') or {}).get('fallback_samples') == '2'
+        ),
+        10,
+        'diagnostics to count two samples served by the physics prior',
+    )
+    with listener.condition:
+        effort = np.array([m.effort for m in sorted(listener.messages['/tau_u'], key=stamp_ns)])
+    assert np.isfinite(effort).all()
+    urdf = pin.buildModelFromUrdf(str(REPO / 'urdf/mabi_max100.urdf'))
+    rotor = mabi.drives.rotor_inertia * mabi.drives.gear_ratio**2
+    for k in (2, 3):
+        expected = pin.rnea(urdf, urdf.createData(), q[k], far_v[k], a[k]) + rotor * a[k]
+        np.testing.assert_allclose(effort[k], expected, rtol=1e-9, atol=1e-6)
+    inside = [0, 1, 4, 5]
+    expected = model.predict(q[inside], v[inside], a[inside])
+    np.testing.assert_allclose(effort[inside], expected, rtol=1e-5, atol=1e-6)
+    values = listener.diagnostics('id_learning/predictor')
+    assert values['out_of_range_action'] == 'fallback'
+    assert values['out_of_range_samples'] == '2'
+    assert 'nominal model' in values['fallback']
+    assert predictor.stop() == 0
+    assert 'physics share 1.00' in predictor.log()
