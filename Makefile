@@ -1,13 +1,15 @@
 # id_learning quick start: `make demo` runs the main job on bags/, `make test` runs the tests.
 # Both create .venv when it is missing. With ROS 2 Jazzy installed from apt (sourced or under
 # /opt/ros/jazzy) the venv sees the system's rclpy; otherwise ROS 2 Jazzy comes from PyPI wheels.
+# Settings are taken from the command line only (`make demo DEMO_BAG=... DEMO_OUT=...`), never
+# from the environment: a shell's OUT or BAG must not redirect where the demo writes.
 SHELL := /bin/bash
-VENV ?= .venv
+VENV := .venv
 PY := $(VENV)/bin/python
-BAG ?= bags/default
-OUT ?= out/demo
+DEMO_BAG := bags/default
+DEMO_OUT := out/demo
 # The reference study's Table 1 (not part of the package), placed beside ours when present.
-STUDY_TABLE ?= $(wildcard ../shared/data/study_table1/table1.json)
+STUDY_TABLE := $(wildcard ../shared/data/study_table1/table1.json)
 
 .PHONY: demo test lint typecheck venv clean bag
 
@@ -18,7 +20,7 @@ $(VENV)/.ready: tools/bootstrap_venv.sh requirements.txt pyproject.toml setup.py
 	touch $@
 
 demo: venv
-	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(BAG) --out $(OUT) \
+	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(DEMO_BAG) --out $(DEMO_OUT) \
 		$(if $(STUDY_TABLE),--study-table $(STUDY_TABLE))
 
 # pytest exits 5 when it collects no test: make treats that as the failure it is.
@@ -33,7 +35,7 @@ lint: venv
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
 
 bag: venv
-	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli simulate --config config/twin_default.yaml --out $(BAG) --force
+	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli simulate --config config/twin_default.yaml --out $(DEMO_BAG) --force
 
 clean:
 	rm -rf out build install log
