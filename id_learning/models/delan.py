@@ -73,6 +73,7 @@ class DelanNetwork(LagrangianNetwork):
     """
 
     placement: torch.Tensor
+    cholesky_q_half: torch.Tensor
     q_half_col: torch.Tensor
 
     def __init__(
@@ -109,7 +110,12 @@ class DelanNetwork(LagrangianNetwork):
             row_of_target
         ] * self._entry_gains(rows, cols)
         self.register_buffer('placement', placement, persistent=False)
-        self.register_buffer('q_half_col', self.lagrangian_q_half.unsqueeze(-1), persistent=False)
+        self.register_buffer(
+            'cholesky_q_half',
+            self.lagrangian_q_half if scaling.balance_inertia else self.q_half.clone(),
+            persistent=False,
+        )
+        self.register_buffer('q_half_col', self.cholesky_q_half.unsqueeze(-1), persistent=False)
 
     def _entry_gains(self, rows: torch.Tensor, cols: torch.Tensor) -> torch.Tensor:
         """Fixed gains of the factor's entries, diagonal first, then below it row by row.
@@ -138,7 +144,7 @@ class DelanNetwork(LagrangianNetwork):
             L (B, n, n) with M = L L^T, and dL/dq (B, n, n, n) indexed (b, k, i, j) for
             dL_ij / dq_k.
         """
-        return self._cholesky((q - self.q_centre) / self.lagrangian_q_half)
+        return self._cholesky((q - self.q_centre) / self.cholesky_q_half)
 
     def _cholesky(self, q_scaled: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         n = self.n_dof
@@ -174,7 +180,7 @@ class DelanNetwork(LagrangianNetwork):
         self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor
     ) -> dict[str, torch.Tensor]:
         """Inertial M a, Coriolis/centrifugal, and gravity dV/dq, each (B, n) [N*m]."""
-        q_scaled = (q - self.q_centre) / self.lagrangian_q_half
+        q_scaled = (q - self.q_centre) / self.cholesky_q_half
         cholesky, derivative = self._cholesky(q_scaled)
         inertial, coriolis = euler_lagrange_torque(cholesky, derivative, v, a)
         return {'inertial': inertial, 'coriolis': coriolis, 'gravity': self.gravity(q)}
@@ -190,7 +196,8 @@ class DelanNetwork(LagrangianNetwork):
         scaling = self.numpy_scaling()
         q_centre, potential_half = scaling['q_centre'], scaling['lagrangian_q_half']
         energy = scaling['lagrangian_energy']
-        q_half, q_half_col = potential_half, potential_half[:, None]
+        q_half = float64_array(self.cholesky_q_half)
+        q_half_col = q_half[:, None]
         cholesky_net = NumpyAnalyticMLP(self.cholesky_net)
         potential_net = NumpyAnalyticMLP(self.potential_net)
         placement_t = np.ascontiguousarray(float64_array(self.placement).T)

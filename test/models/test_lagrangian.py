@@ -254,9 +254,44 @@ def test_scaling_survives_a_json_round_trip_exactly() -> None:
     assert scaling.energy == pytest.approx(expected, rel=1e-12)
     balanced = random_scaling(seed=16, balance=0.75)
     assert LagrangianScaling.from_dict(json.loads(json.dumps(balanced.to_dict()))).balance == 0.75
-    # A model saved before the balance existed has none.
+    assert LagrangianScaling.from_dict(balanced.to_dict()).balance_inertia
+    # A model saved before the balance (or its Cholesky inputs) existed has none.
     old = {k: v for k, v in balanced.to_dict().items() if k != 'energy_balance'}
     assert LagrangianScaling.from_dict(old).balance == 0.0
+    older = {k: v for k, v in balanced.to_dict().items() if k != 'balance_inertia'}
+    assert not LagrangianScaling.from_dict(older).balance_inertia
+
+
+@pytest.mark.parametrize('balance_inertia', [True, False])
+def test_delan_mass_matrix_is_built_from_the_cholesky_net_on_the_balanced_positions(
+    float64, balance_inertia: bool
+) -> None:
+    """M = L L^T, L = diag(sqrt(e_i) / h_v,i) (G * L_s(x)), x the positions scaled to [-1, 1]
+    times the balance gains r_i (not multiplied in models saved before that, which load with
+    ``balance_inertia`` False)."""
+    from dataclasses import replace
+
+    scaling = replace(random_scaling(seed=21, balance=1.0), balance_inertia=balance_inertia)
+    network = DelanNetwork(scaling, generator=generator(22), diagonal_shift=-1.0)
+    q, _, _ = random_state(seed=23)
+    gains, _ = scaling.balanced()
+    centre = torch.as_tensor(0.5 * (scaling.position.low_ + scaling.position.high_))
+    x = (q - centre) / torch.as_tensor(scaling.position.scale())
+    if balance_inertia:
+        x = x * torch.as_tensor(gains)
+    out = network.cholesky_net(x)
+    n = N_DOF
+    energies = torch.as_tensor(scaling.joint_energies())
+    rows, cols = torch.tril_indices(n, n, offset=-1)
+    factor = torch.zeros(len(q), n, n, dtype=q.dtype)
+    factor[:, range(n), range(n)] = torch.nn.functional.softplus(out[:, :n] - 1.0) + 1e-3
+    low = torch.minimum(energies[rows], energies[cols])
+    high = torch.maximum(energies[rows], energies[cols])
+    factor[:, rows, cols] = out[:, n:] * (low / high) ** 0.5
+    rows_scale = torch.sqrt(energies) / torch.as_tensor(scaling.velocity.scale())
+    cholesky = rows_scale[:, None] * factor
+    expected = cholesky @ cholesky.transpose(1, 2)
+    torch.testing.assert_close(network.mass_matrix(q), expected, rtol=1e-12, atol=1e-9)
 
 
 @pytest.mark.parametrize('balance', [0.0, 0.5, 1.0])
