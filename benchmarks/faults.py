@@ -19,10 +19,11 @@ core. Each case is classified:
 Prints a table, then one JSON line with ``cases``, ``clear_error``, ``handled``,
 ``silently_accepted``, ``traceback``, ``data_lost`` and the cases that are not clear errors or
 handled. Doors: train, evaluate, diagnose, sweep, import, inspect, simulate, bag recover, the
-robot and twin configs and the URDF, the replay's plan and the predictor's core. Not yet covered
-(issue 17): the nodes as processes (a killed recorder, overload), the online check.
-``test/test_faults.py`` runs every case in the test suite (11 s here). The parts live in
-``fault_kit.py``, the cases in ``fault_cases_recordings.py`` and ``fault_cases_settings.py``.
+robot and twin configs and the URDF, the replay's plan, the predictor's core, and the nodes as
+processes (bad settings and inputs, a SIGKILLed recorder and replay, a reference at 20x the IPO
+rate) and the online check. ``test/test_faults.py`` runs every case in the test suite. The parts
+live in ``fault_kit.py``, the cases in ``fault_cases_recordings.py``,
+``fault_cases_settings.py`` and ``fault_cases_nodes.py``.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ import tempfile
 from collections import Counter
 from pathlib import Path
 
+from fault_cases_nodes import node_cases
 from fault_cases_recordings import bag_cases, import_cases, replay_and_recover_cases
 from fault_cases_settings import (
     artifact_cases,
@@ -51,7 +53,7 @@ __all__ = ['all_cases', 'build_fixtures', 'cli', 'raises', 'run_cases', 'summary
 def all_cases(fx: Fixtures) -> list[Case]:
     cases: list[Case] = []
     makers = (bag_cases, cli_cases, artifact_cases, predictor_cases, replay_and_recover_cases,
-              import_cases, config_cases, other_door_cases)  # fmt: skip
+              import_cases, config_cases, other_door_cases, node_cases)  # fmt: skip
     for make in makers:
         cases += list(make(fx))
     return cases

@@ -20,6 +20,11 @@ def test_every_fault_is_refused_clearly_or_handled(tmp_path):
     assert document['clear_error'] + document['handled'] == document['cases']
     doors = {case.door for case, _ in results}
     assert {'train', 'import', 'predictor', 'evaluate', 'bag recover', 'replay'} <= doors
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return
+    assert {'recorder', 'online check'} <= doors  # the nodes as processes
 
 
 def test_the_classifier_tells_a_silent_acceptance_and_a_traceback_from_a_clear_error():

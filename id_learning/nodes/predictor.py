@@ -186,14 +186,6 @@ class Predictor(Node):
         self.latency_from = (
             'callback_start' if config.executor == 'events' else 'middleware_receive'
         )
-        # rclpy passes the message info as a second argument to a callback that takes two; its
-        # type hints know only the one-argument form.
-        self._subscription = self.create_subscription(
-            kind,
-            config.input_topic,
-            cast(Callable[[Any], None], callback),
-            input_qos or reference_qos(config.input_depth),
-        )
         # Half the stale threshold: a stale reference is noticed within 1.5 thresholds.
         self._watchdog = self.create_timer(
             max(self.core.config.stale_after_ns * 0.5e-9, 0.002), self._check_stale
@@ -203,6 +195,20 @@ class Predictor(Node):
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._warm_up()
+        # torch, the model and rclpy leave ~10^5 tracked objects; a full collection walks them all
+        # (~0.1 s here) when the per-sample allocations trigger one. Frozen, they are never walked.
+        gc.collect()
+        gc.freeze()
+        # Subscribed last, once ready to serve: a sender that waits for this subscription starts
+        # only then, and nothing it sends queues (and is overwritten, uncounted) while the model
+        # warms up. rclpy passes the message info as a second argument to a callback that takes
+        # two; its type hints know only the one-argument form.
+        self._subscription = self.create_subscription(
+            kind,
+            config.input_topic,
+            cast(Callable[[Any], None], callback),
+            input_qos or reference_qos(config.input_depth),
+        )
         source = self.core.range.source if self.core.range else 'none'
         self.get_logger().info(
             f'{self.core.model.kind} model from {Path(config.artifact).resolve()}: '
@@ -448,20 +454,10 @@ class Predictor(Node):
         )
 
 
-def _make_predictor() -> Predictor:
-    """Create the node, then freeze what exists out of the garbage collector."""
-    node = Predictor()
-    # torch, the model and rclpy leave ~10^5 tracked objects; a full collection walks them all
-    # (~0.1 s here) when the per-sample allocations trigger one. Frozen, they are never walked.
-    gc.collect()
-    gc.freeze()
-    return node
-
-
 def main(args: Sequence[str] | None = None) -> int:
     """Run the predictor until SIGINT/SIGTERM; returns the exit status."""
     return run_node(
-        _make_predictor,
+        Predictor,
         lambda node: node.config.executor,  # type: ignore[attr-defined]
         args,
         name='predictor',
