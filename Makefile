@@ -10,6 +10,9 @@ DEMO_BAG := bags/default
 DEMO_OUT := out/demo
 # The reference study's Table 1 (not part of the package), placed beside ours when present.
 STUDY_TABLE := $(wildcard ../shared/data/study_table1/table1.json)
+ifneq ($(filter command line,$(origin BAG) $(origin OUT)),)
+$(error BAG and OUT are now DEMO_BAG and DEMO_OUT: make demo DEMO_BAG=path/to/bag DEMO_OUT=out/other)
+endif
 
 .PHONY: demo test lint typecheck venv clean bag
 

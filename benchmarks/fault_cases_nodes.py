@@ -33,7 +33,7 @@ def _wait_until(condition: Callable[[], bool], timeout: float = DEADLINE_S) -> b
 
 
 def _domain() -> int:
-    return random.SystemRandom().randint(101, 230)
+    return random.SystemRandom().randint(1, 101)
 
 
 def _refused(log_dir: Path, module: str, parameters: dict[str, object],

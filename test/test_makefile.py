@@ -18,12 +18,27 @@ def dry_run(*args: str, **env: str) -> str:
         ['make', '-n', '-C', str(REPO), *args],
         capture_output=True,
         text=True,
-        env={**os.environ, **env},
+        # Not the make variables of a make that runs these tests: they would pass its settings on.
+        env={
+            **{
+                k: v
+                for k, v in os.environ.items()
+                if k not in ('MAKEFLAGS', 'MFLAGS', 'MAKELEVEL')
+            },
+            **env,
+        },
         timeout=60,
         check=False,
     )
     assert result.returncode == 0, result.stderr
     return result.stdout
+
+
+def test_the_old_names_on_the_command_line_are_refused_naming_the_new_ones():
+    result = subprocess.run(['make', '-n', '-C', str(REPO), 'demo', 'OUT=/tmp/x'],
+                            capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
+    assert result.returncode != 0
+    assert 'DEMO_OUT' in result.stderr
 
 
 def test_environment_variables_named_like_settings_do_not_redirect_the_demo():

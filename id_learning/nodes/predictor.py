@@ -63,6 +63,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
+from id_learning.errors import ConfigError
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     diagnostic_array,
@@ -224,6 +225,21 @@ class Predictor(Node):
             + '; '
             + (self.core.inputs.describe() if self.core.inputs else 'inputs not recorded')
         )
+        fallback = self.core.fallback
+        if (
+            self.core.out_of_range_action == 'fallback'
+            and fallback
+            and 'nominal' in fallback.source
+        ):
+            self.get_logger().warning(
+                'outside the training range the fallback is the nominal model, without friction '
+                'or any identified term: give fallback_artifact an rnea_id artifact (train writes '
+                'one beside the model with --models including rnea_id)'
+            )
+        if config.fallback_artifact and fallback is None:
+            self.get_logger().warning(
+                f'fallback_artifact ignored: a {self.core.model.kind} model is physics itself'
+            )
         if self.core.fitting_inputs is None or self.core.fitting_inputs.name == 'study':
             self.get_logger().warning(
                 "the model was fitted on inputs low-passed like the labels (the study's "
@@ -340,7 +356,10 @@ class Predictor(Node):
         changed, reason = validate_change(self.config, {p.name: p.value for p in parameters})
         if changed is None:
             return SetParametersResult(successful=False, reason=reason)
-        self.core.update_config(guard_config(changed, self.robot))
+        try:
+            self.core.update_config(guard_config(changed, self.robot))
+        except ConfigError as err:
+            return SetParametersResult(successful=False, reason=str(err))
         if changed.diagnostics_period_s != self.config.diagnostics_period_s:
             self._diagnostics_timer.timer_period_ns = round(changed.diagnostics_period_s * 1e9)
         self.config = changed
@@ -410,7 +429,7 @@ class Predictor(Node):
         )
         if self.core.is_stale:
             silence_s = (self.core.silence_ns(time.monotonic_ns()) or 0) * 1e-9
-            level, message = 'stale', f'reference stale for {silence_s:.1f} s: not publishing'
+            level, message = 'warn', f'reference stale for {silence_s:.1f} s: not publishing'
         elif counters.received == 0:
             level, message = 'ok', 'waiting for the reference'
         elif any(now > before for now, before in zip(troubles, self._troubles, strict=True)):

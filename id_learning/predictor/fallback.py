@@ -19,7 +19,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from id_learning.errors import CheckpointError
+from id_learning.errors import CheckpointError, IdLearningError
 from id_learning.models.base import InverseDynamicsModel, SamplePredictor
 from id_learning.models.torch_model import TorchModel
 from id_learning.physics.nominal import NominalModel
@@ -83,7 +83,7 @@ def physics_fallback(
     if sibling is not None and sibling.resolve() != Path(beside or '').resolve():
         try:
             return _physics_artifact(sibling, robot, target)
-        except (CheckpointError, OSError, ValueError):
+        except (IdLearningError, OSError, ValueError):
             pass  # none there, or not one for this model: the next prior
     own = getattr(model, 'physics_sample_predictor', None)
     if own is not None:

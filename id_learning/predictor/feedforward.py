@@ -42,6 +42,7 @@ import torch
 
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import SampleGate
+from id_learning.errors import ConfigError
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.predictor.acceleration import CausalAccelerationEstimator
 from id_learning.predictor.config import GuardConfig
@@ -174,8 +175,8 @@ class FeedForwardPredictor:
             None: 'auto' warns instead.
 
     Raises:
-        ValueError: bad torque limits, an unknown inference backend, or 'fallback' without a
-            physics prior.
+        ValueError: bad torque limits or an unknown inference backend.
+        ConfigError: out_of_range 'fallback' for a network without a physics prior.
     """
 
     def __init__(
@@ -243,10 +244,12 @@ class FeedForwardPredictor:
     def _action(self, config: GuardConfig) -> str:
         """The out-of-range action ``config`` asks for, 'auto' resolved."""
         action = config.out_of_range
+        if action in ('auto', 'fallback') and not is_network(self.model):
+            return 'warn'  # a physics model is its own prior: there is nothing to fall back to
         if action == 'auto':
-            return 'fallback' if is_network(self.model) and self.fallback is not None else 'warn'
+            return 'fallback' if self.fallback is not None else 'warn'
         if action == 'fallback' and self.fallback is None:
-            raise ValueError("out_of_range 'fallback' needs a physics prior (fallback=...)")
+            raise ConfigError("out_of_range 'fallback' needs a physics prior (fallback=...)")
         return action
 
     # -- construction -----------------------------------------------------------------------------
@@ -305,9 +308,14 @@ class FeedForwardPredictor:
         else:
             q = np.zeros(self._n)
         zeros = np.zeros(self._n)
+        trained, fallback = self._training_range, self.fallback
         for _ in range(calls):
             if self.range is not None:
                 self.range.first_violation(q, zeros, zeros)
+            if trained is not None:
+                trained.excess(q, zeros, zeros)
+            if fallback is not None:
+                fallback.predict_one(q, zeros, zeros)
             self._predict(q, zeros, zeros)
         self._window = None
         if self._sequence is not None:

@@ -84,8 +84,14 @@ class TrainingRange:
             return 0.0
         given = {'q': q, 'v': v, 'a': a}
         values = np.concatenate([given[name] for name in names])
-        half = np.maximum(0.5 * (high - low), 1e-12)
-        return float(np.max(np.maximum(low - values, values - high) / half).clip(min=0.0))
+        if not ((values < low) | (values > high)).any():  # the common case, per sample
+            return 0.0
+        return float(np.max(np.maximum(low - values, values - high) / self._half).clip(min=0.0))
+
+    @cached_property
+    def _half(self) -> np.ndarray:
+        _, low, high = self._stacked
+        return np.maximum(0.5 * (high - low), 1e-12)
 
     def first_violation(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray

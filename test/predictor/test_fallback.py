@@ -9,7 +9,7 @@ import pytest
 from predictor.tiny_artifacts import reference_run
 from support import REPO
 
-from id_learning.errors import CheckpointError
+from id_learning.errors import CheckpointError, ConfigError
 from id_learning.models.registry import load_model
 from id_learning.predictor import FeedForwardPredictor, GuardConfig, ReferenceSample
 from id_learning.predictor.fallback import blend_weight
@@ -131,6 +131,19 @@ def test_a_physics_model_warns_and_a_bad_fallback_artifact_is_refused(
     physics = FeedForwardPredictor.from_artifact(tiny_artifacts['rnea_lq'], mabi)
     assert physics.out_of_range_action == 'warn'
     assert physics.fallback is None
+    # A physics model is its own prior: asked to fall back, it warns (also when changed live).
+    asked = GuardConfig(out_of_range='fallback')
+    assert (
+        FeedForwardPredictor.from_artifact(
+            tiny_artifacts['rnea_lq'], mabi, asked
+        ).out_of_range_action
+        == 'warn'
+    )
+    physics.update_config(asked)
+    assert physics.out_of_range_action == 'warn'
+    network = load_model(tiny_artifacts['mlp'], mabi)
+    with pytest.raises(ConfigError, match="'fallback' needs a physics prior"):
+        FeedForwardPredictor(network, mabi.limits.torque, asked)
     with pytest.raises(CheckpointError, match='is a network, not a physics prior'):
         FeedForwardPredictor.from_artifact(
             tiny_artifacts['mlp'], mabi, fallback_artifact=tiny_artifacts['lnn']

@@ -222,13 +222,15 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     listener.wait_for(lambda: diagnostics().get('stale') == 'True', 30, 'the stale report')
     published_while_stale = len(listener.messages['/tau_u'])
     with listener.condition:
-        levels = {
+        stale_reports = [
             status.level
             for msg in listener.messages['/diagnostics']
             for status in msg.status
             if status.name == 'id_learning/predictor'
-        }
-    assert DiagnosticStatus.STALE in levels
+            and status.message.startswith('reference stale')
+        ]
+    assert stale_reports
+    assert set(stale_reports) == {DiagnosticStatus.WARN}
     for k in range(10, 20):
         send(k)
 
@@ -286,10 +288,10 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     assert predictor.stop() == 0
     log = predictor.log()
     assert 'rejected (non_finite)' in log
-    # Stale: one warning per episode (the slow repeat is a minute away), resumed silently.
+    # Stale: at most one warning per episode (the slow repeat is a minute away; an episode the
+    # next sample ends before the watchdog runs is counted, not logged), resumed silently.
     episodes = int(re.search(r'(\d+) stale episodes', log).group(1))
-    assert episodes >= 1
-    assert log.count('reference stale: no valid sample') == episodes
+    assert 1 <= log.count('reference stale: no valid sample') <= episodes
     assert 'still stale' not in log
     assert 'resumed' not in log
 
