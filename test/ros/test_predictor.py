@@ -29,6 +29,18 @@ def tau_u_subscriptions(listener, name: str) -> int:
     return int((listener.diagnostics(name) or {}).get('tau_u_subscriptions', 0))
 
 
+def wait_connected(listener, publisher) -> None:
+    """Until the predictor takes our reference and its tau_u publisher has matched us."""
+    listener.wait_for(
+        lambda: (
+            publisher.get_subscription_count() >= 1
+            and tau_u_subscriptions(listener, 'id_learning/predictor') >= 1
+        ),
+        STARTUP_S,
+        'the predictor to connect (both ways)',
+    )
+
+
 def stamp_ns(msg) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
@@ -163,14 +175,7 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
             'torque_limit_scale': LIMIT_SCALE,
         },
     )
-    listener.wait_for(
-        lambda: (
-            publisher.get_subscription_count() >= 1
-            and tau_u_subscriptions(listener, 'id_learning/predictor') >= 1
-        ),
-        STARTUP_S,
-        'the predictor to connect (both ways)',
-    )
+    wait_connected(listener, publisher)
     joints = list(mabi.joints)
     _, q, v, a = reference_run(20)
     limit = LIMIT_SCALE * mabi.limits.torque
@@ -321,14 +326,7 @@ def test_far_outside_its_envelope_a_network_publishes_the_physics_torque_and_cou
             'diagnostics_period_s': 0.1,
         },
     )
-    listener.wait_for(
-        lambda: (
-            publisher.get_subscription_count() >= 1
-            and tau_u_subscriptions(listener, 'id_learning/predictor') >= 1
-        ),
-        STARTUP_S,
-        'the predictor to connect (both ways)',
-    )
+    wait_connected(listener, publisher)
     model = load_model(tiny_artifacts['mlp'], mabi)
     low, high = training_range(model.fitted_metadata(), mabi).bounds['v']
     _, q, v, a = reference_run(6)
