@@ -135,6 +135,20 @@ def artifact_cases(fx: Fixtures) -> Iterator[Case]:
     for kind in ('flipped', 'truncated', 'missing'):
         yield Case(f'artifact weights {kind}', 'predictor', lambda kind=kind: weights(kind))
 
+    def nan_weight() -> Outcome:
+        """A NaN written into the weights file (its hash left as it was)."""
+        from safetensors.numpy import load_file, save_file
+
+        folder = copy('weights_nan')
+        path = folder / 'weights.safetensors'
+        tensors = {name: value.copy() for name, value in load_file(str(path)).items()}
+        name = sorted(tensors)[0]
+        tensors[name].flat[0] = np.nan
+        save_file(tensors, str(path))
+        return evaluate(folder, ('non-finite', name))
+
+    yield Case('artifact with a NaN weight', 'predictor', nan_weight)
+
     def not_json() -> Outcome:
         folder = copy('not_json')
         (folder / 'model.json').write_text('weights: pickled\n')

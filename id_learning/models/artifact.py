@@ -180,15 +180,12 @@ def read_artifact(
     if metadata.get('units') != UNITS:
         raise CheckpointError(f'{meta_path}: units {metadata.get("units")} differ from {UNITS}')
     digest = hashlib.sha256(weights_path.read_bytes()).hexdigest()
-    if digest != metadata.get('weights_sha256'):
-        raise CheckpointError(f'{weights_path}: contents do not match the hash in {METADATA_FILE}')
     try:
         tensors = load_file(str(weights_path))
     except (SafetensorError, OSError, ValueError) as err:
         raise CheckpointError(f'{weights_path}: not a valid safetensors file: {err}') from err
-    shapes = {name: list(value.shape) for name, value in tensors.items()}
-    if shapes != metadata.get('tensors'):
-        raise CheckpointError(f'{weights_path}: tensors {shapes} differ from the metadata')
+    # Non-finite values first: a NaN written into the weights is named as such, whether or not
+    # the hash was updated with it.
     for name, value in tensors.items():
         bad = np.flatnonzero(~np.isfinite(np.asarray(value, dtype=float)))
         if bad.size:
@@ -196,6 +193,11 @@ def read_artifact(
                 f'{weights_path}: tensor {name} holds {bad.size} non-finite value(s) (first at '
                 f'flat index {int(bad[0])}); a model never predicts from them'
             )
+    if digest != metadata.get('weights_sha256'):
+        raise CheckpointError(f'{weights_path}: contents do not match the hash in {METADATA_FILE}')
+    shapes = {name: list(value.shape) for name, value in tensors.items()}
+    if shapes != metadata.get('tensors'):
+        raise CheckpointError(f'{weights_path}: tensors {shapes} differ from the metadata')
     for key in ('fitted', 'target_scaler'):
         _check_finite(metadata.get(key), key, meta_path)
     _check_robot(metadata.get('robot', {}), robot, folder)
