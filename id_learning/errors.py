@@ -9,6 +9,7 @@ __all__ = [
     'DatasetError',
     'IdLearningError',
     'RobotModelError',
+    'TrainingError',
 ]
 
 
@@ -34,3 +35,7 @@ class DatasetError(IdLearningError):
 
 class CheckpointError(IdLearningError):
     """A model artifact is not what it claims or does not match the robot."""
+
+
+class TrainingError(IdLearningError):
+    """No model of a run could be fitted (each one's reason is in the message)."""

@@ -80,6 +80,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     )
     print(metrics_table(run.metrics))
     print(f'report: {run.report}', flush=True)
+    for kind, why in run.failures.items():
+        print(f'{kind} failed (the other models go on): {why}', flush=True)
     if args.online_seconds > 0:
         _demo_online_check(args, bag, run, out)
     return 0

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -86,7 +87,15 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     print(metrics_table(run.metrics))
     print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
-    return 0
+    return _report_failures(run.failures)
+
+
+def _report_failures(failures: dict[str, str]) -> int:
+    """Say which models failed (the others are written); the exit status: 1 if any did."""
+    for kind, why in failures.items():
+        print(f'id-learning train: {kind} failed (the other models are saved): {why}',
+              file=sys.stderr)  # fmt: skip
+    return 1 if failures else 0
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
@@ -85,23 +85,33 @@ def _history(model: InverseDynamicsModel) -> dict[str, Any] | None:
 
 def _with_diagnosis(
     data: TrainingData, kinds: Sequence[str], overrides: dict[str, dict[str, Any]]
-) -> tuple[TrainingData, dict[str, float]]:
+) -> tuple[TrainingData, dict[str, float], dict[str, str]]:
     """Diagnose the training part once if a kind builds on its effects (no effects file given).
 
     Returns:
-        The training data with the diagnosis, and per kind that uses it the seconds it took.
+        The training data with the diagnosis, per kind that uses it the seconds it took, and,
+        when the diagnosis failed, per such kind why (those kinds cannot be fitted).
     """
     from id_learning.diagnosis import diagnose_training_part
     from id_learning.models.registry import make_config
 
     users = [k for k in kinds if getattr(make_config(k, **overrides[k]), 'effects', None) == '']
     if not users:
-        return data, {}
+        return data, {}, {}
     start = time.perf_counter()
-    model, summary = diagnose_training_part(data.dataset, data.robot)
+    try:
+        model, summary = diagnose_training_part(data.dataset, data.robot)
+    except Exception as err:  # the other kinds do not need it: they go on
+        reason = f'the diagnosis of the training part failed: {type(err).__name__}: {err}'
+        _LOG.error('%s; not fitted: %s', reason, ', '.join(users))
+        return data, {}, dict.fromkeys(users, reason)
     seconds = time.perf_counter() - start
     _LOG.info('diagnosed the training part in %.1f s for %s', seconds, users)
-    return replace(data, diagnosed=DiagnosedEffects(model, summary)), dict.fromkeys(users, seconds)
+    return (
+        replace(data, diagnosed=DiagnosedEffects(model, summary)),
+        dict.fromkeys(users, seconds),
+        {},
+    )
 
 
 def resolve_overrides(
@@ -140,20 +150,34 @@ def fit_models(
     models_dir: Path,
     *,
     progress: bool,
-) -> dict[str, ModelResult]:
+    on_fitted: Callable[[ModelResult], None] | None = None,
+) -> tuple[dict[str, ModelResult], dict[str, str]]:
     """Fit each kind in order on ``data``; each result's folder is ``models_dir / kind``.
 
-    A kind's ``train_seconds`` include the diagnosis of the training part when it builds on it.
+    A kind whose fit fails is skipped, with the reason; the others go on (hours of fitting are
+    not lost to one model). ``on_fitted`` is called with each result as soon as it is fitted
+    (the trainer saves it then). A kind's ``train_seconds`` include the diagnosis of the
+    training part when it builds on it.
+
+    Returns:
+        The fitted models by kind, and the failed kinds with why.
     """
     from id_learning.models.registry import make_model
 
-    data, diagnosis_seconds = _with_diagnosis(data, kinds, overrides)
+    data, diagnosis_seconds, failures = _with_diagnosis(data, kinds, overrides)
     results: dict[str, ModelResult] = {}
     for kind in tqdm(kinds, desc='models', unit='model', disable=not progress):
-        model = make_model(kind, robot, **overrides[kind])
+        if kind in failures:
+            continue
         _LOG.info('fitting %s on %d samples', kind, data.n_fit)
         start = time.perf_counter()
-        model.fit(data, progress=progress)
+        try:
+            model = make_model(kind, robot, **overrides[kind])
+            model.fit(data, progress=progress)
+        except Exception as err:  # reported with the run; the other kinds go on
+            failures[kind] = f'{type(err).__name__}: {err}'
+            _LOG.error('%s failed, the other models go on: %s', kind, failures[kind])
+            continue
         # A kind built on the diagnosis of the training part pays for it too.
         seconds = time.perf_counter() - start + diagnosis_seconds.get(kind, 0.0)
         results[kind] = ModelResult(
@@ -163,4 +187,6 @@ def fit_models(
             {'train_seconds': seconds, 'history': _history(model)},
         )
         _LOG.info('%s fitted in %.1f s', kind, seconds)
-    return results
+        if on_fitted is not None:
+            on_fitted(results[kind])
+    return results, failures

@@ -24,16 +24,17 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, Target
-from id_learning.errors import CheckpointError, ConfigError
+from id_learning.errors import CheckpointError, ConfigError, TrainingError
 from id_learning.evaluation.study import StudyTable
 from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import configure_torch
+from id_learning.models.registry import save_model
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import (
     bag_sha256,
@@ -103,6 +104,8 @@ class RunResult:
     models: dict[str, ModelResult]
     metrics: dict[str, Any]
     report: Path
+    #: Kinds whose fit failed, with why (the others were fitted, saved and scored).
+    failures: dict[str, str] = field(default_factory=dict)
 
     @property
     def metrics_path(self) -> Path:
@@ -119,6 +122,8 @@ class EvaluationResult:
     models: dict[str, ModelResult]
     metrics: dict[str, Any]
     report: Path
+    #: Kinds whose fit failed, with why (the others were fitted, saved and scored).
+    failures: dict[str, str] = field(default_factory=dict)
 
 
 def train_run(
@@ -158,6 +163,8 @@ def train_run(
         ConfigError: unknown kind or hyper-parameter, an unavailable device, or ``out`` holds
             a run and ``overwrite`` is not set.
         DatasetError, BagError: a bag is unusable.
+        TrainingError: no model could be fitted. A model that fails while others fit is
+            reported in ``RunResult.failures``, run.json, metrics.json and the report instead.
     """
     kinds = list(dict.fromkeys(kinds))
     config = replace(preprocess or PreprocessConfig(), target=target)
@@ -196,7 +203,7 @@ def train_run(
     )
     write_json(out / RUN_FILE, run)
 
-    results = fit_models(data, robot, kinds, overrides, out / MODELS_DIR, progress=progress)
+    results, failures = _fit_and_save(data, kinds, overrides, out, run, progress=progress)
     rows = segment_rows(dataset, 'test')
     table, predictions = evaluate_models(results, dataset, rows, scale, timing=True)
     save_models(
@@ -235,8 +242,55 @@ def train_run(
         machine=run['machine'],
         git_commit=run['git_commit'],
     )
+    _add_failures(metrics, report_path, failures)
     write_json(out / METRICS_FILE, metrics)
-    return RunResult(out, dataset, results, metrics, report_path)
+    return RunResult(out, dataset, results, metrics, report_path, failures)
+
+
+def _add_failures(metrics: dict[str, Any], report: Path, failures: dict[str, str]) -> None:
+    """Name the models that failed in metrics.json's document and at the end of the report."""
+    if not failures:
+        return
+    metrics['failed'] = failures
+    with report.open('a', encoding='utf-8') as out:
+        out.write('\n## Models that failed\n\n')
+        out.writelines(f'- `{kind}`: {why}\n' for kind, why in failures.items())
+
+
+def _fit_and_save(
+    data: TrainingData,
+    kinds: list[str],
+    overrides: dict[str, dict[str, Any]],
+    out: Path,
+    run: dict[str, Any],
+    *,
+    progress: bool,
+) -> tuple[dict[str, ModelResult], dict[str, str]]:
+    """Fit every kind, saving each as soon as it is fitted; run.json records the failures.
+
+    Raises:
+        TrainingError: no kind could be fitted.
+    """
+    extra = {key: run[key] for key in ('preprocessing', 'target_scaler', 'training_data')}
+
+    def save_at_once(result: ModelResult) -> None:  # metrics are added once all are scored
+        save_model(result.model, result.folder, extra=extra)
+
+    results, failures = fit_models(
+        data, data.robot, kinds, overrides, out / MODELS_DIR, progress=progress,
+        on_fitted=save_at_once,
+    )  # fmt: skip
+    if failures:
+        run['kinds'] = list(results)
+        run['failed'] = failures
+        write_json(out / RUN_FILE, run)
+    if not results:
+        bags = ', '.join(str(b['path']) for b in run['training_data']['bags'])
+        raise TrainingError(
+            f'no model could be fitted on {bags}: '
+            + '; '.join(f'{kind}: {why}' for kind, why in failures.items())
+        )
+    return results, failures
 
 
 def _load_models(run_dir: Path, run: dict[str, Any], robot: RobotConfig) -> dict[str, ModelResult]:

@@ -496,3 +496,44 @@ def test_inference_timing_without_repeats_has_no_batched_time(monkeypatch):
     timing = measure_inference(model, q, q, q, calls=3, repeats=0)
     assert 'inference_seconds_per_sample' not in timing
     assert timing['latency_single_sample_median_s'] == pytest.approx(3e-5, rel=1e-9)
+
+
+@pytest.fixture(scope='module')
+def short_bag(tmp_path_factory):
+    """26 s: long enough for RNEA+LQ, too short for a network's validation windows through the
+    0.3 Hz label filter (a real failure of one kind in a run)."""
+    config = twin_config(26.0, seed=13)
+    return write_twin_output(simulate(config), config, tmp_path_factory.mktemp('short') / 'bag')
+
+
+def test_a_model_that_fails_leaves_the_others_fitted_saved_scored_and_reported(
+    short_bag, mabi, tmp_path
+):
+    from id_learning.cli.main import main
+
+    out = tmp_path / 'run'
+    run = train_run([short_bag], mabi, 'motor', ['rnea_lq', 'mlp'], out, progress=False)
+    assert list(run.models) == ['rnea_lq']
+    assert set(run.failures) == {'mlp'}
+    assert 'validation part is too short' in run.failures['mlp']
+    load_model(out / 'models' / 'rnea_lq', mabi)  # saved, and complete
+    assert not (out / 'models' / 'mlp').exists()
+    metrics = json.loads((out / 'metrics.json').read_text())
+    assert set(metrics['models']) == {'rnea_lq'}
+    assert 'too short' in metrics['failed']['mlp']
+    assert '## Models that failed' in (out / 'report.md').read_text()
+    run_json = json.loads((out / 'run.json').read_text())
+    assert (run_json['kinds'], list(run_json['failed'])) == (['rnea_lq'], ['mlp'])
+    # The run evaluates like any other; the command line says what failed and exits 1.
+    assert main(['evaluate', '--run', str(out), '--bag', str(short_bag), '--out',
+                 str(tmp_path / 'eval'), '--quiet']) == 0  # fmt: skip
+    status = main(['train', '--bag', str(short_bag), '--models', 'rnea_lq,mlp', '--out',
+                   str(tmp_path / 'cli_run'), '--quiet'])  # fmt: skip
+    assert status == 1
+
+
+def test_a_run_where_every_model_fails_is_an_error_naming_each(short_bag, mabi, tmp_path):
+    from id_learning.errors import TrainingError
+
+    with pytest.raises(TrainingError, match=r'mlp: DatasetError.*lstm: DatasetError'):
+        train_run([short_bag], mabi, 'motor', ['mlp', 'lstm'], tmp_path / 'run', progress=False)
