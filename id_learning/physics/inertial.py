@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from id_learning.errors import RobotModelError
-from id_learning.physics.rigid_body import RigidBodyDynamics
+from id_learning.physics.rigid_body import RigidBodyDynamics, frame_id
 from id_learning.robot.config import JointLimits
 
 __all__ = [
@@ -76,11 +75,9 @@ def payload_parameter_map(
         (body index into the regressor's bodies, (10, 4) map from (m, h_x, h_y, h_z)).
     """
     pin_model = dynamics.model
-    frame_id = pin_model.getFrameId(frame)
-    if frame_id >= len(pin_model.frames):
-        raise RobotModelError(f'payload frame {frame!r} does not exist in the URDF')
-    placement = pin_model.frames[frame_id].placement
-    parent = int(pin_model.frames[frame_id].parentJoint)
+    index = frame_id(pin_model, frame)
+    placement = pin_model.frames[index].placement
+    parent = int(pin_model.frames[index].parentJoint)
     c0 = np.asarray(com_guess_m, dtype=float)
     columns = []
     for unit in np.eye(4):
@@ -140,11 +137,9 @@ def frame_parameter_map(dynamics: RigidBodyDynamics, frame: str) -> tuple[int, n
         RobotModelError: the frame does not exist.
     """
     pin_model = dynamics.model
-    frame_id = pin_model.getFrameId(frame)
-    if frame_id >= len(pin_model.frames):
-        raise RobotModelError(f'frame {frame!r} does not exist in the URDF')
-    placement = pin_model.frames[frame_id].placement
-    parent = int(pin_model.frames[frame_id].parentJoint)
+    index = frame_id(pin_model, frame)
+    placement = pin_model.frames[index].placement
+    parent = int(pin_model.frames[index].parentJoint)
     columns = [
         transform_dynamic_parameters(unit, placement.rotation, placement.translation)
         for unit in np.eye(10)

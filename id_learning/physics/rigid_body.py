@@ -27,13 +27,13 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
     Raises:
         RobotModelError: the URDF cannot be parsed, or its movable joints differ from the config.
     """
+    check_link_inertias(config.urdf_path)
     try:
-        full = pin.buildModelFromUrdf(str(config.urdf_path))
+        full = pin.buildModelFromXML(_unique_frame_names(config.urdf_path))
     except (RuntimeError, ValueError) as err:
         raise RobotModelError(
             f'{config.urdf_path}: cannot build a model from the URDF: {err}'
         ) from err
-    check_link_inertias(config.urdf_path)
     urdf_joints = list(full.names[1:])
     missing = [name for name in config.joints if name not in urdf_joints]
     unknown_locked = [name for name in config.locked_joints if name not in urdf_joints]
@@ -82,6 +82,47 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
             f'{config.urdf_path}: payload_frame {config.payload_frame!r} is not a URDF frame'
         )
     return model
+
+
+def frame_id(model: pin.Model, name: str) -> int:
+    """The index of the frame ``name``: a link's (BODY) frame first, where a joint shares it.
+
+    Raises:
+        RobotModelError: no frame has that name.
+    """
+    for kind in (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT):
+        if model.existFrame(name, kind):
+            return int(model.getFrameId(name, kind))
+    if model.existFrame(name):
+        return int(model.getFrameId(name, pin.FrameType.JOINT))
+    raise RobotModelError(f'frame {name!r} does not exist in the URDF')
+
+
+def _unique_frame_names(urdf: Path | str) -> str:
+    """The URDF's text, with each fixed joint named like a link renamed ``<name>_fixed_joint``.
+
+    Vendor URDFs often name a fixed joint after its child link (``flange``). pinocchio makes a
+    frame of each, and then refuses to look either up by name ("Several frames match the
+    filter"), also inside ``buildReducedModel``. Fixed joints carry no motion and the config
+    never names them: renaming them leaves the dynamics and every name the package uses as they
+    were, and the link keeps its name.
+    """
+    try:
+        tree = ElementTree.parse(urdf)
+    except (OSError, ElementTree.ParseError) as err:
+        raise RobotModelError(f'{urdf}: cannot read the URDF: {err}') from err
+    root = tree.getroot()
+    links = {link.get('name') for link in root.iter('link')}
+    names = {joint.get('name') for joint in root.iter('joint')} | links
+    for joint in root.iter('joint'):
+        name = joint.get('name')
+        if joint.get('type') == 'fixed' and name in links:
+            renamed = f'{name}_fixed_joint'
+            while renamed in names:
+                renamed += '_'
+            joint.set('name', renamed)
+            names.add(renamed)
+    return ElementTree.tostring(root, encoding='unicode')
 
 
 def check_link_inertias(urdf: Path | str, tolerance: float = 1e-9) -> None:
@@ -305,11 +346,9 @@ class RigidBodyDynamics:
             inertia: (3, 3) rotational inertia about the COM [kg*m^2]; a point mass if None.
         """
         model = self.model.copy()
-        frame_id = model.getFrameId(frame)
-        if frame_id >= len(model.frames):
-            raise RobotModelError(f'payload frame {frame!r} does not exist')
-        placement = model.frames[frame_id].placement
-        parent = model.frames[frame_id].parentJoint
+        index = frame_id(model, frame)
+        placement = model.frames[index].placement
+        parent = model.frames[index].parentJoint
         rotational = np.zeros((3, 3)) if inertia is None else np.asarray(inertia, dtype=float)
         payload = pin.Inertia(float(mass), np.asarray(com, dtype=float), rotational)
         model.inertias[parent] = model.inertias[parent] + placement.act(payload)

@@ -598,3 +598,34 @@ def test_config_limits_wider_than_the_urdf_are_refused(write_config: Any) -> Non
         RobotModelError, match=r'limits\.velocity of joint_5 \(9\) lies outside the URDF'
     ):
         RigidBodyDynamics.from_config(config)
+
+
+def test_a_urdf_whose_fixed_joints_are_named_like_their_links_builds_reduces_and_takes_payloads(
+    tmp_path, mabi
+):
+    """Vendor URDFs name fixed joints after their child links; pinocchio then cannot look either
+    frame up by name ("Several frames match the filter"), also inside buildReducedModel."""
+    from id_learning.physics.rigid_body import _unique_frame_names
+
+    text = MABI_URDF.read_text()
+    vendor = tmp_path / 'vendor.urdf'
+    vendor.write_text(
+        text.replace('"flange_joint"', '"flange"').replace('"tool0_joint"', '"tool0"')
+    )
+    plain = pin.buildModelFromUrdf(str(vendor))
+    with pytest.raises(ValueError, match='Several frames'):
+        plain.getFrameId('flange')  # the fault, as pinocchio has it
+    ours = RigidBodyDynamics.from_config(replace(mabi, urdf_path=vendor))
+    reference = RigidBodyDynamics.from_config(mabi)
+    rng = np.random.default_rng(3)
+    q, v, a = (rng.uniform(-1.0, 1.0, (4, 6)) for _ in range(3))
+    np.testing.assert_array_equal(ours.rnea(q, v, a), reference.rnea(q, v, a))
+    payload = (12.0, np.array([0.1, 0.0, 0.05]), np.diag([0.1, 0.2, 0.3]))
+    np.testing.assert_allclose(
+        ours.with_payload('flange', *payload).rnea(q, v, a),
+        reference.with_payload('flange', *payload).rnea(q, v, a),
+        rtol=1e-12,
+    )
+    full = pin.buildModelFromXML(_unique_frame_names(vendor))
+    reduced = pin.buildReducedModel(full, [full.getJointId('joint_6')], pin.neutral(full))
+    assert reduced.nv == 5
