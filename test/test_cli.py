@@ -207,3 +207,28 @@ def test_import_of_a_log_without_a_mapped_column_exits_with_status_two(tmp_path)
     assert line.startswith('id-learning import: error:')
     assert 'q_deg_missing' in line
     assert not (tmp_path / 'bag').exists()
+
+
+def test_import_inspect_and_train_refuse_a_config_beyond_its_urdf_with_one_message(tmp_path):
+    """A velocity limit 0.01 rad/s above the URDF's: every command says so, not train alone."""
+    text = (REPO / 'config/mabi_max100.yaml').read_text()
+    fast = text.replace('velocity: [1.70, 1.40, 1.45, 2.35, 2.25, 3.45]',
+                        'velocity: [1.70, 1.40, 1.45, 2.35, 2.25, 3.51]')  # fmt: skip
+    fast = fast.replace('urdf: ../urdf/', f'urdf: {REPO}/urdf/')
+    assert fast != text
+    robot = tmp_path / 'fast.yaml'
+    robot.write_text(fast)
+    source, mapping = write_log(tmp_path, 'csv', log_values())
+    commands = {
+        'import': ['import', str(source), '--mapping', str(mapping), '--out',
+                   str(tmp_path / 'bag'), '--robot', str(robot)],
+        'inspect': ['inspect', str(REPO / 'bags/default'), '--robot', str(robot)],
+        'train': ['train', '--bag', str(REPO / 'bags/default'), '--robot', str(robot),
+                  '--models', 'rnea_lq', '--out', str(tmp_path / 'run')],
+    }  # fmt: skip
+    for name, argv in commands.items():
+        result = run_cli(*argv)
+        assert result.returncode == 2, (name, result.stdout)
+        assert 'limits.velocity of joint_6 (3.51) lies outside the URDF limit 3.5' in result.stderr
+    assert not (tmp_path / 'bag').exists()
+    assert not (tmp_path / 'run').exists()

@@ -101,10 +101,18 @@ def positive_float(text: str) -> float:
 
 
 def load_robot(args: argparse.Namespace):
-    """The robot config of ``--robot``, else the shipped one."""
+    """The robot config of ``--robot``, else the shipped one, checked against its URDF.
+
+    Every command makes the checks ``train`` makes (joints, limits within the URDF's, payload
+    frame, link inertias), so a config that cannot train is refused by import and inspect too,
+    with the same message.
+    """
+    from id_learning.physics import build_pinocchio_model
     from id_learning.robot import load_robot_config
 
-    return load_robot_config(args.robot or default_robot_config())
+    robot = load_robot_config(args.robot or default_robot_config())
+    build_pinocchio_model(robot)
+    return robot
 
 
 def model_kinds(text: str) -> list[str]:
