@@ -219,7 +219,15 @@ def _contract(
     missing = tuple(name for name in names if msgtypes.get(name) != JOINT_STATE)
     if missing:
         wrong = tuple((name, msgtypes[name]) for name in missing if name in msgtypes)
-        return ContractReport(*names, missing, None, None, None, wrong)
+        states = decoded.get(topics.joint_states)
+        torques_only = (
+            missing == (topics.motor_currents,)
+            and not wrong
+            and states is not None
+            and bool(states.all_stamps)
+            and states.series().effort is not None
+        )
+        return ContractReport(*names, missing, None, None, None, wrong, torques_only)
     states, currents = decoded[topics.joint_states], decoded[topics.motor_currents]
     a = np.array(states.all_stamps, dtype=np.int64)
     b = np.array(currents.all_stamps, dtype=np.int64)

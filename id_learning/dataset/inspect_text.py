@@ -170,7 +170,12 @@ def _verdict_lines(report: BagReport) -> list[str]:
     """The contract check and the list of problems."""
     contract = report.contract
     pair = f'{contract.joint_states} / {contract.motor_currents}'
-    if contract.missing:
+    if contract.joint_torques_only:
+        verdict = (
+            f'joint torques in {contract.joint_states} effort, no {contract.motor_currents}: '
+            'labels for --target joint (motor labels need the currents)'
+        )
+    elif contract.missing:
         found = dict(contract.wrong_types)
         verdict = 'missing ' + ', '.join(
             f'{name} (it has type {found[name]})' if name in found else name

@@ -303,3 +303,26 @@ def test_plot_report_writes_a_png(tmp_path: Path, robot: RobotConfig) -> None:
 def test_missing_bag_raises_bag_error(tmp_path: Path) -> None:
     with pytest.raises(BagError, match='no such bag'):
         inspect_bag(tmp_path / 'nowhere')
+
+
+@pytest.mark.parametrize('with_effort', [True, False])
+def test_joint_torques_without_motor_currents_are_no_problem_but_positions_alone_are(
+    tmp_path: Path, robot: RobotConfig, with_effort: bool
+) -> None:
+    """Joint-torque sensors in /joint_states' effort need no currents (``--target joint``)."""
+    recording = make_recording(robot, regular_stamps(40))
+    with BagWriter(tmp_path / 'bag') as writer:
+        writer.add_topic('/joint_states', JOINT_STATE)
+        for k, stamp in enumerate(recording.stamps_ns.tolist()):
+            effort = 100.0 * recording.current[k] if with_effort else np.zeros(0)
+            data = encode_joint_state(
+                stamp, robot.joints, recording.position[k], recording.velocity[k], effort
+            )
+            writer.write('/joint_states', stamp, data)
+    report = inspect_bag(tmp_path / 'bag', robot)
+    assert report.contract.missing == ('/motor_currents',)
+    assert report.contract.joint_torques_only is with_effort
+    missing = [p for p in report.problems if 'missing JointState topic' in p]
+    assert len(missing) == (0 if with_effort else 1)
+    text = render_report(report)
+    assert ('labels for --target joint' in text) is with_effort
