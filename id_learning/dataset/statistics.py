@@ -58,7 +58,8 @@ class NoiseEstimate:
         filtered_std_nm: (n,) what remains of it after the zero-phase low-pass [N*m].
         correlation_samples: (n,) integrated autocorrelation time of the filtered noise
             [samples]; N samples hold N / tau independent ones.
-        band_hz: (low, high) band the white level was read from [Hz].
+        band_hz: (low, high) frequencies the white level was read between, over all joints
+            [Hz].
     """
 
     raw_std_nm: np.ndarray
@@ -91,18 +92,21 @@ def estimate_noise(
     segment = int(min(512, max(64, n_samples // 8)))
     freqs, psd = signal.welch(tau_raw, fs=fs, nperseg=segment, axis=0, detrend='linear')
     raw, filtered, tau = np.empty(n), np.empty(n), np.empty(n)
-    low = high = 0.0
+    lows, highs = [], []
     for j in range(n):
         low = max(10.0 * float(cutoff_hz[j]), 0.1 * fs)
         high = 0.45 * fs
         band = (freqs >= low) & (freqs <= high)
         if band.sum() < 3:  # a very high cut-off: use the top fifth of the spectrum
             band = freqs >= 0.8 * freqs[-1]
+        # The band actually read (a high cut-off leaves the nominal one empty or inverted).
+        lows.append(float(freqs[band][0]))
+        highs.append(float(freqs[band][-1]))
         floor = float(np.median(psd[band, j]))  # one-sided density [N^2 m^2 / Hz]
         raw[j] = math.sqrt(floor * fs / 2.0)
         filtered[j] = math.sqrt(floor * filter_power_integral(cutoff_hz[j], period_s, order))
         tau[j] = filter_correlation_samples(float(cutoff_hz[j]), period_s, order)
-    return NoiseEstimate(raw, filtered, tau, (low, high))
+    return NoiseEstimate(raw, filtered, tau, (min(lows), max(highs)))
 
 
 def integrated_autocorrelation(x: np.ndarray) -> float:

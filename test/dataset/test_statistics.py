@@ -79,3 +79,15 @@ def test_canonical_correlation_is_one_for_spanned_columns_and_zero_for_orthogona
     assert first_canonical_correlation(a, b) == pytest.approx(1.0)
     q, _ = np.linalg.qr(rng.standard_normal((500, 4)))
     assert first_canonical_correlation(q[:, :2], q[:, 2:]) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_100_hz_log_with_a_high_cut_off_reads_the_noise_in_an_ordered_band():
+    """10 f_c lies above 0.45 f_s here: the top of the spectrum is read, and reported as such
+    (a real 100 Hz log printed "noise band 50-45 Hz")."""
+    rng = np.random.default_rng(5)
+    period = 0.01
+    white = 3.0 * rng.standard_normal((60_000, 2))
+    estimate = estimate_noise(white, np.array([0.5, 5.0]), period, 4)
+    low, high = estimate.band_hz
+    assert 0.0 < low < high <= 50.0
+    assert estimate.raw_std_nm == pytest.approx([3.0, 3.0], rel=0.05)
