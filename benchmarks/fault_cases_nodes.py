@@ -146,7 +146,9 @@ def _overload(fx: Fixtures, rate: float) -> Outcome:
     text = (f'{len(sent)} references at {rate:g}x the IPO rate, {span} from the first served to '
             f'the last: {received} received ({published} published, {late} late), {skipped} '
             f'counted as skipped; {latency_text}')  # fmt: skip
-    counted = span > 0.9 * cycles and received + skipped >= span
+    # Within the span served, everything is accounted for; outside it (discovery at the start,
+    # the listener's own losses under this load) at most a tenth.
+    counted = received + skipped >= max(span, 0.9 * cycles)
     return Outcome('handled' if counted else 'silently_accepted', text)
 
 

@@ -75,7 +75,7 @@ def payload_parameter_map(
         (body index into the regressor's bodies, (10, 4) map from (m, h_x, h_y, h_z)).
     """
     pin_model = dynamics.model
-    index = frame_id(pin_model, frame)
+    index = frame_id(pin_model, frame, 'payload frame')
     placement = pin_model.frames[index].placement
     parent = int(pin_model.frames[index].parentJoint)
     c0 = np.asarray(com_guess_m, dtype=float)

@@ -84,18 +84,17 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
     return model
 
 
-def frame_id(model: pin.Model, name: str) -> int:
+def frame_id(model: pin.Model, name: str, what: str = 'frame') -> int:
     """The index of the frame ``name``: a link's (BODY) frame first, where a joint shares it.
 
     Raises:
-        RobotModelError: no frame has that name.
+        RobotModelError: no frame has that name (``what`` says which frame was sought).
     """
-    for kind in (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT):
+    kinds = (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT)
+    for kind in (*kinds, pin.FrameType.JOINT, pin.FrameType.SENSOR):
         if model.existFrame(name, kind):
             return int(model.getFrameId(name, kind))
-    if model.existFrame(name):
-        return int(model.getFrameId(name, pin.FrameType.JOINT))
-    raise RobotModelError(f'frame {name!r} does not exist in the URDF')
+    raise RobotModelError(f'{what} {name!r} does not exist in the URDF')
 
 
 def _unique_frame_names(urdf: Path | str) -> str:
@@ -346,7 +345,7 @@ class RigidBodyDynamics:
             inertia: (3, 3) rotational inertia about the COM [kg*m^2]; a point mass if None.
         """
         model = self.model.copy()
-        index = frame_id(model, frame)
+        index = frame_id(model, frame, 'payload frame')
         placement = model.frames[index].placement
         parent = model.frames[index].parentJoint
         rotational = np.zeros((3, 3)) if inertia is None else np.asarray(inertia, dtype=float)
