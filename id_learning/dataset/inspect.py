@@ -225,7 +225,7 @@ def _contract(
             and not wrong
             and states is not None
             and bool(states.all_stamps)
-            and states.series().effort is not None
+            and bool(states.lengths.get('effort'))
         )
         return ContractReport(*names, missing, None, None, None, wrong, torques_only)
     states, currents = decoded[topics.joint_states], decoded[topics.motor_currents]

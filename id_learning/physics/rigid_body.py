@@ -29,7 +29,12 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
     """
     check_link_inertias(config.urdf_path)
     try:
-        full = pin.buildModelFromXML(_unique_frame_names(config.urdf_path))
+        renamed = _unique_frame_names(config.urdf_path)
+        full = (
+            pin.buildModelFromUrdf(str(config.urdf_path))
+            if renamed is None
+            else pin.buildModelFromXML(renamed)
+        )
     except (RuntimeError, ValueError) as err:
         raise RobotModelError(
             f'{config.urdf_path}: cannot build a model from the URDF: {err}'
@@ -97,8 +102,11 @@ def frame_id(model: pin.Model, name: str, what: str = 'frame') -> int:
     raise RobotModelError(f'{what} {name!r} does not exist in the URDF')
 
 
-def _unique_frame_names(urdf: Path | str) -> str:
-    """The URDF's text, with each fixed joint named like a link renamed ``<name>_fixed_joint``.
+def _unique_frame_names(urdf: Path | str) -> str | None:
+    """The URDF's text with each fixed joint named like a link renamed ``<name>_fixed_joint``.
+
+    None when no joint needs it: the file is then read as it is (ElementTree would rewrite a
+    default XML namespace as a prefix that pinocchio's parser does not know).
 
     Vendor URDFs often name a fixed joint after its child link (``flange``). pinocchio makes a
     frame of each, and then refuses to look either up by name ("Several frames match the
@@ -113,6 +121,7 @@ def _unique_frame_names(urdf: Path | str) -> str:
     root = tree.getroot()
     links = {link.get('name') for link in root.iter('link')}
     names = {joint.get('name') for joint in root.iter('joint')} | links
+    changed = False
     for joint in root.iter('joint'):
         name = joint.get('name')
         if joint.get('type') == 'fixed' and name in links:
@@ -121,7 +130,8 @@ def _unique_frame_names(urdf: Path | str) -> str:
                 renamed += '_'
             joint.set('name', renamed)
             names.add(renamed)
-    return ElementTree.tostring(root, encoding='unicode')
+            changed = True
+    return ElementTree.tostring(root, encoding='unicode') if changed else None
 
 
 def check_link_inertias(urdf: Path | str, tolerance: float = 1e-9) -> None:

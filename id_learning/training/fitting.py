@@ -103,7 +103,7 @@ def _with_diagnosis(
         model, summary = diagnose_training_part(data.dataset, data.robot)
     except Exception as err:  # the other kinds do not need it: they go on
         reason = f'the diagnosis of the training part failed: {type(err).__name__}: {err}'
-        _LOG.error('%s; not fitted: %s', reason, ', '.join(users))
+        _LOG.error('%s; not fitted: %s', reason, ', '.join(users), exc_info=True)
         return data, {}, dict.fromkeys(users, reason)
     seconds = time.perf_counter() - start
     _LOG.info('diagnosed the training part in %.1f s for %s', seconds, users)
@@ -176,7 +176,9 @@ def fit_models(
             model.fit(data, progress=progress)
         except Exception as err:  # reported with the run; the other kinds go on
             failures[kind] = f'{type(err).__name__}: {err}'
-            _LOG.error('%s failed, the other models go on: %s', kind, failures[kind])
+            _LOG.error(
+                '%s failed, the other models go on: %s', kind, failures[kind], exc_info=True
+            )
             continue
         # A kind built on the diagnosis of the training part pays for it too.
         seconds = time.perf_counter() - start + diagnosis_seconds.get(kind, 0.0)

@@ -23,6 +23,7 @@ the report) and ``training.run_folder`` (the files). Their public names are re-e
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -187,6 +188,10 @@ def train_run(
             bags, robot, config, progress=progress, trim_unpaired_tail=trim_unpaired_tail
         )
     )
+    if overwrite:  # nothing of the replaced run may pass for this one's (a model that fails)
+        shutil.rmtree(out / MODELS_DIR, ignore_errors=True)
+        for name in (RUN_FILE, METRICS_FILE, REPORT_FILE):
+            (out / name).unlink(missing_ok=True)
     (out / MODELS_DIR).mkdir(parents=True, exist_ok=True)
     data = TrainingData(dataset, robot)
     scale = dataset.target_scaler.scale()
@@ -217,7 +222,7 @@ def train_run(
         f'the test part (last {1 - config.train_fraction:.0%} in time) of each training bag'
     )
     report_path, findings = write_run_report(
-        title=f'Training run: {len(kinds)} models, {target} torque labels',
+        title=f'Training run: {len(results)} models, {target} torque labels',
         out=out,
         dataset=dataset,
         robot=robot,
@@ -272,16 +277,20 @@ def _fit_and_save(
         TrainingError: no kind could be fitted.
     """
     extra = {key: run[key] for key in ('preprocessing', 'target_scaler', 'training_data')}
+    # run.json lists the models saved so far: an interrupted run evaluates with what it has.
+    run['requested_kinds'], run['kinds'] = list(kinds), []
+    write_json(out / RUN_FILE, run)
 
     def save_at_once(result: ModelResult) -> None:  # metrics are added once all are scored
         save_model(result.model, result.folder, extra=extra)
+        run['kinds'].append(result.kind)
+        write_json(out / RUN_FILE, run)
 
     results, failures = fit_models(
         data, data.robot, kinds, overrides, out / MODELS_DIR, progress=progress,
         on_fitted=save_at_once,
     )  # fmt: skip
     if failures:
-        run['kinds'] = list(results)
         run['failed'] = failures
         write_json(out / RUN_FILE, run)
     if not results:

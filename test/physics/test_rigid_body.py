@@ -626,6 +626,9 @@ def test_a_urdf_whose_fixed_joints_are_named_like_their_links_builds_reduces_and
         reference.with_payload('flange', *payload).rnea(q, v, a),
         rtol=1e-12,
     )
-    full = pin.buildModelFromXML(_unique_frame_names(vendor))
+    assert _unique_frame_names(MABI_URDF) is None  # nothing to rename: the file as it is
+    renamed = _unique_frame_names(vendor)
+    assert renamed is not None
+    full = pin.buildModelFromXML(renamed)
     reduced = pin.buildReducedModel(full, [full.getJointId('joint_6')], pin.neutral(full))
     assert reduced.nv == 5

@@ -512,7 +512,13 @@ def test_a_model_that_fails_leaves_the_others_fitted_saved_scored_and_reported(
     from id_learning.cli.main import main
 
     out = tmp_path / 'run'
-    run = train_run([short_bag], mabi, 'motor', ['rnea_lq', 'mlp'], out, progress=False)
+    stale = out / 'models' / 'mlp'  # what a replaced run left: must not pass for this one's
+    stale.mkdir(parents=True)
+    (stale / 'model.json').write_text('{}')
+    (out / 'run.json').write_text('{}')
+    run = train_run(
+        [short_bag], mabi, 'motor', ['rnea_lq', 'mlp'], out, progress=False, overwrite=True
+    )
     assert list(run.models) == ['rnea_lq']
     assert set(run.failures) == {'mlp'}
     assert 'validation part is too short' in run.failures['mlp']
@@ -524,6 +530,7 @@ def test_a_model_that_fails_leaves_the_others_fitted_saved_scored_and_reported(
     assert '## Models that failed' in (out / 'report.md').read_text()
     run_json = json.loads((out / 'run.json').read_text())
     assert (run_json['kinds'], list(run_json['failed'])) == (['rnea_lq'], ['mlp'])
+    assert run_json['requested_kinds'] == ['rnea_lq', 'mlp']
     # The run evaluates like any other; the command line says what failed and exits 1.
     assert main(['evaluate', '--run', str(out), '--bag', str(short_bag), '--out',
                  str(tmp_path / 'eval'), '--quiet']) == 0  # fmt: skip
