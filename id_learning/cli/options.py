@@ -64,6 +64,21 @@ def preprocessing_option(p: argparse.ArgumentParser) -> None:
     )
 
 
+def split_option(p: argparse.ArgumentParser) -> None:
+    """The --split and --split-seed options: which samples train and which test."""
+    p.add_argument(
+        '--split',
+        choices=('contiguous', 'shuffled'),
+        default='contiguous',
+        help='contiguous (default): the first 70 %% of each bag in time train, the rest tests; '
+        'shuffled: 70 %% of the samples drawn at random train (the study says only "70/30"); '
+        'the bags stay whole in time either way',
+    )
+    p.add_argument(
+        '--split-seed', type=int, default=0, help='seeds the draw of a shuffled split (default 0)'
+    )
+
+
 def trim_option(p: argparse.ArgumentParser) -> None:
     """The --trim-unpaired-tail option of the commands that read bags."""
     p.add_argument(

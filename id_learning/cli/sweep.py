@@ -30,7 +30,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         storage=args.storage,
         study_name=args.study_name,
         max_seconds_per_trial=args.max_seconds_per_trial,
-        preprocess=PreprocessConfig(target=args.target, mode=args.preprocessing),
+        preprocess=PreprocessConfig(
+            target=args.target,
+            mode=args.preprocessing,
+            split=args.split,
+            split_seed=args.split_seed,
+        ),
         progress=not args.quiet,
         seed=args.seed,
         trim_unpaired_tail=args.trim_unpaired_tail,
@@ -54,6 +59,7 @@ def add_sweep_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     options.robot_option(p)
     options.target_option(p)
     options.preprocessing_option(p)
+    options.split_option(p)
     p.add_argument('--model', required=True, help='the model kind to sweep, e.g. mlp')
     p.add_argument('--trials', type=int, default=20, help='trials this worker runs (20)')
     p.add_argument(

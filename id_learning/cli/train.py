@@ -80,7 +80,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         max_seconds_per_model=args.max_seconds_per_model,
         progress=not args.quiet,
         device=args.device,
-        preprocess=PreprocessConfig(mode=args.preprocessing),
+        preprocess=PreprocessConfig(
+            mode=args.preprocessing, split=args.split, split_seed=args.split_seed
+        ),
         study_table=options.study_table(args, robot),
         overwrite=args.force,
         trim_unpaired_tail=args.trim_unpaired_tail,
@@ -134,6 +136,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     options.robot_option(p)
     options.target_option(p)
     options.preprocessing_option(p)
+    options.split_option(p)
     options.study_table_option(p)
     p.add_argument(
         '--models',

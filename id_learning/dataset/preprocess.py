@@ -35,6 +35,7 @@ from id_learning.robot.drives import motor_torque_from_current
 
 __all__ = [
     'PREPROCESS_MODES',
+    'SPLITS',
     'Dataset',
     'MinMaxScaler',
     'PreprocessConfig',
@@ -52,6 +53,11 @@ PreprocessMode = Literal['through_filter', 'study']
 #: 'through_filter': fit on a controller's inputs, model torque filtered like the labels;
 #: 'study': the reference study's pipeline, filtered inputs to filtered labels, instantaneous.
 PREPROCESS_MODES: tuple[PreprocessMode, ...] = ('through_filter', 'study')
+SplitKind = Literal['contiguous', 'shuffled']
+#: 'contiguous': the leading train_fraction of each recording in time trains, the rest tests;
+#: 'shuffled': train_fraction of the samples, drawn at random, train (the study's wording allows
+#: either); the recordings stay whole in time, so filters and windows still run along them.
+SPLITS: tuple[SplitKind, ...] = ('contiguous', 'shuffled')
 
 
 @dataclass(frozen=True)
@@ -68,7 +74,10 @@ class PreprocessConfig:
         input_smoothing_hz: per-joint cut-offs of the controller inputs' velocity smoothing
             [Hz]; None takes the robot config's input_smoothing_hz (a stored model's own
             definition when it is evaluated).
-        train_fraction: leading share of samples used for training.
+        train_fraction: share of samples used for training (the leading ones in time, or drawn
+            at random: ``split``).
+        split: 'contiguous' (default) or 'shuffled' (``SPLITS``).
+        split_seed: seeds the draw of a shuffled split (and of its validation samples).
         jitter_tolerance: a stamp within this share of a period from the IPO grid is on it.
         min_filter_periods: a recording must last this many periods of the lowest cut-off.
     """
@@ -81,6 +90,8 @@ class PreprocessConfig:
     train_fraction: float = 0.7
     jitter_tolerance: float = 0.25
     min_filter_periods: float = 2.0
+    split: SplitKind = 'contiguous'
+    split_seed: int = 0
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
@@ -96,6 +107,8 @@ class PreprocessConfig:
             raise ConfigError(f'train_fraction must be in (0, 1), got {self.train_fraction}')
         if not 0.0 < self.jitter_tolerance < 0.5:
             raise ConfigError(f'jitter_tolerance must be in (0, 0.5), got {self.jitter_tolerance}')
+        if self.split not in SPLITS:
+            raise ConfigError(f'split must be one of {SPLITS}, got {self.split!r}')
 
 
 def minimum_duration_s(cutoff_hz: np.ndarray, config: PreprocessConfig) -> float:
@@ -259,7 +272,8 @@ class Dataset:
             ``study`` in the study's (see ``fitting_inputs``).
         tau: (N, n) label torques, low-passed with ``cutoff_hz`` (the label filter).
         tau_raw: (N, n) label torques before filtering.
-        n_train: the first n_train samples are the training part, the rest the test part.
+        n_train: the number of training samples: the first n_train (contiguous split) or those
+            ``train_mask`` marks (shuffled).
         input_scaler, target_scaler: fitted on the training part (of q, v, a and of tau).
         cutoff_hz: per-joint cut-offs of the label filter [Hz]; filter_order: its order.
         mode: 'through_filter' or 'study' (``PreprocessConfig.mode``).
@@ -271,6 +285,7 @@ class Dataset:
             twin recording's ground truth); None otherwise.
         regularise_report: what regularise() changed.
         extra: 'segments' when several recordings are combined (see ``recording_rows``).
+        train_mask: (N,) True for the training samples of a shuffled split; None: contiguous.
     """
 
     joints: tuple[str, ...]
@@ -295,21 +310,44 @@ class Dataset:
     regularise_report: RegulariseReport | None = None
     source: str = ''
     extra: dict[str, Any] = field(default_factory=dict)
+    train_mask: np.ndarray | None = None
 
-    def _part(self, rows: slice) -> Split:
+    def _part(self, rows: np.ndarray) -> Split:
         return Split(
             self.q[rows], self.v[rows], self.a[rows], self.tau[rows], self.stamps_ns[rows]
         )
 
     @property
+    def is_shuffled(self) -> bool:
+        """The split drew its training samples at random (``train_mask``)."""
+        return self.train_mask is not None
+
+    @property
+    def train_rows(self) -> np.ndarray:
+        """Rows of the training samples, in row order."""
+        if self.train_mask is not None:
+            return np.flatnonzero(self.train_mask)
+        return np.arange(self.n_train)
+
+    @property
+    def test_rows(self) -> np.ndarray:
+        """Rows of the test samples, in row order (each recording's test range, combined)."""
+        if self.train_mask is not None:
+            return np.flatnonzero(~self.train_mask)
+        segments = self.extra.get('segments')
+        if segments and all('test' in s for s in segments):
+            return np.concatenate([np.arange(*s['test']) for s in segments])
+        return np.arange(self.n_train, len(self.tau))
+
+    @property
     def train(self) -> Split:
-        """The leading, contiguous training part."""
-        return self._part(slice(0, self.n_train))
+        """The training samples."""
+        return self._part(self.train_rows)
 
     @property
     def test(self) -> Split:
-        """The trailing, contiguous test part."""
-        return self._part(slice(self.n_train, None))
+        """The test samples."""
+        return self._part(self.test_rows)
 
     @property
     def is_through_filter(self) -> bool:
@@ -337,7 +375,12 @@ class Dataset:
         segments = self.extra.get('segments')
         if not segments:
             return [np.arange(len(self.q))]
-        return [np.concatenate([np.arange(*s['train']), np.arange(*s['test'])]) for s in segments]
+        return [
+            np.arange(*s['rows'])
+            if 'rows' in s
+            else np.concatenate([np.arange(*s['train']), np.arange(*s['test'])])
+            for s in segments
+        ]
 
     def filter_like_labels(self, x: np.ndarray, joint: int | None = None) -> np.ndarray:
         """Low-pass x (N, n, rows in order) exactly like the labels, each recording on its own.
@@ -414,6 +457,10 @@ def prepare_dataset(
     fitting = controller if config.mode == 'through_filter' else study
     tau = lowpass(tau_raw, cutoff, period, config.filter_order)
     n_train = round(config.train_fraction * len(tau))
+    mask = (
+        shuffled_mask(len(tau), n_train, config.split_seed) if config.split == 'shuffled' else None
+    )
+    fit = np.flatnonzero(mask) if mask is not None else slice(0, n_train)
     inputs = np.hstack([fitting.q, fitting.v, fitting.a])
     return Dataset(
         joints=robot.joints,
@@ -426,8 +473,8 @@ def prepare_dataset(
         tau=tau,
         tau_raw=tau_raw,
         n_train=n_train,
-        input_scaler=MinMaxScaler().fit(inputs[:n_train]),
-        target_scaler=MinMaxScaler().fit(tau[:n_train]),
+        input_scaler=MinMaxScaler().fit(inputs[fit]),
+        target_scaler=MinMaxScaler().fit(tau[fit]),
         cutoff_hz=cutoff,
         filter_order=config.filter_order,
         mode=config.mode,
@@ -436,4 +483,12 @@ def prepare_dataset(
         controller_inputs=controller_inputs,
         regularise_report=report,
         source=recording.source,
+        train_mask=mask,
     )
+
+
+def shuffled_mask(n_samples: int, n_train: int, seed: int) -> np.ndarray:
+    """(n_samples,) True for n_train samples drawn at random (seeded): a shuffled split."""
+    mask = np.zeros(n_samples, dtype=bool)
+    mask[np.random.default_rng(seed).permutation(n_samples)[:n_train]] = True
+    return mask

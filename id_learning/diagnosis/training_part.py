@@ -8,6 +8,7 @@ from typing import Any
 from id_learning.dataset.preprocess import Dataset
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.pipeline import run_diagnosis
+from id_learning.errors import ConfigError
 from id_learning.physics.augmented import AugmentedModel
 from id_learning.robot.config import RobotConfig
 
@@ -22,6 +23,11 @@ def training_part(dataset: Dataset, config: DiagnosisConfig | None = None) -> Da
     part stays unseen. Each recording's training part stays one segment, so filters never cross
     the seam between two recordings.
     """
+    if dataset.is_shuffled:
+        raise ConfigError(
+            'the diagnosis reads the training part as a stretch in time: it needs '
+            '--split contiguous (a shuffled split scatters the training samples)'
+        )
     config = config or DiagnosisConfig()
     rows = slice(0, dataset.n_train)
     n_train = round(config.preprocess.train_fraction * dataset.n_train)

@@ -215,8 +215,11 @@ def _plot(
         ax.grid(alpha=0.3)
     axes[0].legend(dataset.joints, ncol=len(dataset.joints), fontsize=8, loc='upper right')
     axes[-1].set_xlabel('time [s]')
-    axes[-1].axvline(t[dataset.n_train], color='k', ls=':', lw=1)
-    axes[0].set_title('Excitation after filtering (dotted line: train | test split)')
+    if dataset.is_shuffled:
+        axes[0].set_title('Excitation after filtering (train and test samples drawn at random)')
+    else:
+        axes[-1].axvline(t[dataset.n_train], color='k', ls=':', lw=1)
+        axes[0].set_title('Excitation after filtering (dotted line: train | test split)')
     fig.savefig(out / 'excitation.png', dpi=110)
     plt.close(fig)
     files.append('excitation.png')
@@ -246,7 +249,7 @@ def write_summary(
         f'{summary.n_samples} samples '
         f'({summary.duration_s:.1f} s at {dataset.period_s * 1e3:g} ms), '
         f'target: {target}, '
-        f'train/test split at sample {summary.n_train} (contiguous). {summary.regularise}.',
+        f'{_split_text(dataset, summary.n_train)}. {summary.regularise}.',
         '',
         '## Ranges after filtering',
         '',
@@ -287,3 +290,9 @@ def write_summary(
     lines += ['', '## Figures', ''] + [f'![{name}]({name})' for name in figures]
     (out / 'summary.md').write_text('\n'.join(lines) + '\n', encoding='utf-8')
     return summary
+
+
+def _split_text(dataset: Dataset, n_train: int) -> str:
+    if dataset.is_shuffled:
+        return f'train/test split: {n_train} training samples drawn at random (shuffled)'
+    return f'train/test split at sample {n_train} (contiguous)'

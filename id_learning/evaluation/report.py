@@ -136,6 +136,7 @@ def _figures(
             out / 'abs_error_boxplot.png',
         )
         figures.append(('abs_error_boxplot.png', '(b) Absolute test errors per joint and model'))
+    if kinds and not ds.is_shuffled:  # a shuffled split's test samples form no stretch
         dissipative_figure(
             robot=report.robot,
             dataset=ds,

@@ -30,10 +30,7 @@ __all__ = ['ModelScore', 'label_noise_floor', 'predict_along', 'score_model', 't
 
 def test_index(dataset: Dataset) -> np.ndarray:
     """Rows of the test part of every recording, in dataset row order."""
-    segments = dataset.extra.get('segments')
-    if not segments:
-        return np.arange(dataset.n_train, len(dataset.tau))
-    return np.concatenate([np.arange(*s['test']) for s in segments])
+    return dataset.test_rows
 
 
 def predict_along(
@@ -106,7 +103,10 @@ def score_model(model: InverseDynamicsModel, dataset: Dataset, scale: np.ndarray
     torque = predict_along(model, dataset.controller, dataset.recording_rows())
     filtered = dataset.filter_like_labels(torque)[rows]
     through = error_metrics(filtered, dataset.tau[rows], scale).to_dict()
-    study_runs = [np.arange(*s['test']) for s in dataset.extra.get('segments', [])] or [rows]
+    if dataset.is_shuffled:  # scattered test rows: along each recording, then picked
+        study_runs = dataset.recording_rows()
+    else:
+        study_runs = [np.arange(*s['test']) for s in dataset.extra.get('segments', [])] or [rows]
     study = predict_along(model, dataset.study, study_runs)[rows]
     study_way = error_metrics(study, dataset.tau[rows], scale).to_dict()
     metrics: dict[str, object] = {

@@ -13,7 +13,10 @@ from id_learning.physics.augmented import AugmentedModel
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
-__all__ = ['DiagnosedEffects', 'PhysicsFeatures', 'TrainingData', 'nominal_rnea']
+__all__ = ['DiagnosedEffects', 'PhysicsFeatures', 'Rows', 'TrainingData', 'nominal_rnea']
+
+#: Rows of a part: a slice (contiguous split) or sorted row indices (shuffled split).
+Rows = slice | np.ndarray
 
 
 def nominal_rnea(robot: RobotConfig, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -52,7 +55,9 @@ class TrainingData:
     """A preprocessed dataset with its robot, split into fit / validation / test parts.
 
     The training part (the first ``dataset.n_train`` samples) is split again in time: its last
-    ``validation_fraction`` is the validation part used for early stopping. ``diagnosed`` holds
+    ``validation_fraction`` is the validation part used for early stopping. Under a shuffled
+    split the validation samples are drawn at random from the training ones, and the rows are
+    index arrays instead of slices (``Rows``: both index numpy arrays alike). ``diagnosed`` holds
     the effects a diagnosis of the training part found, where the trainer ran one (the
     ``rnea_effects`` kinds without an effects file use them).
     """
@@ -73,25 +78,44 @@ class TrainingData:
 
     @property
     def n_fit(self) -> int:
-        """Samples used for fitting: the training part minus its validation tail."""
+        """Samples used for fitting: the training part minus its validation samples."""
         return round(self.dataset.n_train * (1.0 - self.validation_fraction))
 
+    @cached_property
+    def _shuffled_parts(self) -> tuple[np.ndarray, np.ndarray]:
+        """A shuffled split's fit and validation rows.
+
+        The validation samples are drawn at random from the training ones (seeded), as the split
+        drew those.
+        """
+        train = self.dataset.train_rows
+        order = np.random.default_rng(len(train)).permutation(len(train))
+        return np.sort(train[order[: self.n_fit]]), np.sort(train[order[self.n_fit :]])
+
     @property
-    def fit_rows(self) -> slice:
+    def fit_rows(self) -> Rows:
         """Rows of the fitting part."""
+        if self.dataset.is_shuffled:
+            return self._shuffled_parts[0]
         return slice(0, self.n_fit)
 
     @property
-    def validation_rows(self) -> slice:
-        """Rows of the validation part (tail of the training part)."""
+    def validation_rows(self) -> Rows:
+        """Rows of the validation part (the training part's tail, or its drawn samples)."""
+        if self.dataset.is_shuffled:
+            return self._shuffled_parts[1]
         return slice(self.n_fit, self.dataset.n_train)
 
     @property
-    def train_rows(self) -> slice:
+    def train_rows(self) -> Rows:
         """Rows of the whole training part (fit + validation)."""
+        if self.dataset.is_shuffled:
+            return self.dataset.train_rows
         return slice(0, self.dataset.n_train)
 
     @property
-    def test_rows(self) -> slice:
+    def test_rows(self) -> Rows:
         """Rows of the test part."""
+        if self.dataset.is_shuffled:
+            return self.dataset.test_rows
         return slice(self.dataset.n_train, None)

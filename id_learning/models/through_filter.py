@@ -217,8 +217,8 @@ class ThroughFilterLoss:
     def __init__(
         self,
         dataset: Dataset,
-        fit_rows: slice,
-        validation_rows: slice,
+        fit_rows: slice | np.ndarray,
+        validation_rows: slice | np.ndarray,
         target: np.ndarray,
         *,
         scale: np.ndarray,

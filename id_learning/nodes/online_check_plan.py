@@ -144,7 +144,15 @@ def plan_excerpt(setup: CheckSetup, seconds: float, notes: list[str]) -> Excerpt
 
     bag, robot, model, period_ns = setup.bag, setup.robot, setup.model, setup.period_ns
     dataset = load_datasets([bag], robot, setup.preprocess, progress=False)[0]
-    test_start, test_stop = segment_rows(dataset, 'test')[0]
+    if dataset.is_shuffled:  # its test samples are scattered: replay the last stretch in time
+        n_rows = len(dataset.tau)
+        test_start, test_stop = round(setup.preprocess.train_fraction * n_rows), n_rows
+        notes.append(
+            'the artifact was fitted on a shuffled split: the replayed stretch (the last '
+            f'{1 - setup.preprocess.train_fraction:.0%} in time) holds training samples too'
+        )
+    else:
+        test_start, test_stop = segment_rows(dataset, 'test')[0]
     n_wanted = round(seconds * NS_PER_S / period_ns)
     stop = min(test_start + n_wanted, test_stop)
     if stop - test_start < 3:

@@ -144,14 +144,17 @@ class Problem:
         self.laws = tuple(law for law in FRICTION_LAWS if law in config.friction and self.motor)
         self.nominal = RigidBodyDynamics.from_config(robot)
         self.theta0 = self.nominal.inertial_parameters()
-        train = slice(0, dataset.n_train)
+        # The noise level from a contiguous stretch: the training part, or under a shuffled
+        # split the whole recording (its spectrum needs neighbouring samples; only the noise
+        # level, no label value, enters the fit from it).
+        stretch = slice(None) if dataset.is_shuffled else slice(0, dataset.n_train)
         noise = estimate_noise(
-            dataset.tau_raw[train], dataset.cutoff_hz, dataset.period_s, dataset.filter_order
+            dataset.tau_raw[stretch], dataset.cutoff_hz, dataset.period_s, dataset.filter_order
         )
         tau = noise.correlation_samples
         sigma = np.maximum(noise.filtered_std_nm, 1e-6 * robot.limits.torque)
         self.step = max(1, int(tau.min() // 6))
-        self.rows = np.arange(0, dataset.n_train, self.step)
+        self.rows = dataset.train_rows[:: self.step]
         if len(self.rows) < 10:
             raise DatasetError(
                 f'{dataset.source}: the training part has {dataset.n_train} samples, too few to '

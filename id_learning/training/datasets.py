@@ -36,6 +36,7 @@ __all__ = [
     'load_datasets',
     'preprocess_from_dict',
     'preprocess_to_dict',
+    'seen_rows',
     'segment_rows',
     'training_data_summary',
 ]
@@ -74,6 +75,8 @@ def data_sha256(dataset: Dataset) -> str:
     for array in (dataset.q, dataset.v, dataset.a, dataset.tau):
         digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
     digest.update(str(dataset.n_train).encode())
+    if dataset.train_mask is not None:
+        digest.update(np.packbits(dataset.train_mask).tobytes())
     return digest.hexdigest()
 
 
@@ -90,6 +93,8 @@ def preprocess_to_dict(config: PreprocessConfig, dataset: Dataset) -> dict[str, 
         'filter_order': config.filter_order,
         'cutoff_hz': np.asarray(dataset.cutoff_hz, dtype=float).tolist(),
         'train_fraction': config.train_fraction,
+        'split': config.split,
+        'split_seed': config.split_seed,
         'jitter_tolerance': config.jitter_tolerance,
         'min_filter_periods': config.min_filter_periods,
         'inputs': dataset.controller_inputs.to_dict(),
@@ -111,6 +116,9 @@ def preprocess_from_dict(data: dict[str, Any]) -> PreprocessConfig:
             if inputs is None
             else InputDefinition.from_dict(inputs).velocity_cutoff_hz,
             train_fraction=float(data['train_fraction']),
+            # Runs written before the split could be chosen were split in time.
+            split=data.get('split', 'contiguous'),
+            split_seed=int(data.get('split_seed', 0)),
             jitter_tolerance=float(data['jitter_tolerance']),
             min_filter_periods=float(data['min_filter_periods']),
         )
@@ -173,6 +181,8 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
             raise DatasetError(
                 f'{other.source}: period, cut-offs or inputs differ from {first.source}'
             )
+    if any(d.is_shuffled for d in datasets):
+        return _joined_whole(datasets, [_mask(d) for d in datasets], first.regularise_report)
     train_rows = [slice(0, d.n_train) for d in datasets]
     test_rows = [slice(d.n_train, len(d.q)) for d in datasets]
     segments: list[dict[str, Any]] = []
@@ -197,8 +207,48 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
     )
 
 
+def seen_rows(dataset: Dataset) -> int | np.ndarray:
+    """What of a recording a run trained on: its first n rows, or a shuffled split's mask."""
+    return _mask(dataset) if dataset.is_shuffled else dataset.n_train
+
+
+def _mask(dataset: Dataset) -> np.ndarray:
+    """(N,) True for a dataset's training rows."""
+    mask = np.zeros(len(dataset.q), dtype=bool)
+    mask[dataset.train_rows] = True
+    return mask
+
+
+def _joined_whole(
+    datasets: Sequence[Dataset],
+    seen: Sequence[np.ndarray],
+    regularise_report: Any = None,
+    target_scaler: MinMaxScaler | None = None,
+) -> Dataset:
+    """Whole recordings in order, their training (or seen) rows marked: a shuffled split.
+
+    Each recording is one segment ``{'rows': [start, stop]}``; ``train_mask`` marks the rows
+    of ``seen`` (per recording, True where a model trained on it).
+    """
+    segments, start = [], 0
+    for d in datasets:
+        segments.append({'source': d.source, 'rows': [start, start + len(d.q)]})
+        start += len(d.q)
+    mask = np.concatenate(seen)
+    joined = _joined(
+        datasets,
+        [(d, slice(0, len(d.q))) for d in datasets],
+        n_train=int(mask.sum()),
+        segments=segments,
+        target_scaler=target_scaler,
+        regularise_report=regularise_report if len(datasets) == 1 else None,
+        fit_rows=np.flatnonzero(mask) if mask.any() else None,
+    )
+    return replace(joined, train_mask=mask)
+
+
 def concatenate_for_evaluation(
-    datasets: Sequence[Dataset], seen: Sequence[int], target_scaler: MinMaxScaler
+    datasets: Sequence[Dataset], seen: Sequence[int | np.ndarray], target_scaler: MinMaxScaler
 ) -> Dataset:
     """Concatenate whole preprocessed recordings, in order, as one dataset to evaluate on.
 
@@ -208,6 +258,14 @@ def concatenate_for_evaluation(
     whole so that a torque filtered like the labels is filtered over the whole recording, as the
     labels were. The label scaler is the run's.
     """
+    if any(isinstance(n_seen, np.ndarray) for n_seen in seen):  # a shuffled run's bags
+        masks = [
+            n_seen if isinstance(n_seen, np.ndarray) else np.arange(len(d.q)) < n_seen
+            for d, n_seen in zip(datasets, seen, strict=True)
+        ]
+        if all(m.all() for m in masks):
+            raise DatasetError('no samples left to evaluate')
+        return _joined_whole(datasets, masks, target_scaler=target_scaler)
     segments: list[dict[str, Any]] = []
     start = 0
     for d, n_seen in zip(datasets, seen, strict=True):
@@ -231,11 +289,12 @@ def _joined(
     segments: list[dict[str, Any]],
     target_scaler: MinMaxScaler | None = None,
     regularise_report: Any = None,
+    fit_rows: np.ndarray | None = None,
 ) -> Dataset:
     """One dataset of row ranges of recordings, in the order given.
 
-    The input scaler is fitted on the first ``n_train`` rows (all of them when 0), the target
-    scaler likewise unless one is given.
+    The input scaler is fitted on ``fit_rows``, else on the first ``n_train`` rows (all of them
+    when 0); the target scaler likewise unless one is given.
     """
     first = datasets[0]
 
@@ -246,7 +305,9 @@ def _joined(
         return Motion.concatenate([getattr(d, name).take(rows) for d, rows in pieces])
 
     q, v, a, tau = stack('q'), stack('v'), stack('a'), stack('tau')
-    fit = slice(0, n_train) if n_train else slice(None)
+    fit: slice | np.ndarray = slice(0, n_train) if n_train else slice(None)
+    if fit_rows is not None:
+        fit = fit_rows
     has_clean = all(d.tau_clean is not None for d in datasets)
     return Dataset(
         joints=first.joints,
@@ -275,7 +336,17 @@ def _joined(
 
 
 def segment_rows(dataset: Dataset, part: str) -> list[tuple[int, int]]:
-    """Contiguous [start, stop) row ranges of ``part`` ('train', 'test' or 'all') per recording."""
+    """Contiguous [start, stop) row ranges of ``part`` ('train', 'test' or 'all') per recording.
+
+    Under a shuffled split a part is many short runs of neighbouring rows; 'all' is then one
+    range per recording.
+    """
+    if dataset.is_shuffled:
+        if part == 'all':
+            return [(int(rows[0]), int(rows[-1]) + 1) for rows in dataset.recording_rows()]
+        index = dataset.train_rows if part == 'train' else dataset.test_rows
+        breaks = np.flatnonzero(np.diff(index) > 1) + 1
+        return [(int(run[0]), int(run[-1]) + 1) for run in np.split(index, breaks) if len(run)]
     segments = dataset.extra.get('segments')
     if not segments:
         segments = [{'train': [0, dataset.n_train], 'test': [dataset.n_train, len(dataset.q)]}]

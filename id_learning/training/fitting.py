@@ -16,7 +16,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from id_learning.errors import ConfigError
+from id_learning.errors import ConfigError, IdLearningError
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.models.data import DiagnosedEffects, TrainingData
 from id_learning.models.fitting import select_device
@@ -103,7 +103,8 @@ def _with_diagnosis(
         model, summary = diagnose_training_part(data.dataset, data.robot)
     except Exception as err:  # the other kinds do not need it: they go on
         reason = f'the diagnosis of the training part failed: {type(err).__name__}: {err}'
-        _LOG.error('%s; not fitted: %s', reason, ', '.join(users), exc_info=True)
+        expected = isinstance(err, IdLearningError)  # a stated reason needs no traceback
+        _LOG.error('%s; not fitted: %s', reason, ', '.join(users), exc_info=not expected)
         return data, {}, dict.fromkeys(users, reason)
     seconds = time.perf_counter() - start
     _LOG.info('diagnosed the training part in %.1f s for %s', seconds, users)
@@ -177,7 +178,10 @@ def fit_models(
         except Exception as err:  # reported with the run; the other kinds go on
             failures[kind] = f'{type(err).__name__}: {err}'
             _LOG.error(
-                '%s failed, the other models go on: %s', kind, failures[kind], exc_info=True
+                '%s failed, the other models go on: %s',
+                kind,
+                failures[kind],
+                exc_info=not isinstance(err, IdLearningError),
             )
             continue
         # A kind built on the diagnosis of the training part pays for it too.

@@ -19,6 +19,7 @@ from id_learning.dataset.preprocess import Dataset
 from id_learning.evaluation.study import StudyTable
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.robot.config import RobotConfig
+from id_learning.training.datasets import segment_rows
 from id_learning.training.fitting import ModelResult
 
 __all__ = [
@@ -173,7 +174,9 @@ def evaluate_models(
         predictions[kind] = score.filtered
         entry = dict(score.metrics)
         if timing:
-            a, b = max(rows, key=lambda r: r[1] - r[0])
+            # Timed on a stretch in time (a shuffled split's test rows form none).
+            stretches = segment_rows(dataset, 'all') if dataset.is_shuffled else rows
+            a, b = max(stretches, key=lambda r: r[1] - r[0])
             # Every sample is predicted twice (controller's and the study's inputs).
             entry['inference_seconds_per_sample'] = seconds / (2 * len(dataset.tau))
             motion = dataset.controller

@@ -114,11 +114,11 @@ def validation_error(model: Any, data: TrainingData) -> float:
     from id_learning.evaluation.scoring import predict_along
 
     ds = data.dataset
-    rows = np.arange(data.validation_rows.start, data.validation_rows.stop)
+    rows = np.arange(len(ds.tau))[data.validation_rows]
     if ds.is_through_filter:
         torque = ds.filter_like_labels(predict_along(model, ds.controller, ds.recording_rows()))
-    else:
-        torque = predict_along(model, ds.study, [rows])
+    else:  # along each recording: a sequence model reads the samples before each row
+        torque = predict_along(model, ds.study, ds.recording_rows())
     metrics = error_metrics(torque[rows], ds.tau[rows], ds.target_scaler.scale())
     return float(np.mean(metrics.rmse_normalised))
 

@@ -29,6 +29,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, Target
 from id_learning.errors import CheckpointError, ConfigError, TrainingError
 from id_learning.evaluation.study import StudyTable
@@ -45,6 +47,7 @@ from id_learning.training.datasets import (
     load_datasets,
     preprocess_from_dict,
     preprocess_to_dict,
+    seen_rows,
     segment_rows,
     training_data_summary,
 )
@@ -123,8 +126,6 @@ class EvaluationResult:
     models: dict[str, ModelResult]
     metrics: dict[str, Any]
     report: Path
-    #: Kinds whose fit failed, with why (the others were fitted, saved and scored).
-    failures: dict[str, str] = field(default_factory=dict)
 
 
 def train_run(
@@ -146,7 +147,8 @@ def train_run(
     """Train models on bags and write a run folder (models, metrics.json, report.md).
 
     Args:
-        bags: bag folders; each is filtered and split 70/30 in time on its own.
+        bags: bag folders; each is filtered and split 70/30 on its own (in time, or drawn at
+            random: ``preprocess.split``).
         robot: the robot the bags were recorded on.
         target: 'motor' (tau_u from currents) or 'joint' (measured joint torque).
         kinds: model kinds to train (registry names), in the order to train and report them.
@@ -155,7 +157,7 @@ def train_run(
         max_seconds_per_model: wall-clock budget per model fit [s], or None for the models' own.
         progress: show progress bars.
         device: 'auto' (CUDA when present), 'cpu' or 'cuda'.
-        preprocess: preprocessing settings; the default is the study's, with ``target``.
+        preprocess: preprocessing settings (default: ``PreprocessConfig()``), with ``target``.
         study_table: the study's Table 1 for the report (``evaluation.study``), if given.
         overwrite: replace a run already in ``out``; without it such a run is left intact.
         trim_unpaired_tail: drop a torn recording's last unpaired messages, with a warning.
@@ -188,10 +190,8 @@ def train_run(
             bags, robot, config, progress=progress, trim_unpaired_tail=trim_unpaired_tail
         )
     )
-    if overwrite:  # nothing of the replaced run may pass for this one's (a model that fails)
-        shutil.rmtree(out / MODELS_DIR, ignore_errors=True)
-        for name in (RUN_FILE, METRICS_FILE, REPORT_FILE):
-            (out / name).unlink(missing_ok=True)
+    if overwrite:
+        _clear_replaced_run(out)
     (out / MODELS_DIR).mkdir(parents=True, exist_ok=True)
     data = TrainingData(dataset, robot)
     scale = dataset.target_scaler.scale()
@@ -218,9 +218,7 @@ def train_run(
         target_scaler=dataset.target_scaler,
         training_data=training_data,
     )
-    evaluated_on = (
-        f'the test part (last {1 - config.train_fraction:.0%} in time) of each training bag'
-    )
+    evaluated_on = _test_part_text(config)
     report_path, findings = write_run_report(
         title=f'Training run: {len(results)} models, {target} torque labels',
         out=out,
@@ -250,6 +248,24 @@ def train_run(
     _add_failures(metrics, report_path, failures)
     write_json(out / METRICS_FILE, metrics)
     return RunResult(out, dataset, results, metrics, report_path, failures)
+
+
+def _clear_replaced_run(out: Path) -> None:
+    """Remove a replaced run's models and documents: none may pass for the new run's."""
+    shutil.rmtree(out / MODELS_DIR, ignore_errors=True)
+    for name in (RUN_FILE, METRICS_FILE, REPORT_FILE):
+        (out / name).unlink(missing_ok=True)
+
+
+def _test_part_text(config: PreprocessConfig) -> str:
+    """Which samples a run's figures are measured on, in words."""
+    share = f'{1 - config.train_fraction:.0%}'
+    if config.split == 'shuffled':
+        return (
+            f'the test part ({share} of the samples drawn at random, seed {config.split_seed}) '
+            'of each training bag'
+        )
+    return f'the test part (last {share} in time) of each training bag'
 
 
 def _add_failures(metrics: dict[str, Any], report: Path, failures: dict[str, str]) -> None:
@@ -315,13 +331,14 @@ def _load_models(run_dir: Path, run: dict[str, Any], robot: RobotConfig) -> dict
 
 def _unseen_parts(
     bags: list[Path], datasets: list[Dataset], run: dict[str, Any]
-) -> tuple[list[int], list[str]]:
+) -> tuple[list[int | np.ndarray], list[str]]:
     """Per bag, the rows the run's models saw (a training bag's training part), and a sentence."""
     trained_on = {entry['sha256'] for entry in run['training_data']['bags']}
-    seen, parts = [], []
+    seen: list[int | np.ndarray] = []
+    parts: list[str] = []
     for bag, part in zip(bags, datasets, strict=True):
         if bag_sha256(bag) in trained_on:
-            seen.append(part.n_train)
+            seen.append(seen_rows(part))
             parts.append(f'{bag}: test part only (a training bag of the run)')
         else:
             seen.append(0)

@@ -85,6 +85,51 @@ def test_prepared_dataset_is_split_in_time_and_normalised_on_the_training_part(s
     np.testing.assert_allclose(dataset.tau_raw, tau_u, rtol=1e-12)
 
 
+def test_a_shuffled_split_draws_training_samples_at_random_and_keeps_time_whole(short_twin, mabi):
+    from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.models.data import TrainingData
+
+    _, result = short_twin
+    contiguous = prepare_dataset(result.recording, mabi)
+    shuffled = prepare_dataset(result.recording, mabi, PreprocessConfig(split='shuffled'))
+    again = prepare_dataset(result.recording, mabi, PreprocessConfig(split='shuffled'))
+    other = prepare_dataset(
+        result.recording, mabi, PreprocessConfig(split='shuffled', split_seed=1)
+    )
+    n = len(shuffled.q)
+    assert shuffled.is_shuffled
+    assert not contiguous.is_shuffled
+    assert shuffled.n_train == contiguous.n_train == int(shuffled.train_mask.sum())
+    np.testing.assert_array_equal(shuffled.train_mask, again.train_mask)  # seeded
+    assert not np.array_equal(shuffled.train_mask, other.train_mask)
+    train, test = shuffled.train_rows, shuffled.test_rows
+    assert len(np.intersect1d(train, test)) == 0
+    assert len(train) + len(test) == n
+    assert train.min() < n // 10  # spread over the whole run
+    assert test.max() > n - n // 10
+    # The recording stays whole in time (filters run along it); the arrays are the same.
+    np.testing.assert_array_equal(shuffled.tau, contiguous.tau)
+    (rows,) = shuffled.recording_rows()
+    np.testing.assert_array_equal(rows, np.arange(n))
+    # Scalers from the training samples only.
+    z = shuffled.input_scaler.transform(shuffled.train.inputs)
+    np.testing.assert_allclose(z.min(axis=0), -1.0, atol=1e-12)
+    np.testing.assert_allclose(z.max(axis=0), 1.0, atol=1e-12)
+    # Validation samples drawn from the training ones; no test sample is fitted on.
+    data = TrainingData(shuffled, mabi)
+    fit, validation = data.fit_rows, data.validation_rows
+    assert len(np.intersect1d(fit, validation)) == 0
+    np.testing.assert_array_equal(np.union1d(fit, validation), train)
+    assert len(fit) == data.n_fit
+
+
+def test_an_unknown_split_is_refused():
+    from id_learning.dataset.preprocess import PreprocessConfig
+
+    with pytest.raises(ConfigError, match='split must be one of'):
+        PreprocessConfig(split='random')
+
+
 def test_the_joint_target_needs_measured_joint_torques(short_twin, mabi):
     _, result = short_twin
     with pytest.raises(DatasetError, match='carries no effort'):

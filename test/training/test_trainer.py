@@ -544,3 +544,33 @@ def test_a_run_where_every_model_fails_is_an_error_naming_each(short_bag, mabi, 
 
     with pytest.raises(TrainingError, match=r'mlp: DatasetError.*lstm: DatasetError'):
         train_run([short_bag], mabi, 'motor', ['mlp', 'lstm'], tmp_path / 'run', progress=False)
+
+
+def test_a_shuffled_run_scores_its_drawn_test_samples_and_evaluate_gives_them_back(
+    bags, mabi, tmp_path
+):
+    from id_learning.evaluation.scoring import test_index
+
+    out = tmp_path / 'run'
+    config = PreprocessConfig(split='shuffled', split_seed=4)
+    run = train_run(bags, mabi, 'motor', ['rnea_lq', 'mlp'], out, hyper=FAST,
+                    progress=False, device='cpu', preprocess=config)  # fmt: skip
+    dataset = run.dataset
+    assert dataset.is_shuffled
+    # Two whole recordings in time, each with its own drawn training samples.
+    assert [len(rows) for rows in dataset.recording_rows()] == [
+        len(load_recording(b, mabi).stamps_ns) for b in bags
+    ]
+    n = len(dataset.tau)
+    assert abs(len(test_index(dataset)) - 0.3 * n) <= 2
+    assert run.metrics['n_samples'] == len(test_index(dataset))
+    stored = json.loads((out / 'run.json').read_text())['preprocessing']
+    assert (stored['split'], stored['split_seed']) == ('shuffled', 4)
+    # evaluate rebuilds the split from the run and scores the same samples the same way.
+    evaluated = evaluate_run(out, bags, mabi, tmp_path / 'eval', progress=False)
+    for kind in ('rnea_lq', 'mlp'):
+        np.testing.assert_allclose(
+            evaluated.metrics['models'][kind]['rmse_through_filter_nm'],
+            run.metrics['models'][kind]['rmse_through_filter_nm'],
+            rtol=1e-9,
+        )
