@@ -109,6 +109,8 @@ class PreprocessConfig:
             raise ConfigError(f'jitter_tolerance must be in (0, 0.5), got {self.jitter_tolerance}')
         if self.split not in SPLITS:
             raise ConfigError(f'split must be one of {SPLITS}, got {self.split!r}')
+        if not isinstance(self.split_seed, int) or self.split_seed < 0:
+            raise ConfigError(f'split_seed must be an integer >= 0, got {self.split_seed!r}')
 
 
 def minimum_duration_s(cutoff_hz: np.ndarray, config: PreprocessConfig) -> float:

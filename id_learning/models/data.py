@@ -89,7 +89,11 @@ class TrainingData:
         drew those.
         """
         train = self.dataset.train_rows
-        order = np.random.default_rng(len(train)).permutation(len(train))
+        mask = self.dataset.train_mask
+        assert mask is not None
+        # Seeded by the split itself: another --split-seed draws other validation samples too.
+        seed = int.from_bytes(np.packbits(mask).tobytes()[:8] or b'0', 'little')
+        order = np.random.default_rng([seed, len(train)]).permutation(len(train))
         return np.sort(train[order[: self.n_fit]]), np.sort(train[order[self.n_fit :]])
 
     @property

@@ -147,10 +147,6 @@ def plan_excerpt(setup: CheckSetup, seconds: float, notes: list[str]) -> Excerpt
     if dataset.is_shuffled:  # its test samples are scattered: replay the last stretch in time
         n_rows = len(dataset.tau)
         test_start, test_stop = round(setup.preprocess.train_fraction * n_rows), n_rows
-        notes.append(
-            'the artifact was fitted on a shuffled split: the replayed stretch (the last '
-            f'{1 - setup.preprocess.train_fraction:.0%} in time) holds training samples too'
-        )
     else:
         test_start, test_stop = segment_rows(dataset, 'test')[0]
     n_wanted = round(seconds * NS_PER_S / period_ns)
@@ -169,6 +165,11 @@ def plan_excerpt(setup: CheckSetup, seconds: float, notes: list[str]) -> Excerpt
     trained_on = {
         entry.get('sha256') for entry in setup.metadata.get('training_data', {}).get('bags', [])
     }
+    if dataset.is_shuffled and bag_sha256(bag) in trained_on:
+        notes.append(
+            'the artifact was fitted on a shuffled split: the replayed stretch (the last '
+            f'{1 - setup.preprocess.train_fraction:.0%} in time) holds training samples too'
+        )
     if bag_sha256(bag) not in trained_on:
         notes.append(
             'the bag is not one of the artifact\'s training bags: its "test part" is only its '

@@ -160,9 +160,13 @@ class Problem:
                 f'{dataset.source}: the training part has {dataset.n_train} samples, too few to '
                 'identify the rigid body'
             )
-        # Each kept row holds step / tau independent samples of noise sigma: the data term is
-        # then a log-likelihood on the scale of the prior's.
-        self.row_weight = np.sqrt(self.step / tau) / sigma
+        # Each kept row holds spacing / tau independent samples of noise sigma (spacing: the
+        # step in time between kept rows; wider under a shuffled split): the data term is then a
+        # log-likelihood on the scale of the prior's.
+        spacing = float(self.step)
+        if dataset.is_shuffled:
+            spacing = (self.rows[-1] - self.rows[0] + 1) / len(self.rows)
+        self.row_weight = np.sqrt(spacing / tau) / sigma
         self.noise_std = sigma
         q, v, a = dataset.q, dataset.v, dataset.a
         self.v = v

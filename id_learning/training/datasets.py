@@ -34,6 +34,7 @@ __all__ = [
     'concatenate_for_evaluation',
     'data_sha256',
     'load_datasets',
+    'mask_sha256',
     'preprocess_from_dict',
     'preprocess_to_dict',
     'seen_rows',
@@ -207,6 +208,11 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
     )
 
 
+def mask_sha256(mask: np.ndarray) -> str:
+    """SHA-256 of a boolean row mask (its packed bits)."""
+    return hashlib.sha256(np.packbits(np.asarray(mask, dtype=bool)).tobytes()).hexdigest()
+
+
 def seen_rows(dataset: Dataset) -> int | np.ndarray:
     """What of a recording a run trained on: its first n rows, or a shuffled split's mask."""
     return _mask(dataset) if dataset.is_shuffled else dataset.n_train
@@ -345,7 +351,9 @@ def segment_rows(dataset: Dataset, part: str) -> list[tuple[int, int]]:
         if part == 'all':
             return [(int(rows[0]), int(rows[-1]) + 1) for rows in dataset.recording_rows()]
         index = dataset.train_rows if part == 'train' else dataset.test_rows
-        breaks = np.flatnonzero(np.diff(index) > 1) + 1
+        starts = [int(rows[0]) for rows in dataset.recording_rows()]
+        # A run ends where the rows jump, and where a recording ends.
+        breaks = np.flatnonzero((np.diff(index) > 1) | np.isin(index[1:], starts)) + 1
         return [(int(run[0]), int(run[-1]) + 1) for run in np.split(index, breaks) if len(run)]
     segments = dataset.extra.get('segments')
     if not segments:
@@ -358,9 +366,18 @@ def segment_rows(dataset: Dataset, part: str) -> list[tuple[int, int]]:
 def training_data_summary(
     bags: Sequence[Path], dataset: Dataset, data: TrainingData
 ) -> dict[str, Any]:
-    """What a run was trained on, for run.json and each model.json: bags, hashes and sizes."""
+    """What a run was trained on, for run.json and each model.json: bags, hashes and sizes.
+
+    Under a shuffled split each bag entry also holds its sample count and the SHA-256 of its
+    training mask, so that ``evaluate`` can tell whether it rebuilt the very same split.
+    """
+    entries: list[dict[str, Any]] = [{'path': str(b), 'sha256': bag_sha256(b)} for b in bags]
+    if dataset.train_mask is not None:
+        for entry, rows in zip(entries, dataset.recording_rows(), strict=True):
+            entry['n_samples'] = len(rows)
+            entry['train_mask_sha256'] = mask_sha256(dataset.train_mask[rows])
     return {
-        'bags': [{'path': str(b), 'sha256': bag_sha256(b)} for b in bags],
+        'bags': entries,
         'data_sha256': data_sha256(dataset),
         'n_samples': len(dataset.q),
         'n_train': dataset.n_train,

@@ -45,6 +45,7 @@ from id_learning.training.datasets import (
     concatenate_for_evaluation,
     data_sha256,
     load_datasets,
+    mask_sha256,
     preprocess_from_dict,
     preprocess_to_dict,
     seen_rows,
@@ -333,12 +334,21 @@ def _unseen_parts(
     bags: list[Path], datasets: list[Dataset], run: dict[str, Any]
 ) -> tuple[list[int | np.ndarray], list[str]]:
     """Per bag, the rows the run's models saw (a training bag's training part), and a sentence."""
-    trained_on = {entry['sha256'] for entry in run['training_data']['bags']}
+    trained_on = {entry['sha256']: entry for entry in run['training_data']['bags']}
     seen: list[int | np.ndarray] = []
     parts: list[str] = []
     for bag, part in zip(bags, datasets, strict=True):
-        if bag_sha256(bag) in trained_on:
-            seen.append(seen_rows(part))
+        entry = trained_on.get(bag_sha256(bag))
+        if entry is not None:
+            rows = seen_rows(part)
+            stored = entry.get('train_mask_sha256')
+            if isinstance(rows, np.ndarray) and stored is not None and mask_sha256(rows) != stored:
+                raise CheckpointError(
+                    f"{bag}: the run's shuffled split could not be rebuilt ({len(rows)} samples "
+                    f'now, {entry.get("n_samples")} then, or another random stream): its training '
+                    'samples cannot be told from its test samples'
+                )
+            seen.append(rows)
             parts.append(f'{bag}: test part only (a training bag of the run)')
         else:
             seen.append(0)

@@ -574,3 +574,9 @@ def test_a_shuffled_run_scores_its_drawn_test_samples_and_evaluate_gives_them_ba
             run.metrics['models'][kind]['rmse_through_filter_nm'],
             rtol=1e-9,
         )
+    # A split that cannot be rebuilt exactly is refused, not scored on mixed samples.
+    document = json.loads((out / 'run.json').read_text())
+    document['training_data']['bags'][0]['train_mask_sha256'] = '0' * 64
+    (out / 'run.json').write_text(json.dumps(document))
+    with pytest.raises(CheckpointError, match='shuffled split could not be rebuilt'):
+        evaluate_run(out, bags, mabi, tmp_path / 'eval2', progress=False)
