@@ -11,7 +11,9 @@ import random
 import shutil
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from fault_kit import ROBOT_FILE, Case, Fixtures, Outcome, broken_bag, raises, with_value
@@ -32,17 +34,30 @@ def _wait_until(condition: Callable[[], bool], timeout: float = DEADLINE_S) -> b
     return condition()
 
 
-def _domain() -> int:
-    return random.SystemRandom().randint(1, 101)
+@contextmanager
+def _nodes(log_dir: Path, *, listen: bool = False) -> Iterator[tuple[Any, Any]]:
+    """(start, listener) in a DDS domain of its own, the nodes' logs in ``log_dir``.
+
+    The listener (an in-process subscriber of the reference and tau_u) only when ``listen``;
+    every node is stopped and the listener closed afterwards.
+    """
+    from id_learning.nodes.online_check_ros import Listener, node_processes
+
+    log_dir.mkdir(parents=True, exist_ok=True)
+    domain = random.SystemRandom().randint(1, 101)  # below Linux's ephemeral ports
+    listener = Listener(domain, '/') if listen else None
+    try:
+        with node_processes(log_dir, domain) as start:
+            yield start, listener
+    finally:
+        if listener is not None:
+            listener.close()
 
 
 def _refused(log_dir: Path, module: str, parameters: dict[str, object],
              expect: tuple[str, ...]) -> Outcome:  # fmt: skip
     """A node that must exit non-zero at start, its log naming every word in ``expect``."""
-    from id_learning.nodes.online_check_ros import node_processes
-
-    log_dir.mkdir(parents=True, exist_ok=True)
-    with node_processes(log_dir, _domain()) as start:
+    with _nodes(log_dir) as (start, _):
         node = start(module, parameters, {})
         if not _wait_until(lambda: not node.is_running):
             return Outcome('silently_accepted', f'{module} still running: {node.log()[-300:]}')
@@ -66,12 +81,10 @@ def _killed_recorder(fx: Fixtures) -> Outcome:
     """SIGKILL the recorder after a replay: `bag recover` must give back every message."""
     from id_learning.bag import bag_info
     from id_learning.bag.recover import recover_bag
-    from id_learning.nodes.online_check_ros import node_processes
 
-    out, logs = fx.path('killed_recorder_bag'), fx.path('killed_recorder_logs')
-    logs.mkdir(parents=True, exist_ok=True)
+    out = fx.path('killed_recorder_bag')
     played = sum(t.count for t in bag_info(fx.bag).topics)
-    with node_processes(logs, _domain()) as start:
+    with _nodes(fx.path('killed_recorder_logs')) as (start, _):
         recorder = start('recorder', {'output': str(out), 'flush_period_s': 0.25}, {})
         replay = start('replay', {
             'bag': str(fx.bag), 'rate': 4.0, 'reference_mode': 'none', 'publish_clock': False,
@@ -101,36 +114,27 @@ def _overload(fx: Fixtures, rate: float) -> Outcome:
     """A reference at ``rate`` times the IPO rate: every sample received or counted skipped."""
     import re
 
-    from id_learning.nodes.online_check_ros import Listener, node_processes
-
-    logs = fx.path(f'overload_{rate:g}')
-    logs.mkdir(parents=True, exist_ok=True)
     cycles = _played_cycles(fx.bag, fx.robot)
-    domain = _domain()
-    listener = Listener(domain, '/')
-    try:
-        with node_processes(logs, domain) as start:
-            predictor = start('predictor', {
-                'artifact': str(fx.artifact), 'input_topic': '/reference',
-                'stale_after_cycles': 100000}, {})  # fmt: skip
-            replay = start('replay', {
-                'bag': str(fx.bag), 'rate': rate, 'topics': ['/joint_states'],
-                'publish_clock': False, 'wait_for_subscribers': 2}, {})  # fmt: skip
-            if not _wait_until(lambda: not replay.is_running) or replay.process.returncode != 0:
-                return Outcome('traceback', f'replay failed: {replay.log()[-300:]}')
-            counts: list[int] = []
+    with _nodes(fx.path(f'overload_{rate:g}'), listen=True) as (start, listener):
+        predictor = start('predictor', {
+            'artifact': str(fx.artifact), 'input_topic': '/reference',
+            'stale_after_cycles': 100000}, {})  # fmt: skip
+        replay = start('replay', {
+            'bag': str(fx.bag), 'rate': rate, 'topics': ['/joint_states'],
+            'publish_clock': False, 'wait_for_subscribers': 2}, {})  # fmt: skip
+        if not _wait_until(lambda: not replay.is_running) or replay.process.returncode != 0:
+            return Outcome('traceback', f'replay failed: {replay.log()[-300:]}')
+        counts: list[int] = []
 
-            def drained() -> bool:  # the predictor has served what was queued
-                counts.append(len(listener.outputs))
-                return len(counts) > 10 and counts[-1] == counts[-10]
+        def drained() -> bool:  # the predictor has served what was queued
+            counts.append(len(listener.outputs))
+            return len(counts) > 10 and counts[-1] == counts[-10]
 
-            _wait_until(drained, 20.0)
-            status = predictor.stop()
-            said = predictor.log()
-            sent = sorted(stamp for stamp, *_ in listener.references)
-            served = sorted(stamp for stamp, *_ in listener.outputs)
-    finally:
-        listener.close()
+        _wait_until(drained, 20.0)
+        status = predictor.stop()
+        said = predictor.log()
+        sent = sorted(stamp for stamp, *_ in listener.references)
+        served = sorted(stamp for stamp, *_ in listener.outputs)
     pattern = r'(\d+) samples received, (\d+) published.*?(\d+) cycles skipped, (\d+) late'
     found = re.search(pattern, said, re.S)
     if status != 0 or found is None:
@@ -154,28 +158,19 @@ def _overload(fx: Fixtures, rate: float) -> Outcome:
 
 def _killed_replay(fx: Fixtures) -> Outcome:
     """The replay SIGKILLed mid-play: the predictor says stale once and keeps running."""
-    from id_learning.nodes.online_check_ros import Listener, node_processes
-
-    logs = fx.path('killed_replay')
-    logs.mkdir(parents=True, exist_ok=True)
-    domain = _domain()
-    listener = Listener(domain, '/')
-    try:
-        with node_processes(logs, domain) as start:
-            predictor = start('predictor', {
-                'artifact': str(fx.artifact), 'input_topic': '/reference'}, {})  # fmt: skip
-            replay = start('replay', {
-                'bag': str(fx.bag), 'topics': ['/joint_states'], 'publish_clock': False,
-                'wait_for_subscribers': 2}, {})  # fmt: skip
-            if not _wait_until(lambda: len(listener.outputs) >= 50):
-                return Outcome('traceback', f'no tau_u: {predictor.log()[-300:]}')
-            replay.kill()
-            stale = _wait_until(lambda: 'reference stale' in predictor.log(), 10.0)
-            alive = predictor.is_running
-            status = predictor.stop()
-            said = predictor.log()
-    finally:
-        listener.close()
+    with _nodes(fx.path('killed_replay'), listen=True) as (start, listener):
+        predictor = start('predictor', {
+            'artifact': str(fx.artifact), 'input_topic': '/reference'}, {})  # fmt: skip
+        replay = start('replay', {
+            'bag': str(fx.bag), 'topics': ['/joint_states'], 'publish_clock': False,
+            'wait_for_subscribers': 2}, {})  # fmt: skip
+        if not _wait_until(lambda: len(listener.outputs) >= 50):
+            return Outcome('traceback', f'no tau_u: {predictor.log()[-300:]}')
+        replay.kill()
+        stale = _wait_until(lambda: 'reference stale' in predictor.log(), 10.0)
+        alive = predictor.is_running
+        status = predictor.stop()
+        said = predictor.log()
     if not alive or status != 0:
         return Outcome('traceback', said[-400:])
     if stale and said.count('reference stale: no valid sample') == 1:

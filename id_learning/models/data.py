@@ -13,10 +13,7 @@ from id_learning.physics.augmented import AugmentedModel
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
-__all__ = ['DiagnosedEffects', 'PhysicsFeatures', 'Rows', 'TrainingData', 'nominal_rnea']
-
-#: Rows of a part: a slice (contiguous split) or sorted row indices (shuffled split).
-Rows = slice | np.ndarray
+__all__ = ['DiagnosedEffects', 'PhysicsFeatures', 'TrainingData', 'nominal_rnea']
 
 
 def nominal_rnea(robot: RobotConfig, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -56,8 +53,8 @@ class TrainingData:
 
     The training part (the first ``dataset.n_train`` samples) is split again in time: its last
     ``validation_fraction`` is the validation part used for early stopping. Under a shuffled
-    split the validation samples are drawn at random from the training ones, and the rows are
-    index arrays instead of slices (``Rows``: both index numpy arrays alike). ``diagnosed`` holds
+    split the validation samples are drawn at random from the training ones. Rows are sorted
+    index arrays. ``diagnosed`` holds
     the effects a diagnosis of the training part found, where the trainer ran one (the
     ``rnea_effects`` kinds without an effects file use them).
     """
@@ -82,44 +79,37 @@ class TrainingData:
         return round(self.dataset.n_train * (1.0 - self.validation_fraction))
 
     @cached_property
-    def _shuffled_parts(self) -> tuple[np.ndarray, np.ndarray]:
-        """A shuffled split's fit and validation rows.
+    def _fit_and_validation(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fit and validation rows.
 
-        The validation samples are drawn at random from the training ones (seeded), as the split
-        drew those.
+        The training part's tail validates (contiguous split), or samples drawn from the
+        training ones (shuffled; seeded by the split itself, so that another --split-seed draws
+        other validation samples too).
         """
         train = self.dataset.train_rows
         mask = self.dataset.train_mask
-        assert mask is not None
-        # Seeded by the split itself: another --split-seed draws other validation samples too.
+        if mask is None:
+            return train[: self.n_fit], train[self.n_fit :]
         seed = int.from_bytes(np.packbits(mask).tobytes()[:8] or b'0', 'little')
         order = np.random.default_rng([seed, len(train)]).permutation(len(train))
         return np.sort(train[order[: self.n_fit]]), np.sort(train[order[self.n_fit :]])
 
     @property
-    def fit_rows(self) -> Rows:
+    def fit_rows(self) -> np.ndarray:
         """Rows of the fitting part."""
-        if self.dataset.is_shuffled:
-            return self._shuffled_parts[0]
-        return slice(0, self.n_fit)
+        return self._fit_and_validation[0]
 
     @property
-    def validation_rows(self) -> Rows:
+    def validation_rows(self) -> np.ndarray:
         """Rows of the validation part (the training part's tail, or its drawn samples)."""
-        if self.dataset.is_shuffled:
-            return self._shuffled_parts[1]
-        return slice(self.n_fit, self.dataset.n_train)
+        return self._fit_and_validation[1]
 
     @property
-    def train_rows(self) -> Rows:
+    def train_rows(self) -> np.ndarray:
         """Rows of the whole training part (fit + validation)."""
-        if self.dataset.is_shuffled:
-            return self.dataset.train_rows
-        return slice(0, self.dataset.n_train)
+        return self.dataset.train_rows
 
     @property
-    def test_rows(self) -> Rows:
+    def test_rows(self) -> np.ndarray:
         """Rows of the test part."""
-        if self.dataset.is_shuffled:
-            return self.dataset.test_rows
-        return slice(self.dataset.n_train, None)
+        return self.dataset.test_rows

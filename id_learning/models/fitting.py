@@ -19,7 +19,7 @@ import torch
 from tqdm import tqdm
 
 from id_learning.errors import ConfigError
-from id_learning.models.data import Rows, TrainingData
+from id_learning.models.data import TrainingData
 from id_learning.models.through_filter import ThroughFilterLoss, WindowPredictor
 
 __all__ = [
@@ -321,9 +321,8 @@ def fit_network(
             torque = predict(rows[:, None] + offsets, last)[:, 0]
             return torch.mean(((torque - target_t[rows]) / scale_t) ** 2)
 
-        def part(rows: Rows) -> list[torch.Tensor]:
-            index = np.arange(len(target))[rows]  # a slice or a shuffled split's rows alike
-            index = index[index >= history][:: config.stride]
+        def part(rows: np.ndarray) -> list[torch.Tensor]:
+            index = rows[rows >= history][:: config.stride]
             return [torch.as_tensor(index, device=device)]
 
         history_ = train_module(

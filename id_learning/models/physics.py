@@ -16,7 +16,6 @@ from functools import cached_property
 from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
-import pinocchio as pin
 import torch
 
 from id_learning.dataset.preprocess import MinMaxScaler
@@ -74,24 +73,8 @@ class _NominalPhysics(InverseDynamicsModel):
         return RigidBodyDynamics.from_config(self.robot)
 
     def sample_rnea(self) -> SamplePredictor:
-        """RNEA_URDF(q, v, a) of one sample (n,) -> (n,) [N*m], with its own scratch data.
-
-        Calls pinocchio directly when its joint order is the config's (the usual case):
-        ``RigidBodyDynamics.rnea`` reshapes and reorders for batches, which costs more than the
-        recursion itself for one sample.
-        """
-        model = self.dynamics.model
-        index = [model.joints[model.getJointId(name)].idx_v for name in self.joint_names]
-        if index != list(range(len(index))):
-            return self.dynamics.rnea
-        data = model.createData()
-
-        def rnea(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-            # pinocchio returns a view of data.tau: the caller's arithmetic copies it.
-            tau: np.ndarray = pin.rnea(model, data, q, v, a)
-            return tau
-
-        return rnea
+        """RNEA_URDF(q, v, a) of one sample (n,) -> (n,) [N*m], with its own scratch data."""
+        return self.dynamics.sample_rnea()
 
     def rigid_body_parts(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray

@@ -217,8 +217,8 @@ class ThroughFilterLoss:
     def __init__(
         self,
         dataset: Dataset,
-        fit_rows: slice | np.ndarray,
-        validation_rows: slice | np.ndarray,
+        fit_rows: np.ndarray,
+        validation_rows: np.ndarray,
         target: np.ndarray,
         *,
         scale: np.ndarray,

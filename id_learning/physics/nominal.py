@@ -90,18 +90,10 @@ class NominalModel:
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """tau_nominal of one sample, (n,) q, v, a -> (n,) [N*m], with its own pinocchio data."""
-        model, data, index = self.dynamics.model, self.dynamics.model.createData(), self._index
-        rotor = self.rotor_inertia_joint_side
-        # Velocity index of each config joint; RNEA takes pinocchio's order, gives it back.
-        order = np.argsort(index)
-        is_identity = bool(np.array_equal(index, np.arange(len(index))))
+        rnea, rotor = self.dynamics.sample_rnea(), self.rotor_inertia_joint_side
 
         def tau_nominal(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-            if is_identity:
-                rigid: np.ndarray = pin.rnea(model, data, q, v, a)
-            else:
-                rigid = pin.rnea(model, data, q[order], v[order], a[order])[index]
-            tau: np.ndarray = rigid + rotor * a
+            tau: np.ndarray = rnea(q, v, a) + rotor * a
             return tau
 
         return tau_nominal

@@ -280,6 +280,24 @@ class RigidBodyDynamics:
         return out.reshape(*leading, *out_shape)
 
     # -- algorithms -------------------------------------------------------------------------------
+    def sample_rnea(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """``rnea`` of one sample, (n,) q, v, a -> (n,) [N*m], with its own scratch data.
+
+        Calls pinocchio directly when its joint order is the config's (the usual case): ``rnea``
+        reshapes and reorders for batches, which costs more than the recursion itself for one
+        sample.
+        """
+        if not np.array_equal(self._index, np.arange(self.n_joints)):
+            return self.rnea
+        model, data = self.model, self.model.createData()
+
+        def rnea(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            # pinocchio returns a view of data.tau: the caller's arithmetic copies it.
+            tau: np.ndarray = pin.rnea(model, data, q, v, a)
+            return tau
+
+        return rnea
+
     def rnea(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Joint torques tau = M(q) a + C(q, v) v + g(q) [N*m]; shapes (..., n)."""
         ix = self._index

@@ -74,34 +74,33 @@ class TrainingRange:
         high = np.concatenate([self.bounds[name][1] for name in names]) if names else low
         return names, low, high
 
+    def _outside(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray | None:
+        """The bounded values stacked, or None when all lie inside.
+
+        One comparison of all of them: the common case (inside), per sample.
+        """
+        names, low, high = self._stacked
+        given = {'q': q, 'v': v, 'a': a}
+        values = np.concatenate([given[name] for name in names]) if names else low
+        return values if ((values < low) | (values > high)).any() else None
+
     def excess(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> float:
         """How far (n,) q, v, a reach beyond the bounds, in half ranges; 0 inside.
 
         The largest overshoot of any bounded value, each in units of its own half range.
         """
-        names, low, high = self._stacked
-        if not names:
+        values = self._outside(q, v, a)
+        if values is None:
             return 0.0
-        given = {'q': q, 'v': v, 'a': a}
-        values = np.concatenate([given[name] for name in names])
-        if not ((values < low) | (values > high)).any():  # the common case, per sample
-            return 0.0
-        return float(np.max(np.maximum(low - values, values - high) / self._half).clip(min=0.0))
-
-    @cached_property
-    def _half(self) -> np.ndarray:
         _, low, high = self._stacked
-        return np.maximum(0.5 * (high - low), 1e-12)
+        half = np.maximum(0.5 * (high - low), 1e-12)
+        return float(np.max(np.maximum(low - values, values - high) / half))
 
     def first_violation(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray
     ) -> RangeViolation | None:
         """The first value of (n,) q, v, a outside its bounds, or None."""
-        # One comparison of all bounded values first: the common case (inside) per sample.
-        names, low, high = self._stacked
-        given = {'q': q, 'v': v, 'a': a}
-        values = np.concatenate([given[name] for name in names]) if names else low
-        if not ((values < low) | (values > high)).any():
+        if self._outside(q, v, a) is None:
             return None
         for name, values in (('q', q), ('v', v), ('a', a)):
             limits = self.bounds.get(name)

@@ -114,7 +114,7 @@ def validation_error(model: Any, data: TrainingData) -> float:
     from id_learning.evaluation.scoring import predict_along
 
     ds = data.dataset
-    rows = np.arange(len(ds.tau))[data.validation_rows]
+    rows = data.validation_rows
     if ds.is_through_filter:
         torque = ds.filter_like_labels(predict_along(model, ds.controller, ds.recording_rows()))
     else:  # along each recording: a sequence model reads the samples before each row
