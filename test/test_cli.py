@@ -183,7 +183,9 @@ def test_import_converts_a_log_to_si_units_on_the_ipo_grid(tmp_path, mabi, suffi
         'import', str(source), '--mapping', str(mapping), '--out', out, '--robot', robot
     )
     assert result.returncode == 0, result.stderr
-    assert f'{LOG_ROWS} of {LOG_ROWS} rows written, 0 dropped' in result.stdout
+    assert f'{LOG_ROWS} samples in 1 segment(s) from {LOG_ROWS} rows, 0 rows dropped' in (
+        result.stdout
+    )
     recording = load_recording(tmp_path / 'bag', mabi)
     assert recording.joints == mabi.joints
     stamps = recording.stamps_ns - recording.stamps_ns[0]

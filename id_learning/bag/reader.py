@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 from tqdm import tqdm
@@ -48,6 +49,7 @@ class BagInfo:
     start_ns: int
     duration_ns: int
     topics: tuple[TopicInfo, ...]
+    custom_data: dict[str, str] = field(default_factory=dict)
 
     def topic(self, name: str) -> TopicInfo:
         """Return a topic by name.
@@ -106,9 +108,21 @@ def bag_info(path: Path | str) -> BagInfo:
             if reader.message_count
             else 0,
             topics=topics,
+            custom_data=_custom_data(path),
         )
     finally:
         reader.close()
+
+
+def _custom_data(path: Path) -> dict[str, str]:
+    """``custom_data`` of a bag's ``metadata.yaml`` (rosbag2 keeps string entries there)."""
+    try:
+        text = (path / 'metadata.yaml').read_text(encoding='utf-8')
+        info = yaml.safe_load(text).get('rosbag2_bagfile_information', {})
+    except (OSError, yaml.YAMLError, AttributeError) as err:
+        raise BagError(f'{path}: cannot read metadata.yaml: {err}') from err
+    custom = info.get('custom_data') if isinstance(info, dict) else None
+    return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
 
 
 def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int, bytes]]:

@@ -47,6 +47,7 @@ def write_metadata(
     bag_dir: Path,
     topics: list[tuple[str, str, str, int]],
     files: list[tuple[str, int, int, int]],
+    custom_data: dict[str, str] | None = None,
 ) -> None:
     """Write a rosbag2 v9 ``metadata.yaml`` atomically.
 
@@ -54,6 +55,7 @@ def write_metadata(
         bag_dir: the bag folder.
         topics: (name, msgtype, RIHS01 type hash, message count) per topic.
         files: (relative path, first log time [ns], last log time [ns], message count) per file.
+        custom_data: string entries for rosbag2's ``custom_data`` beside ``writer``.
     """
     starts = [first for _, first, _, count in files if count]
     ends = [last for _, _, last, count in files if count]
@@ -90,7 +92,7 @@ def write_metadata(
             }
             for path, first, last, count in files
         ],
-        'custom_data': {'writer': 'id_learning'},
+        'custom_data': {'writer': 'id_learning', **(custom_data or {})},
         'ros_distro': 'jazzy',
     }
     text = yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
@@ -114,13 +116,18 @@ class BagWriter:
         chunk_bytes: int = DEFAULT_CHUNK_BYTES,
         split_duration_ns: int | None = None,
         split_bytes: int | None = None,
+        custom_data: dict[str, str] | None = None,
     ) -> None:
-        """Prepare a bag folder; nothing is written before ``open()``."""
+        """Prepare a bag folder; nothing is written before ``open()``.
+
+        ``custom_data``: string entries written to ``metadata.yaml``'s ``custom_data``.
+        """
         self.path = Path(path)
         self.overwrite = overwrite
         self.chunk_bytes = chunk_bytes
         self.split_duration_ns = split_duration_ns
         self.split_bytes = split_bytes
+        self.custom_data = dict(custom_data or {})
         self._topics: dict[str, _Topic] = {}
         self._files: list[_FileStats] = []
         self._stream: BinaryIO | None = None
@@ -183,6 +190,7 @@ class BagWriter:
             self.path,
             [(t.name, t.msgtype, t.type_hash, t.count) for t in self._topics.values()],
             [(f.path, f.first_ns or 0, f.last_ns or 0, f.count) for f in self._files],
+            self.custom_data,
         )
 
     def flush(self) -> None:

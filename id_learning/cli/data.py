@@ -47,18 +47,23 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    """Convert a CSV/NPZ log into a bag of the bag contract."""
-    from id_learning.dataset.importer import import_log, load_import_mapping
+    """Convert CSV/NPZ logs (files or folders) into one bag of the bag contract."""
+    from id_learning.dataset.importer import import_logs, load_import_mapping
 
     robot = options.load_robot(args)
-    report = import_log(
-        Path(args.source),
+    reports = import_logs(
+        [Path(source) for source in args.source],
         load_import_mapping(args.mapping),
         Path(args.out),
         robot=robot,
         overwrite=args.force,
     )
-    print(report.summary())
+    for report in reports:
+        print(report.summary())
+    if len(reports) > 1:
+        samples = sum(report.n_rows_written for report in reports)
+        segments = sum(report.n_segments for report in reports)
+        print(f'{args.out}: {samples} samples in {segments} segments from {len(reports)} files')
     return 0
 
 
@@ -106,8 +111,12 @@ def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser('import', help='convert a CSV/NPZ log into a bag (column-mapping YAML)')
-    p.add_argument('source', help='CSV or NPZ file')
+    p = sub.add_parser('import', help='convert CSV/NPZ logs into one bag (column-mapping YAML)')
+    p.add_argument(
+        'source',
+        nargs='+',
+        help='CSV or NPZ files, or folders of them (name order); each is a segment of the bag',
+    )
     p.add_argument(
         '--mapping', required=True, help='column-mapping YAML (see config/import_example.yaml)'
     )

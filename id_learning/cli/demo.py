@@ -38,6 +38,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     print(f'loading {bag} ...', flush=True)
     recording = load_recording(bag, robot, require_current=args.target == 'motor', progress=True)
+    if len(recording.segment_starts) > 1:
+        raise DatasetError(
+            f'{bag}: holds {len(recording.segment_starts)} segments; the demo summarises one '
+            'recording: run train and diagnose on it instead'
+        )
     preprocess = PreprocessConfig(target=args.target, mode=args.preprocessing)
     dataset = prepare_dataset(recording, robot, preprocess)
     ground_truth = tau_clean = None

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeGuard
 
+import numpy as np
+
 from id_learning.config_io import check_keys, load_yaml_mapping
 from id_learning.errors import ConfigError
 
@@ -21,6 +23,8 @@ __all__ = [
     'ColumnSpec',
     'ImportMapping',
     'JointColumns',
+    'MotorSide',
+    'ResamplePolicy',
     'load_import_mapping',
 ]
 
@@ -43,8 +47,14 @@ _TOP_KEYS = (
     'period_s',
     'joints',
     'nan_policy',
+    'implausible_policy',
     'jitter_tolerance',
+    'resample',
+    'motors',
 )
+_RESAMPLE_KEYS = ('method', 'period_s', 'max_gap_s', 'min_segment_s')
+_MOTOR_KEYS = ('gear_ratio', 'torque_constant', 'coupling', 'signals')
+_MOTOR_SIGNALS = ('position', 'velocity', 'current')
 _SPEC_KEYS = ('column', 'unit', 'index', 'scale', 'offset')
 _JOINT_KEYS = ('name', *QUANTITIES)
 
@@ -85,6 +95,53 @@ class JointColumns:
     torque: ColumnSpec | None = None
 
 
+@dataclass(frozen=True)
+class ResamplePolicy:
+    """How the log's stamps become the robot's sampling grid, and where a log splits in segments.
+
+    Attributes:
+        method: 'snap' moves stamps within ``jitter_tolerance`` periods onto the grid and refuses
+            the others (a log written on the controller's own grid); 'interpolate' resamples onto
+            a new grid (logs at another rate, with jitter or a drifting clock): positions and
+            velocities by cubic interpolation, currents and torques through an anti-aliasing
+            low-pass first when the log is faster than the grid.
+        period_s: the grid's period [s]; None: the robot's IPO period (``--robot``), else the
+            log's median step.
+        max_gap_s: a pause in the log longer than this [s] ends a segment, never bridged; None:
+            3 grid periods (what loading a bag tolerates). Shorter pauses are left as gaps
+            ('snap') or bridged by interpolation ('interpolate'), and reported either way.
+        min_segment_s: a segment shorter than this [s] is dropped and reported (0: every segment
+            of two samples or more is kept; preprocessing refuses one too short for its filter).
+    """
+
+    method: Literal['snap', 'interpolate'] = 'snap'
+    period_s: float | None = None
+    max_gap_s: float | None = None
+    min_segment_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class MotorSide:
+    """Motor-side columns and the drive train that maps them to the joint side.
+
+    With the reduction K = diag(gear_ratio) @ coupling, motor angles are theta = K q and joint
+    torques tau = K^T (torque_constant * i), i the motor currents. Motor m belongs to the m-th
+    mapped joint; rows and columns of ``coupling`` follow the mapping's joint order.
+
+    Attributes:
+        gear_ratio: (n,) motor turns per joint turn, per motor.
+        torque_constant: (n,) motor torque per current [N*m/A], per motor.
+        coupling: (n, n) joint-side coupling, identity for independent joints (a coupled wrist:
+            coupling[m, k] is how far joint k turns motor m, per turn of motor m's own joint).
+        signals: the mapped quantities logged motor side: any of position, velocity, current.
+    """
+
+    gear_ratio: tuple[float, ...]
+    torque_constant: tuple[float, ...]
+    coupling: tuple[tuple[float, ...], ...] | None = None
+    signals: tuple[str, ...] = ('current',)
+
+
 @dataclass(frozen=True, kw_only=True)
 class ImportMapping:
     """How to read one kind of log: file format, time base and one column spec per quantity.
@@ -99,8 +156,12 @@ class ImportMapping:
         delimiter: CSV field separator: one character, 'tab' or 'whitespace'; None sniffs.
         comment: prefix of CSV comment lines, or None.
         nan_policy: 'refuse' raises on an empty or non-finite cell, 'drop' drops its row.
+        implausible_policy: 'refuse' raises on a value no arm can have (far beyond the robot's
+            limits, or a non-physical magnitude: see ``import_values``), 'drop' drops its row.
         jitter_tolerance: largest stamp deviation from the sampling grid snapped onto it, as a
             fraction of the period (below 0.5 so that the nearest grid point is unambiguous).
+        resample: how stamps become the sampling grid, and where the log splits in segments.
+        motors: the motor-side columns and drive train, or None when every column is joint side.
         source: the mapping file, named in errors.
     """
 
@@ -112,7 +173,10 @@ class ImportMapping:
     delimiter: str | None = None
     comment: str | None = '#'
     nan_policy: Literal['refuse', 'drop'] = 'refuse'
+    implausible_policy: Literal['refuse', 'drop'] = 'refuse'
     jitter_tolerance: float = 0.25
+    resample: ResamplePolicy = field(default_factory=ResamplePolicy)
+    motors: MotorSide | None = None
     source: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
@@ -121,6 +185,9 @@ class ImportMapping:
         _check_options(self, self.where)
         _check_time_base(self, self.where)
         _check_joints(self.joints, self.where)
+        _check_resample(self, self.where)
+        if self.motors is not None:
+            _check_motors(self.motors, self.joints, self.where)
 
     @property
     def where(self) -> str:
@@ -152,10 +219,11 @@ def _check_options(mapping: ImportMapping, where: str) -> None:
         )
     if mapping.comment is not None and not (isinstance(mapping.comment, str) and mapping.comment):
         raise ConfigError(f'{where}: comment must be a non-empty prefix or null')
-    if mapping.nan_policy not in ('refuse', 'drop'):
-        raise ConfigError(
-            f"{where}: nan_policy must be 'refuse' or 'drop', got {mapping.nan_policy!r}"
-        )
+    for key in ('nan_policy', 'implausible_policy'):
+        if getattr(mapping, key) not in ('refuse', 'drop'):
+            raise ConfigError(
+                f"{where}: {key} must be 'refuse' or 'drop', got {getattr(mapping, key)!r}"
+            )
     tolerance = mapping.jitter_tolerance
     if not (_is_number(tolerance) and 0.0 <= tolerance < 0.5):
         raise ConfigError(
@@ -226,6 +294,76 @@ def _check_joints(joints: tuple[JointColumns, ...], where: str) -> None:
             )
 
 
+def _check_resample(mapping: ImportMapping, where: str) -> None:
+    policy = mapping.resample
+    if not isinstance(policy, ResamplePolicy):
+        raise ConfigError(
+            f'{where}: resample: expected a mapping with keys {list(_RESAMPLE_KEYS)}'
+        )
+    if policy.method not in ('snap', 'interpolate'):
+        raise ConfigError(
+            f"{where}: resample.method must be 'snap' or 'interpolate', got {policy.method!r}"
+        )
+    for key in ('period_s', 'max_gap_s'):
+        value = getattr(policy, key)
+        if value is not None and not (_is_number(value) and value > 0):
+            raise ConfigError(
+                f'{where}: resample.{key} must be a positive number [s], got {value!r}'
+            )
+    if not (_is_number(policy.min_segment_s) and policy.min_segment_s >= 0):
+        raise ConfigError(
+            f'{where}: resample.min_segment_s must be a number >= 0 [s], '
+            f'got {policy.min_segment_s!r}'
+        )
+    if policy.method == 'interpolate' and mapping.time is None:
+        raise ConfigError(
+            f'{where}: resample.method interpolate needs a time column (period_s logs are on '
+            'their grid already)'
+        )
+
+
+def _check_motors(motors: MotorSide, joints: tuple[JointColumns, ...], where: str) -> None:
+    n = len(joints)
+    for key in ('gear_ratio', 'torque_constant'):
+        values = getattr(motors, key)
+        if not (
+            isinstance(values, tuple)
+            and len(values) == n
+            and all(_is_number(x) and x != 0 for x in values)
+        ):
+            raise ConfigError(
+                f'{where}: motors.{key} needs {n} non-zero numbers (one per mapped joint, in '
+                f'mapping order), got {values!r}'
+            )
+    coupling = motors.coupling
+    if coupling is not None:
+        if not (
+            isinstance(coupling, tuple)
+            and len(coupling) == n
+            and all(isinstance(row, tuple) and len(row) == n for row in coupling)
+            and all(_is_number(x) for row in coupling for x in row)
+        ):
+            raise ConfigError(
+                f'{where}: motors.coupling must be a {n}x{n} matrix of numbers (rows: motors, '
+                f'columns: joints, in mapping order), got {coupling!r}'
+            )
+        if abs(float(np.linalg.det(np.array(coupling, dtype=float)))) < 1e-9:
+            raise ConfigError(
+                f'{where}: motors.coupling is singular: the joints cannot be recovered from the '
+                'motors'
+            )
+    unknown = [s for s in motors.signals if s not in _MOTOR_SIGNALS]
+    if unknown or not motors.signals:
+        raise ConfigError(
+            f'{where}: motors.signals must list some of {list(_MOTOR_SIGNALS)}, got '
+            f'{list(motors.signals)}'
+        )
+    if 'current' in motors.signals and joints[0].current is None:
+        raise ConfigError(f'{where}: motors.signals names current, but no current is mapped')
+    if 'velocity' in motors.signals and joints[0].velocity is None:
+        raise ConfigError(f'{where}: motors.signals names velocity, but no velocity is mapped')
+
+
 # -- mapping YAML ---------------------------------------------------------------------------------
 def _spec_from_yaml(value: Any, where: str) -> ColumnSpec:
     if not isinstance(value, dict):
@@ -246,6 +384,32 @@ def _joint_from_yaml(value: Any, where: str) -> JointColumns:
     return JointColumns(name=value['name'], **specs)
 
 
+def _resample_from_yaml(value: Any, where: str) -> ResamplePolicy:
+    if not isinstance(value, dict):
+        raise ConfigError(f'{where}: expected a mapping with keys {list(_RESAMPLE_KEYS)}')
+    check_keys(value, _RESAMPLE_KEYS, where)
+    return ResamplePolicy(**value)
+
+
+def _motors_from_yaml(value: Any, where: str) -> MotorSide:
+    if not isinstance(value, dict):
+        raise ConfigError(f'{where}: expected a mapping with keys {list(_MOTOR_KEYS)}')
+    check_keys(value, _MOTOR_KEYS, where, required=('gear_ratio', 'torque_constant'))
+
+    def as_tuple(item: Any) -> Any:
+        return tuple(as_tuple(x) for x in item) if isinstance(item, list) else item
+
+    signals = value.get('signals', ['current'])
+    if not isinstance(signals, list):
+        raise ConfigError(f'{where}.signals: expected a list, got {signals!r}')
+    return MotorSide(
+        gear_ratio=as_tuple(value['gear_ratio']),
+        torque_constant=as_tuple(value['torque_constant']),
+        coupling=as_tuple(value.get('coupling')),
+        signals=tuple(signals),
+    )
+
+
 def load_import_mapping(path: Path | str) -> ImportMapping:
     """Read and validate a column-mapping YAML (see ``config/import_example.yaml``).
 
@@ -261,9 +425,14 @@ def load_import_mapping(path: Path | str) -> ImportMapping:
     if not isinstance(joints, list):
         raise ConfigError(f'{where}: joints: expected a list of joint mappings, got {joints!r}')
     time = data.get('time')
-    options = {
-        key: data[key] for key in _TOP_KEYS if key in data and key not in ('time', 'joints')
+    nested = ('time', 'joints', 'resample', 'motors')
+    options: dict[str, Any] = {
+        key: data[key] for key in _TOP_KEYS if key in data and key not in nested
     }
+    if data.get('resample') is not None:
+        options['resample'] = _resample_from_yaml(data['resample'], f'{where}: resample')
+    if data.get('motors') is not None:
+        options['motors'] = _motors_from_yaml(data['motors'], f'{where}: motors')
     return ImportMapping(
         joints=tuple(
             _joint_from_yaml(item, f'{where}: joints[{i}]') for i, item in enumerate(joints)

@@ -1,22 +1,26 @@
 """Import CSV or NPZ logs from other sources (controller traces, real-time data logs) into a bag.
 
 A small column-mapping YAML (see ``config/import_example.yaml``) says which column holds the time
-stamp and each joint's position, velocity, motor current and joint torque, and in which unit.
-Values are converted to SI (rad, rad/s, A, N*m), time stamps are snapped onto the controller's
-sampling grid, and the result is written as a bag in the bag contract (see ``recording.py``).
+stamp and each joint's position, velocity, motor current and joint torque, in which unit, and
+which are logged motor side. Values are converted to SI joint side (rad, rad/s, A, N*m), checked
+(``import_values``), put on the controller's sampling grid by snapping or resampling
+(``import_resample``), and written as one bag in the bag contract (see ``recording.py``).
 
-Controllers sample on a fixed grid (the IPO cycle); the jitter in logged time stamps comes from
-the logging path, so a stamp within ``jitter_tolerance`` periods of a grid point is moved onto it.
-Missing grid points are gaps: counted, never filled (the dataset loader decides about gaps).
+Several files (or a folder of them) go into one bag, one after the other; each file, and each
+stretch of a file between pauses longer than ``resample.max_gap_s``, is a segment, which
+preprocessing and the train/test split treat as a recording of its own. Nothing is filled or
+dropped silently: rows dropped by the NaN and implausible-value policies, holes bridged by
+resampling, pauses that end a segment and segments too short to keep are all in the report.
 
-This module turns the mapped columns into SI values and writes the bag; the mapping and its checks
-are in ``import_mapping.py``, the CSV and NPZ readers in ``import_readers.py`` and the time grid
-in ``import_stamps.py``.
+This module reads the mapped columns and writes the bag; the mapping and its checks are in
+``import_mapping.py``, the CSV and NPZ readers in ``import_readers.py``, the values and row checks
+in ``import_values.py``, the time base in ``import_stamps.py`` and ``import_resample.py``.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,14 +30,21 @@ import numpy as np
 
 from id_learning.dataset.import_mapping import (
     QUANTITIES,
-    UNITS,
     ColumnSpec,
     ImportMapping,
     JointColumns,
     load_import_mapping,
 )
 from id_learning.dataset.import_readers import LogTable, is_float, read_table
-from id_learning.dataset.import_stamps import log_stamps
+from id_learning.dataset.import_resample import Gridded, interpolate_segments, slot_segments
+from id_learning.dataset.import_stamps import grid_period_s, relative_times, snap_to_grid
+from id_learning.dataset.import_values import (
+    Field,
+    RowChecks,
+    joint_side,
+    refuse_implausible,
+    si_values,
+)
 from id_learning.dataset.plausibility import check_efforts, check_motion
 from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError, DatasetError
@@ -41,37 +52,43 @@ from id_learning.robot.config import RobotConfig
 
 __all__ = [
     'DEFAULT_START_NS',
+    'SEGMENT_SEPARATION_S',
     'ColumnSpec',
     'ImportMapping',
     'ImportReport',
     'JointColumns',
     'import_log',
+    'import_logs',
     'load_import_mapping',
+    'log_files',
 ]
 
 logger = logging.getLogger(__name__)
 
 # A fixed epoch (2023-11-14 22:13:20 UTC) for the first sample, so an import is deterministic.
 DEFAULT_START_NS = 1_700_000_000 * 10**9
+#: The pause written between two files of one import [s] (at least; rounded up to the grid).
+SEGMENT_SEPARATION_S = 1.0
+_LOG_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat', '.log', '.npz')
 
 
 @dataclass
 class ImportReport:
-    """What an import did; ``summary()`` gives it in one line.
+    """What the import of one log file did; ``summary()`` gives it in a few lines.
 
     Attributes:
         source: the imported log file.
         out: the bag written.
         n_rows_read: data rows in the log (without header, comment and blank lines).
-        n_rows_written: samples written to the bag.
+        n_rows_written: samples written to the bag from this file.
         period_s: sampling period of the written stamps [s].
         velocity_source: 'column' (mapped) or 'differentiated' (from position).
         row_label: what row positions count: 'line' (1-based CSV line, header and comments
             included) or 'row' (0-based NPZ array index).
-        dropped_rows: (position, reason) of each row dropped under nan_policy 'drop'.
-        max_jitter_s: largest |stamp - grid point| seen [s].
-        n_snapped: stamps moved onto the grid.
-        n_gaps: grid slots with no sample (not filled).
+        dropped_rows: (position, reason) of each row dropped under the NaN or implausible-value
+            policy.
+        method: the resample policy's method.
+        grid: what snapping or resampling did (steps, jitter, holes, pauses, short segments).
     """
 
     source: Path
@@ -82,53 +99,80 @@ class ImportReport:
     velocity_source: Literal['column', 'differentiated']
     row_label: Literal['line', 'row'] = 'line'
     dropped_rows: list[tuple[int, str]] = field(default_factory=list)
-    max_jitter_s: float = 0.0
-    n_snapped: int = 0
-    n_gaps: int = 0
+    method: Literal['snap', 'interpolate'] = 'snap'
+    grid: Gridded | None = None
+
+    @property
+    def n_segments(self) -> int:
+        """Segments written from this file."""
+        return 0 if self.grid is None else len(self.grid.segments)
+
+    @property
+    def max_jitter_s(self) -> float:
+        """Largest |stamp - grid point| snapped [s]."""
+        return 0.0 if self.grid is None else self.grid.max_jitter_s
+
+    @property
+    def n_snapped(self) -> int:
+        """Stamps moved onto the grid."""
+        return 0 if self.grid is None else self.grid.n_snapped
+
+    @property
+    def n_gaps(self) -> int:
+        """Grid slots left empty inside segments (loading fills them)."""
+        return 0 if self.grid is None else self.grid.n_gaps
 
     def summary(self, max_positions: int = 5) -> str:
-        """Counts and the first ``max_positions`` dropped positions, in one line."""
-        dropped = ''
-        if self.dropped_rows:
-            shown = ', '.join(str(position) for position, _ in self.dropped_rows[:max_positions])
-            more = ', ...' if len(self.dropped_rows) > max_positions else ''
-            dropped = f' ({self.row_label}s {shown}{more})'
+        """Counts, and the first ``max_positions`` positions of each kind of loss."""
+        label = self.row_label
+
+        def listed(items: Sequence[tuple[int, int] | int], kind: str) -> str:
+            if not items:
+                return ''
+            shown = ', '.join(
+                f'{item[0]}-{item[1]}' if isinstance(item, tuple) else str(item)
+                for item in items[:max_positions]
+            )
+            more = ', ...' if len(items) > max_positions else ''
+            return f'\n  {len(items)} {kind}: {label}s {shown}{more}'
+
+        grid = self.grid or Gridded([], self.period_s, self.period_s, self.period_s)
+        if self.method == 'snap':
+            timing = (
+                f'{grid.n_snapped} stamps snapped (max jitter {grid.max_jitter_s * 1e3:.3g} ms), '
+                f'{grid.n_gaps} missing grid slots'
+            )
+        else:
+            timing = (
+                f'resampled from a median step of {grid.source_step_s * 1e3:.4g} ms (mean '
+                f'{grid.mean_step_s * 1e3:.4g} ms), {grid.n_filled} grid points bridged over '
+                f'{len(grid.holes)} holes'
+            )
         return (
-            f'{self.source} -> {self.out}: {self.n_rows_written} of {self.n_rows_read} rows '
-            f'written, {len(self.dropped_rows)} dropped{dropped}; period '
-            f'{self.period_s * 1e3:g} ms, {self.n_snapped} stamps snapped (max jitter '
-            f'{self.max_jitter_s * 1e3:.3g} ms), {self.n_gaps} missing grid slots; velocity '
-            f'{self.velocity_source}'
+            f'{self.source} -> {self.out}: {self.n_rows_written} samples in '
+            f'{self.n_segments} segment(s) from {self.n_rows_read} rows, '
+            f'{len(self.dropped_rows)} rows dropped; period {self.period_s * 1e3:g} ms, '
+            f'{timing}; velocity {self.velocity_source}'
+            + listed([row for row, _ in self.dropped_rows], 'rows dropped')
+            + listed([(a, b) for a, b, _ in grid.holes], 'holes bridged')
+            + listed([(a, b) for a, b, _ in grid.breaks], 'pauses that end a segment')
+            + listed([(a, b) for a, b, _ in grid.short], 'segments dropped as too short')
         )
 
 
 # -- columns -> raw float matrix ------------------------------------------------------------------
-@dataclass(frozen=True)
-class _Field:
-    """One mapped column: the quantity it holds, for which joint (None for time)."""
-
-    quantity: str
-    joint: str | None
-    spec: ColumnSpec
-
-    def describe(self) -> str:
-        """Column and meaning, for messages."""
-        meaning = 'time' if self.joint is None else f'joint {self.joint} {self.quantity}'
-        return f'column {self.spec.describe()} ({meaning})'
-
-
-def _fields(mapping: ImportMapping, joints: tuple[JointColumns, ...]) -> list[_Field]:
+def _fields(mapping: ImportMapping, joints: tuple[JointColumns, ...]) -> list[Field]:
     """Time first, then each quantity's columns in joint order."""
-    fields = [] if mapping.time is None else [_Field('time', None, mapping.time)]
+    fields = [] if mapping.time is None else [Field('time', None, mapping.time)]
     for quantity in QUANTITIES:
         for joint in joints:
             spec = getattr(joint, quantity)
             if spec is not None:
-                fields.append(_Field(quantity, joint.name, spec))
+                fields.append(Field(quantity, joint.name, spec))
     return fields
 
 
-def _raw_matrix(table: LogTable, fields: Sequence[_Field], mapping: ImportMapping) -> np.ndarray:
+def _raw_matrix(table: LogTable, fields: Sequence[Field], mapping: ImportMapping) -> np.ndarray:
     """(N, F) raw values, one column per field; empty cells are NaN.
 
     Raises:
@@ -144,7 +188,7 @@ def _raw_matrix(table: LogTable, fields: Sequence[_Field], mapping: ImportMappin
     return np.column_stack(columns)
 
 
-def _column(table: LogTable, item: _Field, mapping: ImportMapping) -> np.ndarray:
+def _column(table: LogTable, item: Field, mapping: ImportMapping) -> np.ndarray:
     spec = item.spec
     if spec.column not in table.columns:
         raise ConfigError(
@@ -167,7 +211,7 @@ def _column(table: LogTable, item: _Field, mapping: ImportMapping) -> np.ndarray
     return _as_float(values, table, item)
 
 
-def _as_float(values: np.ndarray, table: LogTable, item: _Field) -> np.ndarray:
+def _as_float(values: np.ndarray, table: LogTable, item: Field) -> np.ndarray:
     try:
         return np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError):
@@ -190,7 +234,7 @@ def _as_float(values: np.ndarray, table: LogTable, item: _Field) -> np.ndarray:
 
 def _finite_rows(
     raw: np.ndarray,
-    fields: Sequence[_Field],
+    fields: Sequence[Field],
     table: LogTable,
     mapping: ImportMapping,
 ) -> tuple[np.ndarray, list[tuple[int, str]]]:
@@ -213,38 +257,28 @@ def _finite_rows(
     return ~bad.any(axis=1), dropped
 
 
-def _drop_reason(bad_cells: np.ndarray, fields: Sequence[_Field]) -> str:
+def _drop_reason(bad_cells: np.ndarray, fields: Sequence[Field]) -> str:
     columns = ', '.join(fields[int(i)].describe() for i in np.flatnonzero(bad_cells))
     return f'empty or non-finite {columns}'
 
 
-def _si_matrix(raw: np.ndarray, fields: Sequence[_Field], quantity: str) -> np.ndarray | None:
-    """(N, n) values of one quantity in SI, in joint order, or None when not mapped."""
-    columns = [
-        raw[:, i] * (UNITS[quantity][item.spec.unit] * item.spec.scale) + item.spec.offset
-        for i, item in enumerate(fields)
-        if item.quantity == quantity
-    ]
-    return np.column_stack(columns) if columns else None
-
-
 # -- import ---------------------------------------------------------------------------------------
-def _joint_order(mapping: ImportMapping, robot: RobotConfig | None) -> tuple[JointColumns, ...]:
-    """The mapped joints, in the robot's order when a robot config is given.
+def _joint_order(mapping: ImportMapping, robot: RobotConfig | None) -> np.ndarray:
+    """Indices of the written joints into the mapping's: the robot's order when one is given.
 
     Raises:
         ConfigError: the mapped joint names are not the robot's (lists both).
     """
+    names = [joint.name for joint in mapping.joints]
     if robot is None:
-        return mapping.joints
-    by_name = {joint.name: joint for joint in mapping.joints}
-    if set(by_name) != set(robot.joints):
+        return np.arange(len(names))
+    if set(names) != set(robot.joints):
         raise ConfigError(
-            f'{mapping.where}: mapped joints {list(by_name)} are not the joints of robot '
+            f'{mapping.where}: mapped joints {names} are not the joints of robot '
             f'{robot.name} {list(robot.joints)}; map exactly the robot config joints '
             '(--robot names the robot config)'
         )
-    return tuple(by_name[name] for name in robot.joints)
+    return np.array([names.index(name) for name in robot.joints])
 
 
 def _check_efforts(recording: Recording, robot: RobotConfig, where: str) -> None:
@@ -267,6 +301,221 @@ def _check_efforts(recording: Recording, robot: RobotConfig, where: str) -> None
             )
 
 
+def log_files(sources: Sequence[Path | str]) -> list[Path]:
+    """The log files named: files as given, folders as their log files in name order.
+
+    Raises:
+        DatasetError: a source does not exist, or a folder holds no log file.
+    """
+    files: list[Path] = []
+    for source in map(Path, sources):
+        if source.is_dir():
+            found = sorted(
+                p for p in source.iterdir() if p.is_file() and p.suffix.lower() in _LOG_SUFFIXES
+            )
+            if not found:
+                raise DatasetError(
+                    f'{source}: no log files ({", ".join(_LOG_SUFFIXES)}) in this folder'
+                )
+            files.extend(found)
+        elif source.is_file():
+            files.append(source)
+        else:
+            raise DatasetError(f'{source}: no such log file or folder')
+    if not files:
+        raise DatasetError('no log file given')
+    return files
+
+
+def _grid(
+    table: LogTable,
+    raw: np.ndarray,
+    values: dict[str, np.ndarray],
+    keep: np.ndarray,
+    *,
+    mapping: ImportMapping,
+    robot: RobotConfig | None,
+) -> Gridded:
+    """The kept rows on the sampling grid, in segments (the mapping's time base and policy)."""
+    positions = table.positions(len(raw))[keep]
+    kept = {key: array[keep] for key, array in values.items()}
+    policy = mapping.resample
+    if mapping.time is None:
+        assert mapping.period_s is not None  # ImportMapping guarantees one time base
+        return slot_segments(np.flatnonzero(keep), kept, positions, mapping.period_s, policy)
+    label = table.row_label
+    times = relative_times(raw[keep, 0], positions, mapping, table.source, label)
+    period = grid_period_s(times, mapping, robot, table.source)
+    if policy.method == 'interpolate':
+        return interpolate_segments(times, kept, positions, period, policy)
+    snapped = snap_to_grid(times, positions, period, mapping, where=table.source, label=label)
+    grid = slot_segments(snapped.slots, kept, positions, period, policy)
+    grid.max_jitter_s, grid.n_snapped = snapped.max_jitter_s, snapped.n_snapped
+    return grid
+
+
+def _read_file(
+    source: Path, mapping: ImportMapping, robot: RobotConfig | None, order: np.ndarray
+) -> tuple[Gridded, ImportReport]:
+    """One log file on the grid, with its report (``out`` and counts filled in by the caller)."""
+    joints = tuple(mapping.joints[i] for i in order)
+    table = read_table(source, mapping)
+    fields = _fields(mapping, joints)
+    raw = _raw_matrix(table, fields, mapping)
+    keep, dropped = _finite_rows(raw, fields, table, mapping)
+    values = si_values(raw, fields)
+    if mapping.motors is not None:
+        values = joint_side(values, mapping.motors, order, robot, mapping.where)
+    positions = table.positions(len(raw))
+    keep, implausible = refuse_implausible(
+        RowChecks(fields, robot),
+        values,
+        keep,
+        positions,
+        policy=mapping.implausible_policy,
+        where=str(source),
+        label=table.row_label,
+    )
+    dropped = sorted(dropped + implausible)
+    if np.count_nonzero(keep) < 2:
+        raise DatasetError(
+            f'{source}: {np.count_nonzero(keep)} usable rows; at least 2 are needed'
+        )
+    grid = _grid(table, raw, values, keep, mapping=mapping, robot=robot)
+    if not grid.segments:
+        raise DatasetError(
+            f'{source}: no segment of at least resample.min_segment_s '
+            f'{mapping.resample.min_segment_s:g} s without a pause longer than max_gap_s'
+        )
+    report = ImportReport(
+        source=source,
+        out=Path(),
+        n_rows_read=len(raw),
+        n_rows_written=sum(len(segment.slots) for segment in grid.segments),
+        period_s=grid.period_s,
+        velocity_source='differentiated' if joints[0].velocity is None else 'column',
+        row_label=table.row_label,
+        dropped_rows=dropped,
+        method=mapping.resample.method if mapping.time is not None else 'snap',
+        grid=grid,
+    )
+    return grid, report
+
+
+def _recording(
+    grids: Sequence[Gridded], joints: tuple[str, ...], start_ns: int, source: str
+) -> Recording:
+    """The segments of every file one after the other on one grid, as one recording."""
+    period_s = grids[0].period_s
+    period_ns = round(period_s * 1e9)
+    separation = math.ceil(SEGMENT_SEPARATION_S / period_s)
+    stamps: list[np.ndarray] = []
+    starts: list[int] = []
+    parts: list[dict[str, np.ndarray]] = []
+    offset, n_samples = 0, 0
+    for grid in grids:
+        for segment in grid.segments:
+            starts.append(n_samples)
+            n_samples += len(segment.slots)
+            stamps.append(start_ns + (offset + segment.slots) * period_ns)
+            parts.append(segment.values)
+        offset += int(grid.segments[-1].slots[-1]) + separation
+    velocity = [
+        part['velocity']
+        if 'velocity' in part
+        else np.gradient(part['position'], (stamp - stamp[0]) * 1e-9, axis=0)
+        for part, stamp in zip(parts, stamps, strict=True)
+    ]
+
+    def joined(key: str) -> np.ndarray | None:
+        return np.concatenate([part[key] for part in parts]) if key in parts[0] else None
+
+    return Recording(
+        joints=joints,
+        stamps_ns=np.concatenate(stamps),
+        position=np.concatenate([part['position'] for part in parts]),
+        velocity=np.concatenate(velocity),
+        current=joined('current'),
+        joint_torque=joined('torque'),
+        source=source,
+        segment_starts=tuple(starts),
+    )
+
+
+def import_logs(
+    sources: Sequence[Path | str],
+    mapping: ImportMapping,
+    out: Path | str,
+    *,
+    robot: RobotConfig | None = None,
+    velocity_from_position: bool = True,
+    overwrite: bool = False,
+    start_ns: int | None = None,
+) -> list[ImportReport]:
+    """Import CSV or NPZ logs (files, or folders of them) into one bag in the bag contract.
+
+    Args:
+        sources: the log files, or folders whose log files are taken in name order.
+        mapping: which columns hold what, in which unit, and the resample policy.
+        out: the bag folder to write.
+        robot: when given, the joints must be the robot's (reordered to its order), its IPO
+            period is the grid's (unless the policy names one), values are checked against its
+            limits, and its topics are used.
+        velocity_from_position: differentiate position along each segment when the mapping has
+            no velocity columns.
+        overwrite: replace an existing bag folder.
+        start_ns: stamp of the first sample [ns since epoch]; default ``DEFAULT_START_NS``.
+
+    Returns:
+        Per file, what was read, dropped, snapped or resampled, and written.
+
+    Raises:
+        ConfigError: the mapping does not fit the log or the robot (missing column, joint names,
+            no velocity while ``velocity_from_position`` is False).
+        DatasetError: unreadable log, non-numeric or (under 'refuse') non-finite or implausible
+            cells, values past the plausibility gate (each names line and column), stamps
+            backwards, repeated or (under 'snap') off the grid, no segment long enough, or files
+            on different grids.
+        BagError: ``out`` exists and ``overwrite`` is False.
+    """
+    out = Path(out)
+    start_ns = DEFAULT_START_NS if start_ns is None else start_ns
+    order = _joint_order(mapping, robot)
+    if mapping.joints[0].velocity is None and not velocity_from_position:
+        raise ConfigError(
+            f'{mapping.where}: no velocity columns are mapped and velocity_from_position is off'
+        )
+    files = log_files(sources)
+    read = [_read_file(source, mapping, robot, order) for source in files]
+    periods = {report.period_s for _, report in read}
+    if len(periods) > 1:
+        found = ', '.join(f'{r.source}: {r.period_s * 1e3:g} ms' for _, r in read)
+        raise DatasetError(
+            f'the logs are on different sampling grids ({found}); set resample.period_s and '
+            'resample.method: interpolate to put them on one'
+        )
+    where = str(files[0]) if len(files) == 1 else f'{files[0].parent} ({len(files)} files)'
+    joints = tuple(mapping.joints[i].name for i in order)
+    recording = _recording([grid for grid, _ in read], joints, start_ns, where)
+    # Nothing impossible reaches a bag: the plausibility gate (the robot's limits when known).
+    check_motion(
+        recording.joints,
+        recording.stamps_ns,
+        recording.position,
+        recording.velocity,
+        limits=robot.limits if robot else None,
+        where=where,
+    )
+    if robot is not None:
+        _check_efforts(recording, robot, where)
+    write_recording(recording, out, topics=robot.topics if robot else None, overwrite=overwrite)
+    reports = [report for _, report in read]
+    for report in reports:
+        report.out = out
+        logger.info('imported %s', report.summary())
+    return reports
+
+
 def import_log(
     source: Path | str,
     mapping: ImportMapping,
@@ -277,85 +526,13 @@ def import_log(
     overwrite: bool = False,
     start_ns: int | None = None,
 ) -> ImportReport:
-    """Import a CSV or NPZ log into a bag in the bag contract.
-
-    Args:
-        source: the log file.
-        mapping: which columns hold what, in which unit.
-        out: the bag folder to write.
-        robot: when given, the joints must be the robot's (reordered to its order), its IPO
-            period is preferred when estimating the sampling period, and its topics are used.
-        velocity_from_position: differentiate position (central differences over the snapped
-            stamps) when the mapping has no velocity columns.
-        overwrite: replace an existing bag folder.
-        start_ns: stamp of the first sample [ns since epoch]; default ``DEFAULT_START_NS``.
-
-    Returns:
-        What was read, dropped, snapped and written.
-
-    Raises:
-        ConfigError: the mapping does not fit the log or the robot (missing column, joint names,
-            no velocity while ``velocity_from_position`` is False).
-        DatasetError: unreadable log, non-numeric or (under 'refuse') non-finite cells, stamps
-            backwards, off the grid or repeated, fewer than two rows left, or motion the
-            plausibility gate refuses (non-finite after unit conversion; with a robot, positions
-            or velocities beyond its limits, degrees named as such).
-        BagError: ``out`` exists and ``overwrite`` is False.
-    """
-    source, out = Path(source), Path(out)
-    start_ns = DEFAULT_START_NS if start_ns is None else start_ns
-    joints = _joint_order(mapping, robot)
-    if joints[0].velocity is None and not velocity_from_position:
-        raise ConfigError(
-            f'{mapping.where}: no velocity columns are mapped and velocity_from_position is off'
-        )
-    table = read_table(source, mapping)
-    fields = _fields(mapping, joints)
-    raw = _raw_matrix(table, fields, mapping)
-    keep, dropped = _finite_rows(raw, fields, table, mapping)
-    n_usable = int(np.count_nonzero(keep))
-    if n_usable < 2:
-        raise DatasetError(f'{source}: {n_usable} usable rows; at least 2 are needed')
-    rows = raw[keep]
-    stamps = log_stamps(rows, keep, table, mapping=mapping, robot=robot, start_ns=start_ns)
-    position = _si_matrix(rows, fields, 'position')
-    assert position is not None  # every joint maps a position
-    velocity = _si_matrix(rows, fields, 'velocity')
-    if velocity is None:
-        velocity = np.gradient(position, (stamps.stamps_ns - stamps.stamps_ns[0]) * 1e-9, axis=0)
-    recording = Recording(
-        joints=tuple(joint.name for joint in joints),
-        stamps_ns=stamps.stamps_ns,
-        position=position,
-        velocity=velocity,
-        current=_si_matrix(rows, fields, 'current'),
-        joint_torque=_si_matrix(rows, fields, 'torque'),
-        source=str(source),
-    )
-    # Nothing impossible reaches a bag: the plausibility gate (the robot's limits when known).
-    check_motion(
-        recording.joints,
-        recording.stamps_ns,
-        position,
-        velocity,
-        limits=robot.limits if robot else None,
-        where=str(source),
-    )
-    if robot is not None:
-        _check_efforts(recording, robot, str(source))
-    write_recording(recording, out, topics=robot.topics if robot else None, overwrite=overwrite)
-    report = ImportReport(
-        source=source,
-        out=out,
-        n_rows_read=len(raw),
-        n_rows_written=recording.n_samples,
-        period_s=stamps.period_s,
-        velocity_source='differentiated' if joints[0].velocity is None else 'column',
-        row_label=table.row_label,
-        dropped_rows=dropped,
-        max_jitter_s=stamps.max_jitter_s,
-        n_snapped=stamps.n_snapped,
-        n_gaps=stamps.n_gaps,
-    )
-    logger.info('imported %s', report.summary())
-    return report
+    """Import one CSV or NPZ log file into a bag; ``import_logs`` for one file."""
+    return import_logs(
+        [source],
+        mapping,
+        out,
+        robot=robot,
+        velocity_from_position=velocity_from_position,
+        overwrite=overwrite,
+        start_ns=start_ns,
+    )[0]

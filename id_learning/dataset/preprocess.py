@@ -426,6 +426,11 @@ def prepare_dataset(
         DatasetError: the recording is too short for the filter, lacks the target, or is off-grid.
     """
     config = config or PreprocessConfig()
+    if len(recording.segment_starts) > 1:
+        raise DatasetError(
+            f'{recording.source}: holds {len(recording.segment_starts)} segments; prepare each '
+            '(Recording.segments()) and combine them (training.combine_datasets)'
+        )
     cutoff = np.asarray(
         config.cutoff_hz if config.cutoff_hz is not None else robot.lowpass_cutoff_hz
     )

@@ -4,10 +4,17 @@ The bag contract: ``/joint_states`` (sensor_msgs/JointState: name, position [rad
 [rad/s], effort = measured joint torque [N*m] or empty) and ``/motor_currents``
 (sensor_msgs/JointState whose effort holds motor currents [A]), with the same joint names and the
 same header stamps sample by sample. Topic names come from the robot config.
+
+A bag may hold several segments (an import of several files, or of a log with long pauses): the
+stamps of their first samples are listed in ``metadata.yaml``'s ``custom_data`` under
+``SEGMENTS_KEY`` (a JSON list). Stamps may jump between segments; within one they keep the IPO
+grid. Preprocessing and the split treat each segment as a recording of its own.
 """
 
 from __future__ import annotations
 
+import itertools
+import json
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -18,6 +25,7 @@ from id_learning.bag import (
     JOINT_STATE,
     BagWriter,
     JointStateSeries,
+    bag_info,
     encode_joint_state,
     read_joint_states,
 )
@@ -32,7 +40,17 @@ from id_learning.robot.config import RobotConfig, TopicConfig
 
 _LOG = logging.getLogger(__name__)
 
-__all__ = ['Recording', 'check_finite', 'check_stamps', 'load_recording', 'write_recording']
+__all__ = [
+    'SEGMENTS_KEY',
+    'Recording',
+    'check_finite',
+    'check_stamps',
+    'load_recording',
+    'write_recording',
+]
+
+#: The ``custom_data`` key of the segments' first stamps [ns] (a JSON list).
+SEGMENTS_KEY = 'id_learning.segment_starts_ns'
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +65,7 @@ class Recording:
         current: (N, n) motor currents [A], or None when the recording has none.
         joint_torque: (N, n) measured joint torques [N*m], or None when not measured.
         source: where the samples came from (bag path, log file), for error messages.
+        segment_starts: first sample of each segment, from 0 (see the module docstring).
     """
 
     joints: tuple[str, ...]
@@ -56,10 +75,21 @@ class Recording:
     current: np.ndarray | None = None
     joint_torque: np.ndarray | None = None
     source: str = '<memory>'
+    segment_starts: tuple[int, ...] = (0,)
 
     def __post_init__(self) -> None:
         """Check that every array has one row per stamp and one column per joint."""
         n_samples, n_joints = len(self.stamps_ns), len(self.joints)
+        starts = self.segment_starts
+        if (
+            not starts
+            or starts[0] != 0
+            or any(b <= a for a, b in zip(starts, (*starts[1:], n_samples + 1), strict=True))
+        ):
+            raise DatasetError(
+                f'{self.source}: segment starts {list(starts)} must rise from 0 within the '
+                f'{n_samples} samples'
+            )
         for key in ('position', 'velocity', 'current', 'joint_torque'):
             array = getattr(self, key)
             if array is not None and array.shape != (n_samples, n_joints):
@@ -72,6 +102,29 @@ class Recording:
     def n_samples(self) -> int:
         """Number of samples."""
         return len(self.stamps_ns)
+
+    def segments(self) -> list[Recording]:
+        """The segments as recordings of their own (this recording when it has one)."""
+        if len(self.segment_starts) == 1:
+            return [self]
+        bounds = (*self.segment_starts, self.n_samples)
+        count = len(self.segment_starts)
+
+        def part(array: np.ndarray | None, a: int, b: int) -> np.ndarray | None:
+            return None if array is None else array[a:b]
+
+        return [
+            Recording(
+                joints=self.joints,
+                stamps_ns=self.stamps_ns[a:b],
+                position=self.position[a:b],
+                velocity=self.velocity[a:b],
+                current=part(self.current, a, b),
+                joint_torque=part(self.joint_torque, a, b),
+                source=f'{self.source} (segment {k + 1} of {count})',
+            )
+            for k, (a, b) in enumerate(itertools.pairwise(bounds))
+        ]
 
     @property
     def duration_s(self) -> float:
@@ -106,7 +159,11 @@ def write_recording(
     topics = topics or TopicConfig()
     path = Path(path)
     empty = np.empty(0)
-    with BagWriter(path, overwrite=overwrite) as writer:
+    custom = {}
+    if len(recording.segment_starts) > 1:
+        starts = recording.stamps_ns[list(recording.segment_starts)]
+        custom[SEGMENTS_KEY] = json.dumps([int(stamp) for stamp in starts])
+    with BagWriter(path, overwrite=overwrite, custom_data=custom) as writer:
         writer.add_topic(topics.joint_states, JOINT_STATE)
         if recording.current is not None:
             writer.add_topic(topics.motor_currents, JOINT_STATE)
@@ -175,7 +232,8 @@ def load_recording(
             f'{where_js}: messages carry no '
             f'{"position" if states.position is None else "velocity"}'
         )
-    check_stamps(states.stamps_ns, robot.ipo_period_s, max_gap_periods, where_js)
+    starts = _segment_starts(path, states.stamps_ns)
+    _check_segment_stamps(states.stamps_ns, starts, robot, max_gap_periods, where_js)
     position = states.position[:, order]
     velocity = states.velocity[:, order]
     joint_torque = None if states.effort is None else states.effort[:, order]
@@ -202,7 +260,7 @@ def load_recording(
         order_mc = _reorder(currents, robot.joints, where_mc)
         if currents.effort is None:
             raise DatasetError(f'{where_mc}: messages carry no effort (the motor currents)')
-        check_stamps(currents.stamps_ns, robot.ipo_period_s, max_gap_periods, where_mc)
+        _check_segment_stamps(currents.stamps_ns, starts, robot, max_gap_periods, where_mc)
         size = min(len(currents.stamps_ns), len(states.stamps_ns))
         mismatch = np.flatnonzero(currents.stamps_ns[:size] != states.stamps_ns[:size])
         if mismatch.size:
@@ -249,4 +307,49 @@ def load_recording(
         current=current,
         joint_torque=joint_torque,
         source=str(path),
+        segment_starts=tuple(start for start in starts if start < len(states.stamps_ns)),
     )
+
+
+def _segment_starts(path: Path, stamps_ns: np.ndarray) -> tuple[int, ...]:
+    """First sample of each segment the bag's metadata lists (``SEGMENTS_KEY``), else (0,).
+
+    Raises:
+        DatasetError: the entry is malformed, or names a stamp the recording does not have.
+    """
+    text = bag_info(path).custom_data.get(SEGMENTS_KEY)
+    if text is None:
+        return (0,)
+    try:
+        stamps = [int(stamp) for stamp in json.loads(text)]
+    except (ValueError, TypeError) as err:
+        raise DatasetError(
+            f'{path}: metadata.yaml custom_data {SEGMENTS_KEY} is no list of stamps: {err}'
+        ) from err
+    index = np.searchsorted(stamps_ns, stamps)
+    missing = [
+        stamp
+        for stamp, i in zip(stamps, index, strict=True)
+        if i >= len(stamps_ns) or stamps_ns[i] != stamp
+    ]
+    if missing or not stamps or index[0] != 0:
+        raise DatasetError(
+            f'{path}: metadata.yaml custom_data {SEGMENTS_KEY} lists segment starts the '
+            f'recording does not begin with or hold (e.g. {missing[:3] or stamps[:1]} ns)'
+        )
+    return tuple(int(i) for i in index)
+
+
+def _check_segment_stamps(
+    stamps_ns: np.ndarray,
+    starts: tuple[int, ...],
+    robot: RobotConfig,
+    max_gap_periods: float,
+    where: str,
+) -> None:
+    """``check_stamps`` within each segment, and increasing stamps across their seams."""
+    check_stamps(stamps_ns, robot.ipo_period_s, np.inf, where)
+    bounds = (*starts, len(stamps_ns))
+    for k, (a, b) in enumerate(itertools.pairwise(bounds)):
+        segment = where if len(starts) == 1 else f'{where} (segment {k + 1}, from sample {a})'
+        check_stamps(stamps_ns[a:b], robot.ipo_period_s, max_gap_periods, segment)

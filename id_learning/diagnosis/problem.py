@@ -106,7 +106,9 @@ def as_datasets(
                 'recording was made with'
             )
         if isinstance(item, Recording):
-            datasets.append(prepare_dataset(item, robot, config.preprocess))
+            datasets.extend(
+                prepare_dataset(segment, robot, config.preprocess) for segment in item.segments()
+            )
             continue
         if not math.isclose(item.period_s, robot.ipo_period_s, rel_tol=1e-9):
             raise DatasetError(

@@ -1,7 +1,8 @@
 """Loading the bags of a run: preprocessing each on its own, hashing, and joining them.
 
-Several bags: each is preprocessed on its own (the zero-phase filter and the differentiation
-must not run across the seam of two recordings) and split 70/30 in time on its own; the training
+Several bags, or several segments of one bag: each is preprocessed on its own (the zero-phase
+filter and the differentiation must not run across the seam of two recordings) and split 70/30
+in time on its own; the training
 parts are concatenated in bag order, then the test parts (``combine_datasets``). For evaluating a
 run on other recordings they are joined whole instead (``concatenate_for_evaluation``). Kept apart
 from fitting and the run folder because the online check and the benchmarks load data the same
@@ -29,10 +30,12 @@ from id_learning.robot.config import RobotConfig
 from id_learning.twin import read_noise_free_torque
 
 __all__ = [
+    'bag_of',
     'bag_sha256',
     'combine_datasets',
     'concatenate_for_evaluation',
     'data_sha256',
+    'datasets_by_bag',
     'load_datasets',
     'mask_sha256',
     'preprocess_from_dict',
@@ -150,11 +153,31 @@ def load_datasets(
             progress=progress,
             trim_unpaired_tail=trim_unpaired_tail,
         )
-        dataset = prepare_dataset(recording, robot, config)
-        clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)
-        datasets.append(replace(dataset, tau_clean=clean) if clean is not None else dataset)
-        _LOG.info('%s: %d samples', bag, recording.n_samples)
+        for segment in recording.segments():
+            dataset = prepare_dataset(segment, robot, config)
+            clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)
+            datasets.append(
+                replace(dataset, tau_clean=clean, extra={**dataset.extra, 'bag': str(bag)})
+            )
+        _LOG.info(
+            '%s: %d samples in %d segment(s)',
+            bag,
+            recording.n_samples,
+            len(recording.segment_starts),
+        )
     return datasets
+
+
+def bag_of(dataset: Dataset) -> str:
+    """The bag a dataset (one segment of it) was loaded from, else its source."""
+    return str(dataset.extra.get('bag', dataset.source))
+
+
+def datasets_by_bag(
+    bags: Sequence[Path], datasets: Sequence[Dataset]
+) -> list[tuple[Path, list[int]]]:
+    """Per bag, the indices of its datasets (its segments, in order) in ``datasets``."""
+    return [(bag, [i for i, d in enumerate(datasets) if bag_of(d) == str(bag)]) for bag in bags]
 
 
 def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
@@ -189,7 +212,9 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
     segments: list[dict[str, Any]] = []
     start = 0
     for d in datasets:
-        segments.append({'source': d.source, 'train': [start, start + d.n_train]})
+        segments.append(
+            {'source': d.source, 'bag': bag_of(d), 'train': [start, start + d.n_train]}
+        )
         start += d.n_train
     n_train = start
     for d, segment in zip(datasets, segments, strict=True):
@@ -238,7 +263,7 @@ def _joined_whole(
     """
     segments, start = [], 0
     for d in datasets:
-        segments.append({'source': d.source, 'rows': [start, start + len(d.q)]})
+        segments.append({'source': d.source, 'bag': bag_of(d), 'rows': [start, start + len(d.q)]})
         start += len(d.q)
     mask = np.concatenate(seen)
     joined = _joined(
@@ -277,7 +302,12 @@ def concatenate_for_evaluation(
     for d, n_seen in zip(datasets, seen, strict=True):
         stop = start + len(d.q)
         segments.append(
-            {'source': d.source, 'train': [start, start + n_seen], 'test': [start + n_seen, stop]}
+            {
+                'source': d.source,
+                'bag': bag_of(d),
+                'train': [start, start + n_seen],
+                'test': [start + n_seen, stop],
+            }
         )
         start = stop
     if sum(s['test'][1] - s['test'][0] for s in segments) == 0:
@@ -373,9 +403,16 @@ def training_data_summary(
     """
     entries: list[dict[str, Any]] = [{'path': str(b), 'sha256': bag_sha256(b)} for b in bags]
     if dataset.train_mask is not None:
-        for entry, rows in zip(entries, dataset.recording_rows(), strict=True):
-            entry['n_samples'] = len(rows)
-            entry['train_mask_sha256'] = mask_sha256(dataset.train_mask[rows])
+        segments = dataset.extra['segments']
+        for entry in entries:
+            rows = [
+                rows
+                for rows, segment in zip(dataset.recording_rows(), segments, strict=True)
+                if segment.get('bag', segment['source']) == entry['path']
+            ]
+            mask = np.concatenate([dataset.train_mask[r] for r in rows])
+            entry['n_samples'] = len(mask)
+            entry['train_mask_sha256'] = mask_sha256(mask)
     return {
         'bags': entries,
         'data_sha256': data_sha256(dataset),

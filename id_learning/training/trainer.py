@@ -44,6 +44,7 @@ from id_learning.training.datasets import (
     combine_datasets,
     concatenate_for_evaluation,
     data_sha256,
+    datasets_by_bag,
     load_datasets,
     mask_sha256,
     preprocess_from_dict,
@@ -333,26 +334,31 @@ def _load_models(run_dir: Path, run: dict[str, Any], robot: RobotConfig) -> dict
 def _unseen_parts(
     bags: list[Path], datasets: list[Dataset], run: dict[str, Any]
 ) -> tuple[list[int | np.ndarray], list[str]]:
-    """Per bag, the rows the run's models saw (a training bag's training part), and a sentence."""
+    """Per dataset (a bag's segment), the rows the run's models saw, and a sentence per bag.
+
+    A training bag of the run contributes its test part only; any other bag all of it.
+    """
     trained_on = {entry['sha256']: entry for entry in run['training_data']['bags']}
-    seen: list[int | np.ndarray] = []
+    seen: list[int | np.ndarray] = [0] * len(datasets)
     parts: list[str] = []
-    for bag, part in zip(bags, datasets, strict=True):
+    for bag, indices in datasets_by_bag(bags, datasets):
         entry = trained_on.get(bag_sha256(bag))
-        if entry is not None:
-            rows = seen_rows(part)
-            stored = entry.get('train_mask_sha256')
-            if isinstance(rows, np.ndarray) and stored is not None and mask_sha256(rows) != stored:
-                raise CheckpointError(
-                    f"{bag}: the run's shuffled split could not be rebuilt ({len(rows)} samples "
-                    f'now, {entry.get("n_samples")} then, or another random stream): its training '
-                    'samples cannot be told from its test samples'
-                )
-            seen.append(rows)
-            parts.append(f'{bag}: test part only (a training bag of the run)')
-        else:
-            seen.append(0)
+        if entry is None:
             parts.append(f'{bag}: whole recording')
+            continue
+        rows = [seen_rows(datasets[i]) for i in indices]
+        stored = entry.get('train_mask_sha256')
+        masks = [r for r in rows if isinstance(r, np.ndarray)]
+        if masks and stored is not None and mask_sha256(np.concatenate(masks)) != stored:
+            n_now = sum(len(m) for m in masks)
+            raise CheckpointError(
+                f"{bag}: the run's shuffled split could not be rebuilt ({n_now} samples "
+                f'now, {entry.get("n_samples")} then, or another random stream): its training '
+                'samples cannot be told from its test samples'
+            )
+        for i, r in zip(indices, rows, strict=True):
+            seen[i] = r
+        parts.append(f'{bag}: test part only (a training bag of the run)')
     return seen, parts
 
 
