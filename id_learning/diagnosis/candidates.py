@@ -199,10 +199,10 @@ def testability(
         smallest = 5.0 / float(norm[0])  # 5 standard errors from zero, noise only
         if smallest > bound:
             unit = PARAMETERS[spec.name][0][1]
-            if not smallest < 1e3 * bound:  # a number that large means nothing to a reader
+            if not smallest < 10.0 * bound:  # a number that large means nothing to a reader
                 return False, (
                     'not detectable on this excitation: its signature is at the noise level '
-                    f'(it would take a value over 1000 times the plausible bound {bound:.3g} '
+                    f'(it would take a value over 10 times the plausible bound {bound:.3g} '
                     f'{unit} to show)'
                 )
             return False, (

@@ -35,6 +35,7 @@ from id_learning.diagnosis.candidates import (
     describe_parameters,
 )
 from id_learning.diagnosis.config import DiagnosisConfig
+from id_learning.diagnosis.heldout import fallback_joints, judge_effects, test_blocks
 from id_learning.diagnosis.locate import locate_residual
 from id_learning.diagnosis.problem import (
     ResidualProblem,
@@ -49,6 +50,7 @@ from id_learning.diagnosis.selection import (
     AliasSet,
     Design,
     Fit,
+    GroupEvaluation,
     SelectionResult,
     find_aliases,
     forward_select,
@@ -110,9 +112,47 @@ def run_diagnosis(
         design = candidates.design(y, n_eff)
         aliases = aliases_of(selected)
     aliases = candidates.without_generalisations(aliases)
+    blocks = test_blocks(problem, design.residual(design.fit(selected), 'test'))
+    steps = list(selection.steps)
+    unconfirmed = _unconfirmed_springs(candidates, design, selected, blocks, config)
+    if unconfirmed:
+        steps = [st for st, label in zip(steps, selected, strict=True) if label not in unconfirmed]
+        selected = [label for label in selected if label not in unconfirmed]
+        aliases = candidates.without_generalisations(aliases_of(selected))
     return _assemble(
-        problem, candidates, design, selection=selection, selected=selected, aliases=aliases
+        problem,
+        candidates,
+        design,
+        selection=selection,
+        steps=steps,
+        selected=selected,
+        aliases=aliases,
+        blocks=blocks,
     )
+
+
+def _unconfirmed_springs(
+    candidates: CandidateSet,
+    design: Design,
+    selected: list[str],
+    blocks: tuple[np.ndarray, float],
+    config: DiagnosisConfig,
+) -> list[str]:
+    """Gravity springs whose held-out gain is not significant over blocks of time.
+
+    A spring claims hardware the robot may not have, and on real robots it stands in for other
+    position-dependent errors (offsets, link parameters) on the training part; it is named only
+    when the held-out part confirms it with every other effect in the model.
+    """
+    springs = [label for label in selected if candidates.specs[label].name == 'gravity_spring']
+    if not springs:
+        return []
+    tests = judge_effects(design, selected, design.fit(selected), *blocks)
+    return [
+        label
+        for label in springs
+        if not (tests[label].judged and tests[label].p_value < config.significance)
+    ]
 
 
 def augmented_torque(
@@ -192,26 +232,40 @@ def _assemble(
     design: Design,
     *,
     selection: SelectionResult,
+    steps: list[GroupEvaluation],
     selected: list[str],
     aliases: list[AliasSet],
+    blocks: tuple[np.ndarray, float],
 ) -> DiagnosisResult:
-    """Refit with the selected effects and collect what the report shows."""
+    """Refit with the selected effects and collect what the report shows.
+
+    An effect is named with high confidence only when its held-out gain over blocks of time is
+    significant (``heldout.judge_effects``) and no structured remainder on its joints outweighs
+    it; joints the effects do not improve on the held-out part fall back to the nominal model.
+    """
     robot, config = problem.robot, problem.config
     final = design.fit(selected)
+    tests = judge_effects(design, selected, final, *blocks)
+    fallback = fallback_joints(design, final, blocks[0])
     waterfall, explained, explained_total = _waterfall(design, selected, problem.weights)
     remainder = _remainder(problem, design, final, config)
     members = {label for alias in aliases for label in alias.members}
     t_crit = float(stats.t.ppf(0.975, max(design.n_eff_train - final.rank, 1.0)))
     effects = []
-    for step, label in zip(selection.steps, selected, strict=True):
+    for step, label in zip(steps, selected, strict=True):
         spec = candidates.specs[label]
         theta = design.physical(final, label)
         interval_covariance = t_crit**2 * design.physical_covariance(final, label)
         half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
         rms = _rmse(np.concatenate([design.contribution(final, label, p) for p in PARTS]))
         # Low confidence: a structured remainder on one of its joints outweighs what it explains.
-        low = any(
-            r.structured and 0 < rms[robot.joints.index(r.joint)] < r.rms_nm for r in remainder
+        test = tests[label]
+        low = (
+            any(
+                r.structured and 0 < rms[robot.joints.index(r.joint)] < r.rms_nm for r in remainder
+            )
+            or not (test.judged and test.p_value < config.significance)
+            or (spec.joint is not None and spec.joint in fallback)
         )
         effects.append(
             FoundEffect(
@@ -232,6 +286,12 @@ def _assemble(
                     'delta_bic': step.delta_bic,
                     'held_out_gain': step.held_out_gain,
                     'columns': step.extra_rank,
+                    'held_out_blocks': {
+                        'p_value_holm': test.p_value,
+                        'n_blocks': test.n_blocks,
+                        'block_s': test.block_s,
+                        'gain_share': test.gain,
+                    },
                 },
             )
         )
@@ -247,6 +307,8 @@ def _assemble(
             'plausible': r.plausible,
             'reason': r.reason,
         }
+    after_test = design.residual(final, 'test')
+    after_test[:, fallback] = design.y['test'][:, fallback]
     times = {part: problem.times(part) for part in PARTS}
     location = locate_residual(
         design.y['train'],
@@ -276,7 +338,8 @@ def _assemble(
         untestable=candidates.untestable_summary(),
         remainder=remainder,
         rmse_before_nm=_rmse(design.residual(design.fit([]), 'test')),
-        rmse_after_nm=_rmse(design.residual(final, 'test')),
+        rmse_after_nm=_rmse(after_test),
+        nominal_joints=[robot.joints[j] for j in fallback],
         waterfall=waterfall,
         location=location,
         stop_reason=selection.stop_reason,

@@ -14,6 +14,7 @@ from id_learning.dataset.recording import Recording
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.locate import LOCATION_VARIABLES
 from id_learning.diagnosis.pipeline import DiagnosisResult, run_diagnosis
+from id_learning.diagnosis.result import FoundEffect
 from id_learning.physics.augmented import EFFECTS_JSON
 from id_learning.robot.config import RobotConfig
 
@@ -83,8 +84,8 @@ def _verdict(result: DiagnosisResult) -> list[str]:
             lines.append(
                 f'- **{effect.name}**{where}: '
                 + '; '.join(_parameter_text(p) for p in effect.parameters)
-                + f' (explains {100 * effect.variance_explained_total:.0f} % of the '
-                f'disagreement, confidence {effect.confidence})'
+                + f' (explains {_share(effect.variance_explained_total)} of the '
+                f'disagreement; {_held_out(effect)}; confidence {effect.confidence})'
             )
     else:
         lines.append('- No named effect is needed to explain the data.')
@@ -112,9 +113,22 @@ def _verdict(result: DiagnosisResult) -> list[str]:
             [
                 ['nominal', *[f'{x:.3g}' for x in result.rmse_before_nm]],
                 *[[f'+ {label}', *[f'{x:.3g}' for x in rmse]] for label, rmse in result.waterfall],
+                ['RNEA+effects (as saved)', *[f'{x:.3g}' for x in result.rmse_after_nm]],
                 ['noise level (estimate)', *[f'{x:.3g}' for x in result.noise.filtered_std_nm]],
             ],
         ),
+        '',
+        *_fallback_lines(result),
+    ]
+
+
+def _fallback_lines(result: DiagnosisResult) -> list[str]:
+    """Which joints the saved model leaves to the nominal model, and why."""
+    if not result.nominal_joints:
+        return []
+    return [
+        f'The effects do not improve {", ".join(result.nominal_joints)} on the held-out part '
+        '(judged over blocks of time): the saved model gives the nominal torque there.',
         '',
     ]
 
@@ -129,7 +143,7 @@ def _effects(result: DiagnosisResult) -> list[str]:
                 effect.status,
                 effect.confidence,
                 '<br>'.join(_parameter_text(p) for p in effect.parameters),
-                ', '.join(f'{100 * x:.0f}' for x in effect.variance_explained),
+                ', '.join(_share(x).removesuffix(' %') for x in effect.variance_explained),
                 f'F = {effect.selection["f_statistic"]:.1f}, '
                 f'p = {effect.selection["p_value"]:.2g}, '
                 f'ΔBIC = {effect.selection["delta_bic"]:.1f}',
@@ -191,7 +205,7 @@ def _remainder(result: DiagnosisResult) -> list[str]:
         *_table([*head, 'structured'], rows),
         '',
         f'Noise: raw label {", ".join(f"{x:.3g}" for x in noise.raw_std_nm)} N·m white level '
-        f'(median spectrum {noise.band_hz[0]:g}–{noise.band_hz[1]:g} Hz); after the filter '
+        f'({_band(noise.band_hz)}); after the filter '
         f'{", ".join(f"{x:.3g}" for x in noise.filtered_std_nm)} N·m with correlation times '
         f'{", ".join(f"{x:.0f}" for x in noise.correlation_samples)} samples; effective '
         f'samples train {", ".join(f"{x:.0f}" for x in result.effective_samples["train"])}, '
@@ -363,3 +377,29 @@ def diagnose(
     if out_dir is not None:
         write_report(result, Path(out_dir))
     return result
+
+
+def _share(x: float) -> str:
+    """A share of the disagreement for readers: '<1 %' when tiny, 'none' when not positive."""
+    if not x > 0:
+        return 'none'
+    return '<1 %' if x < 0.005 else f'{100 * x:.0f} %'
+
+
+def _held_out(effect: FoundEffect) -> str:
+    """The held-out block test of an effect, in words."""
+    test = effect.selection.get('held_out_blocks')
+    if not test:
+        return 'held-out gain not judged'
+    blocks = f'{test["n_blocks"]} blocks of {test["block_s"]:.2g} s'
+    if test['p_value_holm'] != test['p_value_holm']:  # nan: too few blocks
+        return f'held-out part too short to judge ({blocks})'
+    return f'held-out gain over {blocks}: p = {test["p_value_holm"]:.2g}'
+
+
+def _band(band_hz: tuple[float, float] | np.ndarray) -> str:
+    """The band the white noise level was read in, or where it was read when no band fits."""
+    low, high = float(band_hz[0]), float(band_hz[1])
+    if low < high:
+        return f'median spectrum {low:.3g}–{high:.3g} Hz'
+    return 'read at the top of the spectrum: the label filter leaves no noise-only band'

@@ -36,15 +36,17 @@ class FoundEffect:
     Attributes:
         spec: the candidate (name, joint, column settings).
         status: 'found' (named) or 'alias' (kept in the model, but one of an alias set).
-        confidence: 'high', or 'low' when a structured remainder on its joints is larger than
-            what it explains there.
+        confidence: 'high', or 'low' when its held-out gain over blocks of time is not
+            significant (or cannot be judged), when its joint falls back to the nominal model,
+            or when a structured remainder on its joints is larger than what it explains there.
         coefficients: (k,) column coefficients in physical units (the model's parameters).
         coefficients_ci: (k, 2) 95 % confidence intervals of the coefficients.
         parameters: physical parameters with intervals (``describe_parameters``).
         contribution_rms_nm: (n,) RMS of the filtered torque it adds per joint [N*m].
         variance_explained: (n,) share of the nominal residual's held-out variance it removed.
         variance_explained_total: the same over all joints, noise-weighted.
-        selection: the tests when it entered (F, p-value, delta BIC, held-out gain).
+        selection: the tests when it entered (F, p-value, delta BIC, held-out gain), and
+            'held_out_blocks': its gain judged over blocks of held-out time (``heldout``).
     """
 
     spec: EffectSpec
@@ -56,7 +58,7 @@ class FoundEffect:
     contribution_rms_nm: np.ndarray
     variance_explained: np.ndarray
     variance_explained_total: float
-    selection: dict[str, float]
+    selection: dict[str, Any]
 
     @property
     def name(self) -> str:
@@ -109,11 +111,14 @@ class DiagnosisResult:
         alias_sets: effects this excitation cannot tell apart.
         untestable: candidates the excitation cannot show, with reasons.
         remainder: per joint, what is left.
-        rmse_before_nm, rmse_after_nm: (n,) held-out RMSE of the nominal and the refit model.
+        rmse_before_nm, rmse_after_nm: (n,) held-out RMSE of the nominal and the refit model
+            (the nominal model's on the joints in ``nominal_joints``).
         waterfall: per added effect, (label, (n,) held-out RMSE after adding it [N*m]).
         location: per joint, where the nominal residual lives.
         stop_reason: why the selection stopped.
         rejected: the best candidate that did not enter, and why.
+        nominal_joints: joints whose held-out part the effects do not improve: the refit model
+            gives the nominal torque there.
         config: the settings used (JSON-ready).
         settings: the diagnosis config (not serialised; ``config`` is its JSON form).
         series: on the kept rows of both parts (not serialised): 'time_s' (M,), 'is_test' (M,),
@@ -137,6 +142,7 @@ class DiagnosisResult:
     location: list[JointLocation]
     stop_reason: str
     rejected: dict[str, Any] | None
+    nominal_joints: list[str] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
     series: dict[str, np.ndarray] = field(default_factory=dict)
     settings: DiagnosisConfig | None = None
@@ -162,7 +168,10 @@ class DiagnosisResult:
     def augmented_model(self) -> AugmentedModel:
         """The refit model: nominal plus every effect (aliases' representatives included)."""
         return AugmentedModel(
-            self.robot, self.target, [(e.spec, e.coefficients) for e in self.effects]
+            self.robot,
+            self.target,
+            [(e.spec, e.coefficients) for e in self.effects],
+            nominal_joints=self.nominal_joints,
         )
 
     @property
@@ -232,6 +241,7 @@ class DiagnosisResult:
             'held_out_rmse_nm': {
                 'before': self.rmse_before_nm.tolist(),
                 'after': self.rmse_after_nm.tolist(),
+                'nominal_joints': list(self.nominal_joints),
                 'waterfall': [
                     {'added': label, 'rmse_nm': rmse.tolist()} for label, rmse in self.waterfall
                 ],

@@ -113,6 +113,7 @@ def _terms_metadata(model: AugmentedModel) -> dict[str, Any]:
     return {
         'target': model.target,
         'terms': [spec.to_dict() for spec, _ in model.terms],
+        'nominal_joints': list(model.nominal_joints),
     }
 
 
@@ -139,6 +140,8 @@ def _load_terms(
             {'spec': spec, 'coefficients': np.asarray(tensors[name], dtype=float)}
             for spec, name in zip(specs, expected, strict=True)
         ],
+        # Artifacts saved before the per-joint fallback add the effects on every joint.
+        'nominal_joints': fitted.get('nominal_joints', []),
     }
     try:
         return AugmentedModel.from_dict(data, robot)

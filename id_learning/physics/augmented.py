@@ -35,6 +35,11 @@ class AugmentedModel:
         robot: the robot config (URDF, drives).
         target: 'motor' (tau_u, rotor inertia included) or 'joint'.
         terms: (effect, coefficients) pairs; each adds ``effect_columns(effect) @ theta``.
+        nominal_joints: joints left to the nominal model (the diagnosis's per-joint fallback,
+            where held-out data showed the effects do not help): their torque is the nominal one.
+
+    Raises:
+        RobotModelError: a fallback joint is not the robot's.
     """
 
     def __init__(
@@ -42,11 +47,21 @@ class AugmentedModel:
         robot: RobotConfig,
         target: str,
         terms: Sequence[tuple[EffectSpec, np.ndarray]],
+        *,
+        nominal_joints: Sequence[str] = (),
     ) -> None:
         """Store the terms; the URDF is read on first use."""
         self.robot = robot
         self.target = target
         self.terms = [(spec, np.asarray(theta, dtype=float)) for spec, theta in terms]
+        unknown = [name for name in nominal_joints if name not in robot.joints]
+        if unknown:
+            raise RobotModelError(
+                f'nominal_joints {unknown} are not joints of robot {robot.name} '
+                f'{list(robot.joints)}'
+            )
+        self.nominal_joints = tuple(nominal_joints)
+        self._fallback = np.array([robot.joints.index(name) for name in nominal_joints], int)
 
     @cached_property
     def nominal(self) -> NominalModel:
@@ -66,7 +81,9 @@ class AugmentedModel:
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
         )
-        return self._additive(quantities, self.terms)
+        tau = self._additive(quantities, self.terms)
+        tau[:, self._fallback] = quantities.tau_nominal[:, self._fallback]
+        return tau
 
     def _additive(
         self,
@@ -121,7 +138,7 @@ class AugmentedModel:
             folded.append((JOINT_COLUMNS[name], joints, settings, theta))
         specs = [spec for spec, _ in rest]
         derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
-        nominal, additive = self.nominal, self._additive
+        nominal, additive, fallback = self.nominal, self._additive, self._fallback
 
         def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             qs = nominal.evaluate(
@@ -130,7 +147,9 @@ class AugmentedModel:
             tau: np.ndarray = qs.tau_nominal[0].copy()
             for columns, joints, settings, theta in folded:
                 np.add.at(tau, joints, columns(qs, joints, settings, nominal)[0][0] * theta)
-            return additive(qs, rest, tau[None])[0]
+            out: np.ndarray = additive(qs, rest, tau[None])[0]
+            out[fallback] = qs.tau_nominal[0, fallback]
+            return out
 
         return torque_one
 
@@ -144,6 +163,7 @@ class AugmentedModel:
                 {'spec': spec.to_dict(), 'coefficients': theta.tolist()}
                 for spec, theta in self.terms
             ],
+            'nominal_joints': list(self.nominal_joints),
         }
 
     @classmethod
@@ -160,10 +180,12 @@ class AugmentedModel:
             )
         if 'terms' in data:
             entries = [(t['spec'], t['coefficients']) for t in data['terms']]
+            fallback = data.get('nominal_joints', [])
         else:  # effects.json
             entries = [(e['model']['spec'], e['model']['coefficients']) for e in data['effects']]
+            fallback = data.get('held_out_rmse_nm', {}).get('nominal_joints', [])
         terms = [
             (EffectSpec.from_dict(spec, robot.joints), np.asarray(theta, dtype=float))
             for spec, theta in entries
         ]
-        return cls(robot, str(data['target']), terms)
+        return cls(robot, str(data['target']), terms, nominal_joints=list(fallback))

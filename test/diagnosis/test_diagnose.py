@@ -262,3 +262,22 @@ def test_load_dependent_friction_takes_the_payload_into_its_load():
     friction = next(e for e in result.effects if e.name == 'load_dependent_friction')
     assert friction.spec.settings['load'] == 'model'
     assert friction.coefficients[0] == pytest.approx(0.03, rel=0.1)
+
+
+def test_a_robot_without_a_spring_gets_none_and_no_joint_is_made_worse():
+    """Offsets and link-parameter errors bend the gravity torque as a spring would; held-out
+    blocks of time do not confirm a spring, and every joint ends no worse than nominal."""
+    config, twin = hidden(
+        {
+            'joint_offset': {'enabled': True},
+            'inertial_parameter_error': {'enabled': True},
+            'coulomb_friction': {'enabled': True},
+        }
+    )
+    result = run_diagnosis(twin.recording, config.robot)
+    assert not [e for e in result.effects if e.name == 'gravity_spring']
+    assert (result.rmse_after_nm <= result.rmse_before_nm * (1 + 1e-12)).all()
+    for effect in result.effects:
+        if effect.confidence == 'high':
+            blocks = effect.selection['held_out_blocks']
+            assert blocks['p_value_holm'] < result.settings.significance
