@@ -108,8 +108,9 @@ class ResamplePolicy:
         period_s: the grid's period [s]; None: the robot's IPO period (``--robot``), else the
             log's median step.
         max_gap_s: a pause in the log longer than this [s] ends a segment, never bridged; None:
-            3 grid periods (what loading a bag tolerates). Shorter pauses are left as gaps
-            ('snap') or bridged by interpolation ('interpolate'), and reported either way.
+            3 grid periods (what loading a bag tolerates; 'interpolate': 3 log steps when the log
+            is slower). Shorter pauses are left as gaps ('snap', at most 3 periods then) or
+            bridged by interpolation ('interpolate'), and reported either way.
         min_segment_s: a segment shorter than this [s] is dropped and reported (0: every segment
             of two samples or more is kept; preprocessing refuses one too short for its filter).
     """

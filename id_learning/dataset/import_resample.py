@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from id_learning.dataset.import_mapping import ResamplePolicy
+from id_learning.errors import ConfigError
 
 __all__ = ['GAP_PERIODS', 'Gridded', 'Segment', 'interpolate_segments', 'slot_segments']
 
@@ -85,8 +86,23 @@ class Gridded:
     short: list[tuple[int, int, float]] = field(default_factory=list)
 
 
-def _max_gap_s(policy: ResamplePolicy, period_s: float) -> float:
-    return policy.max_gap_s if policy.max_gap_s is not None else GAP_PERIODS * period_s
+def _max_gap_s(policy: ResamplePolicy, period_s: float, step_s: float | None = None) -> float:
+    """The longest pause inside a segment [s].
+
+    The policy's, else 3 grid periods (3 log steps when the log is slower and resampled).
+
+    Raises:
+        ConfigError: a gap left unfilled ('snap') longer than loading a bag tolerates.
+    """
+    if policy.max_gap_s is None:
+        return GAP_PERIODS * max(period_s, step_s or 0.0)
+    if step_s is None and policy.max_gap_s > GAP_PERIODS * period_s * (1 + 1e-9):
+        raise ConfigError(
+            f'resample.max_gap_s {policy.max_gap_s:g} s: pauses are left unfilled when samples '
+            f'are snapped, and loading a bag refuses gaps over {GAP_PERIODS:g} periods '
+            f'({GAP_PERIODS * period_s:g} s); use at most that, or method: interpolate'
+        )
+    return policy.max_gap_s
 
 
 def _stretches(
@@ -169,7 +185,8 @@ def interpolate_segments(
     inside its time span.
     """
     out = Gridded([], period_s, 0.0, 0.0)
-    stretches = _stretches(times_s, positions, _max_gap_s(policy, period_s), out)
+    median_step = float(np.median(np.diff(times_s)))
+    stretches = _stretches(times_s, positions, _max_gap_s(policy, period_s, median_step), out)
     kept = [s for s in stretches if _keep_long(s, times_s, positions, policy, out)]
     out.source_step_s, out.mean_step_s = _step_stats(times_s, kept)
     for s in kept:

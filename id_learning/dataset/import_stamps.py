@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from id_learning.dataset.import_mapping import UNITS, ImportMapping
-from id_learning.errors import DatasetError
+from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['Snapped', 'grid_period_s', 'relative_times', 'snap_to_grid']
@@ -74,6 +74,12 @@ def grid_period_s(
     """
     policy = mapping.resample
     if policy.period_s is not None:
+        if robot is not None and abs(policy.period_s - robot.ipo_period_s) > 1e-12:
+            raise ConfigError(
+                f'{mapping.where}: resample.period_s {policy.period_s:g} s is not the IPO period '
+                f'{robot.ipo_period_s:g} s of robot {robot.name}: its bags must be on its grid '
+                "(omit period_s to take the robot's)"
+            )
         return float(policy.period_s)
     median_s = float(np.median(np.diff(times_s)))
     if robot is not None:

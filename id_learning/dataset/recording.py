@@ -84,7 +84,7 @@ class Recording:
         if (
             not starts
             or starts[0] != 0
-            or any(b <= a for a, b in zip(starts, (*starts[1:], n_samples + 1), strict=True))
+            or any(b <= a for a, b in zip(starts, (*starts[1:], max(n_samples, 1)), strict=True))
         ):
             raise DatasetError(
                 f'{self.source}: segment starts {list(starts)} must rise from 0 within the '

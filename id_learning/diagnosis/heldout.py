@@ -14,6 +14,7 @@ end), and an effect's gain is judged by a one-sided t test over the blocks' gain
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -31,6 +32,8 @@ MIN_BLOCKS = 5
 #: Blocks span at least this many residual correlation times, and at least 1 s.
 _CORRELATION_TIMES = 2.0
 _MIN_BLOCK_S = 1.0
+#: A step of more than this many kept rows' spacing is a seam between recordings.
+_SEAM_ROWS = 3.0
 #: A joint keeps its effects when their held-out gain is significant at this level over blocks.
 FALLBACK_SIGNIFICANCE = 0.05
 
@@ -73,17 +76,23 @@ def test_blocks(problem: ResidualProblem, residual: np.ndarray) -> tuple[np.ndar
     )
     block_s = max(_MIN_BLOCK_S, _CORRELATION_TIMES * float(correlation_s))
     times = problem.times('test')
+    # A run of rows ends at a recording's end and wherever time jumps or goes back: a dataset
+    # joined from several recordings (the training parts of a run's bags) holds seams.
+    steps = np.diff(times)
+    seams = np.flatnonzero((steps <= 0) | (steps > _SEAM_ROWS * seconds_per_row)) + 1
+    ends = np.cumsum([len(r.rows['test']) for r in problem.recordings])[:-1]
+    bounds = [0, *sorted(set(seams.tolist()) | set(ends.tolist())), len(times)]
     ids = np.empty(len(times), dtype=np.int64)
-    start, next_id = 0, 0
-    for r in problem.recordings:
-        count = len(r.rows['test'])
-        t = times[start : start + count] - (times[start] if count else 0.0)
+    next_id = 0
+    for a, b in itertools.pairwise(bounds):
+        if b <= a:
+            continue
+        t = times[a:b] - times[a]
         local = np.floor(t / block_s).astype(np.int64)
-        if count and local.max() > 0 and t[-1] - local.max() * block_s < block_s / 2:
+        if local.max() > 0 and t[-1] - local.max() * block_s < block_s / 2:
             local[local == local.max()] -= 1
-        ids[start : start + count] = local + next_id
-        next_id += int(local.max()) + 1 if count else 0
-        start += count
+        ids[a:b] = local + next_id
+        next_id += int(local.max()) + 1
     return ids, block_s
 
 

@@ -162,7 +162,9 @@ def augmented_torque(
     a: np.ndarray,
     jerk: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Torque of the nominal model plus every effect of the refit model (aliases included).
+    """Torque of the refit model (nominal plus every effect, aliases included).
+
+    The nominal torque alone on its fallback joints (``DiagnosisResult.nominal_joints``).
 
     Args:
         result: a diagnosis.
@@ -287,7 +289,8 @@ def _assemble(
                     'held_out_gain': step.held_out_gain,
                     'columns': step.extra_rank,
                     'held_out_blocks': {
-                        'p_value_holm': test.p_value,
+                        # None: too few blocks to judge (JSON has no NaN).
+                        'p_value_holm': None if np.isnan(test.p_value) else test.p_value,
                         'n_blocks': test.n_blocks,
                         'block_s': test.block_s,
                         'gain_share': test.gain,
@@ -307,8 +310,7 @@ def _assemble(
             'plausible': r.plausible,
             'reason': r.reason,
         }
-    after_test = design.residual(final, 'test')
-    after_test[:, fallback] = design.y['test'][:, fallback]
+    after_test = _after(design, final, 'test', fallback)
     times = {part: problem.times(part) for part in PARTS}
     location = locate_residual(
         design.y['train'],
@@ -324,7 +326,9 @@ def _assemble(
         'is_test': np.concatenate([np.full(len(times[part]), part == 'test') for part in PARTS]),
         'label': np.concatenate([problem.label(part) for part in PARTS]),
         'residual_before': np.concatenate([design.y[part] for part in PARTS]),
-        'residual_after': np.concatenate([design.residual(final, part) for part in PARTS]),
+        'residual_after': np.concatenate(
+            [_after(design, final, part, fallback) for part in PARTS]
+        ),
     }
     return DiagnosisResult(
         robot=robot,
@@ -349,6 +353,13 @@ def _assemble(
         series=series,
         settings=config,
     )
+
+
+def _after(design: Design, final: Fit, part: str, fallback: list[int]) -> np.ndarray:
+    """The saved model's residual on a part: the nominal one on the fallback joints."""
+    residual = design.residual(final, part)
+    residual[:, fallback] = design.y[part][:, fallback]
+    return residual
 
 
 def _rmse(x: np.ndarray) -> np.ndarray:

@@ -383,7 +383,7 @@ def _share(x: float) -> str:
     """A share of the disagreement for readers: '<1 %' when tiny, 'none' when not positive."""
     if not x > 0:
         return 'none'
-    return '<1 %' if x < 0.005 else f'{100 * x:.0f} %'
+    return '<1 %' if x < 0.01 else f'{100 * x:.0f} %'
 
 
 def _held_out(effect: FoundEffect) -> str:
@@ -392,7 +392,7 @@ def _held_out(effect: FoundEffect) -> str:
     if not test:
         return 'held-out gain not judged'
     blocks = f'{test["n_blocks"]} blocks of {test["block_s"]:.2g} s'
-    if test['p_value_holm'] != test['p_value_holm']:  # nan: too few blocks
+    if test['p_value_holm'] is None:  # too few blocks
         return f'held-out part too short to judge ({blocks})'
     return f'held-out gain over {blocks}: p = {test["p_value_holm"]:.2g}'
 

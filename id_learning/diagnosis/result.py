@@ -166,7 +166,7 @@ class DiagnosisResult:
 
     @cached_property
     def augmented_model(self) -> AugmentedModel:
-        """The refit model: nominal plus every effect (aliases' representatives included)."""
+        """The refit model: nominal plus every effect; nominal alone on the fallback joints."""
         return AugmentedModel(
             self.robot,
             self.target,

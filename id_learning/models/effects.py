@@ -27,7 +27,7 @@ from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
 
-from id_learning.errors import CheckpointError, ConfigError
+from id_learning.errors import CheckpointError, ConfigError, RobotModelError
 from id_learning.models.base import (
     InverseDynamicsModel,
     ModelConfig,
@@ -145,7 +145,7 @@ def _load_terms(
     }
     try:
         return AugmentedModel.from_dict(data, robot)
-    except (KeyError, ValueError, TypeError) as err:
+    except (KeyError, ValueError, TypeError, RobotModelError) as err:
         raise CheckpointError(f'{kind}: an effect term cannot be rebuilt: {err}') from err
 
 

@@ -319,3 +319,29 @@ def test_a_bag_whose_segment_metadata_is_broken_is_refused(
     meta.write_text(yaml.safe_dump(data), encoding='utf-8')
     with pytest.raises(DatasetError, match=f'custom_data {SEGMENTS_KEY} lists segment starts'):
         load_recording(tmp_path / 'bag', robot)
+
+
+def test_settings_that_would_write_an_unloadable_bag_are_refused(
+    tmp_path: Path, robot: RobotConfig
+) -> None:
+    log = write_log(tmp_path / 'log.csv', np.arange(0.0, 1.0, 0.008), robot)
+    snap_long_gap = mapping_for(robot, resample=ResamplePolicy(max_gap_s=0.05))
+    with pytest.raises(ConfigError, match=r'max_gap_s 0.05 s: pauses are left unfilled'):
+        import_log(log, snap_long_gap, tmp_path / 'a', robot=robot)
+    other_grid = mapping_for(robot, resample=ResamplePolicy(method='interpolate', period_s=0.004))
+    with pytest.raises(ConfigError, match=r'period_s 0.004 s is not the IPO period 0.008 s'):
+        import_log(log, other_grid, tmp_path / 'b', robot=robot)
+    assert not (tmp_path / 'a').exists()
+    assert not (tmp_path / 'b').exists()
+
+
+def test_a_log_slower_than_three_grid_periods_is_resampled_not_cut_at_every_step(
+    tmp_path: Path, robot: RobotConfig
+) -> None:
+    log = write_log(tmp_path / 'log.csv', np.arange(0.0, 4.0, 0.030), robot)
+    report = import_log(
+        log, mapping_for(robot, resample=INTERPOLATE), tmp_path / 'bag', robot=robot
+    )
+    assert report.n_segments == 1
+    last_t = 0.030 * 133  # the log's last stamp
+    assert report.n_rows_written == int(np.floor(last_t / 0.008 + 1e-9)) + 1

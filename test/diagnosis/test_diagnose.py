@@ -280,4 +280,5 @@ def test_a_robot_without_a_spring_gets_none_and_no_joint_is_made_worse():
     for effect in result.effects:
         if effect.confidence == 'high':
             blocks = effect.selection['held_out_blocks']
+            assert blocks['p_value_holm'] is not None
             assert blocks['p_value_holm'] < result.settings.significance
