@@ -234,7 +234,7 @@ def _resample(
     if quantity in ('position', 'velocity'):
         if len(t) >= 4:
             return np.asarray(CubicSpline(t, x, axis=0)(grid_t))
-    elif step_s * (1.0 + 1e-6) < period_s / 1.25:
+    elif step_s * (1.0 + 1e-6) < period_s:
         t, x = _antialiased(t, x, step_s, period_s)
     return np.column_stack([np.interp(grid_t, t, x[:, j]) for j in range(x.shape[1])])
 
@@ -250,5 +250,6 @@ def _antialiased(
         return t, x  # too short to filter; so short a segment is dropped or nearly so
     on_uniform = np.column_stack([np.interp(uniform, t, x[:, j]) for j in range(x.shape[1])])
     cutoff_hz = _ANTIALIAS_NYQUIST_FRACTION * 0.5 / period_s
-    sos = signal.butter(_ANTIALIAS_ORDER, cutoff_hz, fs=1.0 / step_s, output='sos')
+    fs = (len(uniform) - 1) / (uniform[-1] - uniform[0])  # below 1.25 / period: cut-off < Nyquist
+    sos = signal.butter(_ANTIALIAS_ORDER, cutoff_hz, fs=fs, output='sos')
     return uniform, signal.sosfiltfilt(sos, on_uniform, axis=0)

@@ -159,6 +159,9 @@ class RowChecks:
         """(N,) True for rows with a value outside the bounds of this level."""
         bad = np.zeros(len(next(iter(values.values()))), dtype=bool)
         for quantity, array in values.items():
+            if wide:  # finite cells that overflow in the motor-side conversion (rows with
+                # empty cells are not kept, so their NaN never counts here)
+                bad |= ~np.isfinite(array).all(axis=1)
             bounds = self._bounds(quantity, wide)
             if bounds is not None:
                 bad |= ((array < bounds[0]) | (array > bounds[1])).any(axis=1)
@@ -167,6 +170,10 @@ class RowChecks:
     def describe(self, values: dict[str, np.ndarray], row: int, wide: bool) -> tuple[str, int]:
         """The first column of ``row`` outside the bounds, described, and its joint's index."""
         for quantity, array in values.items():
+            if wide and not np.isfinite(array[row]).all():
+                j = int(np.argmax(~np.isfinite(array[row])))
+                item = self._fields_of(quantity)[j]
+                return f'{item.describe()}: no finite value after the motors conversion', j
             bounds = self._bounds(quantity, wide)
             if bounds is None:
                 continue

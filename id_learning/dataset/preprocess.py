@@ -418,9 +418,16 @@ def target_torque(recording: Recording, robot: RobotConfig, target: Target) -> n
 
 
 def prepare_dataset(
-    recording: Recording, robot: RobotConfig, config: PreprocessConfig | None = None
+    recording: Recording,
+    robot: RobotConfig,
+    config: PreprocessConfig | None = None,
+    *,
+    segment: int = 0,
 ) -> Dataset:
     """Preprocess one recording: labels through the study's filter, inputs both ways.
+
+    ``segment``: the recording's index among a bag's segments; a shuffled split draws each
+    segment's samples from its own random stream (the first one's is the split seed's).
 
     Raises:
         DatasetError: the recording is too short for the filter, lacks the target, or is off-grid.
@@ -465,7 +472,9 @@ def prepare_dataset(
     tau = lowpass(tau_raw, cutoff, period, config.filter_order)
     n_train = round(config.train_fraction * len(tau))
     mask = (
-        shuffled_mask(len(tau), n_train, config.split_seed) if config.split == 'shuffled' else None
+        shuffled_mask(len(tau), n_train, config.split_seed, segment)
+        if config.split == 'shuffled'
+        else None
     )
     fit = np.flatnonzero(mask) if mask is not None else slice(0, n_train)
     inputs = np.hstack([fitting.q, fitting.v, fitting.a])
@@ -494,8 +503,13 @@ def prepare_dataset(
     )
 
 
-def shuffled_mask(n_samples: int, n_train: int, seed: int) -> np.ndarray:
-    """(n_samples,) True for n_train samples drawn at random (seeded): a shuffled split."""
+def shuffled_mask(n_samples: int, n_train: int, seed: int, segment: int = 0) -> np.ndarray:
+    """(n_samples,) True for n_train samples drawn at random (seeded): a shuffled split.
+
+    Segments after a bag's first draw from streams of their own, so that two segments of one
+    length do not share a mask.
+    """
+    rng = np.random.default_rng(seed if segment == 0 else [seed, segment])
     mask = np.zeros(n_samples, dtype=bool)
-    mask[np.random.default_rng(seed).permutation(n_samples)[:n_train]] = True
+    mask[rng.permutation(n_samples)[:n_train]] = True
     return mask

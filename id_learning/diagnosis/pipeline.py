@@ -56,6 +56,7 @@ from id_learning.diagnosis.selection import (
     forward_select,
     noise_consistency,
 )
+from id_learning.errors import DatasetError
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
@@ -194,6 +195,11 @@ def filtered_prediction(
         (the preprocessed dataset, (N, n) model torque filtered like the label [N*m]).
     """
     config = result.settings or DiagnosisConfig()
+    if len(recording.segment_starts) > 1:
+        raise DatasetError(
+            f'{recording.source}: holds {len(recording.segment_starts)} segments; compare each '
+            '(Recording.segments()) on its own'
+        )
     (dataset,) = as_datasets(recording, result.robot, config)
     q, v, a, jerk = column_motion(dataset)
     if with_effects:

@@ -107,7 +107,8 @@ def as_datasets(
             )
         if isinstance(item, Recording):
             datasets.extend(
-                prepare_dataset(segment, robot, config.preprocess) for segment in item.segments()
+                prepare_dataset(segment, robot, config.preprocess, segment=k)
+                for k, segment in enumerate(item.segments())
             )
             continue
         if not math.isclose(item.period_s, robot.ipo_period_s, rel_tol=1e-9):

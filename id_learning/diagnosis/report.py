@@ -119,6 +119,9 @@ def _verdict(result: DiagnosisResult) -> list[str]:
         ),
         '',
         *_fallback_lines(result),
+        'The held-out part took part in the choice (an effect must lower its error there, and '
+        'it decides the fallback): `train` and `evaluate` score on data the diagnosis never saw.',
+        '',
     ]
 
 

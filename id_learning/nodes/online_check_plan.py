@@ -143,7 +143,12 @@ def plan_excerpt(setup: CheckSetup, seconds: float, notes: list[str]) -> Excerpt
     from id_learning.training.trainer import bag_sha256, load_datasets, segment_rows
 
     bag, robot, model, period_ns = setup.bag, setup.robot, setup.model, setup.period_ns
-    dataset = load_datasets([bag], robot, setup.preprocess, progress=False)[0]
+    segments = load_datasets([bag], robot, setup.preprocess, progress=False)
+    dataset = segments[0]
+    if len(segments) > 1:
+        notes.append(
+            f'the bag holds {len(segments)} segments: replayed the test part of the first one'
+        )
     if dataset.is_shuffled:  # its test samples are scattered: replay the last stretch in time
         n_rows = len(dataset.tau)
         test_start, test_stop = round(setup.preprocess.train_fraction * n_rows), n_rows

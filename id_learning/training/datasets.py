@@ -153,8 +153,17 @@ def load_datasets(
             progress=progress,
             trim_unpaired_tail=trim_unpaired_tail,
         )
-        for segment in recording.segments():
-            dataset = prepare_dataset(segment, robot, config)
+        for k, segment in enumerate(recording.segments()):
+            try:
+                dataset = prepare_dataset(segment, robot, config, segment=k)
+            except DatasetError as err:
+                if len(recording.segment_starts) == 1:
+                    raise
+                raise DatasetError(
+                    f'{err}; every segment of a bag is preprocessed on its own: re-import with '
+                    'resample.min_segment_s to drop short segments (reported), or a larger '
+                    'resample.max_gap_s to keep them joined'
+                ) from err
             clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)
             datasets.append(
                 replace(dataset, tau_clean=clean, extra={**dataset.extra, 'bag': str(bag)})

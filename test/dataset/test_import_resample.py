@@ -345,3 +345,32 @@ def test_a_log_slower_than_three_grid_periods_is_resampled_not_cut_at_every_step
     assert report.n_segments == 1
     last_t = 0.030 * 133  # the log's last stamp
     assert report.n_rows_written == int(np.floor(last_t / 0.008 + 1e-9)) + 1
+
+
+def test_a_shuffled_split_draws_each_segment_of_a_bag_on_its_own(
+    tmp_path: Path, robot: RobotConfig
+) -> None:
+    folder = tmp_path / 'logs'
+    folder.mkdir()
+    for k in range(2):
+        write_log(folder / f'run_{k}.csv', np.arange(0.0, 12.0, 0.008), robot)
+    import_logs([folder], mapping_for(robot), tmp_path / 'bag', robot=robot)
+    config = PreprocessConfig(target='motor', cutoff_hz=(2.0,) * 6, split='shuffled')
+    first, second = load_datasets([tmp_path / 'bag'], robot, config, progress=False)
+    assert first.train_mask is not None
+    assert second.train_mask is not None
+    assert len(first.train_mask) == len(second.train_mask)
+    assert not np.array_equal(first.train_mask, second.train_mask)
+
+
+def test_a_segment_too_short_for_the_filter_names_the_remedy(
+    tmp_path: Path, robot: RobotConfig
+) -> None:
+    write_log(tmp_path / 'long.csv', np.arange(0.0, 12.0, 0.008), robot)
+    write_log(tmp_path / 'short.csv', np.arange(0.0, 0.5, 0.008), robot)
+    import_logs(
+        [tmp_path / 'long.csv', tmp_path / 'short.csv'], mapping_for(robot), tmp_path / 'bag'
+    )
+    config = PreprocessConfig(target='motor', cutoff_hz=(2.0,) * 6)
+    with pytest.raises(DatasetError, match=r'segment 2 of 2.*too short.*min_segment_s'):
+        load_datasets([tmp_path / 'bag'], robot, config, progress=False)
