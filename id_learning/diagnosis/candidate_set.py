@@ -16,6 +16,7 @@ from scipy import optimize
 
 from id_learning.diagnosis.candidates import (
     SPECIAL_CASES,
+    SPRING_STAND_INS,
     ExcitationFacts,
     PlausibilityFacts,
     plausibility,
@@ -185,11 +186,15 @@ class CandidateSet:
     def special_cases(self, selected: Sequence[str], aliases: Sequence[AliasSet]) -> list[str]:
         """``selected`` with each general effect replaced by a special case that mimics it.
 
-        Of several, the one that leaves least of the general effect's contribution.
+        Of several, the one that leaves least of the general effect's contribution. Likewise a
+        gravity spring that an offset or a link-parameter error mimics gives way to it: the data
+        cannot tell them apart, and a spring claims hardware the robot may not have.
         """
         out = list(selected)
         for alias in aliases:
             special = [m for m in alias.members[1:] if self._general_of(m, alias.representative)]
+            if self.specs[alias.representative].name == 'gravity_spring':
+                special = [m for m in alias.members[1:] if self.specs[m].name in SPRING_STAND_INS]
             if special:
                 best = min(special, key=lambda m: alias.unexplained.get(m, math.inf))
                 out[out.index(alias.representative)] = best

@@ -139,6 +139,12 @@ def _moving(v: np.ndarray, eps: float) -> np.ndarray:
     return np.abs(v) > 2.0 * eps
 
 
+#: Effects preferred over a gravity spring that they mimic (an alias set): no hardware claimed.
+SPRING_STAND_INS = ('joint_offset', 'torque_offset', 'inertial_parameter_error', 'payload_mass')
+#: Effects that exist in tau_u from currents only, not in a torque measured after the gear.
+MOTOR_SIDE_EFFECTS = ('rotor_inertia', 'torque_constant_scale')
+
+
 def testability(
     spec: EffectSpec, facts: ExcitationFacts, model: NominalModel, config: DiagnosisConfig
 ) -> tuple[bool, str]:
@@ -147,6 +153,11 @@ def testability(
     j = spec.joint
     eps = config.smoothing_velocity
     norm = facts.column_norm[spec.label]
+    if model.target != 'motor' and spec.name in MOTOR_SIDE_EFFECTS:
+        return False, (
+            'measured joint torques are taken after the gear: no rotor inertia and no motor '
+            'torque constant is in the label'
+        )
     if not np.any(norm > 0):
         return False, 'its regressor is zero on this recording'
     if j is not None and spec.name in (

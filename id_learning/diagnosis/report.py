@@ -58,8 +58,9 @@ def render_markdown(result: DiagnosisResult, figures: list[str]) -> str:
         '',
         f'Robot {result.robot.name}, {result.duration_s:.1f} s recorded, target '
         f'{"tau_u from motor currents" if result.target == "motor" else "joint torque"}. '
-        'Nominal model: URDF rigid-body dynamics (RNEA) plus the datasheet rotor inertia. '
-        'Every torque below is joint side [N·m], filtered like the label; RMSEs are on the '
+        'Nominal model: URDF rigid-body dynamics (RNEA)'
+        + (' plus the datasheet rotor inertia. ' if result.target == 'motor' else '. ')
+        + 'Every torque below is joint side [N·m], filtered like the label; RMSEs are on the '
         'held-out (last 30 %, contiguous) part.',
         '',
         *_verdict(result),
@@ -214,6 +215,7 @@ def _remainder(result: DiagnosisResult) -> list[str]:
         f'samples train {", ".join(f"{x:.0f}" for x in result.effective_samples["train"])}, '
         f'test {", ".join(f"{x:.0f}" for x in result.effective_samples["test"])}.',
         '',
+        *_noise_warning(result),
         '## Where the nominal residual lives (share of its variance organised by each variable)',
         '',
         *_table(
@@ -406,3 +408,24 @@ def _band(band_hz: tuple[float, float] | np.ndarray) -> str:
     if low < high:
         return f'median spectrum {low:.3g}–{high:.3g} Hz'
     return 'read at the top of the spectrum: the label filter leaves no noise-only band'
+
+
+#: A remainder this many times the noise on every joint: the noise level was misread.
+_NOISE_UNDERESTIMATE_RATIO = 5.0
+
+
+def _noise_warning(result: DiagnosisResult) -> list[str]:
+    """A warning when the remainder dwarfs the noise estimate on every joint."""
+    if (
+        not result.remainder
+        or min(r.ratio for r in result.remainder) <= _NOISE_UNDERESTIMATE_RATIO
+    ):
+        return []
+    return [
+        f'**The noise level is probably underestimated**: the remainder is over '
+        f'{_NOISE_UNDERESTIMATE_RATIO:g} times it on every joint. Real drives often have little '
+        'noise above the band the models learn and much structure inside it; read the '
+        'selection statistics (which use this level) as optimistic, and the held-out block '
+        'tests as the verdict.',
+        '',
+    ]

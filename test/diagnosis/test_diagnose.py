@@ -282,3 +282,19 @@ def test_a_robot_without_a_spring_gets_none_and_no_joint_is_made_worse():
             blocks = effect.selection['held_out_blocks']
             assert blocks['p_value_holm'] is not None
             assert blocks['p_value_holm'] < result.settings.significance
+
+
+def test_joint_torque_sensors_offer_no_motor_side_effects():
+    """A torque measured after the gear holds no rotor inertia and no motor torque constant."""
+    from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.diagnosis.config import DiagnosisConfig
+
+    config = twin_config(DURATION_S, {'coulomb_friction': {'enabled': True}}, seed=SEED)
+    twin = simulate(replace(config, joint_torque_sensors=True))
+    settings = DiagnosisConfig(preprocess=PreprocessConfig(target='joint'))
+    result = run_diagnosis(twin.recording, config.robot, settings)
+    reasons = {(u['name'], u['joint']): u['reason'] for u in result.untestable}
+    for j in config.robot.joints:
+        assert 'after the gear' in reasons[('rotor_inertia', j)]
+        assert 'after the gear' in reasons[('torque_constant_scale', j)]
+    assert not {e.name for e in result.effects} & {'rotor_inertia', 'torque_constant_scale'}
