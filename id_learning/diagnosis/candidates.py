@@ -142,7 +142,9 @@ def _moving(v: np.ndarray, eps: float) -> np.ndarray:
 #: Effects preferred over a gravity spring that they mimic (an alias set): no hardware claimed.
 SPRING_STAND_INS = ('joint_offset', 'torque_offset', 'inertial_parameter_error', 'payload_mass')
 #: Effects that exist in tau_u from currents only, not in a torque measured after the gear.
-MOTOR_SIDE_EFFECTS = ('rotor_inertia', 'torque_constant_scale')
+#: (A rotor is not seen after the gear either, but the same column is then an error of the
+#: URDF's inertia about the joint axis: described link side, as a change.)
+MOTOR_SIDE_EFFECTS = ('torque_constant_scale',)
 
 
 def testability(
@@ -155,8 +157,8 @@ def testability(
     norm = facts.column_norm[spec.label]
     if model.target != 'motor' and spec.name in MOTOR_SIDE_EFFECTS:
         return False, (
-            'measured joint torques are taken after the gear: no rotor inertia and no motor '
-            'torque constant is in the label'
+            'measured joint torques are taken after the gear: no motor torque constant is in '
+            'the label'
         )
     if not np.any(norm > 0):
         return False, 'its regressor is zero on this recording'
@@ -466,6 +468,11 @@ def describe_parameters(
     name = spec.name
     if name == 'inertial_parameter_error':
         return _base_parameter_changes(spec, theta, model, interval_covariance)
+    if name == 'rotor_inertia' and j is not None and model.target != 'motor':
+        n2 = float(robot.drives.gear_ratio[j]) ** 2
+        return [
+            entry('axis_inertia_change_link_side', n2 * theta[0], n2 * lo[0], n2 * hi[0], 'kg*m^2')
+        ]
     if name == 'rotor_inertia' and j is not None:
         nominal = robot.drives.rotor_inertia[j]
         out = [entry('rotor_inertia_motor_side', nominal + theta[0], nominal + lo[0],

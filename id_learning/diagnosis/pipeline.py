@@ -117,8 +117,15 @@ def run_diagnosis(
     steps = list(selection.steps)
     unconfirmed = _unconfirmed_springs(candidates, design, selected, blocks, config)
     if unconfirmed:
-        steps = [st for st, label in zip(steps, selected, strict=True) if label not in unconfirmed]
-        selected = [label for label in selected if label not in unconfirmed]
+        # An unconfirmed spring gives way to the alias that leaves least of it, else goes.
+        stand_in = {label: _best_other(label, aliases, candidates) for label in unconfirmed}
+        kept = [label not in unconfirmed or stand_in[label] for label in selected]
+        steps = [st for st, keep in zip(steps, kept, strict=True) if keep]
+        selected = [
+            stand_in.get(label) or label for label, k in zip(selected, kept, strict=True) if k
+        ]
+        selected = candidates.refine(selected, y, n_eff)
+        design = candidates.design(y, n_eff)
         aliases = candidates.without_generalisations(aliases_of(selected))
     return _assemble(
         problem,
@@ -130,6 +137,16 @@ def run_diagnosis(
         aliases=aliases,
         blocks=blocks,
     )
+
+
+def _best_other(label: str, aliases: list[AliasSet], candidates: CandidateSet) -> str | None:
+    """The member of ``label``'s alias set, no spring, that leaves least of it; None if none."""
+    for alias in aliases:
+        if alias.representative == label:
+            others = [m for m in alias.members[1:] if candidates.specs[m].name != 'gravity_spring']
+            if others:
+                return min(others, key=lambda m: alias.unexplained.get(m, np.inf))
+    return None
 
 
 def _unconfirmed_springs(
