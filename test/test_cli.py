@@ -173,6 +173,39 @@ def write_log(folder, suffix: str, values: dict[str, np.ndarray]):
     return source, folder / 'map.yaml'
 
 
+def test_import_resamples_logs_of_10_and_12_ms_into_one_bag_in_one_command(tmp_path, mabi):
+    sources = []
+    for step_ms in (10.0, 12.0):
+        folder = tmp_path / f'{step_ms:g}ms'
+        folder.mkdir()
+        t_ms = 5000.0 + step_ms * np.arange(60)
+        phase = 2 * np.pi * 0.5 * (t_ms[:, None] * 1e-3) + np.arange(6)
+        values = {
+            't_ms': t_ms,
+            'q_deg': 20.0 * np.sin(phase),
+            'v_deg_s': 20.0 * np.pi * np.cos(phase),
+            'i_a': np.sin(phase),
+        }
+        source, mapping = write_log(folder, 'csv', values)
+        sources.append(str(source))
+    spec = yaml.safe_load(mapping.read_text())
+    spec['resample'] = {'method': 'interpolate'}
+    mapping.write_text(yaml.safe_dump(spec, sort_keys=False))
+    robot = str(REPO / 'config/mabi_max100.yaml')
+    result = run_cli(
+        'import', *sources, '--mapping', str(mapping), '--out', str(tmp_path / 'bag'),
+        '--robot', robot,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert 'resampled from a median step of 10 ms' in result.stdout
+    assert 'resampled from a median step of 12 ms' in result.stdout
+    assert 'samples in 2 segments from 2 files' in result.stdout
+    recording = load_recording(tmp_path / 'bag', mabi)
+    assert len(recording.segment_starts) == 2
+    for segment in recording.segments():
+        np.testing.assert_array_equal(np.diff(segment.stamps_ns), 8_000_000)
+
+
 @pytest.mark.parametrize('suffix', ['csv', 'npz'])
 def test_import_converts_a_log_to_si_units_on_the_ipo_grid(tmp_path, mabi, suffix):
     values = log_values()
