@@ -87,9 +87,35 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f'report: {run.report}', flush=True)
     for kind, why in run.failures.items():
         print(f'{kind} failed (the other models go on): {why}', flush=True)
+    if args.closed_loop_seconds > 0:
+        _demo_closed_loop(args, robot, run, out)
     if args.online_seconds > 0:
         _demo_online_check(args, bag, run, out)
     return 0
+
+
+def _demo_closed_loop(args: argparse.Namespace, robot: Any, run: Any, out: Path) -> None:
+    """Track the test motion on the twin with each model as feed-forward.
+
+    A bag of a real robot (no twin config beside it) skips this step.
+    """
+    from id_learning.errors import ConfigError
+    from id_learning.training.closed_loop_run import closed_loop_run
+
+    print(
+        f'closed loop: tracking {args.closed_loop_seconds:g} s of the test part on the twin, '
+        'feedback alone and with each model as feed-forward ...',
+        flush=True,
+    )
+    try:
+        result = closed_loop_run(
+            run.out, robot, out / 'closed_loop', duration_s=args.closed_loop_seconds
+        )
+    except ConfigError as err:
+        print(f'closed loop not run: {err}', flush=True)
+        return
+    print(result.summary())
+    print(f'closed loop: {result.json_path}; plot: {result.plot_path}', flush=True)
 
 
 def _demo_diagnosis(bag: Path, robot: Any, preprocess: Any, recording: Any, out: Path) -> None:
@@ -167,6 +193,12 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         type=float,
         default=30.0,
         help='seconds of the test part replayed through the predictor node (0: skip)',
+    )
+    p.add_argument(
+        '--closed-loop-seconds',
+        type=float,
+        default=60.0,
+        help="seconds of the test part tracked in the twin's closed loop (0: skip)",
     )
     p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
     options.study_table_option(p)

@@ -102,21 +102,45 @@ def _report_failures(failures: dict[str, str]) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Evaluate every model of a run on other recordings."""
-    from id_learning.training import evaluate_run, read_run
+    from id_learning.training import evaluate_run
 
     run_dir = Path(args.run)
-    if args.robot:
-        robot = options.load_robot(args)
-    else:
-        from id_learning.robot import load_robot_config
-
-        source = read_run(run_dir).get('robot_config')
-        robot = load_robot_config(source) if source else options.load_robot(args)
+    robot = _run_robot(args, run_dir)
     result = evaluate_run(
         run_dir, [Path(b) for b in args.bag], robot, Path(args.out), progress=not args.quiet
     )
     print(metrics_table(result.metrics))
     print(f'metrics: {result.out / "metrics.json"}; report: {result.report}')
+    return 0
+
+
+def _run_robot(args: argparse.Namespace, run_dir: Path) -> Any:
+    """``--robot``, else the robot config the run was trained with, else the shipped one."""
+    if args.robot:
+        return options.load_robot(args)
+    from id_learning.robot import load_robot_config
+    from id_learning.training import read_run
+
+    source = read_run(run_dir).get('robot_config')
+    return load_robot_config(source) if source else options.load_robot(args)
+
+
+def cmd_closed_loop(args: argparse.Namespace) -> int:
+    """Track the run's test motion on the twin with each model's tau_u as feed-forward."""
+    from id_learning.training.closed_loop_run import closed_loop_run
+
+    run_dir = Path(args.run)
+    result = closed_loop_run(
+        run_dir,
+        _run_robot(args, run_dir),
+        Path(args.out),
+        twin_config=Path(args.twin) if args.twin else None,
+        duration_s=args.duration,
+        kinds=options.model_kinds(args.models) if args.models else None,
+        progress=not args.quiet,
+    )
+    print(result.summary())
+    print(f'closed loop: {result.json_path}; plot: {result.plot_path}')
     return 0
 
 
@@ -174,7 +198,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``train`` and ``evaluate`` to the subcommands ``sub``."""
+    """Add ``train``, ``evaluate`` and ``closed-loop`` to the subcommands ``sub``."""
     p = sub.add_parser('train', help='train models on bags; write models, metrics and a report')
     add_train_arguments(p)
     p.set_defaults(func=cmd_train)
@@ -188,3 +212,21 @@ def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     options.robot_option(p, 'robot config YAML (default: the one the run was trained with)')
     p.add_argument('--quiet', action='store_true', help='no progress bars')
     p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser(
+        'closed-loop',
+        help="track the run's test motion on the twin with each model as feed-forward",
+    )
+    p.add_argument('--run', required=True, help='run folder written by train')
+    p.add_argument('--out', required=True, help='folder for closed_loop.json and the plot')
+    p.add_argument(
+        '--twin',
+        help="twin config of the plant (default: the twin_config.yaml beside the run's bag)",
+    )
+    p.add_argument(
+        '--duration', type=float, default=60.0, help='seconds of the test part to track (60)'
+    )
+    p.add_argument('--models', help="comma-separated kinds (default: all of the run's)")
+    options.robot_option(p, 'robot config YAML (default: the one the run was trained with)')
+    p.add_argument('--quiet', action='store_true', help='no progress bars')
+    p.set_defaults(func=cmd_closed_loop)

@@ -21,6 +21,7 @@ result types in ``result``; this module runs the steps and assembles the result.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -35,7 +36,12 @@ from id_learning.diagnosis.candidates import (
     describe_parameters,
 )
 from id_learning.diagnosis.config import DiagnosisConfig
-from id_learning.diagnosis.heldout import fallback_joints, judge_effects, test_blocks
+from id_learning.diagnosis.heldout import (
+    BlockTest,
+    fallback_joints,
+    judge_effects,
+    test_blocks,
+)
 from id_learning.diagnosis.locate import locate_residual
 from id_learning.diagnosis.problem import (
     ResidualProblem,
@@ -305,20 +311,7 @@ def _assemble(
                 contribution_rms_nm=rms,
                 variance_explained=explained[label],
                 variance_explained_total=explained_total[label],
-                selection={
-                    'f_statistic': step.f_statistic,
-                    'p_value': step.p_value,
-                    'delta_bic': step.delta_bic,
-                    'held_out_gain': step.held_out_gain,
-                    'columns': step.extra_rank,
-                    'held_out_blocks': {
-                        # None: too few blocks to judge (JSON has no NaN).
-                        'p_value_holm': None if np.isnan(test.p_value) else test.p_value,
-                        'n_blocks': test.n_blocks,
-                        'block_s': test.block_s,
-                        'gain_share': test.gain,
-                    },
-                },
+                selection=_selection_record(step, test),
             )
         )
     rejected = None
@@ -376,6 +369,24 @@ def _assemble(
         series=series,
         settings=config,
     )
+
+
+def _selection_record(step: GroupEvaluation, test: BlockTest) -> dict[str, Any]:
+    """The tests an effect passed when it entered, and its held-out block test, JSON-ready."""
+    return {
+        'f_statistic': step.f_statistic,
+        'p_value': step.p_value,
+        'delta_bic': step.delta_bic,
+        'held_out_gain': step.held_out_gain,
+        'columns': step.extra_rank,
+        'held_out_blocks': {
+            # None: too few blocks to judge (JSON has no NaN).
+            'p_value_holm': None if np.isnan(test.p_value) else test.p_value,
+            'n_blocks': test.n_blocks,
+            'block_s': test.block_s,
+            'gain_share': test.gain,
+        },
+    }
 
 
 def _after(design: Design, final: Fit, part: str, fallback: list[int]) -> np.ndarray:

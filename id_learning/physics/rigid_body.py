@@ -298,6 +298,24 @@ class RigidBodyDynamics:
 
         return rnea
 
+    def sample_mass_and_bias(
+        self,
+    ) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """(n,) q, v -> (M(q) (n, n) [kg*m^2], C(q, v) v + g(q) (n,) [N*m]) of one sample.
+
+        What forward dynamics needs each step, in config order, with its own scratch data.
+        """
+        model, data, ix = self.model, self.model.createData(), self._index
+
+        def mass_and_bias(q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            qp, vp = self._to_pin(q), self._to_pin(v)
+            mass = pin.crba(model, data, qp)
+            mass = np.triu(mass) + np.triu(mass, 1).T
+            bias = pin.nonLinearEffects(model, data, qp, vp)
+            return mass[np.ix_(ix, ix)], bias[ix].copy()
+
+        return mass_and_bias
+
     def rnea(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Joint torques tau = M(q) a + C(q, v) v + g(q) [N*m]; shapes (..., n)."""
         ix = self._index

@@ -52,7 +52,9 @@ __all__ = [
     'MeasurementConfig',
     'TwinConfig',
     'TwinResult',
+    'friction_and_cogging',
     'load_twin_config',
+    'random_streams',
     'read_noise_free_torque',
     'simulate',
     'true_dynamics',
@@ -306,7 +308,7 @@ def _rigid_body_terms(
     return gravity, coriolis, inertia
 
 
-def _streams(seed: int) -> list[np.random.Generator]:
+def random_streams(seed: int) -> list[np.random.Generator]:
     """The twin's four random streams of a seed: excitation, robot, current noise, sensors."""
     return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)]
 
@@ -319,10 +321,10 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
             config's torque limits (names joint and time).
     """
     robot, effects = config.robot, config.effects
-    excitation_rng, _, noise_rng, sensor_rng = _streams(config.seed)
+    excitation_rng, _, noise_rng, sensor_rng = random_streams(config.seed)
     # The robot's hidden parameters come from their own seed, drawn as ``seed`` would draw them:
     # one robot, many recordings; robot_seed = seed reproduces the one-seed bags.
-    parameter_rng = _streams(config.true_robot_seed)[1]
+    parameter_rng = random_streams(config.true_robot_seed)[1]
     trajectory: ExcitationTrajectory = design_excitation(
         config.excitation, robot.limits, robot.ipo_period_s, excitation_rng
     )
@@ -359,7 +361,7 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     rotor_inertia = robot.drives.rotor_inertia * (rotor.scale if rotor.enabled else 1.0)
     components['rotor_inertia'] = rotor_inertia * gear**2 * ac
 
-    components |= _friction_and_cogging(effects, vc, qc, tau_joint, gear)
+    components |= friction_and_cogging(effects, vc, qc, tau_joint, gear)
 
     scale_effect = effects.get('torque_constant_scale')
     assert isinstance(scale_effect, TorqueConstantScale)
@@ -412,7 +414,7 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     return TwinResult(recording, components, tau_u_clean, tau_joint, q, v, a, parameters)
 
 
-def _friction_and_cogging(
+def friction_and_cogging(
     effects: EffectSet, vc: np.ndarray, qc: np.ndarray, tau_joint: np.ndarray, gear: np.ndarray
 ) -> dict[str, np.ndarray]:
     """The enabled friction laws' and cogging's torques [N*m] on the delayed motion."""

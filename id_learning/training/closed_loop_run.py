@@ -1,0 +1,188 @@
+"""``closed-loop``: a training run's models as feed-forward in the twin's loop, side by side.
+
+The reference is the test part of the run's first training bag (its last share in time), as a
+controller sends it (``Dataset.controller``); the plant is the twin robot that bag was recorded
+from (the ``twin_config.yaml`` the twin wrote beside it, or ``twin_config``). Writes
+closed_loop.json (per run and joint the RMS and largest tracking error, and
+``improvement_best``) and closed_loop.png (the tracking errors over time).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from id_learning.errors import CheckpointError, ConfigError
+from id_learning.evaluation.closed_loop import (
+    FEEDBACK_ONLY,
+    TRUE_DYNAMICS,
+    LoopGains,
+    Tracking,
+    compare_feed_forward,
+    improvement,
+)
+from id_learning.models.registry import load_model
+from id_learning.robot.config import RobotConfig
+from id_learning.training.datasets import load_datasets, preprocess_from_dict
+from id_learning.training.run_folder import MODELS_DIR, read_run
+from id_learning.twin import load_twin_config
+from id_learning.twin.plant import TwinPlant
+from id_learning.twin.simulate import TWIN_CONFIG_COPY
+
+__all__ = ['CLOSED_LOOP_JSON', 'ClosedLoopResult', 'closed_loop_run']
+
+CLOSED_LOOP_JSON = 'closed_loop.json'
+CLOSED_LOOP_PNG = 'closed_loop.png'
+
+
+@dataclass(frozen=True)
+class ClosedLoopResult:
+    """What ``closed_loop_run`` measured and wrote."""
+
+    runs: dict[str, Tracking]
+    best_model: str
+    improvement_best: np.ndarray
+    document: dict[str, Any]
+    json_path: Path
+    plot_path: Path
+
+    def summary(self) -> str:
+        """The RMS tracking error per run and joint [mrad], and the improvement, as a table."""
+        joints = self.document['joints']
+        width = max(len(name) for name in self.runs) + 2
+        lines = [f'{"RMS tracking error [mrad]":<{width}}' + ''.join(f'{j:>10}' for j in joints)]
+        for name, run in self.runs.items():
+            lines.append(f'{name:<{width}}' + ''.join(f'{1e3 * x:>10.3f}' for x in run.rms))
+        lines.append(
+            f'{"improvement (" + self.best_model + ")":<{width}}'
+            + ''.join(f'{x:>10.1f}' for x in self.improvement_best)
+        )
+        return '\n'.join(lines)
+
+
+def _twin_config_path(run: dict[str, Any], twin_config: Path | None) -> Path:
+    if twin_config is not None:
+        return Path(twin_config)
+    bags = [Path(entry['path']) for entry in run['training_data']['bags']]
+    for bag in bags:
+        if (bag / TWIN_CONFIG_COPY).is_file():
+            return bag / TWIN_CONFIG_COPY
+    raise ConfigError(
+        f"no {TWIN_CONFIG_COPY} beside the run's training bags {[str(b) for b in bags]}: the "
+        'closed loop needs the twin robot the data came from; pass --twin CONFIG'
+    )
+
+
+def closed_loop_run(
+    run_dir: Path,
+    robot: RobotConfig,
+    out: Path,
+    *,
+    twin_config: Path | None = None,
+    duration_s: float = 60.0,
+    kinds: Sequence[str] | None = None,
+    progress: bool = True,
+) -> ClosedLoopResult:
+    """Track the run's test motion on the twin with each model's feed-forward; write the results.
+
+    Raises:
+        CheckpointError: the run or a model does not fit the robot.
+        ConfigError: no twin config, one of another robot, or a model the run lacks.
+    """
+    run_dir, out = Path(run_dir), Path(out)
+    run = read_run(run_dir)
+    if run.get('robot', {}).get('joints') != list(robot.joints):
+        raise CheckpointError(f'{run_dir}: the run is not for robot {robot.name}')
+    twin_path = _twin_config_path(run, twin_config)
+    twin = load_twin_config(twin_path)
+    if twin.robot.name != robot.name or twin.robot.joints != robot.joints:
+        raise ConfigError(
+            f'{twin_path}: twin robot {twin.robot.name} is not robot {robot.name} of the run'
+        )
+    kinds = list(kinds or run['kinds'])
+    unknown = sorted(set(kinds) - set(run['kinds']))
+    if unknown:
+        raise ConfigError(f'{run_dir}: no model(s) {unknown} in the run; it has {run["kinds"]}')
+    bag = Path(run['training_data']['bags'][0]['path'])
+    config = preprocess_from_dict(run['preprocessing'])
+    dataset = load_datasets([bag], robot, config, progress=False)[0]
+    start = round(config.train_fraction * len(dataset.q))
+    stop = min(len(dataset.q), start + round(duration_s / robot.ipo_period_s))
+    reference = dataset.controller.take(slice(start, stop))
+    plant = TwinPlant(twin)
+    feed_forward = {
+        kind: load_model(run_dir / MODELS_DIR / kind, robot, kind).predict(
+            reference.q, reference.v, reference.a
+        )
+        for kind in kinds
+    }
+    feed_forward[TRUE_DYNAMICS] = (
+        plant.motor_torque(reference.q + plant.encoder_offset, reference.v, reference.a)
+        / plant.kt_scale
+    )
+    runs = compare_feed_forward(
+        plant, reference, feed_forward, period_s=robot.ipo_period_s, progress=progress
+    )
+    best, ratio = improvement(runs, kinds)
+    gains = LoopGains.for_plant(plant, np.mean(reference.q, axis=0) + plant.encoder_offset)
+    document = {
+        'run': str(run_dir),
+        'twin_config': str(twin_path),
+        'reference': {
+            'bag': str(bag),
+            'rows': [start, stop],
+            'duration_s': (stop - start) * robot.ipo_period_s,
+            'part': 'test part (the last share in time)',
+        },
+        'joints': list(robot.joints),
+        'controller': {
+            'structure': 'position P, velocity PI, torque limit, at the IPO period',
+            'period_s': robot.ipo_period_s,
+            'position_gain_per_s': gains.position.tolist(),
+            'velocity_gain_nms_per_rad': gains.velocity.tolist(),
+            'integral_gain_nm_per_rad': gains.integral.tolist(),
+        },
+        'runs': {
+            name: {
+                'rms_rad': track.rms.tolist(),
+                'max_rad': track.max.tolist(),
+                'saturated_cycles': track.saturated.tolist(),
+            }
+            for name, track in runs.items()
+        },
+        'best_model': best,
+        'improvement_best': ratio.tolist(),
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    json_path = out / CLOSED_LOOP_JSON
+    json_path.write_text(json.dumps(document, indent=2), encoding='utf-8')
+    plot_path = _plot(runs, best, robot, out / CLOSED_LOOP_PNG)
+    return ClosedLoopResult(runs, best, ratio, document, json_path, plot_path)
+
+
+def _plot(runs: dict[str, Tracking], best: str, robot: RobotConfig, path: Path) -> Path:
+    """Tracking error over time per joint: feedback alone, the best model, true dynamics."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    n = robot.n_joints
+    fig, axes = plt.subplots(n, 1, figsize=(9, 1.6 * n), sharex=True)
+    t = np.arange(len(runs[FEEDBACK_ONLY].error)) * robot.ipo_period_s
+    for j, ax in enumerate(np.atleast_1d(axes)):
+        for name in (FEEDBACK_ONLY, best, TRUE_DYNAMICS):
+            ax.plot(t, 1e3 * runs[name].error[:, j], lw=0.7, label=name)
+        ax.set_ylabel(f'{robot.joints[j]}\n[mrad]', fontsize=8)
+    np.atleast_1d(axes)[0].legend(fontsize=7, loc='upper right')
+    np.atleast_1d(axes)[-1].set_xlabel('time [s]')
+    fig.suptitle("Tracking error in the twin's loop (reference minus true position)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,84 @@
+"""The twin as a plant: its inverse dynamics against the recordings', and the closed loop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+from support import REPO, twin_config
+
+from id_learning.dataset.inputs import Motion
+from id_learning.evaluation.closed_loop import (
+    FEEDBACK_ONLY,
+    LoopGains,
+    compare_feed_forward,
+    improvement,
+    track,
+)
+from id_learning.twin import simulate
+from id_learning.twin.plant import TwinPlant
+
+PERIOD_S = 0.008
+
+
+@pytest.fixture(scope='module')
+def twin():
+    """A 12 s recording of the default twin without its label-only effects (offset, delay)."""
+    effects = yaml.safe_load((REPO / 'config/twin_default.yaml').read_text())['effects']
+    effects['signal_delay']['enabled'] = False
+    effects['torque_offset']['enabled'] = False
+    config = twin_config(12.0, effects, seed=5)
+    return config, simulate(config)
+
+
+def test_the_plant_needs_the_torque_the_recordings_hold(twin) -> None:
+    config, result = twin
+    plant = TwinPlant(config)
+    tau = plant.motor_torque(result.q_true, result.v_true, result.a_true)
+    # simulate divides every component by the torque-constant scale: tau_u = tau_motor / s
+    np.testing.assert_allclose(tau / plant.kt_scale, result.tau_u_clean, rtol=1e-9, atol=1e-6)
+
+
+def test_a_step_under_the_needed_torque_gives_the_motion_s_acceleration(twin) -> None:
+    config, result = twin
+    plant = TwinPlant(config)
+    k = 400
+    q, v, a = result.q_true[k], result.v_true[k], result.a_true[k]
+    state = plant.start(q, v, a)
+    command = plant.motor_torque(q, v, a)[0] / plant.kt_scale
+    dt = 1e-5
+    after = plant.step(state, command, dt)
+    np.testing.assert_allclose((after.v - v) / dt, a, rtol=1e-3, atol=1e-3)
+    np.testing.assert_allclose(after.q, q + dt * after.v)
+
+
+def test_true_feed_forward_shrinks_the_tracking_error_and_a_biased_one_less(twin) -> None:
+    config, result = twin
+    plant = TwinPlant(config)
+    reference = Motion(result.q_true - plant.encoder_offset, result.v_true, result.a_true)
+    true_ff = plant.motor_torque(result.q_true, result.v_true, result.a_true) / plant.kt_scale
+    runs = compare_feed_forward(
+        plant,
+        reference,
+        {'true': true_ff, 'half': 0.5 * true_ff},
+        period_s=PERIOD_S,
+        progress=False,
+    )
+    assert set(runs) == {FEEDBACK_ONLY, 'true', 'half'}
+    assert (runs['true'].rms < runs['half'].rms).all()
+    assert (runs['half'].rms < runs[FEEDBACK_ONLY].rms).all()
+    best, ratio = improvement(runs, ['half', 'true'])
+    assert best == 'true'
+    assert (ratio > 3).all()
+    assert not runs[FEEDBACK_ONLY].saturated.any()
+
+
+def test_the_command_saturates_at_the_torque_limit_without_wind_up(twin) -> None:
+    config, result = twin
+    plant = TwinPlant(config)
+    reference = Motion(result.q_true - plant.encoder_offset, result.v_true, result.a_true)
+    gains = LoopGains.for_plant(plant, result.q_true[0])
+    huge = np.tile(10 * config.robot.limits.torque, (len(reference.q), 1))
+    run = track(plant, reference.take(slice(0, 5)), huge, gains, period_s=PERIOD_S)
+    np.testing.assert_allclose(np.abs(run.command), np.tile(config.robot.limits.torque, (5, 1)))
+    assert (run.saturated == 5).all()
