@@ -316,6 +316,22 @@ class PredictorNodeConfig:
         'Physics artifact (rnea_id, rnea_effects, rnea_lq) for fallback; empty = the rnea_id '
         "beside the model in its run, else the model's own physics part, else the nominal model.",
     )
+    adaptation: str = param(
+        'off',
+        'Online adaptation to drift: rls = a Coulomb level, a viscous coefficient and an offset '
+        'per joint added to the model, learnt by recursive least squares from the measured '
+        'currents on measured_topic (a motor-target model only); off = the model as fitted. '
+        'The adapted values are on /diagnostics and saved beside the artifact on shutdown.',
+        choices=('off', 'rls'),
+    )
+    adaptation_time_constant_s: float = param(
+        60.0, 'Memory of the adaptation (its forgetting factor) [s].'
+    )
+    measured_topic: str = param(
+        '/motor_currents',
+        'sensor_msgs/JointState whose effort holds the measured motor currents [A], stamped '
+        'like the reference they answer: what adaptation learns from.',
+    )
     torch_threads: int = param(
         1, 'torch intra-op and inter-op threads, and numpy OpenBLAS threads [threads].'
     )
@@ -362,6 +378,7 @@ class PredictorNodeConfig:
             'log_throttle_s',
             'latency_window',
             'diagnostics_period_s',
+            'adaptation_time_constant_s',
         )
         _positive(
             self,

@@ -70,6 +70,7 @@ from id_learning.nodes.msg_conversions import (
     joint_state_message,
     joint_state_to_sample,
     serialize_exact,
+    time_to_ns,
     torque_command,
     trajectory_message,
     trajectory_to_sample,
@@ -92,6 +93,7 @@ from id_learning.predictor import (
     StepResult,
     configure_inference_threads,
 )
+from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
 from id_learning.robot.config import RobotConfig, load_robot_config
 
 __all__ = ['Predictor', 'guard_config', 'main']
@@ -152,6 +154,9 @@ class Predictor(Node):
         )
         self.done: Future = Future()  # never completes: runs until shut down
         self.names = list(self.core.joint_names)
+        self._adaptation_file: Path | None = None
+        if config.adaptation == 'rls':
+            self.core.adaptation = adaptation_loop(config, self.robot, self.core)
         self.latency_s = RollingStats(config.latency_window)
         self.callback_errors = 0
         #: Published later than one IPO period after the sample arrived (see latency_from).
@@ -195,6 +200,13 @@ class Predictor(Node):
             config.diagnostics_period_s, self._publish_diagnostics
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._measured = (
+            self.create_subscription(
+                JointState, config.measured_topic, self._on_measured, reference_qos(64)
+            )
+            if self.core.adaptation is not None
+            else None
+        )
         self._warm_up()
         # torch, the model and rclpy leave ~10^5 tracked objects; a full collection walks them all
         # (~0.1 s here) when the per-sample allocations trigger one. Frozen, they are never walked.
@@ -303,6 +315,24 @@ class Predictor(Node):
                 throttle_duration_sec=self.config.log_throttle_s,
             )
 
+    def _on_measured(self, msg: JointState) -> None:
+        """The drive's currents of a served cycle: the adaptation learns from them."""
+        loop = self.core.adaptation
+        if loop is None:
+            return
+        try:
+            stamp = time_to_ns(msg.header.stamp)
+            if self.core.is_stale:
+                loop.adapter.counters.frozen += 1
+                return
+            loop.measured_message(stamp, list(msg.name), list(msg.effort), self.names)
+        except Exception as err:  # the edge of the callback: report and keep running
+            self.callback_errors += 1
+            self.get_logger().error(
+                f'measured-current callback failed: {type(err).__name__}: {err}',
+                throttle_duration_sec=self.config.log_throttle_s,
+            )
+
     def _log_reject(self, result: StepResult) -> None:
         throttle = self.config.log_throttle_s
         text = f'sample at {result.stamp_ns} ns rejected ({result.reject.value}): {result.detail}'
@@ -377,6 +407,7 @@ class Predictor(Node):
         values: dict[str, object] = {
             'model': self.core.model.kind,
             'artifact': self.config.artifact,
+            'adaptation': self.config.adaptation,
             'input_rate_hz': rate,
             'received': counters.received,
             'published': counters.predicted,
@@ -408,6 +439,8 @@ class Predictor(Node):
                 'compute_max_ms': compute.max * 1e3,
             }
         )
+        if self.core.adaptation is not None:
+            values.update(self.core.adaptation.report(self.names))
         values.update(
             {
                 f'clamped_{name}': int(count)
@@ -459,6 +492,11 @@ class Predictor(Node):
         if self._is_closed:
             return
         self._is_closed = True
+        if self.core.adaptation is not None:
+            self._adaptation_file = self.core.adaptation.adapter.save(
+                Path(self.config.artifact), tuple(self.names)
+            )
+            self.get_logger().info(f'adapted parameters saved to {self._adaptation_file}')
         counters = self.core.counters
         latency = self.latency_s.summary()
         self.get_logger().info(
@@ -471,6 +509,24 @@ class Predictor(Node):
             f'{self.late_samples} late; receive-to-publish latency median '
             f'{latency.median * 1e3:.3f} ms, p99 {latency.p99 * 1e3:.3f} ms'
         )
+
+
+def adaptation_loop(
+    config: PredictorNodeConfig, robot: RobotConfig, core: FeedForwardPredictor
+) -> AdaptationLoop:
+    """The RLS adaptation of a motor-target model.
+
+    Raises:
+        ConfigError: the model predicts a measured joint torque, which currents do not give.
+    """
+    target = core.target
+    if target != 'motor':
+        raise ConfigError(
+            f'adaptation rls learns tau_u from motor currents; the {core.model.kind} model '
+            f'predicts the {target} target: set adaptation off'
+        )
+    settings = AdaptationConfig(time_constant_s=config.adaptation_time_constant_s)
+    return AdaptationLoop.for_robot(robot, core.joint_names, settings)
 
 
 def main(args: Sequence[str] | None = None) -> int:

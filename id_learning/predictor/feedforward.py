@@ -42,6 +42,7 @@ from id_learning.dataset.plausibility import SampleGate
 from id_learning.errors import ConfigError
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.predictor.acceleration import CausalAccelerationEstimator
+from id_learning.predictor.adaptation import AdaptationLoop
 from id_learning.predictor.config import GuardConfig
 from id_learning.predictor.fallback import (
     PhysicsFallback,
@@ -111,6 +112,10 @@ class FeedForwardPredictor:
             raise ValueError(f'inference must be one of {INFERENCE_BACKENDS}, got {inference!r}')
         self.model = model
         self.fallback = fallback
+        #: Online adaptation to drift (``adaptation.AdaptationLoop``); None: the model as fitted.
+        self.adaptation: AdaptationLoop | None = None
+        #: The torque the model predicts ('motor' tau_u or 'joint'), where the artifact says.
+        self.target: str | None = None
         self.inference = inference
         self.config = config or GuardConfig()
         self.joint_names: tuple[str, ...] = tuple(model.joint_names)
@@ -209,6 +214,7 @@ class FeedForwardPredictor:
             else None,
         )
         predictor.inputs, predictor.fitting_inputs = artifact_inputs(metadata)
+        predictor.target = artifact_target(metadata)
         return predictor
 
     def warm_up(self, calls: int = 25) -> None:
@@ -432,6 +438,9 @@ class FeedForwardPredictor:
                 self._push_window(q, v, a)  # the motion happened: keep the history continuous
                 return self._reject(sample, Reject.OUT_OF_RANGE, detail or '')
             tau = self._predict(q, v, a)
+        if self.adaptation is not None:  # the drift the model lacks, learnt from the currents
+            self.adaptation.predicted(sample.stamp_ns, v, tau)
+            tau = tau + self.adaptation.correction(v)
         self.compute_s.add(time.perf_counter() - start)
         if not np.isfinite(tau).all():
             return self._reject(

@@ -35,6 +35,7 @@ __all__ = [
     'ViscousFriction',
     'effects_from_dict',
     'smooth_sign',
+    'warm_up',
 ]
 
 EFFECT_NAMES = (
@@ -76,31 +77,53 @@ class Effect:
         return out
 
 
+def warm_up(
+    warm_scale: float, warm_up_s: float, shift_time_s: np.ndarray | None
+) -> np.ndarray | float:
+    """(N, 1) scale of a friction that falls as the drive warms up over a shift, or 1.
+
+    scale(t) = warm_scale + (1 - warm_scale) * exp(-t / warm_up_s), t (N,) the time into the
+    shift [s] (lubricant viscosity falls with temperature); ``warm_up_s`` 0 keeps it constant.
+    """
+    if shift_time_s is None or warm_up_s <= 0:
+        return 1.0
+    decay = np.exp(-np.asarray(shift_time_s, dtype=float) / warm_up_s)
+    return (warm_scale + (1.0 - warm_scale) * decay)[:, None]
+
+
 @dataclass(frozen=True, eq=False)
 class ViscousFriction(Effect):
-    """tau = d * v, with d [N*m*s/rad] per joint."""
+    """tau = d * v, with d [N*m*s/rad] per joint, times the warm-up scale (``warm_up``)."""
 
     name: ClassVar[str] = 'viscous_friction'
     vector_fields: ClassVar[tuple[str, ...]] = ('coefficient',)
     coefficient: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    warm_scale: float = 1.0
+    warm_up_s: float = 0.0
 
-    def torque(self, v: np.ndarray) -> np.ndarray:
-        """Friction torque (..., n) [N*m] at velocities v [rad/s]."""
-        return self.coefficient * v
+    def torque(self, v: np.ndarray, shift_time_s: np.ndarray | None = None) -> np.ndarray:
+        """Friction torque (..., n) [N*m] at velocities v [rad/s] (N, n) and shift times (N,)."""
+        return self.coefficient * v * warm_up(self.warm_scale, self.warm_up_s, shift_time_s)
 
 
 @dataclass(frozen=True, eq=False)
 class CoulombFriction(Effect):
-    """tau = F_c * tanh(v / v_eps), with F_c [N*m] and smoothing velocity v_eps [rad/s]."""
+    """tau = F_c * tanh(v / v_eps) times the warm-up scale (``warm_up``).
+
+    F_c [N*m] per joint, smoothing velocity v_eps [rad/s].
+    """
 
     name: ClassVar[str] = 'coulomb_friction'
     vector_fields: ClassVar[tuple[str, ...]] = ('level',)
     level: np.ndarray = field(default_factory=lambda: np.zeros(0))
     smoothing_velocity: float = 0.005
+    warm_scale: float = 1.0
+    warm_up_s: float = 0.0
 
-    def torque(self, v: np.ndarray) -> np.ndarray:
-        """Friction torque (..., n) [N*m]."""
-        return self.level * smooth_sign(v, self.smoothing_velocity)
+    def torque(self, v: np.ndarray, shift_time_s: np.ndarray | None = None) -> np.ndarray:
+        """Friction torque (..., n) [N*m] at velocities (N, n) and shift times (N,)."""
+        scale = warm_up(self.warm_scale, self.warm_up_s, shift_time_s)
+        return self.level * smooth_sign(v, self.smoothing_velocity) * scale
 
 
 @dataclass(frozen=True, eq=False)
@@ -332,6 +355,8 @@ def _parse_effect(cls: type[Effect], data: dict[str, Any], n: int, where: str) -
         'arm_link_m',
         'mass_rel_std',
         'com_std_m',
+        'warm_scale',
+        'warm_up_s',
     ):
         if hasattr(effect, key) and getattr(effect, key) < 0:
             raise ConfigError(f'{where}.{key}: must be >= 0, got {getattr(effect, key)}')

@@ -107,6 +107,7 @@ class TwinConfig:
     measurement: MeasurementConfig
     joint_torque_sensors: bool = False
     robot_seed: int | None = None
+    shift_start_s: float = 0.0
     raw: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -124,6 +125,7 @@ _TOP = (
     'effects',
     'measurement',
     'joint_torque_sensors',
+    'shift_start_s',
 )
 _MEASUREMENT = (
     'current_noise_std_a',
@@ -209,6 +211,13 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
         )
     if not isinstance(start, int) or start < 0:
         raise ConfigError(f'{where}: start_time_ns must be a non-negative integer, got {start!r}')
+    shift_start = data.get('shift_start_s', 0.0)
+    if (
+        not isinstance(shift_start, (int, float))
+        or isinstance(shift_start, bool)
+        or shift_start < 0
+    ):
+        raise ConfigError(f'{where}: shift_start_s must be a number >= 0 [s], got {shift_start!r}')
     sensors = data.get('joint_torque_sensors', False)
     if not isinstance(sensors, bool):
         raise ConfigError(f'{where}: joint_torque_sensors must be true or false')
@@ -222,6 +231,7 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
         measurement=measurement,
         joint_torque_sensors=sensors,
         robot_seed=robot_seed,
+        shift_start_s=float(shift_start),
         raw=data,
     )
 
@@ -361,7 +371,8 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     rotor_inertia = robot.drives.rotor_inertia * (rotor.scale if rotor.enabled else 1.0)
     components['rotor_inertia'] = rotor_inertia * gear**2 * ac
 
-    components |= friction_and_cogging(effects, vc, qc, tau_joint, gear)
+    shift_time = config.shift_start_s + t - delay_s
+    components |= friction_and_cogging(effects, vc, qc, tau_joint, gear, shift_time_s=shift_time)
 
     scale_effect = effects.get('torque_constant_scale')
     assert isinstance(scale_effect, TorqueConstantScale)
@@ -415,9 +426,18 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
 
 
 def friction_and_cogging(
-    effects: EffectSet, vc: np.ndarray, qc: np.ndarray, tau_joint: np.ndarray, gear: np.ndarray
+    effects: EffectSet,
+    vc: np.ndarray,
+    qc: np.ndarray,
+    tau_joint: np.ndarray,
+    gear: np.ndarray,
+    *,
+    shift_time_s: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """The enabled friction laws' and cogging's torques [N*m] on the delayed motion."""
+    """The enabled friction laws' and cogging's torques [N*m] on the delayed motion.
+
+    ``shift_time_s`` (N,): each sample's time into the shift, for a friction that warms up.
+    """
     components: dict[str, np.ndarray] = {}
     viscous, coulomb, stribeck, load = (
         effects.get(name)
@@ -433,9 +453,9 @@ def friction_and_cogging(
     assert isinstance(stribeck, StribeckFriction)
     assert isinstance(load, LoadDependentFriction)
     if viscous.enabled:
-        components['viscous_friction'] = viscous.torque(vc)
+        components['viscous_friction'] = viscous.torque(vc, shift_time_s)
     if coulomb.enabled:
-        components['coulomb_friction'] = coulomb.torque(vc)
+        components['coulomb_friction'] = coulomb.torque(vc, shift_time_s)
     if stribeck.enabled:
         components['stribeck_friction'] = stribeck.torque(vc)
     if load.enabled:

@@ -366,3 +366,90 @@ def test_far_outside_its_envelope_a_network_publishes_the_physics_torque_and_cou
     assert 'nominal model' in values['fallback']
     assert predictor.stop() == 0
     assert 'physics share 1.00' in predictor.log()
+
+
+def test_adaptation_learns_a_friction_offset_from_the_currents_and_saves_it_beside(
+    nodes, listener, tiny_artifacts, mabi, tmp_path
+):
+    """The currents carry 40 N*m on joint_1 more than the model: the node learns it online."""
+    import json
+    import shutil
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from id_learning.nodes.qos import reference_qos
+
+    artifact = tmp_path / 'rnea_lq'
+    shutil.copytree(tiny_artifacts['rnea_lq'], artifact)
+    listener.subscribe(JointState, '/tau_u')
+    listener.subscribe(DiagnosticArray, '/diagnostics')
+    reference = listener.node.create_publisher(JointTrajectory, '/reference', reference_qos(500))
+    currents = listener.node.create_publisher(JointState, '/motor_currents', reference_qos(500))
+    predictor = nodes(
+        'predictor',
+        {
+            'artifact': str(artifact),
+            'input_topic': '/reference',
+            'input_depth': 500,
+            'stale_after_cycles': 5000,
+            'diagnostics_period_s': 0.1,
+            'adaptation': 'rls',
+            'adaptation_time_constant_s': 5.0,
+        },
+    )
+    wait_connected(listener, reference)
+    listener.wait_for(
+        lambda: currents.get_subscription_count() >= 1, STARTUP_S, 'the currents subscription'
+    )
+    model = load_model(artifact, mabi)
+    n = 300
+    stamps, q, v, a = reference_run(n)
+    tau = model.predict(q, v, a)
+    extra = np.zeros(6)
+    extra[0] = 40.0
+    per_ampere = mabi.drives.gear_ratio * mabi.drives.torque_constant
+    for k in range(n):
+        msg = JointTrajectory(joint_names=list(mabi.joints))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamps[k]), 1_000_000_000)
+        msg.points = [
+            JointTrajectoryPoint(
+                positions=list(q[k]), velocities=list(v[k]), accelerations=list(a[k])
+            )
+        ]
+        reference.publish(msg)
+        listener.wait_for(
+            lambda k=k: len(listener.messages['/tau_u']) > k, 10, f'tau_u of sample {k}'
+        )
+        measured = JointState(name=list(mabi.joints), effort=list((tau[k] + extra) / per_ampere))
+        measured.header = msg.header
+        currents.publish(measured)
+    listener.wait_for(
+        lambda: (
+            int((listener.diagnostics('id_learning/predictor') or {}).get('adaptation_updates', 0))
+            >= n - 5
+        ),
+        10,
+        'the adaptation to learn from the currents',
+    )
+    values = listener.diagnostics('id_learning/predictor')
+    learnt = sum(
+        float(values[f'adapted_{column}_joint_1'])
+        * (np.tanh(v[-1, 0] / 0.01) if column.startswith('coulomb') else
+           v[-1, 0] if column.startswith('viscous') else 1.0)
+        for column in ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
+    )  # fmt: skip
+    assert learnt == pytest.approx(40.0, abs=4.0)
+    assert abs(float(values['adapted_offset_nm_joint_2'])) < 1.0
+    with listener.condition:
+        last = sorted(listener.messages['/tau_u'], key=stamp_ns)[-1]
+    assert last.effort[0] - tau[-1, 0] == pytest.approx(40.0, abs=4.0)
+    assert predictor.stop() == 0
+    saved = tmp_path / 'rnea_lq.adaptation.json'
+    state = json.loads(saved.read_text())
+    assert state['joints'] == list(mabi.joints)
+    assert state['updates'] >= n - 5
+    assert sorted(p.name for p in artifact.iterdir()) == sorted(
+        p.name for p in tiny_artifacts['rnea_lq'].iterdir()
+    )

@@ -1,0 +1,131 @@
+"""A shift of warm-up drift: the frozen model, the adapting one, and one refitted on the last hour.
+
+    python benchmarks/drift_adaptation.py [--hours 0,1,...,8] [--window 240] [--catch-up 120]
+
+The twin robot of config/twin_default.yaml with its viscous and Coulomb friction falling by 30 %
+over the shift (``warm_scale`` 0.7, ``warm_up_s`` 2 h: 0.705 of the cold friction after 8 h).
+- frozen: ``rnea_id`` identified on a recording at the start of the shift;
+- adapted: the same model with ``predictor.adaptation.FrictionAdapter`` learning from the
+  measured currents, online, window after window (a priori errors: each sample is predicted
+  before it is learnt from). The hours between windows are not simulated: the adapter resumes
+  from where the last window left it and gets each window's first ``--catch-up`` seconds to
+  catch up; every window is scored on the rest;
+- refit: ``rnea_id`` identified on a recording of the last hour before each window.
+Each window's tau_u RMSE is against the twin's noise-free tau_u, per joint, on the controller's
+reference (the true motion). Prints the table and JSON, and the adapter's update time per sample.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+from common import REPO, emit
+
+from id_learning.models.registry import load_model
+from id_learning.predictor.adaptation import FrictionAdapter
+from id_learning.robot.drives import motor_torque_from_current
+from id_learning.training import train_run
+from id_learning.twin import load_twin_config, simulate, write_twin_output
+
+HOUR_S = 3600.0
+
+
+def twin(shift_start_s: float, seed: int, duration_s: float):
+    config = load_twin_config(REPO / 'config/twin_default.yaml')
+    data = yaml.safe_load((REPO / 'config/twin_default.yaml').read_text())
+    for name in ('viscous_friction', 'coulomb_friction'):
+        data['effects'][name] |= {'warm_scale': 0.7, 'warm_up_s': 2 * HOUR_S}
+    data |= {'seed': seed, 'robot_seed': 2026, 'shift_start_s': shift_start_s}
+    path = Path(tempfile.mkdtemp()) / 'twin.yaml'
+    data['robot'] = str(REPO / 'config/mabi_max100.yaml')
+    path.write_text(yaml.safe_dump(data))
+    config = load_twin_config(path)
+    return replace(config, excitation=replace(config.excitation, duration_s=duration_s))
+
+
+def fitted(config, folder: Path):
+    result = simulate(config)
+    bag = write_twin_output(result, config, folder / 'bag')
+    run = train_run([bag], config.robot, 'motor', ['rnea_id'], folder / 'run', progress=False)
+    return load_model(run.models['rnea_id'].folder, config.robot, 'rnea_id')
+
+
+def rmse(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean((a - b) ** 2, axis=0))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--hours', default='0,1,2,3,4,5,6,7,8')
+    parser.add_argument('--window', type=float, default=240.0, help='test window per hour [s]')
+    parser.add_argument(
+        '--catch-up', type=float, default=120.0, help='unscored start of each window [s]'
+    )
+    parser.add_argument('--fit', type=float, default=300.0, help='fitting recordings [s]')
+    args = parser.parse_args()
+    hours = [float(h) for h in args.hours.split(',')]
+    work = Path(tempfile.mkdtemp())
+    robot = twin(0.0, 1, 1.0).robot
+    frozen = fitted(twin(0.0, 1, args.fit), work / 'frozen')
+    adapter = FrictionAdapter(robot.limits.torque, robot.limits.velocity, robot.ipo_period_s)
+    update_s: list[float] = []
+    rows = []
+    for hour in hours:
+        window = simulate(twin(hour * HOUR_S, 100 + int(hour), args.window))
+        q, v, a = window.q_true, window.v_true, window.a_true
+        measured = motor_torque_from_current(window.recording.current, robot.drives)
+        model = frozen.predict(q, v, a)
+        adapted = np.empty_like(model)
+        for k in range(len(q)):
+            adapted[k] = model[k] + adapter.correction(v[k])
+            start = time.perf_counter()
+            adapter.update(v[k], measured[k], model[k])  # the reference's velocity, as online
+            update_s.append(time.perf_counter() - start)
+        start_s = max(0.0, hour * HOUR_S - HOUR_S)
+        refit = fitted(twin(start_s, 200 + int(hour), args.fit), work / f'refit_{hour:g}')
+        # Scored after the catch-up: it stands for the hour between windows, which a
+        # continuous run spends tracking the drift.
+        half = slice(round(args.catch_up / robot.ipo_period_s), None)
+        clean = window.tau_u_clean[half]
+        row = {
+            'hour': hour,
+            'friction_scale': 0.7 + 0.3 * np.exp(-hour / 2.0),
+            'frozen_rmse_nm': rmse(model[half], clean).tolist(),
+            'adapted_rmse_nm': rmse(adapted[half], clean).tolist(),
+            'refit_rmse_nm': rmse(refit.predict(q, v, a)[half], clean).tolist(),
+            'theta': adapter.theta.tolist(),
+        }
+        rows.append(row)
+        print(
+            f'hour {hour:g}: friction x{row["friction_scale"]:.3f}; mean RMSE [N*m] frozen '
+            f'{np.mean(row["frozen_rmse_nm"]):.2f}, adapted {np.mean(row["adapted_rmse_nm"]):.2f}'
+            f', refit {np.mean(row["refit_rmse_nm"]):.2f}',
+            flush=True,
+        )
+    frozen_growth = np.mean(rows[-1]['frozen_rmse_nm']) / np.mean(rows[0]['frozen_rmse_nm'])
+    adapted_vs_refit = [
+        float(np.mean(r['adapted_rmse_nm']) / np.mean(r['refit_rmse_nm'])) for r in rows
+    ]
+    emit(
+        {
+            'benchmark': 'drift_adaptation',
+            'hours': rows,
+            'frozen_growth': float(frozen_growth),
+            'adapted_over_refit': adapted_vs_refit,
+            'adapter': adapter.state(robot.joints),
+            'update_us': {
+                'median': 1e6 * float(np.median(update_s)),
+                'p99': 1e6 * float(np.percentile(update_s, 99)),
+            },
+        }
+    )
+
+
+if __name__ == '__main__':
+    main()

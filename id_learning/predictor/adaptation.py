@@ -1,0 +1,286 @@
+"""Online adaptation of the feed-forward to a drifting machine: recursive least squares.
+
+Friction falls as a drive warms up over a shift, so a model fitted cold drifts off. Here the
+model's tau_u is corrected by the linear-in-parameters part that drifts, per joint:
+
+    tau_u = model(q, v, a) + theta_j . [tanh(v_j / v_eps), v_j, 1]
+
+(a Coulomb level, a viscous coefficient and an offset), with theta_j estimated from the measured
+tau_u (motor currents) by recursive least squares with exponential forgetting. Safeguards, as an
+adaptation inside a control loop needs them:
+
+- outlier gating: a sample whose prediction error is beyond ``gate_sigmas`` times the running
+  error scale is not learnt from (a collision, a current spike);
+- bounded parameters: the correction applied uses theta clipped to ``bounds`` (a correction
+  larger than a share of the torque limits is no drift); the recursion itself runs unclipped,
+  since clipping its state would leave the covariance describing an estimate it no longer has
+  (a robot starting from rest, where the Coulomb and viscous columns are nearly parallel, would
+  then stay biased for the whole shift);
+- bounded covariance: the covariance's trace is capped, so that forgetting without excitation
+  (a robot standing still) cannot wind it up;
+- frozen input: a non-finite sample, or one the caller marks stale, changes nothing.
+
+The adapter is plain numpy (no ROS): the predictor node updates it from measured currents and
+adds ``correction`` to every prediction.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from id_learning.robot.config import RobotConfig
+
+__all__ = ['ADAPTATION_JSON', 'AdaptationConfig', 'AdaptationLoop', 'FrictionAdapter']
+
+#: Where adapted parameters are saved beside (never over) an artifact.
+ADAPTATION_JSON = 'adaptation.json'
+_COLUMNS = ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
+#: The corrections are bounded to this share of the torque limits: a drift, not a new model.
+BOUND_SHARE = 0.1
+
+
+@dataclass(frozen=True)
+class AdaptationConfig:
+    """Settings of the friction adapter.
+
+    Attributes:
+        time_constant_s: memory of the forgetting factor [s]: lambda = 1 - period / time_constant.
+        smoothing_velocity: v_eps of the Coulomb column's tanh [rad/s].
+        gate_sigmas: samples whose error exceeds this many running error scales are skipped.
+        initial_std: prior standard deviation of each parameter (Coulomb [N*m], viscous
+            [N*m*s/rad], offset [N*m]) as a share of its bound: a small prior keeps the first
+            samples (a robot starting from rest, where the Coulomb and viscous columns are
+            nearly parallel) from throwing the estimate about.
+        max_trace: cap on the covariance's trace, as a multiple of its initial trace.
+    """
+
+    time_constant_s: float = 60.0
+    smoothing_velocity: float = 0.01
+    gate_sigmas: float = 6.0
+    initial_std: float = 0.1
+    max_trace: float = 1.0
+
+
+@dataclass
+class _Counters:
+    updates: int = 0
+    gated: int = 0
+    frozen: int = 0
+    clipped: int = 0
+    resets: int = 0
+
+
+@dataclass
+class FrictionAdapter:
+    """Per-joint RLS on a Coulomb level, a viscous coefficient and an offset.
+
+    Args:
+        torque_limit: (n,) the robot's torque limits [N*m]: they scale the priors and bound
+            the parameters (``BOUND_SHARE`` of the limit for Coulomb and offset, of the limit
+            over ``max_velocity`` for viscous).
+        max_velocity: (n,) the robot's velocity limits [rad/s].
+        period_s: the update period [s] (the IPO period).
+        config: the adapter's settings.
+    """
+
+    torque_limit: np.ndarray
+    max_velocity: np.ndarray
+    period_s: float
+    config: AdaptationConfig = field(default_factory=AdaptationConfig)
+
+    def __post_init__(self) -> None:
+        """Start at theta = 0 with the prior covariance."""
+        n = len(self.torque_limit)
+        limit = np.asarray(self.torque_limit, dtype=float)
+        share = BOUND_SHARE * limit
+        self.bounds = np.stack([share, share / np.asarray(self.max_velocity), share], axis=1)
+        self.theta = np.zeros((n, 3))  # what is applied: the estimate within the bounds
+        self._estimate = np.zeros((n, 3))  # the recursion's own, unclipped
+        self._p0 = np.stack([np.diag((self.config.initial_std * b) ** 2) for b in self.bounds])
+        self.covariance = self._p0.copy()
+        self._max_trace = self.config.max_trace * np.trace(self._p0, axis1=1, axis2=2)
+        self.forgetting = 1.0 - self.period_s / self.config.time_constant_s
+        self.error_scale = 0.02 * limit  # running RMS of the prediction error [N*m]
+        self.counters = _Counters()
+
+    def regressors(self, v: np.ndarray) -> np.ndarray:
+        """(n, 3) columns of each joint at velocities v (n,)."""
+        eps = self.config.smoothing_velocity
+        return np.stack([np.tanh(v / eps), v, np.ones_like(v)], axis=1)
+
+    def correction(self, v: np.ndarray) -> np.ndarray:
+        """(n,) tau_u to add to the model's prediction at velocities v (n,) [N*m]."""
+        return np.einsum('jk,jk->j', self.regressors(v), self.theta)
+
+    def update(
+        self,
+        v: np.ndarray,
+        tau_measured: np.ndarray,
+        tau_model: np.ndarray,
+        *,
+        stale: bool = False,
+    ) -> bool:
+        """Learn from one sample: measured tau_u against the model's (before correction).
+
+        Args:
+            v: (n,) joint velocities [rad/s] of the sample.
+            tau_measured: (n,) tau_u from the measured currents [N*m].
+            tau_model: (n,) the model's tau_u at the sample, without the correction [N*m].
+            stale: the inputs are not current (the caller's watchdog): nothing is learnt.
+
+        Returns:
+            Whether any joint learnt from the sample.
+        """
+        values = (v, tau_measured, tau_model)
+        if stale or not all(np.isfinite(x).all() for x in values):
+            self.counters.frozen += 1
+            return False
+        phi = self.regressors(v)
+        error = tau_measured - tau_model - np.einsum('jk,jk->j', phi, self._estimate)
+        accept = np.abs(error) <= self.config.gate_sigmas * self.error_scale
+        self.counters.gated += int(np.count_nonzero(~accept))
+        if not accept.any():
+            return False
+        lam = self.forgetting
+        p_phi = np.einsum('jkl,jl->jk', self.covariance, phi)
+        gain = p_phi / (lam + np.einsum('jk,jk->j', phi, p_phi))[:, None]
+        estimate = self._estimate + gain * error[:, None]
+        covariance = (self.covariance - np.einsum('jk,jl->jkl', gain, p_phi)) / lam
+        # Rounding makes the update drift from symmetry, and forgetting amplifies it until the
+        # covariance is indefinite and the estimate diverges (after ~10^5 updates): keep it
+        # symmetric, and start a joint afresh should its covariance still lose definiteness.
+        covariance = 0.5 * (covariance + np.swapaxes(covariance, 1, 2))
+        broken = ~np.isfinite(covariance).all(axis=(1, 2)) | (
+            np.diagonal(covariance, axis1=1, axis2=2) <= 0
+        ).any(axis=1)
+        covariance[broken] = self._p0[broken]
+        self.counters.resets += int(np.count_nonzero(broken))
+        trace = np.trace(covariance, axis1=1, axis2=2)
+        covariance *= np.minimum(1.0, self._max_trace / trace)[:, None, None]
+        rows = accept[:, None]
+        self._estimate = np.where(rows, estimate, self._estimate)
+        self.theta = np.clip(self._estimate, -self.bounds, self.bounds)
+        self.counters.clipped = int(np.count_nonzero(self.theta != self._estimate))
+        self.covariance = np.where(rows[:, :, None], covariance, self.covariance)
+        scale = np.sqrt(lam * self.error_scale**2 + (1 - lam) * error**2)
+        self.error_scale = np.where(accept, scale, self.error_scale)
+        self.counters.updates += 1
+        return True
+
+    def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
+        """The adapted parameters and counters, JSON-ready (for /diagnostics and the file)."""
+        return {
+            'joints': list(joints),
+            'columns': list(_COLUMNS),
+            'theta': self.theta.tolist(),
+            'error_scale_nm': self.error_scale.tolist(),
+            'updates': self.counters.updates,
+            'gated_joint_samples': self.counters.gated,
+            'frozen_samples': self.counters.frozen,
+            'parameters_at_bounds': self.counters.clipped,
+            'covariance_resets': self.counters.resets,
+            'config': self.config.__dict__,
+        }
+
+    def save(self, artifact: Path, joints: tuple[str, ...]) -> Path:
+        """Write the state as ``adaptation.json`` beside the artifact folder, never into it."""
+        artifact = Path(artifact)
+        path = artifact.parent / f'{artifact.name}.{ADAPTATION_JSON}'
+        tmp = path.with_suffix('.tmp')
+        tmp.write_text(json.dumps(self.state(joints), indent=2), encoding='utf-8')
+        tmp.replace(path)
+        return path
+
+
+class AdaptationLoop:
+    """Pairs each prediction with the measured currents of the same IPO cycle, and adapts.
+
+    The predictor records the model's tau_u and the reference velocity of every sample it
+    serves (``predicted``); the drive's currents of that cycle arrive later with the same
+    stamp (``measured``) and the pair updates the adapter. Only the last ``capacity``
+    predictions are kept: currents older than that, or for a cycle never predicted, are counted
+    as unpaired and learnt nothing from.
+
+    Args:
+        adapter: the RLS estimator.
+        torque_per_ampere: (n,) gear ratio times torque constant: tau_u = it * current.
+        capacity: predictions kept for pairing.
+    """
+
+    def __init__(
+        self, adapter: FrictionAdapter, torque_per_ampere: np.ndarray, capacity: int = 512
+    ) -> None:
+        """Start with nothing to pair."""
+        self.adapter = adapter
+        self.torque_per_ampere = np.asarray(torque_per_ampere, dtype=float)
+        self.capacity = capacity
+        self._pending: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.unpaired = 0
+
+    def correction(self, v: np.ndarray) -> np.ndarray:
+        """(n,) tau_u to add to the model's at reference velocities v (n,) [N*m]."""
+        return self.adapter.correction(v)
+
+    def predicted(self, stamp_ns: int, v: np.ndarray, tau_model: np.ndarray) -> None:
+        """Remember the model's tau_u (before correction) and the velocity of one cycle."""
+        pending = self._pending
+        pending[stamp_ns] = (v.copy(), tau_model.copy())
+        if len(pending) > self.capacity:
+            del pending[next(iter(pending))]  # dicts keep insertion order: the oldest goes
+
+    def measured(self, stamp_ns: int, currents: np.ndarray, *, stale: bool = False) -> bool:
+        """Learn from the currents (n,) [A] of one cycle; whether the adapter learnt."""
+        pair = self._pending.pop(stamp_ns, None)
+        if pair is None:
+            self.unpaired += 1
+            return False
+        v, tau_model = pair
+        return self.adapter.update(v, self.torque_per_ampere * currents, tau_model, stale=stale)
+
+    @classmethod
+    def for_robot(
+        cls, robot: RobotConfig, joints: tuple[str, ...], config: AdaptationConfig
+    ) -> AdaptationLoop:
+        """A loop for a robot's drives and limits, in the given joint order."""
+        order = [robot.joints.index(name) for name in joints]
+        drives, limits = robot.drives, robot.limits
+        adapter = FrictionAdapter(
+            limits.torque[order], limits.velocity[order], robot.ipo_period_s, config
+        )
+        return cls(adapter, (drives.gear_ratio * drives.torque_constant)[order])
+
+    def measured_message(
+        self, stamp_ns: int, names: Sequence[str], effort: Sequence[float], joints: Sequence[str]
+    ) -> bool:
+        """``measured`` from a JointState's names and effort (the currents), in any order.
+
+        A message whose names are not the joints, or whose effort does not match them, counts
+        as frozen input (nothing learnt).
+        """
+        if len(names) != len(joints) or set(names) != set(joints) or len(effort) != len(names):
+            self.adapter.counters.frozen += 1
+            return False
+        index = {name: k for k, name in enumerate(names)}
+        currents = np.array([effort[index[name]] for name in joints], dtype=float)
+        return self.measured(stamp_ns, currents)
+
+    def report(self, joints: Sequence[str]) -> dict[str, object]:
+        """Diagnostics key-values: counts and each joint's adapted parameters."""
+        counters = self.adapter.counters
+        values: dict[str, object] = {
+            'adaptation_updates': counters.updates,
+            'adaptation_gated': counters.gated,
+            'adaptation_frozen': counters.frozen,
+            'adaptation_unpaired': self.unpaired,
+            'adaptation_at_bounds': counters.clipped,
+        }
+        for j, name in enumerate(joints):
+            for k, column in enumerate(_COLUMNS):
+                values[f'adapted_{column}_{name}'] = float(self.adapter.theta[j, k])
+        return values
