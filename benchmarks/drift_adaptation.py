@@ -10,7 +10,8 @@ over the shift (``warm_scale`` 0.7, ``warm_up_s`` 2 h: 0.705 of the cold frictio
   before it is learnt from). The hours between windows are not simulated: the adapter resumes
   from where the last window left it and gets each window's first ``--catch-up`` seconds to
   catch up; every window is scored on the rest;
-- refit: ``rnea_id`` identified on a recording of the last hour before each window.
+- refit: ``rnea_id`` identified on a recording that ends where each window starts (``--fit``
+  seconds: the freshest refit the last hour allows).
 Each window's tau_u RMSE is against the twin's noise-free tau_u, per joint, on the controller's
 reference (the true motion). Prints the table and JSON, and the adapter's update time per sample.
 """
@@ -37,7 +38,6 @@ HOUR_S = 3600.0
 
 
 def twin(shift_start_s: float, seed: int, duration_s: float):
-    config = load_twin_config(REPO / 'config/twin_default.yaml')
     data = yaml.safe_load((REPO / 'config/twin_default.yaml').read_text())
     for name in ('viscous_friction', 'coulomb_friction'):
         data['effects'][name] |= {'warm_scale': 0.7, 'warm_up_s': 2 * HOUR_S}
@@ -87,7 +87,7 @@ def main() -> None:
             start = time.perf_counter()
             adapter.update(v[k], measured[k], model[k])  # the reference's velocity, as online
             update_s.append(time.perf_counter() - start)
-        start_s = max(0.0, hour * HOUR_S - HOUR_S)
+        start_s = max(0.0, hour * HOUR_S - args.fit)  # the last minutes before the window
         refit = fitted(twin(start_s, 200 + int(hour), args.fit), work / f'refit_{hour:g}')
         # Scored after the catch-up: it stands for the hour between windows, which a
         # continuous run spends tracking the drift.

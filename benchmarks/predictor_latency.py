@@ -47,7 +47,7 @@ STUDY_SIZE_QUICK = {'max_epochs': 1, 'device': 'cpu', 'stride': 16}
 
 
 def fit_quick_artifacts(folder: Path, robot_path: Path, kinds: list[str]) -> dict[str, Path]:
-    """One-epoch models of the study's sizes on a 10 s sine recording."""
+    """One-epoch models of the study's sizes on a 40 s sine recording."""
     sys.path.insert(0, str(REPO / 'test'))
     from support import sine_recording
 
@@ -57,7 +57,7 @@ def fit_quick_artifacts(folder: Path, robot_path: Path, kinds: list[str]) -> dic
     from id_learning.robot import load_robot_config
 
     robot = load_robot_config(robot_path)
-    data = TrainingData(prepare_dataset(sine_recording(1250), robot), robot)
+    data = TrainingData(prepare_dataset(sine_recording(5000), robot), robot)
     out = {}
     for kind in kinds:
         hyper = {} if kind == 'rnea_lq' else STUDY_SIZE_QUICK

@@ -72,20 +72,27 @@ class Tracking:
         error: (N, n) reference minus true position at each IPO cycle [rad].
         command: (N, n) the torque commanded [N*m, tau_u units].
         saturated: (n,) cycles in which the command hit the torque limit.
+        diverged_at: the cycle at which the loop went unstable (a feed-forward no drive could
+            follow, a non-finite one), or None; errors are infinite then.
     """
 
     error: np.ndarray
     command: np.ndarray
     saturated: np.ndarray
+    diverged_at: int | None = None
 
     @property
     def rms(self) -> np.ndarray:
-        """(n,) RMS tracking error [rad]."""
+        """(n,) RMS tracking error [rad] (inf when the loop diverged)."""
+        if self.diverged_at is not None:
+            return np.full(self.error.shape[1], np.inf)
         return np.sqrt(np.mean(self.error**2, axis=0))
 
     @property
     def max(self) -> np.ndarray:
-        """(n,) largest tracking error [rad]."""
+        """(n,) largest tracking error [rad] (inf when the loop diverged)."""
+        if self.diverged_at is not None:
+            return np.full(self.error.shape[1], np.inf)
         return np.max(np.abs(self.error), axis=0)
 
 
@@ -137,8 +144,8 @@ def track(
         command[k] = clipped
         for _ in range(SUBSTEPS):
             state = plant.step(state, clipped, dt)
-        if not np.isfinite(state.q).all():
-            raise FloatingPointError(f'the closed loop diverged at cycle {k}')
+        if not (np.isfinite(state.q).all() and np.isfinite(tau).all()):
+            return Tracking(error, command, saturated, diverged_at=k)
     return Tracking(error, command, saturated)
 
 
@@ -173,5 +180,7 @@ def improvement(runs: Mapping[str, Tracking], models: list[str]) -> tuple[str, n
     """
     base = runs[FEEDBACK_ONLY].rms
     scores = {name: float(np.mean(runs[name].rms / base)) for name in models}
+    if not scores:
+        raise ValueError('no model to compare with feedback alone')
     best = min(scores, key=scores.__getitem__)
     return best, base / runs[best].rms

@@ -380,6 +380,11 @@ class PredictorNodeConfig:
             'diagnostics_period_s',
             'adaptation_time_constant_s',
         )
+        if self.adaptation_time_constant_s < 0.1:
+            raise ConfigError(
+                'adaptation_time_constant_s must be at least 0.1 s (ten IPO periods and more), '
+                f'got {self.adaptation_time_constant_s}'
+            )
         _positive(
             self,
             'max_age_s',

@@ -493,10 +493,14 @@ class Predictor(Node):
             return
         self._is_closed = True
         if self.core.adaptation is not None:
-            self._adaptation_file = self.core.adaptation.adapter.save(
-                Path(self.config.artifact), tuple(self.names)
-            )
-            self.get_logger().info(f'adapted parameters saved to {self._adaptation_file}')
+            try:
+                self._adaptation_file = self.core.adaptation.adapter.save(
+                    Path(self.config.artifact), tuple(self.names)
+                )
+            except OSError as err:
+                self.get_logger().error(f'adapted parameters not saved: {err}')
+            else:
+                self.get_logger().info(f'adapted parameters saved to {self._adaptation_file}')
         counters = self.core.counters
         latency = self.latency_s.summary()
         self.get_logger().info(

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from id_learning.errors import ConfigError
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['ADAPTATION_JSON', 'AdaptationConfig', 'AdaptationLoop', 'FrictionAdapter']
@@ -43,6 +44,8 @@ ADAPTATION_JSON = 'adaptation.json'
 _COLUMNS = ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
 #: The corrections are bounded to this share of the torque limits: a drift, not a new model.
 BOUND_SHARE = 0.1
+#: The adaptation's memory spans at least this many update periods.
+MIN_MEMORY_PERIODS = 10
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,6 @@ class _Counters:
     updates: int = 0
     gated: int = 0
     frozen: int = 0
-    clipped: int = 0
     resets: int = 0
 
 
@@ -95,7 +97,16 @@ class FrictionAdapter:
     config: AdaptationConfig = field(default_factory=AdaptationConfig)
 
     def __post_init__(self) -> None:
-        """Start at theta = 0 with the prior covariance."""
+        """Start at theta = 0 with the prior covariance.
+
+        Raises:
+            ConfigError: a time constant shorter than ``MIN_MEMORY_PERIODS`` update periods.
+        """
+        if not self.config.time_constant_s >= MIN_MEMORY_PERIODS * self.period_s:
+            raise ConfigError(
+                f'adaptation time constant {self.config.time_constant_s:g} s: it must span at '
+                f'least {MIN_MEMORY_PERIODS} periods of {self.period_s * 1e3:g} ms'
+            )
         n = len(self.torque_limit)
         limit = np.asarray(self.torque_limit, dtype=float)
         share = BOUND_SHARE * limit
@@ -111,12 +122,16 @@ class FrictionAdapter:
 
     def regressors(self, v: np.ndarray) -> np.ndarray:
         """(n, 3) columns of each joint at velocities v (n,)."""
-        eps = self.config.smoothing_velocity
-        return np.stack([np.tanh(v / eps), v, np.ones_like(v)], axis=1)
+        phi = np.ones((len(v), 3))
+        np.tanh(v / self.config.smoothing_velocity, out=phi[:, 0])
+        phi[:, 1] = v
+        return phi
 
     def correction(self, v: np.ndarray) -> np.ndarray:
         """(n,) tau_u to add to the model's prediction at velocities v (n,) [N*m]."""
-        return np.einsum('jk,jk->j', self.regressors(v), self.theta)
+        theta = self.theta
+        scaled = np.tanh(v / self.config.smoothing_velocity)
+        return scaled * theta[:, 0] + v * theta[:, 1] + theta[:, 2]
 
     def update(
         self,
@@ -137,41 +152,54 @@ class FrictionAdapter:
         Returns:
             Whether any joint learnt from the sample.
         """
-        values = (v, tau_measured, tau_model)
-        if stale or not all(np.isfinite(x).all() for x in values):
+        if stale or not np.isfinite(v.sum() + tau_measured.sum() + tau_model.sum()):
             self.counters.frozen += 1
             return False
         phi = self.regressors(v)
-        error = tau_measured - tau_model - np.einsum('jk,jk->j', phi, self._estimate)
-        accept = np.abs(error) <= self.config.gate_sigmas * self.error_scale
-        self.counters.gated += int(np.count_nonzero(~accept))
-        if not accept.any():
-            return False
+        error = tau_measured - tau_model - (phi * self._estimate).sum(axis=1)
         lam = self.forgetting
-        p_phi = np.einsum('jkl,jl->jk', self.covariance, phi)
-        gain = p_phi / (lam + np.einsum('jk,jk->j', phi, p_phi))[:, None]
+        limit = self.config.gate_sigmas * self.error_scale
+        accept = np.abs(error) <= limit
+        # The error scale learns from every sample, gated ones with their error clipped to the
+        # gate: a scale that had shrunk to the noise of a standstill grows back within a second
+        # of motion, instead of gating every sample from then on.
+        clipped = np.minimum(np.abs(error), limit)
+        self.error_scale = np.sqrt(lam * self.error_scale**2 + (1 - lam) * clipped**2)
+        if not accept.all():
+            self.counters.gated += int(np.count_nonzero(~accept))
+            if not accept.any():
+                return False
+        p_phi = np.matmul(self.covariance, phi[:, :, None])[:, :, 0]
+        gain = p_phi / (lam + (phi * p_phi).sum(axis=1))[:, None]
         estimate = self._estimate + gain * error[:, None]
-        covariance = (self.covariance - np.einsum('jk,jl->jkl', gain, p_phi)) / lam
+        covariance = (self.covariance - gain[:, :, None] * p_phi[:, None, :]) / lam
         # Rounding makes the update drift from symmetry, and forgetting amplifies it until the
         # covariance is indefinite and the estimate diverges (after ~10^5 updates): keep it
         # symmetric, and start a joint afresh should its covariance still lose definiteness.
-        covariance = 0.5 * (covariance + np.swapaxes(covariance, 1, 2))
-        broken = ~np.isfinite(covariance).all(axis=(1, 2)) | (
-            np.diagonal(covariance, axis1=1, axis2=2) <= 0
-        ).any(axis=1)
-        covariance[broken] = self._p0[broken]
-        self.counters.resets += int(np.count_nonzero(broken))
-        trace = np.trace(covariance, axis1=1, axis2=2)
+        covariance += np.swapaxes(covariance, 1, 2)
+        covariance *= 0.5
+        diagonal = np.einsum('jii->ji', covariance)
+        if not (np.isfinite(covariance.sum()) and (diagonal > 0).all()):
+            broken = ~np.isfinite(covariance).all(axis=(1, 2)) | (diagonal <= 0).any(axis=1)
+            covariance[broken] = self._p0[broken]
+            self.counters.resets += int(np.count_nonzero(broken))
+            diagonal = np.einsum('jii->ji', covariance)
+        trace = diagonal.sum(axis=1)
         covariance *= np.minimum(1.0, self._max_trace / trace)[:, None, None]
-        rows = accept[:, None]
-        self._estimate = np.where(rows, estimate, self._estimate)
+        if accept.all():
+            self._estimate, self.covariance = estimate, covariance
+        else:
+            rows = accept[:, None]
+            self._estimate = np.where(rows, estimate, self._estimate)
+            self.covariance = np.where(rows[:, :, None], covariance, self.covariance)
         self.theta = np.clip(self._estimate, -self.bounds, self.bounds)
-        self.counters.clipped = int(np.count_nonzero(self.theta != self._estimate))
-        self.covariance = np.where(rows[:, :, None], covariance, self.covariance)
-        scale = np.sqrt(lam * self.error_scale**2 + (1 - lam) * error**2)
-        self.error_scale = np.where(accept, scale, self.error_scale)
         self.counters.updates += 1
         return True
+
+    @property
+    def at_bounds(self) -> int:
+        """Parameters whose estimate lies beyond its bound (the applied value is the bound)."""
+        return int(np.count_nonzero(self.theta != self._estimate))
 
     def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
         """The adapted parameters and counters, JSON-ready (for /diagnostics and the file)."""
@@ -183,14 +211,18 @@ class FrictionAdapter:
             'updates': self.counters.updates,
             'gated_joint_samples': self.counters.gated,
             'frozen_samples': self.counters.frozen,
-            'parameters_at_bounds': self.counters.clipped,
+            'parameters_at_bounds': self.at_bounds,
             'covariance_resets': self.counters.resets,
             'config': self.config.__dict__,
         }
 
     def save(self, artifact: Path, joints: tuple[str, ...]) -> Path:
-        """Write the state as ``adaptation.json`` beside the artifact folder, never into it."""
-        artifact = Path(artifact)
+        """Write the state as ``<artifact>.adaptation.json`` beside the artifact folder.
+
+        Never into it: the artifact's files are hashed. A restart starts from zero again (the
+        file is a record of what was learnt, not loaded back).
+        """
+        artifact = Path(artifact).resolve()
         path = artifact.parent / f'{artifact.name}.{ADAPTATION_JSON}'
         tmp = path.with_suffix('.tmp')
         tmp.write_text(json.dumps(self.state(joints), indent=2), encoding='utf-8')
@@ -278,7 +310,7 @@ class AdaptationLoop:
             'adaptation_gated': counters.gated,
             'adaptation_frozen': counters.frozen,
             'adaptation_unpaired': self.unpaired,
-            'adaptation_at_bounds': counters.clipped,
+            'adaptation_at_bounds': self.adapter.at_bounds,
         }
         for j, name in enumerate(joints):
             for k, column in enumerate(_COLUMNS):

@@ -439,7 +439,8 @@ class FeedForwardPredictor:
                 return self._reject(sample, Reject.OUT_OF_RANGE, detail or '')
             tau = self._predict(q, v, a)
         if self.adaptation is not None:  # the drift the model lacks, learnt from the currents
-            self.adaptation.predicted(sample.stamp_ns, v, tau)
+            if share == 0.0:  # not while the physics prior serves: its torque is another model
+                self.adaptation.predicted(sample.stamp_ns, v, tau)
             tau = tau + self.adaptation.correction(v)
         self.compute_s.add(time.perf_counter() - start)
         if not np.isfinite(tau).all():

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,7 @@ from id_learning.evaluation.closed_loop import (
 )
 from id_learning.models.registry import load_model
 from id_learning.robot.config import RobotConfig
-from id_learning.training.datasets import load_datasets, preprocess_from_dict
+from id_learning.training.datasets import load_datasets, preprocess_from_dict, segment_rows
 from id_learning.training.run_folder import MODELS_DIR, read_run
 from id_learning.twin import load_twin_config
 from id_learning.twin.plant import TwinPlant
@@ -65,16 +65,15 @@ class ClosedLoopResult:
         return '\n'.join(lines)
 
 
-def _twin_config_path(run: dict[str, Any], twin_config: Path | None) -> Path:
+def _twin_config_path(bag: Path, twin_config: Path | None) -> Path:
+    """The plant's config: the one given, else the twin's copy beside the reference's bag."""
     if twin_config is not None:
         return Path(twin_config)
-    bags = [Path(entry['path']) for entry in run['training_data']['bags']]
-    for bag in bags:
-        if (bag / TWIN_CONFIG_COPY).is_file():
-            return bag / TWIN_CONFIG_COPY
+    if (bag / TWIN_CONFIG_COPY).is_file():
+        return bag / TWIN_CONFIG_COPY
     raise ConfigError(
-        f"no {TWIN_CONFIG_COPY} beside the run's training bags {[str(b) for b in bags]}: the "
-        'closed loop needs the twin robot the data came from; pass --twin CONFIG'
+        f"no {TWIN_CONFIG_COPY} beside {bag}, the run's first training bag: the closed loop "
+        'needs the twin robot the data came from; pass --twin CONFIG'
     )
 
 
@@ -95,10 +94,13 @@ def closed_loop_run(
         ConfigError: no twin config, one of another robot, or a model the run lacks.
     """
     run_dir, out = Path(run_dir), Path(out)
+    if not duration_s > 0:
+        raise ConfigError(f'duration must be positive [s], got {duration_s}')
     run = read_run(run_dir)
     if run.get('robot', {}).get('joints') != list(robot.joints):
         raise CheckpointError(f'{run_dir}: the run is not for robot {robot.name}')
-    twin_path = _twin_config_path(run, twin_config)
+    bag = Path(run['training_data']['bags'][0]['path'])
+    twin_path = _twin_config_path(bag, twin_config)
     twin = load_twin_config(twin_path)
     if twin.robot.name != robot.name or twin.robot.joints != robot.joints:
         raise ConfigError(
@@ -108,13 +110,21 @@ def closed_loop_run(
     unknown = sorted(set(kinds) - set(run['kinds']))
     if unknown:
         raise ConfigError(f'{run_dir}: no model(s) {unknown} in the run; it has {run["kinds"]}')
-    bag = Path(run['training_data']['bags'][0]['path'])
     config = preprocess_from_dict(run['preprocessing'])
     dataset = load_datasets([bag], robot, config, progress=False)[0]
-    start = round(config.train_fraction * len(dataset.q))
-    stop = min(len(dataset.q), start + round(duration_s / robot.ipo_period_s))
+    if dataset.is_shuffled:  # its test samples are scattered: the last share in time
+        start, end = round(config.train_fraction * len(dataset.q)), len(dataset.q)
+        part = 'the last share in time (a shuffled split: it holds training samples too)'
+    else:
+        start, end = segment_rows(dataset, 'test')[0]
+        part = 'the test part'
+    stop = min(end, start + round(duration_s / robot.ipo_period_s))
+    if stop - start < 2:
+        raise ConfigError(f'{bag}: {stop - start} samples of the test part to track')
     reference = dataset.controller.take(slice(start, stop))
-    plant = TwinPlant(twin)
+    # The plant's friction warms up from where the reference starts in the recording.
+    offset_s = float(dataset.stamps_ns[start] - dataset.stamps_ns[0]) * 1e-9
+    plant = TwinPlant(replace(twin, shift_start_s=twin.shift_start_s + offset_s))
     feed_forward = {
         kind: load_model(run_dir / MODELS_DIR / kind, robot, kind).predict(
             reference.q, reference.v, reference.a
@@ -137,7 +147,7 @@ def closed_loop_run(
             'bag': str(bag),
             'rows': [start, stop],
             'duration_s': (stop - start) * robot.ipo_period_s,
-            'part': 'test part (the last share in time)',
+            'part': part,
         },
         'joints': list(robot.joints),
         'controller': {
@@ -149,9 +159,11 @@ def closed_loop_run(
         },
         'runs': {
             name: {
-                'rms_rad': track.rms.tolist(),
-                'max_rad': track.max.tolist(),
+                # None for a loop that diverged (JSON has no infinity).
+                'rms_rad': None if track.diverged_at is not None else track.rms.tolist(),
+                'max_rad': None if track.diverged_at is not None else track.max.tolist(),
                 'saturated_cycles': track.saturated.tolist(),
+                'diverged_at_cycle': track.diverged_at,
             }
             for name, track in runs.items()
         },

@@ -10,7 +10,9 @@ encoder offset) and integrates
 where tau_cmd is a torque in the drive's datasheet units (tau_u), as a controller commands it.
 Friction is stiff around zero velocity (a smoothed sign), so each step treats it implicitly in
 the velocity (linearised backward Euler): explicit Euler would need microsecond steps.
-The label-only effects (a current sensor's offset, the currents' delay) act on no motion.
+The label-only effects (a current sensor's offset, the currents' delay) act on no motion. A
+friction that warms up over the shift (``warm_scale``, ``warm_up_s``) follows the plant's time
+from the config's ``shift_start_s``.
 """
 
 from __future__ import annotations
@@ -34,11 +36,16 @@ _DERIVATIVE_STEP = 1e-6  # rad/s, for the friction's velocity derivative
 
 @dataclass
 class PlantState:
-    """The true motion of the plant: positions [rad], velocities [rad/s], link torque [N*m]."""
+    """The true motion of the plant.
+
+    Positions [rad], velocities [rad/s], link torque [N*m] and the time since the plant started
+    [s] (friction warms up over the shift).
+    """
 
     q: np.ndarray
     v: np.ndarray
     link_torque: np.ndarray
+    time_s: float = 0.0
 
 
 class TwinPlant:
@@ -82,20 +89,33 @@ class TwinPlant:
             out[..., j] = self._spring.torque_on_joint(q[..., j])
         return out
 
-    def _friction(self, q: np.ndarray, v: np.ndarray, link: np.ndarray) -> np.ndarray:
+    def _friction(
+        self, q: np.ndarray, v: np.ndarray, link: np.ndarray, time_s: float
+    ) -> np.ndarray:
         """(n,) friction and cogging torque [N*m] of one state (the link torque loads friction)."""
-        parts = friction_and_cogging(self.config.effects, v[None], q[None], link[None], self.gear)
+        shift = np.array([self.config.shift_start_s + time_s])
+        parts = friction_and_cogging(
+            self.config.effects, v[None], q[None], link[None], self.gear, shift_time_s=shift
+        )
         return np.sum(list(parts.values()), axis=0)[0] if parts else np.zeros_like(q)
 
-    def motor_torque(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    def motor_torque(
+        self, q: np.ndarray, v: np.ndarray, a: np.ndarray, time_s: np.ndarray | None = None
+    ) -> np.ndarray:
         """(N, n) joint-side motor torque [N*m] the true motion (N, n) needs (inverse dynamics).
 
         What ``simulate`` puts in tau_u_clean times the torque-constant scale, less the label's
-        offset, on the undelayed motion: the twin's true inverse dynamics.
+        offset, on the undelayed motion: the twin's true inverse dynamics. ``time_s`` (N,): the
+        samples' times since the recording started (default: one IPO period apart from 0).
         """
         q, v, a = (np.atleast_2d(x) for x in (q, v, a))
+        if time_s is None:
+            time_s = np.arange(len(q)) * self.robot.ipo_period_s
+        shift = self.config.shift_start_s + np.asarray(time_s, dtype=float)
         link = self.dynamics.rnea(q, v, a) - self._spring_torque(q)
-        parts = friction_and_cogging(self.config.effects, v, q, link, self.gear)
+        parts = friction_and_cogging(
+            self.config.effects, v, q, link, self.gear, shift_time_s=shift
+        )
         friction = np.sum(list(parts.values()), axis=0) if parts else 0.0
         return link + self.rotor_inertia_joint_side * a + friction
 
@@ -120,12 +140,12 @@ class TwinPlant:
         mass, bias = self._mass_and_bias(q, v)
         mass = mass + np.diag(self.rotor_inertia_joint_side)
         spring = self._spring_torque(q)
-        friction = self._friction(q, v, state.link_torque)
+        friction = self._friction(q, v, state.link_torque, state.time_s)
         slope = (
-            self._friction(q, v + _DERIVATIVE_STEP, state.link_torque) - friction
+            self._friction(q, v + _DERIVATIVE_STEP, state.link_torque, state.time_s) - friction
         ) / _DERIVATIVE_STEP
         force = self.kt_scale * tau_command - (bias - spring + friction)
         dv = np.linalg.solve(mass + dt * np.diag(np.maximum(slope, 0.0)), dt * force)
         v_next = v + dv
         link = mass @ (dv / dt) - np.diag(self.rotor_inertia_joint_side) @ (dv / dt)
-        return PlantState(q + dt * v_next, v_next, link + bias - spring)
+        return PlantState(q + dt * v_next, v_next, link + bias - spring, state.time_s + dt)

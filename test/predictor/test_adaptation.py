@@ -113,3 +113,21 @@ def test_the_covariance_stays_symmetric_and_a_broken_one_starts_afresh() -> None
     assert fit.counters.resets == 1
     assert np.isfinite(fit.covariance).all()
     np.testing.assert_allclose(fit.covariance[1], fit._p0[1])
+
+
+def test_a_scale_shrunk_at_standstill_lets_motion_back_in() -> None:
+    """At rest the error is noise; the model's errors in motion must not be gated for good."""
+    from id_learning.errors import ConfigError
+
+    fit = adapter(time_constant_s=20.0)
+    rng = np.random.default_rng(4)
+    for _ in range(20_000):  # 160 s at rest: the scale falls to the 1 N*m noise
+        fit.update(np.zeros(3), rng.standard_normal(3), np.zeros(3))
+    assert (fit.error_scale < 2.0).all()
+    v, measured, model = stream(TRUE, 5000, noise=1.0)
+    for k in range(len(v)):
+        fit.update(v[k], measured[k], model[k])
+    assert fit.counters.updates > 24_000  # motion is learnt from, not gated
+    np.testing.assert_allclose(fit.theta[:, :2], TRUE[:, :2], rtol=0.1)
+    with pytest.raises(ConfigError, match='at least 10 periods'):
+        adapter(time_constant_s=0.05)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import yaml
@@ -82,3 +84,33 @@ def test_the_command_saturates_at_the_torque_limit_without_wind_up(twin) -> None
     run = track(plant, reference.take(slice(0, 5)), huge, gains, period_s=PERIOD_S)
     np.testing.assert_allclose(np.abs(run.command), np.tile(config.robot.limits.torque, (5, 1)))
     assert (run.saturated == 5).all()
+
+
+def test_a_friction_warming_up_over_the_shift_is_the_recordings_in_the_plant() -> None:
+    effects = yaml.safe_load((REPO / 'config/twin_default.yaml').read_text())['effects']
+    effects['signal_delay']['enabled'] = False
+    effects['torque_offset']['enabled'] = False
+    for name in ('viscous_friction', 'coulomb_friction'):
+        effects[name] |= {'warm_scale': 0.7, 'warm_up_s': 4.0}
+    config = twin_config(8.0, effects, seed=6, shift_start_s=3.0)
+    result = simulate(config)
+    plant = TwinPlant(config)
+    tau = plant.motor_torque(result.q_true, result.v_true, result.a_true)
+    np.testing.assert_allclose(tau / plant.kt_scale, result.tau_u_clean, rtol=1e-9, atol=1e-6)
+    cold = TwinPlant(replace(config, shift_start_s=0.0)).motor_torque(
+        result.q_true, result.v_true, result.a_true
+    )
+    assert np.abs(cold - tau).max() > 1.0  # the friction has fallen since the start
+
+
+def test_a_feed_forward_no_drive_can_follow_is_a_diverged_run_not_a_crash(twin) -> None:
+    config, result = twin
+    plant = TwinPlant(config)
+    reference = Motion(result.q_true - plant.encoder_offset, result.v_true, result.a_true)
+    bad = np.full_like(reference.q, np.nan)
+    runs = compare_feed_forward(
+        plant, reference.take(slice(0, 50)), {'nan': bad[:50]}, period_s=PERIOD_S, progress=False
+    )
+    assert runs['nan'].diverged_at == 0
+    assert np.isinf(runs['nan'].rms).all()
+    assert runs[FEEDBACK_ONLY].diverged_at is None
