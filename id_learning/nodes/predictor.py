@@ -154,9 +154,6 @@ class Predictor(Node):
         )
         self.done: Future = Future()  # never completes: runs until shut down
         self.names = list(self.core.joint_names)
-        self._adaptation_file: Path | None = None
-        if config.adaptation == 'rls':
-            self.core.adaptation = adaptation_loop(config, self.robot, self.core)
         self.latency_s = RollingStats(config.latency_window)
         self.callback_errors = 0
         #: Published later than one IPO period after the sample arrived (see latency_from).
@@ -200,13 +197,7 @@ class Predictor(Node):
             config.diagnostics_period_s, self._publish_diagnostics
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._measured = (
-            self.create_subscription(
-                JointState, config.measured_topic, self._on_measured, reference_qos(64)
-            )
-            if self.core.adaptation is not None
-            else None
-        )
+        self._measured = self._start_adaptation()
         self._warm_up()
         # torch, the model and rclpy leave ~10^5 tracked objects; a full collection walks them all
         # (~0.1 s here) when the per-sample allocations trigger one. Frozen, they are never walked.
@@ -314,6 +305,16 @@ class Predictor(Node):
                 f'reference callback failed: {type(err).__name__}: {err}',
                 throttle_duration_sec=self.config.log_throttle_s,
             )
+
+    def _start_adaptation(self) -> Any:
+        """With ``adaptation: rls``, the adaptation loop and its currents subscription."""
+        self._adaptation_file: Path | None = None
+        if self.config.adaptation != 'rls':
+            return None
+        self.core.adaptation = adaptation_loop(self.config, self.robot, self.core)
+        return self.create_subscription(
+            JointState, self.config.measured_topic, self._on_measured, reference_qos(64)
+        )
 
     def _on_measured(self, msg: JointState) -> None:
         """The drive's currents of a served cycle: the adaptation learns from them."""
