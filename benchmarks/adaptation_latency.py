@@ -1,6 +1,7 @@
 """What online adaptation adds to the predictor's time per sample, with and without it.
 
     python benchmarks/adaptation_latency.py [--kinds rnea_lq mlp] [--samples 20000]
+        [--mode rls|rls_inertia]
 
 The predictor core (``FeedForwardPredictor.step``, the node's hot path without DDS) serves a
 smooth reference at the IPO rate, once as fitted and once with ``adaptation: rls``; with
@@ -49,6 +50,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--kinds', nargs='+', default=['rnea_lq', 'mlp', 'lstm'])
     parser.add_argument('--samples', type=int, default=20_000)
+    parser.add_argument('--mode', choices=('rls', 'rls_inertia'), default='rls')
     args = parser.parse_args()
     robot = load_robot_config(DEFAULT_ROBOT)
     folders = fit_quick_artifacts(Path(tempfile.mkdtemp()), DEFAULT_ROBOT, args.kinds)
@@ -61,7 +63,7 @@ def main() -> None:
             )
             if adapt:
                 core.adaptation = AdaptationLoop.for_robot(
-                    robot, core.joint_names, AdaptationConfig()
+                    robot, core.joint_names, AdaptationConfig(), inertia=args.mode == 'rls_inertia'
                 )
             core.warm_up()
             seconds = serve(core, args.samples, adapt)[1000:]  # after the first second
@@ -74,10 +76,17 @@ def main() -> None:
         out[kind] = figures
         print(
             f'{kind}: p99 {figures["off"]["p99_ms"]:.3f} ms off, {figures["rls"]["p99_ms"]:.3f} '
-            f'ms with rls (+{figures["added_p99_ms"]:.3f} ms)',
+            f'ms with {args.mode} (+{figures["added_p99_ms"]:.3f} ms)',
             flush=True,
         )
-    emit({'benchmark': 'adaptation_latency', 'samples': args.samples, 'kinds': out})
+    emit(
+        {
+            'benchmark': 'adaptation_latency',
+            'mode': args.mode,
+            'samples': args.samples,
+            'kinds': out,
+        }
+    )
 
 
 if __name__ == '__main__':

@@ -320,9 +320,11 @@ class PredictorNodeConfig:
         'off',
         'Online adaptation to drift: rls = a Coulomb level, a viscous coefficient and an offset '
         'per joint added to the model, learnt by recursive least squares from the measured '
-        'currents on measured_topic (a motor-target model only); off = the model as fitted. '
-        'The adapted values are on /diagnostics and saved beside the artifact on shutdown.',
-        choices=('off', 'rls'),
+        'currents on measured_topic (a motor-target model only); rls_inertia = that and a '
+        "change of the robot's base inertial parameters (a tool or payload change); off = the "
+        'model as fitted. The adapted values are on /diagnostics and saved beside the artifact '
+        'on shutdown.',
+        choices=('off', 'rls', 'rls_inertia'),
     )
     adaptation_time_constant_s: float = param(
         60.0, 'Memory of the adaptation (its forgetting factor) [s].'

@@ -309,7 +309,7 @@ class Predictor(Node):
     def _start_adaptation(self) -> Any:
         """With ``adaptation: rls``, the adaptation loop and its currents subscription."""
         self._adaptation_file: Path | None = None
-        if self.config.adaptation != 'rls':
+        if self.config.adaptation == 'off':
             return None
         self.core.adaptation = adaptation_loop(self.config, self.robot, self.core)
         return self.create_subscription(
@@ -495,7 +495,7 @@ class Predictor(Node):
         self._is_closed = True
         if self.core.adaptation is not None:
             try:
-                self._adaptation_file = self.core.adaptation.adapter.save(
+                self._adaptation_file = self.core.adaptation.save(
                     Path(self.config.artifact), tuple(self.names)
                 )
             except OSError as err:
@@ -531,7 +531,9 @@ def adaptation_loop(
             f'predicts the {target} target: set adaptation off'
         )
     settings = AdaptationConfig(time_constant_s=config.adaptation_time_constant_s)
-    return AdaptationLoop.for_robot(robot, core.joint_names, settings)
+    return AdaptationLoop.for_robot(
+        robot, core.joint_names, settings, inertia=config.adaptation == 'rls_inertia'
+    )
 
 
 def main(args: Sequence[str] | None = None) -> int:

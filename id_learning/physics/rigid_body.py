@@ -358,6 +358,26 @@ class RigidBodyDynamics:
 
         return self._batched(one, q, out_shape=(self.n_joints, self.n_joints))
 
+    def sample_regressor(
+        self, columns: np.ndarray | None = None
+    ) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """``regressor`` of one sample, (n,) q, v, a -> (n, k), with its own scratch data.
+
+        ``columns``: the parameters kept (e.g. a base parameter set's independent ones), all if
+        None.
+        """
+        model, data, ix = self.model, self.model.createData(), self._index
+        keep = slice(None) if columns is None else np.asarray(columns)
+
+        def regressor(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+            full = pin.computeJointTorqueRegressor(
+                model, data, self._to_pin(q), self._to_pin(v), self._to_pin(a)
+            )
+            out: np.ndarray = full[ix][:, keep]
+            return out
+
+        return regressor
+
     def regressor(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Torque regressor Y with tau = Y @ inertial_parameters(); shape (..., n, 10 * bodies)."""
         ix = self._index

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from id_learning.errors import ConfigError
+from id_learning.predictor.adaptation_inertia import InertiaAdapter
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['ADAPTATION_JSON', 'AdaptationConfig', 'AdaptationLoop', 'FrictionAdapter']
@@ -44,6 +45,8 @@ ADAPTATION_JSON = 'adaptation.json'
 _COLUMNS = ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
 #: The corrections are bounded to this share of the torque limits: a drift, not a new model.
 BOUND_SHARE = 0.1
+#: The rigid body's correction may reach this share: a payload can weigh as much as a link.
+INERTIA_BOUND_SHARE = 0.5
 #: The adaptation's memory spans at least this many update periods.
 MIN_MEMORY_PERIODS = 10
 
@@ -216,7 +219,9 @@ class FrictionAdapter:
             'config': self.config.__dict__,
         }
 
-    def save(self, artifact: Path, joints: tuple[str, ...]) -> Path:
+    def save(
+        self, artifact: Path, joints: tuple[str, ...], extra: dict[str, Any] | None = None
+    ) -> Path:
         """Write the state as ``<artifact>.adaptation.json`` beside the artifact folder.
 
         Never into it: the artifact's files are hashed. A restart starts from zero again (the
@@ -225,7 +230,8 @@ class FrictionAdapter:
         artifact = Path(artifact).resolve()
         path = artifact.parent / f'{artifact.name}.{ADAPTATION_JSON}'
         tmp = path.with_suffix('.tmp')
-        tmp.write_text(json.dumps(self.state(joints), indent=2), encoding='utf-8')
+        state = self.state(joints) | (extra or {})
+        tmp.write_text(json.dumps(state, indent=2), encoding='utf-8')
         tmp.replace(path)
         return path
 
@@ -233,59 +239,109 @@ class FrictionAdapter:
 class AdaptationLoop:
     """Pairs each prediction with the measured currents of the same IPO cycle, and adapts.
 
-    The predictor records the model's tau_u and the reference velocity of every sample it
-    serves (``predicted``); the drive's currents of that cycle arrive later with the same
-    stamp (``measured``) and the pair updates the adapter. Only the last ``capacity``
-    predictions are kept: currents older than that, or for a cycle never predicted, are counted
-    as unpaired and learnt nothing from.
+    The predictor hands every sample it serves to ``serve``, which adds the corrections and
+    remembers the model's tau_u and the state; the drive's currents of that cycle arrive later
+    with the same stamp (``measured``) and the pair updates the adapters. Only the last
+    ``capacity`` predictions are kept: currents older than that, or for a cycle never served,
+    are counted as unpaired and learnt nothing from.
 
     Args:
-        adapter: the RLS estimator.
+        adapter: the friction RLS.
         torque_per_ampere: (n,) gear ratio times torque constant: tau_u = it * current.
         capacity: predictions kept for pairing.
+        inertia: the rigid body's RLS (a change of the base inertial parameters), or None.
     """
 
     def __init__(
-        self, adapter: FrictionAdapter, torque_per_ampere: np.ndarray, capacity: int = 512
+        self,
+        adapter: FrictionAdapter,
+        torque_per_ampere: np.ndarray,
+        capacity: int = 512,
+        inertia: InertiaAdapter | None = None,
     ) -> None:
         """Start with nothing to pair."""
         self.adapter = adapter
+        self.inertia = inertia
         self.torque_per_ampere = np.asarray(torque_per_ampere, dtype=float)
         self.capacity = capacity
-        self._pending: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._pending: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]] = {}
         self.unpaired = 0
 
-    def correction(self, v: np.ndarray) -> np.ndarray:
-        """(n,) tau_u to add to the model's at reference velocities v (n,) [N*m]."""
-        return self.adapter.correction(v)
+    def serve(
+        self,
+        stamp_ns: int,
+        state: tuple[np.ndarray, np.ndarray, np.ndarray],
+        tau_model: np.ndarray,
+        *,
+        learn: bool = True,
+    ) -> np.ndarray:
+        """The model's tau_u (n,) at a reference state (q, v, a) with the corrections added.
 
-    def predicted(self, stamp_ns: int, v: np.ndarray, tau_model: np.ndarray) -> None:
-        """Remember the model's tau_u (before correction) and the velocity of one cycle."""
-        pending = self._pending
-        pending[stamp_ns] = (v.copy(), tau_model.copy())
-        if len(pending) > self.capacity:
-            del pending[next(iter(pending))]  # dicts keep insertion order: the oldest goes
+        ``learn``: remember the sample for its currents (not while another model served it).
+        """
+        q, v, a = state
+        if self.inertia is not None:  # friction and rigid body, estimated together
+            regressor = self.inertia.regressor(q, v, a)
+            tau = tau_model + self.inertia.correction(regressor)
+        else:
+            regressor = None
+            tau = tau_model + self.adapter.correction(v)
+        if learn:
+            pending = self._pending
+            pending[stamp_ns] = (v.copy(), regressor, tau_model.copy())
+            if len(pending) > self.capacity:
+                del pending[next(iter(pending))]  # dicts keep insertion order: the oldest goes
+        return tau
 
     def measured(self, stamp_ns: int, currents: np.ndarray, *, stale: bool = False) -> bool:
-        """Learn from the currents (n,) [A] of one cycle; whether the adapter learnt."""
+        """Learn from the currents (n,) [A] of one cycle; whether the friction adapter learnt.
+
+        With the rigid body adapted too, the joint estimator (``InertiaAdapter``) learns alone.
+        """
         pair = self._pending.pop(stamp_ns, None)
         if pair is None:
             self.unpaired += 1
             return False
-        v, tau_model = pair
-        return self.adapter.update(v, self.torque_per_ampere * currents, tau_model, stale=stale)
+        v, regressor, tau_model = pair
+        measured = self.torque_per_ampere * currents
+        if self.inertia is not None and regressor is not None:
+            learnt = self.inertia.update(regressor, measured - tau_model, stale=stale)
+            if not learnt:
+                self.adapter.counters.frozen += int(stale)
+            return learnt
+        return self.adapter.update(v, measured, tau_model, stale=stale)
+
+    def save(self, artifact: Path, joints: tuple[str, ...]) -> Path:
+        """Write both adapters' state beside the artifact (``FrictionAdapter.save``)."""
+        extra = {} if self.inertia is None else {'inertia': self.inertia.state()}
+        return self.adapter.save(artifact, joints, extra)
 
     @classmethod
     def for_robot(
-        cls, robot: RobotConfig, joints: tuple[str, ...], config: AdaptationConfig
+        cls,
+        robot: RobotConfig,
+        joints: tuple[str, ...],
+        config: AdaptationConfig,
+        *,
+        inertia: bool = False,
     ) -> AdaptationLoop:
-        """A loop for a robot's drives and limits, in the given joint order."""
+        """A loop for a robot's drives and limits, in the given joint order.
+
+        ``inertia``: adapt the rigid body's base parameters too (``InertiaAdapter``).
+        """
         order = [robot.joints.index(name) for name in joints]
         drives, limits = robot.drives, robot.limits
         adapter = FrictionAdapter(
             limits.torque[order], limits.velocity[order], robot.ipo_period_s, config
         )
-        return cls(adapter, (drives.gear_ratio * drives.torque_constant)[order])
+        body = (
+            InertiaAdapter(
+                robot, joints, robot.ipo_period_s, config.time_constant_s, INERTIA_BOUND_SHARE
+            )
+            if inertia
+            else None
+        )
+        return cls(adapter, (drives.gear_ratio * drives.torque_constant)[order], inertia=body)
 
     def measured_message(
         self, stamp_ns: int, names: Sequence[str], effort: Sequence[float], joints: Sequence[str]
@@ -312,7 +368,14 @@ class AdaptationLoop:
             'adaptation_unpaired': self.unpaired,
             'adaptation_at_bounds': self.adapter.at_bounds,
         }
+        theta = self.adapter.theta if self.inertia is None else self.inertia.friction
         for j, name in enumerate(joints):
             for k, column in enumerate(_COLUMNS):
-                values[f'adapted_{column}_{name}'] = float(self.adapter.theta[j, k])
+                values[f'adapted_{column}_{name}'] = float(theta[j, k])
+        if self.inertia is not None:
+            values['adaptation_inertia_updates'] = self.inertia.updates
+            values['adaptation_inertia_gated'] = self.inertia.gated
+            values['adapted_base_parameter_change_norm'] = float(
+                np.linalg.norm(self.inertia.change)
+            )
         return values

@@ -439,9 +439,8 @@ class FeedForwardPredictor:
                 return self._reject(sample, Reject.OUT_OF_RANGE, detail or '')
             tau = self._predict(q, v, a)
         if self.adaptation is not None:  # the drift the model lacks, learnt from the currents
-            if share == 0.0:  # not while the physics prior serves: its torque is another model
-                self.adaptation.predicted(sample.stamp_ns, v, tau)
-            tau = tau + self.adaptation.correction(v)
+            # Not learnt from while the physics prior serves: its torque is another model's.
+            tau = self.adaptation.serve(sample.stamp_ns, (q, v, a), tau, learn=share == 0.0)
         self.compute_s.add(time.perf_counter() - start)
         if not np.isfinite(tau).all():
             return self._reject(

@@ -131,3 +131,44 @@ def test_a_scale_shrunk_at_standstill_lets_motion_back_in() -> None:
     np.testing.assert_allclose(fit.theta[:, :2], TRUE[:, :2], rtol=0.1)
     with pytest.raises(ConfigError, match='at least 10 periods'):
         adapter(time_constant_s=0.05)
+
+
+def test_a_payload_the_model_lacks_is_learnt_as_a_change_of_the_base_parameters(mabi) -> None:
+    """The model: the URDF's rigid body; the arm carries 60 kg more (pinocchio with a payload)."""
+    from id_learning.physics.rigid_body import RigidBodyDynamics
+    from id_learning.predictor.adaptation import AdaptationLoop
+
+    nominal = RigidBodyDynamics.from_config(mabi)
+    loaded = nominal.with_payload(
+        mabi.payload_frame, 60.0, np.array([0.1, 0.0, 0.05]), np.diag([0.3, 0.5, 0.5])
+    )
+    loop = AdaptationLoop.for_robot(
+        mabi, mabi.joints, AdaptationConfig(time_constant_s=30.0), inertia=True
+    )
+    assert loop.inertia is not None
+    rng = np.random.default_rng(2)
+    n = 3000
+    t = np.arange(n) * 0.008
+    phase = rng.uniform(0, 2 * np.pi, 6)
+    speed = rng.uniform(0.3, 0.8, 6)
+    q = 0.6 * np.sin(speed * t[:, None] + phase)
+    v = 0.6 * speed * np.cos(speed * t[:, None] + phase)
+    a = -0.6 * speed**2 * np.sin(speed * t[:, None] + phase)
+    model = nominal.rnea(q, v, a)
+    truth = loaded.rnea(q, v, a)
+    per_ampere = loop.torque_per_ampere
+    errors = []
+    for k in range(n):
+        tau = loop.serve(1000 + k, (q[k], v[k], a[k]), model[k])
+        errors.append(tau - truth[k])
+        noisy = truth[k] + rng.normal(0.0, 5.0, 6)
+        loop.measured(1000 + k, noisy / per_ampere)
+    errors = np.array(errors)
+    before = np.sqrt(np.mean((model - truth)[-500:] ** 2, axis=0))
+    after = np.sqrt(np.mean(errors[-500:] ** 2, axis=0))
+    assert (before[1:5] > 40.0).all()  # 60 kg at the flange: hundreds of N*m on axes 2 and 3
+    assert (after[1:5] < 0.05 * before[1:5]).all()
+    assert (after < before).all()
+    assert loop.inertia.updates > 0.9 * n
+    state = loop.inertia.state()
+    assert len(state['change']) == len(state['base_parameters'])
