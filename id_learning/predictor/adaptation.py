@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from id_learning.errors import ConfigError
-from id_learning.predictor.adaptation_inertia import InertiaAdapter
+from id_learning.predictor.adaptation_inertia import InertiaAdapter, stabilised
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['ADAPTATION_JSON', 'AdaptationConfig', 'AdaptationLoop', 'FrictionAdapter']
@@ -176,19 +176,8 @@ class FrictionAdapter:
         gain = p_phi / (lam + (phi * p_phi).sum(axis=1))[:, None]
         estimate = self._estimate + gain * error[:, None]
         covariance = (self.covariance - gain[:, :, None] * p_phi[:, None, :]) / lam
-        # Rounding makes the update drift from symmetry, and forgetting amplifies it until the
-        # covariance is indefinite and the estimate diverges (after ~10^5 updates): keep it
-        # symmetric, and start a joint afresh should its covariance still lose definiteness.
-        covariance += np.swapaxes(covariance, 1, 2)
-        covariance *= 0.5
-        diagonal = np.einsum('jii->ji', covariance)
-        if not (np.isfinite(covariance.sum()) and (diagonal > 0).all()):
-            broken = ~np.isfinite(covariance).all(axis=(1, 2)) | (diagonal <= 0).any(axis=1)
-            covariance[broken] = self._p0[broken]
-            self.counters.resets += int(np.count_nonzero(broken))
-            diagonal = np.einsum('jii->ji', covariance)
-        trace = diagonal.sum(axis=1)
-        covariance *= np.minimum(1.0, self._max_trace / trace)[:, None, None]
+        covariance, resets = stabilised(covariance, self._p0, self._max_trace)
+        self.counters.resets += resets
         if accept.all():
             self._estimate, self.covariance = estimate, covariance
         else:

@@ -22,7 +22,7 @@ from id_learning.physics.base_parameters import base_parameters
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
-__all__ = ['InertiaAdapter']
+__all__ = ['InertiaAdapter', 'stabilised']
 
 #: Prior standard deviation of each base parameter's change: this share of its nominal value
 #: plus ``_PRIOR_FLOOR`` (SI units), so that parameters the URDF sets to zero can move too.
@@ -129,14 +129,9 @@ class InertiaAdapter:
         gain = np.linalg.solve(innovation, p_yt.T).T  # P Y^T S^-1, S symmetric
         self.estimate = self.estimate + gain @ error
         covariance = (self.covariance - gain @ p_yt.T) / lam
-        covariance = 0.5 * (covariance + covariance.T)
-        if not (np.isfinite(covariance).all() and (np.diag(covariance) > 0).all()):
-            covariance = self._p0.copy()  # start afresh rather than diverge
-            self.resets += 1
-        trace = float(np.trace(covariance))
-        if trace > self._max_trace:
-            covariance *= self._max_trace / trace
-        self.covariance = covariance
+        self.covariance, resets = stabilised(covariance[None], self._p0[None], self._max_trace)
+        self.covariance = self.covariance[0]
+        self.resets += resets
         self.updates += 1
         return True
 
@@ -150,6 +145,30 @@ class InertiaAdapter:
             'gated_samples': self.gated,
             'covariance_resets': self.resets,
         }
+
+
+def stabilised(
+    covariance: np.ndarray, prior: np.ndarray, max_trace: np.ndarray | float
+) -> tuple[np.ndarray, int]:
+    """RLS covariances (k, m, m) made safe to carry on, and how many had to start afresh.
+
+    Rounding makes the update drift from symmetry, and forgetting amplifies it until the
+    covariance is indefinite and the estimate diverges (after ~10^5 updates): each is made
+    symmetric, one that still lost definiteness starts again from its ``prior``, and each trace
+    is capped at ``max_trace`` (forgetting without excitation must not wind it up).
+    """
+    covariance = 0.5 * (covariance + np.swapaxes(covariance, 1, 2))
+    diagonal = np.einsum('jii->ji', covariance)
+    if not (np.isfinite(covariance.sum()) and (diagonal > 0).all()):
+        broken = ~np.isfinite(covariance).all(axis=(1, 2)) | (diagonal <= 0).any(axis=1)
+        covariance[broken] = prior[broken]
+        resets = int(np.count_nonzero(broken))
+        diagonal = np.einsum('jii->ji', covariance)
+    else:
+        resets = 0
+    trace = diagonal.sum(axis=1)
+    covariance *= np.minimum(1.0, max_trace / trace)[:, None, None]
+    return covariance, resets
 
 
 def _in_robot_order(x: np.ndarray, order: list[int]) -> np.ndarray:
