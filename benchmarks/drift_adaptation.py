@@ -1,15 +1,16 @@
 """A shift of warm-up drift: the frozen model, the adapting one, and one refitted on the last hour.
 
     python benchmarks/drift_adaptation.py [--hours 0,1,...,8] [--window 240] [--catch-up 120]
+        [--mode rls|rls_inertia]
 
 The twin robot of config/twin_default.yaml with its viscous and Coulomb friction falling by 30 %
 over the shift (``warm_scale`` 0.7, ``warm_up_s`` 2 h: 0.705 of the cold friction after 8 h).
 - frozen: ``rnea_id`` identified on a recording at the start of the shift;
-- adapted: the same model with ``predictor.adaptation.FrictionAdapter`` learning from the
-  measured currents, online, window after window (a priori errors: each sample is predicted
-  before it is learnt from). The hours between windows are not simulated: the adapter resumes
-  from where the last window left it and gets each window's first ``--catch-up`` seconds to
-  catch up; every window is scored on the rest;
+- adapted: the same model with the predictor's adaptation (``AdaptationLoop``, ``--mode``)
+  learning from the measured currents, online, window after window (a priori errors: each
+  sample is predicted before it is learnt from). The hours between windows are not simulated:
+  the adapter resumes from where the last window left it and gets each window's first
+  ``--catch-up`` seconds to catch up; every window is scored on the rest;
 - refit: ``rnea_id`` identified on a recording that ends where each window starts (``--fit``
   seconds: the freshest refit the last hour allows).
 Each window's tau_u RMSE is against the twin's noise-free tau_u, per joint, on the controller's
@@ -29,8 +30,7 @@ import yaml
 from common import REPO, emit
 
 from id_learning.models.registry import load_model
-from id_learning.predictor.adaptation import FrictionAdapter
-from id_learning.robot.drives import motor_torque_from_current
+from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
 from id_learning.training import train_run
 from id_learning.twin import load_twin_config, simulate, write_twin_output
 
@@ -67,25 +67,28 @@ def main() -> None:
     parser.add_argument(
         '--catch-up', type=float, default=120.0, help='unscored start of each window [s]'
     )
+    parser.add_argument('--mode', choices=('rls', 'rls_inertia'), default='rls')
     parser.add_argument('--fit', type=float, default=300.0, help='fitting recordings [s]')
     args = parser.parse_args()
     hours = [float(h) for h in args.hours.split(',')]
     work = Path(tempfile.mkdtemp())
     robot = twin(0.0, 1, 1.0).robot
     frozen = fitted(twin(0.0, 1, args.fit), work / 'frozen')
-    adapter = FrictionAdapter(robot.limits.torque, robot.limits.velocity, robot.ipo_period_s)
+    loop = AdaptationLoop.for_robot(
+        robot, robot.joints, AdaptationConfig(), inertia=args.mode == 'rls_inertia'
+    )
     update_s: list[float] = []
     rows = []
     for hour in hours:
         window = simulate(twin(hour * HOUR_S, 100 + int(hour), args.window))
         q, v, a = window.q_true, window.v_true, window.a_true
-        measured = motor_torque_from_current(window.recording.current, robot.drives)
+        currents = window.recording.current
         model = frozen.predict(q, v, a)
         adapted = np.empty_like(model)
-        for k in range(len(q)):
-            adapted[k] = model[k] + adapter.correction(v[k])
+        for k in range(len(q)):  # served on the reference, learnt from the cycle's currents
+            adapted[k] = loop.serve(k, (q[k], v[k], a[k]), model[k])
             start = time.perf_counter()
-            adapter.update(v[k], measured[k], model[k])  # the reference's velocity, as online
+            loop.measured(k, currents[k])
             update_s.append(time.perf_counter() - start)
         start_s = max(0.0, hour * HOUR_S - args.fit)  # the last minutes before the window
         refit = fitted(twin(start_s, 200 + int(hour), args.fit), work / f'refit_{hour:g}')
@@ -99,7 +102,9 @@ def main() -> None:
             'frozen_rmse_nm': rmse(model[half], clean).tolist(),
             'adapted_rmse_nm': rmse(adapted[half], clean).tolist(),
             'refit_rmse_nm': rmse(refit.predict(q, v, a)[half], clean).tolist(),
-            'theta': adapter.theta.tolist(),
+            'theta': (
+                loop.adapter.theta if loop.inertia is None else loop.inertia.friction
+            ).tolist(),
         }
         rows.append(row)
         print(
@@ -118,7 +123,8 @@ def main() -> None:
             'hours': rows,
             'frozen_growth': float(frozen_growth),
             'adapted_over_refit': adapted_vs_refit,
-            'adapter': adapter.state(robot.joints),
+            'mode': args.mode,
+            'adapter': loop.report(robot.joints),
             'update_us': {
                 'median': 1e6 * float(np.median(update_s)),
                 'p99': 1e6 * float(np.percentile(update_s, 99)),

@@ -307,7 +307,7 @@ class Predictor(Node):
             )
 
     def _start_adaptation(self) -> Any:
-        """With ``adaptation: rls``, the adaptation loop and its currents subscription."""
+        """With adaptation on (rls, rls_inertia), the loop and its currents subscription."""
         self._adaptation_file: Path | None = None
         if self.config.adaptation == 'off':
             return None

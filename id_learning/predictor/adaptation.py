@@ -16,8 +16,8 @@ adaptation inside a control loop needs them:
   since clipping its state would leave the covariance describing an estimate it no longer has
   (a robot starting from rest, where the Coulomb and viscous columns are nearly parallel, would
   then stay biased for the whole shift);
-- bounded covariance: the covariance's trace is capped, so that forgetting without excitation
-  (a robot standing still) cannot wind it up;
+- bounded covariance: each parameter's variance is capped at its prior one, so that
+  forgetting without excitation (a robot standing still) cannot wind it up;
 - frozen input: a non-finite sample, or one the caller marks stale, changes nothing.
 
 The adapter is plain numpy (no ROS): the predictor node updates it from measured currents and
@@ -63,14 +63,14 @@ class AdaptationConfig:
             [N*m*s/rad], offset [N*m]) as a share of its bound: a small prior keeps the first
             samples (a robot starting from rest, where the Coulomb and viscous columns are
             nearly parallel) from throwing the estimate about.
-        max_trace: cap on the covariance's trace, as a multiple of its initial trace.
+        max_variance: cap on each parameter's variance, as a multiple of its prior one.
     """
 
     time_constant_s: float = 60.0
     smoothing_velocity: float = 0.01
     gate_sigmas: float = 6.0
     initial_std: float = 0.1
-    max_trace: float = 1.0
+    max_variance: float = 1.0
 
 
 @dataclass
@@ -118,7 +118,6 @@ class FrictionAdapter:
         self._estimate = np.zeros((n, 3))  # the recursion's own, unclipped
         self._p0 = np.stack([np.diag((self.config.initial_std * b) ** 2) for b in self.bounds])
         self.covariance = self._p0.copy()
-        self._max_trace = self.config.max_trace * np.trace(self._p0, axis1=1, axis2=2)
         self.forgetting = 1.0 - self.period_s / self.config.time_constant_s
         self.error_scale = 0.02 * limit  # running RMS of the prediction error [N*m]
         self.counters = _Counters()
@@ -176,7 +175,7 @@ class FrictionAdapter:
         gain = p_phi / (lam + (phi * p_phi).sum(axis=1))[:, None]
         estimate = self._estimate + gain * error[:, None]
         covariance = (self.covariance - gain[:, :, None] * p_phi[:, None, :]) / lam
-        covariance, resets = stabilised(covariance, self._p0, self._max_trace)
+        covariance, resets = stabilised(covariance, self._p0, self.config.max_variance)
         self.counters.resets += resets
         if accept.all():
             self._estimate, self.covariance = estimate, covariance
@@ -294,15 +293,19 @@ class AdaptationLoop:
         v, regressor, tau_model = pair
         measured = self.torque_per_ampere * currents
         if self.inertia is not None and regressor is not None:
-            learnt = self.inertia.update(regressor, measured - tau_model, stale=stale)
-            if not learnt:
-                self.adapter.counters.frozen += int(stale)
-            return learnt
+            if stale or not np.isfinite(measured).all():
+                self.adapter.counters.frozen += 1
+                return False
+            return self.inertia.update(regressor, measured - tau_model)
         return self.adapter.update(v, measured, tau_model, stale=stale)
 
     def save(self, artifact: Path, joints: tuple[str, ...]) -> Path:
-        """Write both adapters' state beside the artifact (``FrictionAdapter.save``)."""
-        extra = {} if self.inertia is None else {'inertia': self.inertia.state()}
+        """Write the active estimator's state beside the artifact (``FrictionAdapter.save``).
+
+        With the rigid body adapted, its joint estimate (friction terms and base-parameter
+        changes, ``InertiaAdapter.state``) replaces the unused friction adapter's.
+        """
+        extra = {} if self.inertia is None else self.inertia.state() | {'mode': 'rls_inertia'}
         return self.adapter.save(artifact, joints, extra)
 
     @classmethod
@@ -325,7 +328,15 @@ class AdaptationLoop:
         )
         body = (
             InertiaAdapter(
-                robot, joints, robot.ipo_period_s, config.time_constant_s, INERTIA_BOUND_SHARE
+                robot,
+                joints,
+                robot.ipo_period_s,
+                config.time_constant_s,
+                INERTIA_BOUND_SHARE,
+                smoothing_velocity=config.smoothing_velocity,
+                gate_sigmas=config.gate_sigmas,
+                friction_prior=config.initial_std * BOUND_SHARE,
+                max_variance=config.max_variance,
             )
             if inertia
             else None
@@ -349,21 +360,19 @@ class AdaptationLoop:
 
     def report(self, joints: Sequence[str]) -> dict[str, object]:
         """Diagnostics key-values: counts and each joint's adapted parameters."""
-        counters = self.adapter.counters
+        counters, inertia = self.adapter.counters, self.inertia
         values: dict[str, object] = {
-            'adaptation_updates': counters.updates,
-            'adaptation_gated': counters.gated,
+            'adaptation_updates': counters.updates if inertia is None else inertia.updates,
+            'adaptation_gated': counters.gated if inertia is None else inertia.gated,
             'adaptation_frozen': counters.frozen,
             'adaptation_unpaired': self.unpaired,
-            'adaptation_at_bounds': self.adapter.at_bounds,
+            'adaptation_at_bounds': self.adapter.at_bounds if inertia is None else 0,
         }
         theta = self.adapter.theta if self.inertia is None else self.inertia.friction
         for j, name in enumerate(joints):
             for k, column in enumerate(_COLUMNS):
                 values[f'adapted_{column}_{name}'] = float(theta[j, k])
         if self.inertia is not None:
-            values['adaptation_inertia_updates'] = self.inertia.updates
-            values['adaptation_inertia_gated'] = self.inertia.gated
             values['adapted_base_parameter_change_norm'] = float(
                 np.linalg.norm(self.inertia.change)
             )

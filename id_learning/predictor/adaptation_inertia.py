@@ -7,8 +7,9 @@ by every joint (a tool change, a payload the model did not see). All of them are
 together, by one recursive least squares with a vector output (every joint of a sample at once,
 each weighted by its running error scale): estimated apart, the friction offsets would chase
 the slowly varying gravity error along the motion and the two would never settle. The
-correction is clipped per joint to ``bound_share`` of its torque limit; outlier gating and the
-covariance safeguards are those of ``FrictionAdapter``.
+correction is clipped per joint to ``bound_share`` of its torque limit. A sample with any joint
+beyond the gate is not learnt from (the outputs share the parameters); the covariance
+safeguards are ``stabilised``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from id_learning.errors import ConfigError
 from id_learning.physics.base_parameters import base_parameters
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
@@ -44,6 +46,10 @@ class InertiaAdapter:
         gate_sigmas: a sample with a joint's error beyond this many error scales is not learnt.
         friction_prior: prior std of the friction terms, as a share of the torque limit (and of
             it over the velocity limit for viscous).
+        max_variance: cap on each parameter's variance, as a multiple of its prior one.
+
+    Raises:
+        ConfigError: ``joints`` are not the robot's joints (in any order).
     """
 
     robot: RobotConfig
@@ -54,6 +60,7 @@ class InertiaAdapter:
     smoothing_velocity: float = 0.01
     gate_sigmas: float = 6.0
     friction_prior: float = 0.01
+    max_variance: float = 1.0
     updates: int = field(default=0, init=False)
     gated: int = field(default=0, init=False)
     resets: int = field(default=0, init=False)
@@ -63,6 +70,11 @@ class InertiaAdapter:
         dynamics = RigidBodyDynamics.from_config(self.robot)
         base = base_parameters(dynamics, self.robot.limits)
         self.names = base.names
+        if sorted(self.joints) != sorted(self.robot.joints):
+            raise ConfigError(
+                f'rigid-body adaptation needs every joint of robot {self.robot.name} '
+                f'{list(self.robot.joints)}; the model has {list(self.joints)}'
+            )
         order = [self.robot.joints.index(name) for name in self.joints]
         self._order = order
         self._base = dynamics.sample_regressor(base.independent)
@@ -75,7 +87,6 @@ class InertiaAdapter:
         body_std = _PRIOR_SHARE * np.abs(nominal) + _PRIOR_FLOOR
         self._p0 = np.diag(np.concatenate([friction_std, body_std]) ** 2)
         self.covariance = self._p0.copy()
-        self._max_trace = float(np.trace(self._p0))
         self.estimate = np.zeros(3 * n + base.count)
         self.forgetting = 1.0 - self.period_s / self.time_constant_s
         self.limit = self.bound_share * limit
@@ -121,16 +132,21 @@ class InertiaAdapter:
         limit = self.gate_sigmas * self.error_scale
         clipped = np.minimum(np.abs(error), limit)
         self.error_scale = np.sqrt(lam * self.error_scale**2 + (1 - lam) * clipped**2)
-        if (np.abs(error) > limit).any():
+        if not (np.abs(error) <= limit).all():  # a NaN error is gated too
             self.gated += 1
             return False
         p_yt = self.covariance @ regressor.T  # (m, n)
         innovation = lam * np.diag(self.error_scale**2) + regressor @ p_yt
         gain = np.linalg.solve(innovation, p_yt.T).T  # P Y^T S^-1, S symmetric
-        self.estimate = self.estimate + gain @ error
+        estimate = self.estimate + gain @ error
+        if not np.isfinite(estimate).all():  # never carry a broken estimate into a torque
+            self.resets += 1
+            self.estimate, self.covariance = np.zeros_like(estimate), self._p0.copy()
+            return False
+        self.estimate = estimate
         covariance = (self.covariance - gain @ p_yt.T) / lam
-        self.covariance, resets = stabilised(covariance[None], self._p0[None], self._max_trace)
-        self.covariance = self.covariance[0]
+        stable, resets = stabilised(covariance[None], self._p0[None], self.max_variance)
+        self.covariance = stable[0]
         self.resets += resets
         self.updates += 1
         return True
@@ -138,7 +154,8 @@ class InertiaAdapter:
     def state(self) -> dict[str, Any]:
         """The estimated friction terms and base-parameter changes, JSON-ready."""
         return {
-            'friction_theta': self.friction.tolist(),
+            'theta': self.friction.tolist(),
+            'error_scale_nm': self.error_scale.tolist(),
             'base_parameters': list(self.names),
             'change': self.change.tolist(),
             'updates': self.updates,
@@ -148,14 +165,16 @@ class InertiaAdapter:
 
 
 def stabilised(
-    covariance: np.ndarray, prior: np.ndarray, max_trace: np.ndarray | float
+    covariance: np.ndarray, prior: np.ndarray, max_variance: float = 1.0
 ) -> tuple[np.ndarray, int]:
     """RLS covariances (k, m, m) made safe to carry on, and how many had to start afresh.
 
     Rounding makes the update drift from symmetry, and forgetting amplifies it until the
     covariance is indefinite and the estimate diverges (after ~10^5 updates): each is made
-    symmetric, one that still lost definiteness starts again from its ``prior``, and each trace
-    is capped at ``max_trace`` (forgetting without excitation must not wind it up).
+    symmetric, and one that still lost definiteness starts again from its ``prior``. Forgetting
+    without excitation (a joint at rest, a parameter the path does not reach) winds a variance
+    up: each is capped at ``max_variance`` times its prior one, by scaling its row and column,
+    so that the excited directions keep forgetting (a cap on the trace would take their share).
     """
     covariance = 0.5 * (covariance + np.swapaxes(covariance, 1, 2))
     diagonal = np.einsum('jii->ji', covariance)
@@ -166,8 +185,9 @@ def stabilised(
         diagonal = np.einsum('jii->ji', covariance)
     else:
         resets = 0
-    trace = diagonal.sum(axis=1)
-    covariance *= np.minimum(1.0, max_trace / trace)[:, None, None]
+    limit = max_variance * np.einsum('jii->ji', prior)
+    shrink = np.sqrt(np.minimum(1.0, limit / diagonal))
+    covariance *= shrink[:, :, None] * shrink[:, None, :]
     return covariance, resets
 
 

@@ -172,3 +172,19 @@ def test_a_payload_the_model_lacks_is_learnt_as_a_change_of_the_base_parameters(
     assert loop.inertia.updates > 0.9 * n
     state = loop.inertia.state()
     assert len(state['change']) == len(state['base_parameters'])
+
+
+def test_the_rigid_body_adapter_works_in_the_model_s_joint_order(mabi) -> None:
+    from id_learning.errors import ConfigError
+    from id_learning.predictor.adaptation_inertia import InertiaAdapter
+
+    forward = InertiaAdapter(mabi, mabi.joints, 0.008, 30.0, 0.5)
+    order = [5, 3, 0, 1, 4, 2]
+    permuted = InertiaAdapter(mabi, tuple(mabi.joints[i] for i in order), 0.008, 30.0, 0.5)
+    rng = np.random.default_rng(8)
+    q, v, a = (rng.uniform(-0.5, 0.5, 6) for _ in range(3))
+    base = forward.regressor(q, v, a)[:, 18:]
+    moved = permuted.regressor(q[order], v[order], a[order])[:, 18:]
+    np.testing.assert_allclose(moved, base[order], rtol=1e-12, atol=1e-12)
+    with pytest.raises(ConfigError, match='needs every joint'):
+        InertiaAdapter(mabi, mabi.joints[:5], 0.008, 30.0, 0.5)
