@@ -93,7 +93,7 @@ def _verdict(result: DiagnosisResult) -> list[str]:
     for alias in result.alias_sets:
         lines.append(
             '- **Alias set** (this excitation cannot tell them apart): '
-            + ', '.join(alias.members)
+            + alias.summary()
             + f'; the model keeps {alias.representative}.'
         )
     structured = result.structured_joints()
@@ -164,11 +164,18 @@ def _effects(result: DiagnosisResult) -> list[str]:
         ]
         lines += ['## Effects in the refit model', '', *_table(head, rows), '']
     if result.alias_sets:
-        lines += ['## Alias sets', '']
+        lines += [
+            '## Alias sets',
+            '',
+            "Alternatives ranked by what they leave of the kept effect's torque (in residual "
+            'variances per effective sample: 0 reproduces it exactly).',
+            '',
+        ]
         for alias in result.alias_sets:
             detail = ', '.join(
-                f'{m} (canonical correlation {alias.canonical_correlation.get(m, 1.0):.3f})'
-                for m in alias.members[1:]
+                f'{m} ({alias.unexplained.get(m, float("nan")):.2g}; canonical correlation '
+                f'{alias.canonical_correlation.get(m, 1.0):.3f})'
+                for m in alias.alternatives()
             )
             lines.append(f'- {alias.representative} ≈ {detail}')
         lines.append('')
@@ -340,7 +347,7 @@ def render_summary(result: DiagnosisResult) -> str:
             + f' ({effect.confidence} confidence)'
         )
     for alias in result.alias_sets:
-        lines.append(f'  alias set (cannot be told apart here): {", ".join(alias.members)}')
+        lines.append(f'  alias set (cannot be told apart here): {alias.summary()}')
     untestable = result.untestable_effects()
     if untestable:
         lines.append(

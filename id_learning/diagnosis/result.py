@@ -233,6 +233,7 @@ class DiagnosisResult:
                     'members': [member(label) for label in alias.members],
                     'canonical_correlation': alias.canonical_correlation,
                     'unexplained_effective': alias.unexplained,
+                    'alternatives_ranked': alias.alternatives(),
                 }
                 for alias in self.alias_sets
             ],

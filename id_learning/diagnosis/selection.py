@@ -405,6 +405,18 @@ class AliasSet:
     canonical_correlation: dict[str, float] = field(default_factory=dict)
     unexplained: dict[str, float] = field(default_factory=dict)
 
+    def alternatives(self) -> list[str]:
+        """The members other than the representative, the closest mimic first."""
+        others = [m for m in self.members if m != self.representative]
+        return sorted(others, key=lambda m: (self.unexplained.get(m, np.inf), m))
+
+    def summary(self, shown: int = 2) -> str:
+        """The representative and its ``shown`` closest alternatives, and how many more."""
+        ranked = self.alternatives()
+        more = len(ranked) - shown
+        text = f'{self.representative} or {" or ".join(ranked[:shown])}'
+        return text + (f' (+{more} more, ranked in the Alias sets section)' if more > 0 else '')
+
 
 def find_aliases(
     design: Design,

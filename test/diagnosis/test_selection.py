@@ -96,3 +96,16 @@ def test_fit_recovers_the_coefficient_with_an_honest_interval(signals):
     sd = float(np.sqrt(design.physical_covariance(fit, 'a')[0, 0]))
     assert abs(theta - 3.0) < 4 * sd
     assert 0.01 < sd < 0.2
+
+
+def test_an_alias_set_ranks_its_alternatives_and_names_the_closest_two():
+    from id_learning.diagnosis.selection import AliasSet
+
+    alias = AliasSet(
+        'a',
+        ['a', 'd', 'b', 'c', 'e'],
+        unexplained={'b': 0.5, 'c': 0.1, 'd': 2.0, 'e': 0.3},
+    )
+    assert alias.alternatives() == ['c', 'e', 'b', 'd']
+    assert alias.summary() == 'a or c or e (+2 more, ranked in the Alias sets section)'
+    assert AliasSet('a', ['a', 'b'], unexplained={'b': 0.0}).summary() == 'a or b'
