@@ -283,10 +283,16 @@ def _assemble(
     members = {label for alias in aliases for label in alias.members}
     t_crit = float(stats.t.ppf(0.975, max(design.n_eff_train - final.rank, 1.0)))
     effects = []
+    # The design's covariance assumes what the filter leaves of white noise; a remainder
+    # correlated longer (model-form error, real drives) holds fewer independent samples: the
+    # long-run variance grows with the correlation time, and so do the intervals.
+    correlation = np.array([r.correlation_ratio for r in remainder])
     for step, label in zip(steps, selected, strict=True):
         spec = candidates.specs[label]
         theta = design.physical(final, label)
-        interval_covariance = t_crit**2 * design.physical_covariance(final, label)
+        joints = slice(None) if spec.joint is None else [spec.joint]
+        inflation = max(1.0, float(np.max(correlation[joints])))
+        interval_covariance = inflation * t_crit**2 * design.physical_covariance(final, label)
         half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
         rms = _rmse(np.concatenate([design.contribution(final, label, p) for p in PARTS]))
         # Low confidence: a structured remainder on one of its joints outweighs what it explains.
@@ -311,7 +317,7 @@ def _assemble(
                 contribution_rms_nm=rms,
                 variance_explained=explained[label],
                 variance_explained_total=explained_total[label],
-                selection=_selection_record(step, test),
+                selection=_selection_record(step, test) | {'interval_inflation': inflation},
             )
         )
     rejected = None

@@ -45,8 +45,10 @@ class FoundEffect:
         contribution_rms_nm: (n,) RMS of the filtered torque it adds per joint [N*m].
         variance_explained: (n,) share of the nominal residual's held-out variance it removed.
         variance_explained_total: the same over all joints, noise-weighted.
-        selection: the tests when it entered (F, p-value, delta BIC, held-out gain), and
-            'held_out_blocks': its gain judged over blocks of held-out time (``heldout``).
+        selection: the tests when it entered (F, p-value, delta BIC, held-out gain),
+            'held_out_blocks': its gain judged over blocks of held-out time (``heldout``), and
+            'interval_inflation': the factor its interval covariance was widened by for a
+            remainder correlated longer than filtered noise (1: none).
     """
 
     spec: EffectSpec
