@@ -21,6 +21,9 @@ def twin_config(duration_s: float = 30.0, effects: dict | None = None, **overrid
     return replace(config, excitation=replace(config.excitation, duration_s=duration_s))
 
 
+#: Hyper-parameters of the short training runs in tests: an MLP fit of two epochs.
+FAST_HYPER = {'mlp': {'max_epochs': 2}}
+
 #: Label cut-off of quick model tests [Hz]: the study's 0.3 Hz filter reads 11 s on either side,
 #: too much for the seconds-long recordings a unit test fits on through the filter.
 QUICK_CUTOFF_HZ = 2.0

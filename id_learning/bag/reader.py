@@ -21,6 +21,7 @@ __all__ = [
     'BagInfo',
     'JointStateSeries',
     'TopicInfo',
+    'bag_custom_data',
     'bag_info',
     'iter_messages',
     'iter_raw',
@@ -108,14 +109,21 @@ def bag_info(path: Path | str) -> BagInfo:
             if reader.message_count
             else 0,
             topics=topics,
-            custom_data=_custom_data(path),
+            custom_data=bag_custom_data(path),
         )
     finally:
         reader.close()
 
 
-def _custom_data(path: Path) -> dict[str, str]:
-    """``custom_data`` of a bag's ``metadata.yaml`` (rosbag2 keeps string entries there)."""
+def bag_custom_data(path: Path | str) -> dict[str, str]:
+    """``custom_data`` of a bag's ``metadata.yaml`` (rosbag2 keeps string entries there).
+
+    Read from the file alone, without opening the bag's storage.
+
+    Raises:
+        BagError: metadata.yaml is missing or not YAML.
+    """
+    path = Path(path)
     try:
         text = (path / 'metadata.yaml').read_text(encoding='utf-8')
         info = yaml.safe_load(text).get('rosbag2_bagfile_information', {})

@@ -25,7 +25,7 @@ from id_learning.bag import (
     JOINT_STATE,
     BagWriter,
     JointStateSeries,
-    bag_info,
+    bag_custom_data,
     encode_joint_state,
     read_joint_states,
 )
@@ -317,7 +317,7 @@ def _segment_starts(path: Path, stamps_ns: np.ndarray) -> tuple[int, ...]:
     Raises:
         DatasetError: the entry is malformed, or names a stamp the recording does not have.
     """
-    text = bag_info(path).custom_data.get(SEGMENTS_KEY)
+    text = bag_custom_data(path).get(SEGMENTS_KEY)
     if text is None:
         return (0,)
     try:

@@ -16,7 +16,7 @@ leaves to the feed-forward the torque that feedback alone would need an error to
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +33,7 @@ __all__ = [
     'Tracking',
     'compare_feed_forward',
     'improvement',
+    'reference_gains',
     'track',
 ]
 
@@ -155,22 +156,25 @@ def compare_feed_forward(
     feed_forwards: Mapping[str, np.ndarray],
     *,
     period_s: float,
+    gains: LoopGains | None = None,
     progress: bool = True,
-    on_run: Callable[[str, Tracking], None] | None = None,
 ) -> dict[str, Tracking]:
     """Track the reference with feedback alone, then with each feed-forward (name -> (N, n)).
 
-    The gains are those of the plant at the reference's mean pose; the sensor noise is the same
-    in every run.
+    The gains default to those of the plant at the reference's mean pose (``reference_gains``);
+    the sensor noise is the same in every run.
     """
-    gains = LoopGains.for_plant(plant, np.mean(reference.q, axis=0) + plant.encoder_offset)
+    gains = gains or reference_gains(plant, reference)
     runs = {FEEDBACK_ONLY: np.zeros_like(reference.q), **feed_forwards}
-    out = {}
-    for name, ff in tqdm(runs.items(), desc='closed loop', unit='run', disable=not progress):
-        out[name] = track(plant, reference, ff, gains, period_s=period_s)
-        if on_run is not None:
-            on_run(name, out[name])
-    return out
+    return {
+        name: track(plant, reference, ff, gains, period_s=period_s)
+        for name, ff in tqdm(runs.items(), desc='closed loop', unit='run', disable=not progress)
+    }
+
+
+def reference_gains(plant: TwinPlant, reference: Motion) -> LoopGains:
+    """The loop's gains on the plant's inertia at the reference's mean pose."""
+    return LoopGains.for_plant(plant, np.mean(reference.q, axis=0) + plant.encoder_offset)
 
 
 def improvement(runs: Mapping[str, Tracking], models: list[str]) -> tuple[str, np.ndarray]:

@@ -21,10 +21,10 @@ from id_learning.errors import CheckpointError, ConfigError
 from id_learning.evaluation.closed_loop import (
     FEEDBACK_ONLY,
     TRUE_DYNAMICS,
-    LoopGains,
     Tracking,
     compare_feed_forward,
     improvement,
+    reference_gains,
 )
 from id_learning.models.registry import load_model
 from id_learning.robot.config import RobotConfig
@@ -135,11 +135,11 @@ def closed_loop_run(
         plant.motor_torque(reference.q + plant.encoder_offset, reference.v, reference.a)
         / plant.kt_scale
     )
+    gains = reference_gains(plant, reference)
     runs = compare_feed_forward(
-        plant, reference, feed_forward, period_s=robot.ipo_period_s, progress=progress
+        plant, reference, feed_forward, period_s=robot.ipo_period_s, gains=gains, progress=progress
     )
     best, ratio = improvement(runs, kinds)
-    gains = LoopGains.for_plant(plant, np.mean(reference.q, axis=0) + plant.encoder_offset)
     document = {
         'run': str(run_dir),
         'twin_config': str(twin_path),

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import time
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -13,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 import yaml
-from support import REPO, twin_config
+from support import FAST_HYPER, REPO, twin_config
 
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.preprocess import PreprocessConfig, lowpass, prepare_dataset
@@ -34,65 +33,6 @@ from id_learning.training import (
 )
 from id_learning.training.measure import LATENCY_CALLS, LATENCY_WARMUP
 from id_learning.twin import simulate, write_twin_output
-
-FAST = {'mlp': {'max_epochs': 2}}
-
-
-@pytest.fixture(scope='module')
-def bags(tmp_path_factory):
-    """Two 51.5 s default twin recordings with different seeds (different excitations).
-
-    Long enough to fit through the 0.3 Hz label filter, which reads 11 s on either side.
-    """
-    folder = tmp_path_factory.mktemp('bags')
-    paths = []
-    for seed in (11, 12):
-        config = twin_config(60.0, seed=seed)
-        paths.append(write_twin_output(simulate(config), config, folder / f'twin_{seed}'))
-    return paths
-
-
-def time_each_fit(patch: pytest.MonkeyPatch, seconds: dict[str, float]) -> None:
-    """Record in ``seconds`` how long each model's fit() takes, timed inside the call."""
-    from id_learning.models import registry
-
-    make_model = registry.make_model
-
-    def make_timed_model(kind, *args, **kwargs):
-        model = make_model(kind, *args, **kwargs)
-        fit = model.fit
-
-        def timed_fit(*fit_args, **fit_kwargs):
-            start = time.perf_counter()
-            try:
-                return fit(*fit_args, **fit_kwargs)
-            finally:
-                seconds[kind] = time.perf_counter() - start
-
-        model.fit = timed_fit
-        return model
-
-    patch.setattr(registry, 'make_model', make_timed_model)
-
-
-@pytest.fixture(scope='module')
-def timed_run(bags, mabi, tmp_path_factory):
-    """The run, the seconds each fit() took and the wall-clock seconds of the whole run."""
-    out = tmp_path_factory.mktemp('run') / 'run'
-    fit_seconds: dict[str, float] = {}
-    with pytest.MonkeyPatch.context() as patch:
-        time_each_fit(patch, fit_seconds)
-        start = time.perf_counter()
-        result = train_run(
-            bags, mabi, 'motor', ['rnea_lq', 'mlp'], out, hyper=FAST, progress=False, device='cpu'
-        )
-        wall_seconds = time.perf_counter() - start
-    return result, fit_seconds, wall_seconds
-
-
-@pytest.fixture(scope='module')
-def run(timed_run):
-    return timed_run[0]
 
 
 def test_each_bag_is_filtered_on_its_own_and_training_parts_come_first(bags, mabi):
@@ -553,7 +493,7 @@ def test_a_shuffled_run_scores_its_drawn_test_samples_and_evaluate_gives_them_ba
 
     out = tmp_path / 'run'
     config = PreprocessConfig(split='shuffled', split_seed=4)
-    run = train_run(bags, mabi, 'motor', ['rnea_lq', 'mlp'], out, hyper=FAST,
+    run = train_run(bags, mabi, 'motor', ['rnea_lq', 'mlp'], out, hyper=FAST_HYPER,
                     progress=False, device='cpu', preprocess=config)  # fmt: skip
     dataset = run.dataset
     assert dataset.is_shuffled
@@ -580,31 +520,3 @@ def test_a_shuffled_run_scores_its_drawn_test_samples_and_evaluate_gives_them_ba
     (out / 'run.json').write_text(json.dumps(document))
     with pytest.raises(CheckpointError, match='shuffled split could not be rebuilt'):
         evaluate_run(out, bags, mabi, tmp_path / 'eval2', progress=False)
-
-
-def test_closed_loop_tracks_the_test_motion_better_with_feed_forward(run, mabi, tmp_path):
-    """The run's bags carry the twin's config: the plant is the robot they were recorded from."""
-    from id_learning.evaluation.closed_loop import FEEDBACK_ONLY, TRUE_DYNAMICS
-    from id_learning.training.closed_loop_run import closed_loop_run
-
-    result = closed_loop_run(run.out, mabi, tmp_path / 'loop', duration_s=8.0, progress=False)
-    document = json.loads(result.json_path.read_text())
-    assert set(document['runs']) == {FEEDBACK_ONLY, 'rnea_lq', 'mlp', TRUE_DYNAMICS}
-    assert document['reference']['duration_s'] == pytest.approx(8.0)
-    assert result.plot_path.is_file()
-    base = np.array(document['runs'][FEEDBACK_ONLY]['rms_rad'])
-    true = np.array(document['runs'][TRUE_DYNAMICS]['rms_rad'])
-    assert (true < base / 3).all()
-    assert document['best_model'] in ('rnea_lq', 'mlp')
-    best = np.array(document['runs'][document['best_model']]['rms_rad'])
-    np.testing.assert_allclose(document['improvement_best'], base / best)
-    with pytest.raises(ConfigError, match=r"no model\(s\) \['lstm'\] in the run"):
-        closed_loop_run(run.out, mabi, tmp_path / 'x', kinds=['lstm'], progress=False)
-    bare = tmp_path / 'bare'
-    shutil.copytree(run.out, bare)
-    meta = json.loads((bare / 'run.json').read_text())
-    for entry in meta['training_data']['bags']:
-        entry['path'] = str(tmp_path / 'nowhere')
-    (bare / 'run.json').write_text(json.dumps(meta))
-    with pytest.raises(ConfigError, match=r'twin_config\.yaml.*pass --twin'):
-        closed_loop_run(bare, mabi, tmp_path / 'y', progress=False)

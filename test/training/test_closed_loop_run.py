@@ -1,0 +1,38 @@
+"""closed-loop on a training run: the twin robot its bags came from, tracking with feed-forward."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from id_learning.errors import ConfigError
+from id_learning.evaluation.closed_loop import FEEDBACK_ONLY, TRUE_DYNAMICS
+from id_learning.training.closed_loop_run import closed_loop_run
+
+
+def test_closed_loop_tracks_the_test_motion_better_with_feed_forward(run, mabi, tmp_path):
+    """The run's bags carry the twin's config: the plant is the robot they were recorded from."""
+    result = closed_loop_run(run.out, mabi, tmp_path / 'loop', duration_s=8.0, progress=False)
+    document = json.loads(result.json_path.read_text())
+    assert set(document['runs']) == {FEEDBACK_ONLY, 'rnea_lq', 'mlp', TRUE_DYNAMICS}
+    assert document['reference']['duration_s'] == pytest.approx(8.0)
+    assert result.plot_path.is_file()
+    base = np.array(document['runs'][FEEDBACK_ONLY]['rms_rad'])
+    true = np.array(document['runs'][TRUE_DYNAMICS]['rms_rad'])
+    assert (true < base / 3).all()
+    assert document['best_model'] in ('rnea_lq', 'mlp')
+    best = np.array(document['runs'][document['best_model']]['rms_rad'])
+    np.testing.assert_allclose(document['improvement_best'], base / best)
+    with pytest.raises(ConfigError, match=r"no model\(s\) \['lstm'\] in the run"):
+        closed_loop_run(run.out, mabi, tmp_path / 'x', kinds=['lstm'], progress=False)
+    bare = tmp_path / 'bare'
+    shutil.copytree(run.out, bare)
+    meta = json.loads((bare / 'run.json').read_text())
+    for entry in meta['training_data']['bags']:
+        entry['path'] = str(tmp_path / 'nowhere')
+    (bare / 'run.json').write_text(json.dumps(meta))
+    with pytest.raises(ConfigError, match=r'twin_config\.yaml.*pass --twin'):
+        closed_loop_run(bare, mabi, tmp_path / 'y', progress=False)
