@@ -432,7 +432,35 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
                 {**common, 'scenario': 'outside', 'seed': seed, 'hidden': [],
                  'drift': (joint, args.magnitude, 37.0)}
             )  # fmt: skip
+        if 'variant' in wanted:
+            cases += variant_cases(args, seed, common)
     return cases
+
+
+def variant_cases(args: argparse.Namespace, seed: int, common: dict[str, Any]) -> list[dict]:
+    """Base friction of our own form, alone and with each variant effect (diagnosis_variants)."""
+    from diagnosis_variants import VARIANT_SINGLE
+
+    cases: list[dict[str, Any]] = [
+        {**common, 'scenario': 'variant:nothing', 'seed': seed, 'hidden': []}
+    ]
+    for name, joints in VARIANT_SINGLE.items():
+        if args.effects and name not in args.effects:
+            continue
+        joint = None if joints is None else joints[seed % len(joints)]
+        cases.append(
+            {**common, 'scenario': f'variant:{name}', 'seed': seed, 'hidden': [(name, joint)]}
+        )
+    return cases
+
+
+def run_any(case: dict[str, Any]) -> dict[str, Any]:
+    """A twin-form case (``run_case``) or a variant-form one (``diagnosis_variants``)."""
+    if case['scenario'].startswith('variant'):
+        from diagnosis_variants import run_variant_case
+
+        return run_variant_case(case)
+    return run_case(case)
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -446,8 +474,15 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         def rate(key: str, items: list[dict[str, Any]] = items) -> float:
             return float(np.mean([bool(run.get(key)) for run in items]))
 
-        if scenario == 'nothing' or scenario.startswith(('aliased', 'untestable', 'outside')):
+        if scenario == 'nothing' or scenario.startswith(
+            ('aliased', 'untestable', 'outside', 'variant')
+        ):
             entry['success_rate'] = rate('success')
+        if scenario.startswith('variant:') and scenario != 'variant:nothing':
+            errors = [run['parameter_error'] for run in items if 'parameter_error' in run]
+            entry['parameter_within_15pc_rate'] = (
+                float(np.mean([e <= 0.15 for e in errors])) if errors else None
+            )
         if scenario.startswith(('single', 'large')):
             entry['right_name_and_joint_rate'] = rate('exact')
             entry['truth_named_rate'] = rate('truth_named')
@@ -501,7 +536,7 @@ def main() -> int:
         '--magnitude', type=float, default=3.0, help='effect size / post-filter noise level'
     )
     parser.add_argument(
-        '--scenarios', default='nothing,single,large,pair,aliased,untestable,outside'
+        '--scenarios', default='nothing,single,large,pair,aliased,untestable,outside,variant'
     )
     parser.add_argument(
         '--effects',
@@ -518,7 +553,7 @@ def main() -> int:
     start = time.perf_counter()
     runs: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        for k, run in enumerate(pool.map(run_case, cases), start=1):
+        for k, run in enumerate(pool.map(run_any, cases), start=1):
             runs.append(run)
             print(
                 f'[{k}/{len(cases)}] {run["scenario"]} seed {run["seed"]}: named {run["named"]}'

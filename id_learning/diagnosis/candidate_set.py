@@ -8,7 +8,7 @@ load-dependent friction) tuned on the training part.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -21,6 +21,12 @@ from id_learning.diagnosis.candidates import (
     PlausibilityFacts,
     plausibility,
     testability,
+)
+from id_learning.diagnosis.friction_shape import (
+    FRICTION_SHAPED,
+    FrictionShape,
+    identify_friction_shape,
+    reshaped,
 )
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.selection import (
@@ -63,6 +69,8 @@ class CandidateSet:
             for label, spec in self.specs.items()
         }
         self.testable = [label for label in self.specs if self.verdicts[label][0]]
+        #: per joint, the friction curve's (v_eps, viscous exponent) (``friction_shape``).
+        self.friction_shapes = self._shape_friction()
         quantities = problem.joined_quantities()
         self.facts = PlausibilityFacts(
             rigid_rms=np.sqrt(np.mean(quantities.tau_rigid**2, axis=0)),
@@ -70,6 +78,39 @@ class CandidateSet:
             moving_mass_kg=model.dynamics.total_moving_mass(),
             body_parameters=model.dynamics.inertial_parameters().reshape(-1, 10),
         )
+
+    def _shape_friction(self) -> list[FrictionShape]:
+        """Identify each joint's friction curve shape and put it in its friction candidates."""
+        problem = self.problem
+        y = problem.residual('train')
+        n_eff = problem.n_effective('train')
+        shapes = []
+        for j, joint in enumerate(problem.robot.joints):
+            others = self._others_on(j, lambda s, j=j: s.joint == j and s.name in FRICTION_SHAPED)
+
+            def columns_of(spec: EffectSpec, j: int = j) -> np.ndarray:
+                return problem.columns(spec)[0]['train'][:, j, :]
+
+            shape = identify_friction_shape(
+                j, joint, y[:, j], others=others, columns_of=columns_of,
+                effective_samples=float(n_eff[j]), config=problem.config,
+            )  # fmt: skip
+            shapes.append(shape)
+            if shape == (problem.config.smoothing_velocity, 1.0):
+                continue
+            for label, spec in list(self.specs.items()):
+                if spec.joint == j and spec.name in FRICTION_SHAPED:
+                    self._swap(label, reshaped(spec, shape))
+        return shapes
+
+    def _others_on(self, j: int, skip: Callable[[EffectSpec], bool]) -> list[np.ndarray]:
+        """Training columns (M, k) on joint j of every testable candidate ``skip`` keeps."""
+        out = []
+        for label in self.testable:
+            column = self.columns[label]['train'][:, j, :]
+            if not skip(self.specs[label]) and np.any(column):
+                out.append(column)
+        return out
 
     def design(self, y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]) -> Design:
         """The regression problem over the testable candidates.
@@ -146,13 +187,33 @@ class CandidateSet:
                 continue
             self._swap(label, refined)
             selected[index] = refined.label
-        return self._load_on_model(selected, y, n_eff)
+        return self._delay_of_model(self._load_on_model(selected, y, n_eff), y, n_eff)
+
+    def _delay_of_model(
+        self, selected: list[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
+    ) -> list[str]:
+        """Let a selected delay hold back the selected effects' torque too, not the URDF's alone.
+
+        The drive delivers the whole torque late, friction included: with the rigid body's rate
+        alone, a delay soaks up a share of friction (a viscous term's rate is an inertia).
+        """
+        delays = [g for g in selected if self.specs[g].name == 'signal_delay']
+        others = [g for g in selected if self.specs[g].name != 'signal_delay']
+        if not delays or not others or self.specs[delays[0]].settings.get('rate_of'):
+            return selected
+        design = self.design(y, n_eff)
+        fit = design.fit(selected)
+        self.problem.rate_terms = [(self.specs[g], design.physical(fit, g)) for g in others]
+        refined = self.specs[delays[0]].replace_settings(rate_of='model')
+        self._swap(delays[0], refined)
+        return [refined.label if g == delays[0] else g for g in selected]
 
     def _swap(self, label: str, refined: EffectSpec) -> None:
         """Put a refined spec (and its columns) in the place of a candidate."""
         new = refined.label
         self.specs[new] = refined
         self.columns[new], self.raw[new], _ = self.problem.columns(refined)
+        self.verdicts.setdefault(new, self.verdicts[label])
         self.testable = [new if t == label else t for t in self.testable if t != new or t == label]
 
     def _load_on_model(

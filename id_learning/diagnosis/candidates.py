@@ -289,8 +289,10 @@ def plausibility(
     if name == 'viscous_friction':
         assert limit is not None
         assert j is not None
-        bound = limit / robot.limits.velocity[j]
-        return _in_range(value, 0.0, bound, 'N*m*s/rad')
+        exponent = float(spec.settings.get('exponent', 1.0))
+        bound = limit / robot.limits.velocity[j] ** exponent
+        unit = 'N*m*s/rad' if exponent == 1.0 else f'N*m*(s/rad)^{exponent:g}'
+        return _in_range(value, 0.0, bound, unit)
     if name in ('coulomb_friction', 'stribeck_friction'):
         assert limit is not None
         return _in_range(value, 0.0, 0.5 * limit, 'N*m')

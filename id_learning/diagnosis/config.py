@@ -29,7 +29,17 @@ class DiagnosisConfig:
         structure_correlation_ratio: a remainder above the noise whose correlation time exceeds
             the filtered noise's by this factor is structured.
         max_effects: most effects one diagnosis adds.
-        smoothing_velocity: v_eps of tanh(v / v_eps) in the friction columns [rad/s].
+        smoothing_velocity: v_eps of tanh(v / v_eps) in the friction columns [rad/s], where
+            ``smoothing_velocities`` is empty.
+        smoothing_velocities: v_eps tried per joint; the one that fits the recording best is
+            used on that joint (a drive's friction may turn through zero speed more sharply or
+            more softly than any one value).
+        viscous_exponents: exponents delta of a viscous law b sign(v) |v|^delta tried per joint
+            beside the linear one; one is used only where it fits clearly better.
+        standstill_velocity: a joint whose fitting-input speed stays below this [rad/s] for
+            ``standstill_min_s`` or longer rests; the torque its friction holds there is free
+            (``standstill``). 0 turns this off.
+        standstill_min_s: shortest rest [s].
         stribeck_velocities: Stribeck velocities v_s tried [rad/s]; the best is refined.
         cogging_periods: cogging periods per motor turn tried.
         gravity_spring_joints: joints that may carry a balancer spring; None: every joint whose
@@ -57,6 +67,10 @@ class DiagnosisConfig:
     structure_correlation_ratio: float = 3.0
     max_effects: int = 60
     smoothing_velocity: float = 0.005
+    smoothing_velocities: tuple[float, ...] = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02)
+    viscous_exponents: tuple[float, ...] = (0.6, 0.8, 1.2, 1.4, 1.7)
+    standstill_velocity: float = 0.002
+    standstill_min_s: float = 0.1
     stribeck_velocities: tuple[float, ...] = (0.01, 0.02, 0.03, 0.05, 0.08)
     cogging_periods: tuple[int, ...] = (6, 12, 18, 24, 36)
     gravity_spring_joints: tuple[str, ...] | None = None
@@ -83,6 +97,8 @@ class DiagnosisConfig:
             'structure_correlation_ratio': (1.0, 1e3),
             'max_effects': (0, 100),
             'smoothing_velocity': (1e-6, 1.0),
+            'standstill_velocity': (0.0, 1.0),
+            'standstill_min_s': (0.0, 1e3),
             'gravity_spring_min_share': (0.0, 1.0),
             'min_moving_fraction': (0.0, 1.0),
             'min_slow_fraction': (0.0, 1.0),
@@ -98,6 +114,16 @@ class DiagnosisConfig:
                 )
         if self.edge_trim_s is not None and self.edge_trim_s < 0:
             raise ConfigError(f'diagnosis.edge_trim_s: must be >= 0, got {self.edge_trim_s}')
+        if self.viscous_exponents and not all(0.2 <= d <= 3.0 for d in self.viscous_exponents):
+            raise ConfigError(
+                'diagnosis.viscous_exponents: need exponents in [0.2, 3], got '
+                f'{self.viscous_exponents!r}'
+            )
+        if self.smoothing_velocities and min(self.smoothing_velocities) <= 0:
+            raise ConfigError(
+                'diagnosis.smoothing_velocities: need positive velocities [rad/s], got '
+                f'{self.smoothing_velocities!r}'
+            )
         if not self.stribeck_velocities or min(self.stribeck_velocities) <= 0:
             raise ConfigError(
                 'diagnosis.stribeck_velocities: need positive velocities [rad/s], got '

@@ -65,6 +65,9 @@ from id_learning.diagnosis.selection import (
 from id_learning.errors import DatasetError
 from id_learning.robot.config import RobotConfig
 
+#: Alternatives an alias set lists beside the kept effect, the closest mimics first.
+ALIAS_ALTERNATIVES = 2
+
 __all__ = [
     'DiagnosisResult',
     'FoundEffect',
@@ -360,7 +363,7 @@ def _assemble(
         noise=problem.noise,
         effective_samples=design.n_effective,
         effects=effects,
-        alias_sets=aliases,
+        alias_sets=[alias.closest(ALIAS_ALTERNATIVES) for alias in aliases],
         untestable=candidates.untestable_summary(),
         remainder=remainder,
         rmse_before_nm=_rmse(design.residual(design.fit([]), 'test')),

@@ -28,6 +28,7 @@ from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.selection import (
     PARTS,
 )
+from id_learning.diagnosis.standstill import StandstillProjection
 from id_learning.errors import DatasetError
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import (
@@ -193,6 +194,8 @@ class ResidualProblem:
         self.recordings: list[PreparedRecording] = []
         #: Link-side terms (spec, physical coefficients) the model-load friction sees.
         self.link_terms: list[tuple[EffectSpec, np.ndarray]] = []
+        #: Terms (spec, physical coefficients) whose torque a delay of the model's form delays.
+        self.rate_terms: list[tuple[EffectSpec, np.ndarray]] = []
         self._quantities_for_library()
 
     def _noise(self) -> NoiseEstimate:
@@ -228,6 +231,11 @@ class ResidualProblem:
             nominal = as_label(quantities.tau_nominal, dataset)
             smooth = self._smooth(dataset)
             self.recordings.append(PreparedRecording(dataset, quantities, smooth, rows, nominal))
+        self.standstill = StandstillProjection(
+            [(r.dataset, r.rows['train']) for r in self.recordings],
+            self.config.standstill_velocity,
+            self.config.standstill_min_s,
+        )
         self.library = build_library(self.model, self.joined_quantities(), self.config)
 
     def _check_length(self, all_rows: list[dict[str, np.ndarray]]) -> None:
@@ -290,13 +298,18 @@ class ResidualProblem:
         return np.concatenate([r.dataset.tau[r.rows[part]] for r in self.recordings])
 
     def residual(self, part: str) -> np.ndarray:
-        """(M, n) filtered label minus filtered nominal [N*m] on one part's kept rows."""
-        return np.concatenate(
+        """(M, n) filtered label minus filtered nominal [N*m] on one part's kept rows.
+
+        The training part without what the joints' standstills hold (``standstill``): a fit
+        nuisance. The test part keeps it, so held-out errors are those of a model that predicts.
+        """
+        y = np.concatenate(
             [
                 r.dataset.tau[r.rows[part]] - r.nominal_filtered[r.rows[part]]
                 for r in self.recordings
             ]
         )
+        return self.standstill.project(y) if part == 'train' else y
 
     def columns(self, spec: EffectSpec) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
         """Filtered columns per part, raw training columns and the filter's retention."""
@@ -307,6 +320,8 @@ class ResidualProblem:
         for r in self.recordings:
             quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
             x = effect_columns(spec, quantities, self.model)
+            if spec.name == 'signal_delay' and spec.settings.get('rate_of') == 'model':
+                x = x - self._terms_rate(r)[:, :, None]
             xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
             for part in ('train', 'test'):
                 filtered[part].append(xf[r.rows[part]])
@@ -320,10 +335,31 @@ class ResidualProblem:
                 kept_energy += float(np.sum(filter_columns(smooth, r.dataset)[train] ** 2))
         retention = kept_energy / raw_energy if raw_energy > 0 else (0.0 if switching else 1.0)
         return (
-            {part: np.concatenate(blocks) for part, blocks in filtered.items()},
+            {
+                part: self.standstill.project(np.concatenate(blocks))
+                if part == 'train'
+                else np.concatenate(blocks)
+                for part, blocks in filtered.items()
+            },
             np.concatenate(raw_train),
             retention,
         )
+
+    def _terms_rate(self, r: PreparedRecording) -> np.ndarray:
+        """(N, n) time derivative of the rate terms' torque along one recording [N*m/s].
+
+        A delay holds back the whole torque the drive delivers, friction included, not only
+        the rigid body's (``CandidateSet.refine``).
+        """
+        torque = np.zeros_like(r.quantities.q)
+        for spec, theta in self.rate_terms:
+            quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
+            torque += effect_columns(spec, quantities, self.model) @ theta
+        rate = np.zeros_like(torque)
+        for rows in r.dataset.recording_rows():
+            if len(rows) > 2:
+                rate[rows] = differentiate(torque[rows], r.dataset.period_s)
+        return rate
 
     def _loaded(self, r: PreparedRecording) -> NominalQuantities:
         """A recording's quantities with the link torque of the nominal model plus link terms."""

@@ -177,7 +177,8 @@ def _effects(result: DiagnosisResult) -> list[str]:
                 f'{alias.canonical_correlation.get(m, 1.0):.3f})'
                 for m in alias.alternatives()
             )
-            lines.append(f'- {alias.representative} ≈ {detail}')
+            further = f'; {alias.further} more mimic it less closely' if alias.further else ''
+            lines.append(f'- {alias.representative} ≈ {detail}{further}')
         lines.append('')
     return lines
 

@@ -236,6 +236,7 @@ class DiagnosisResult:
                     'canonical_correlation': alias.canonical_correlation,
                     'unexplained_effective': alias.unexplained,
                     'alternatives_ranked': alias.alternatives(),
+                    'further_alternatives': alias.further,
                 }
                 for alias in self.alias_sets
             ],

@@ -398,12 +398,32 @@ class AliasSet:
             each member's filtered columns, after the other selected effects are projected out.
         unexplained: what a member leaves of the representative's contribution, in units of the
             residual variance per effective sample (0: reproduced exactly).
+        further: alternatives that also pass but mimic less closely than the members listed
+            (``closest``).
     """
 
     representative: str
     members: list[str]
     canonical_correlation: dict[str, float] = field(default_factory=dict)
     unexplained: dict[str, float] = field(default_factory=dict)
+    further: int = 0
+
+    def closest(self, count: int) -> AliasSet:
+        """The set with only the ``count`` closest alternatives; the rest counted in ``further``.
+
+        Dozens of alternatives tell a reader nothing but that the kept effect is small on this
+        excitation; the few that mimic it best say what to tell apart next.
+        """
+        kept = self.alternatives()[:count]
+        dropped = len(self.members) - 1 - len(kept)
+        keep = {self.representative, *kept}
+        return AliasSet(
+            self.representative,
+            [self.representative, *kept],
+            {k: v for k, v in self.canonical_correlation.items() if k in keep},
+            {k: v for k, v in self.unexplained.items() if k in keep},
+            self.further + dropped,
+        )
 
     def alternatives(self) -> list[str]:
         """The members other than the representative, the closest mimic first."""
@@ -413,9 +433,14 @@ class AliasSet:
     def summary(self, shown: int = 2) -> str:
         """The representative and its ``shown`` closest alternatives, and how many more."""
         ranked = self.alternatives()
-        more = len(ranked) - shown
+        more = len(ranked) - shown + self.further
         text = f'{self.representative} or {" or ".join(ranked[:shown])}'
-        return text + (f' (+{more} more, ranked in the Alias sets section)' if more > 0 else '')
+        if more <= 0:
+            return text
+        return text + (
+            f' (+{more} more that mimic it less closely: the kept effect is small on this '
+            'excitation)'
+        )
 
 
 def find_aliases(

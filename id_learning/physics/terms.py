@@ -85,12 +85,16 @@ class EffectSpec:
         parts = [self.joint_name] if self.joint_name else []
         if self.name == 'stribeck_friction':
             parts.append(f'v_s={self.settings["velocity"]:g}')
+        if self.name == 'viscous_friction' and self.settings.get('exponent', 1.0) != 1.0:
+            parts.append(f'delta={self.settings["exponent"]:g}')
         if self.name == 'cogging':
             parts.append(f'p={self.settings["periods_per_motor_turn"]}')
         if self.name == 'payload_mass':
             parts.append(str(self.settings['frame']))
         if uses_model_load(self):
             parts.append('model load')
+        if self.name == 'signal_delay' and self.settings.get('rate_of') == 'model':
+            parts.append('whole model')
         if self.name == 'gravity_spring' and 'ratio' in self.settings:
             parts.append(f'r={self.settings["ratio"]:.3g}, phi={self.settings["phase_rad"]:.3g}')
         return f'{self.name}[{", ".join(parts)}]' if parts else self.name
@@ -126,6 +130,16 @@ def _friction_sign(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -
     return sign
 
 
+def _viscous(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -> np.ndarray:
+    """v, or sign(v) |v|^delta for a viscous law with an exponent (``settings['exponent']``)."""
+    v: np.ndarray = qs.v[:, j]
+    exponent = settings.get('exponent', 1.0)
+    if np.all(np.asarray(exponent) == 1.0):
+        return v
+    out: np.ndarray = np.sign(v) * np.abs(v) ** np.asarray(exponent, dtype=float)
+    return out
+
+
 def _gravity_spring(
     qs: NominalQuantities, j: Any, settings: Mapping[str, Any], model: NominalModel
 ) -> tuple[np.ndarray, ...]:
@@ -156,7 +170,7 @@ JointColumns = Callable[
 #: quantities, the joint index j and the spec's settings. Written with numpy broadcasting, so j
 #: may also be an index array with settings arrays of its length: all joints of an effect at once.
 JOINT_COLUMNS: dict[str, JointColumns] = {
-    'viscous_friction': lambda qs, j, s, model: (qs.v[:, j],),
+    'viscous_friction': lambda qs, j, s, model: (_viscous(qs, j, s),),
     'coulomb_friction': lambda qs, j, s, model: (_friction_sign(qs, j, s),),
     'stribeck_friction': lambda qs, j, s, model: (
         np.exp(-((qs.v[:, j] / s['velocity']) ** 2)) * _friction_sign(qs, j, s),
@@ -201,7 +215,9 @@ def effect_columns(
             raise ValueError('joint_offset needs quantities evaluated with derivatives=True')
         return qs.dtau_dq[:, :, j : j + 1].copy()
     if name == 'signal_delay':
-        # Currents at t belong to the motion at t - d: tau(t - d) ~ tau(t) - d dtau/dt.
+        # Currents at t belong to the motion at t - d: tau(t - d) ~ tau(t) - d dtau/dt. The
+        # diagnosis' 'whole model' form adds the other effects' rate along the recording
+        # (``ResidualProblem``); on single states only the nominal torque's rate is known.
         return -model.nominal_rate(qs)[:, :, None]
     if name == 'payload_mass':
         if qs.regressor is None:

@@ -107,5 +107,12 @@ def test_an_alias_set_ranks_its_alternatives_and_names_the_closest_two():
         unexplained={'b': 0.5, 'c': 0.1, 'd': 2.0, 'e': 0.3},
     )
     assert alias.alternatives() == ['c', 'e', 'b', 'd']
-    assert alias.summary() == 'a or c or e (+2 more, ranked in the Alias sets section)'
+    assert alias.summary().startswith('a or c or e (+2 more that mimic it less closely')
     assert AliasSet('a', ['a', 'b'], unexplained={'b': 0.0}).summary() == 'a or b'
+    # A result keeps the closest alternatives and counts the others.
+    short = alias.closest(2)
+    assert short.members == ['a', 'c', 'e']
+    assert short.further == 2
+    assert set(short.unexplained) == {'c', 'e'}
+    assert short.summary() == alias.summary()
+    assert short.closest(1).further == 3

@@ -1,0 +1,106 @@
+"""Standstills: where a joint rests, the torque its friction holds is not a function of motion.
+
+Friction at rest takes whatever value between its static levels the approach and the
+controller's integrator leave; a model of friction as a function of velocity cannot say which
+(and a measured velocity at rest is sensor noise, so the sign of any friction column there is
+noise too). The diagnosis therefore gives each standstill of each joint a free held torque: a
+box over the standstill, filtered like the label, projected out of the residual and of every
+candidate's columns (Frisch-Waugh-Lovell, so every fit behaves as if these nuisance columns were
+in it). What the held torque was is then never blamed on an effect. Only the training part is
+projected: the held-out part is judged as a model would predict it, held torques and all.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+from id_learning.dataset.preprocess import Dataset
+from id_learning.dataset.signals import butterworth
+
+__all__ = ['StandstillProjection', 'standstill_intervals']
+
+
+def standstill_intervals(
+    v: np.ndarray, period_s: float, threshold: float, min_s: float
+) -> list[tuple[int, int]]:
+    """(start, stop) sample ranges where |v| stays below ``threshold`` for at least ``min_s``."""
+    still = np.abs(np.asarray(v, dtype=float)) < threshold
+    edges = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    shortest = max(1, round(min_s / period_s))
+    return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True) if b - a >= shortest]
+
+
+class StandstillProjection:
+    """Per joint, an orthonormal basis of the standstill boxes on the training rows.
+
+    Args:
+        recordings: per recording, its dataset and its kept training rows.
+        threshold: |v| [rad/s] of the fitting inputs below which a joint rests.
+        min_s: shortest rest [s].
+    """
+
+    def __init__(
+        self, recordings: list[tuple[Dataset, np.ndarray]], threshold: float, min_s: float
+    ) -> None:
+        n = recordings[0][0].q.shape[1] if recordings else 0
+        per_recording = [
+            [box[rows] for box in _boxes(dataset, threshold, min_s)]
+            for dataset, rows in recordings
+        ]
+        #: rests found per joint, over all recordings.
+        self.count = np.array(
+            [sum(cols[j].shape[1] for cols in per_recording) for j in range(n)], dtype=int
+        )
+        self.bases: list[np.ndarray | None] = [
+            _orthonormal(_block_diagonal([cols[j] for cols in per_recording])) for j in range(n)
+        ]
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """Training-row values (M, n) or columns (M, n, k) without their part along the boxes."""
+        out = np.array(x, dtype=float, copy=True)
+        for j, basis in enumerate(self.bases):
+            if basis is not None:
+                out[:, j] = out[:, j] - basis @ (basis.T @ out[:, j])
+        return out
+
+
+def _boxes(dataset: Dataset, threshold: float, min_s: float) -> list[np.ndarray]:
+    """Per joint, (N, m) the filtered boxes over the joint's standstills in one dataset."""
+    n_samples, n = dataset.v.shape
+    out = []
+    for j in range(n):
+        sos = butterworth(float(dataset.cutoff_hz[j]), dataset.period_s, dataset.filter_order)
+        cols = []
+        for rows in dataset.recording_rows():
+            for start, stop in standstill_intervals(
+                dataset.v[rows, j], dataset.period_s, threshold, min_s
+            ):
+                box = np.zeros(len(rows))
+                box[start:stop] = 1.0
+                column = np.zeros(n_samples)
+                column[rows] = signal.sosfiltfilt(sos, box)
+                cols.append(column)
+        out.append(np.column_stack(cols) if cols else np.zeros((n_samples, 0)))
+    return out
+
+
+def _block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
+    rows = sum(b.shape[0] for b in blocks)
+    width = sum(b.shape[1] for b in blocks)
+    out = np.zeros((rows, width))
+    r = c = 0
+    for b in blocks:
+        out[r : r + b.shape[0], c : c + b.shape[1]] = b
+        r, c = r + b.shape[0], c + b.shape[1]
+    return out
+
+
+def _orthonormal(x: np.ndarray) -> np.ndarray | None:
+    """An orthonormal basis of x's column space (numerically null columns dropped)."""
+    if x.shape[1] == 0 or x.shape[0] == 0:
+        return None
+    u, s, _ = np.linalg.svd(x, full_matrices=False)
+    keep = s > 1e-8 * max(float(s[0]), 1e-300)
+    return u[:, keep] if np.any(keep) else None

@@ -1,0 +1,108 @@
+"""The friction curve's shape the diagnosis identifies, and its free torque at standstill."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from support import twin_config
+
+from id_learning.dataset.preprocess import prepare_dataset
+from id_learning.diagnosis import DiagnosisConfig, run_diagnosis
+from id_learning.diagnosis.candidate_set import CandidateSet
+from id_learning.diagnosis.problem import ResidualProblem, as_datasets
+from id_learning.diagnosis.standstill import StandstillProjection, standstill_intervals
+from id_learning.errors import ConfigError
+from id_learning.robot.drives import current_from_motor_torque
+from id_learning.twin import simulate
+
+DURATION_S = 150.0
+SEED = 11
+COULOMB = [120.0, 160.0, 90.0, 20.0, 15.0, 6.0]
+VISCOUS = [300.0, 400.0, 220.0, 45.0, 35.0, 15.0]
+
+
+def friction(smoothing: float) -> dict:
+    return {
+        'coulomb_friction': {
+            'enabled': True, 'level': COULOMB, 'smoothing_velocity': smoothing
+        },
+        'viscous_friction': {'enabled': True, 'coefficient': VISCOUS},
+    }  # fmt: skip
+
+
+def shapes_of(recording, robot) -> list[tuple[float, float]]:
+    """Per joint, the (v_eps, viscous exponent) the diagnosis identifies."""
+    config = DiagnosisConfig()
+    problem = ResidualProblem(as_datasets(recording, robot, config), robot, config)
+    return CandidateSet(problem).friction_shapes
+
+
+def test_standstill_intervals_are_the_rests_long_enough():
+    v = np.ones(100)
+    v[10:30] = 1e-4  # 20 samples at rest
+    v[50:53] = 0.0  # 3 samples: a reversal, not a rest
+    v[90:] = -1e-4  # a rest to the end
+    assert standstill_intervals(v, 0.01, threshold=2e-3, min_s=0.05) == [(10, 30), (90, 100)]
+    assert standstill_intervals(np.ones(10), 0.01, 2e-3, 0.05) == []
+
+
+def test_standstill_projection_removes_a_held_torque_and_nothing_else(short_twin):
+    config, twin = short_twin
+    dataset = prepare_dataset(twin.recording, config.robot)
+    n_samples, n = dataset.v.shape
+    projection = StandstillProjection([(dataset, np.arange(n_samples))], threshold=2e-3, min_s=0.1)
+    assert projection.count.sum() > 0
+    j = int(np.argmax(projection.count))
+    basis = projection.bases[j]
+    assert basis is not None
+    held = 7.0 * basis[:, 0] + 3.0 * basis[:, -1]
+    y = np.zeros((n_samples, n))
+    y[:, j] = held + np.sin(np.arange(n_samples) * 0.01)
+    projected = projection.project(y)
+    # What remains is orthogonal to every standstill box and the sine's share outside them.
+    assert np.abs(basis.T @ projected[:, j]).max() < 1e-8
+    sine = np.sin(np.arange(n_samples) * 0.01)
+    assert projected[:, j] == pytest.approx(sine - basis @ (basis.T @ sine), abs=1e-9)
+
+
+def test_the_twins_sign_smoothing_is_kept_and_a_sharp_one_is_found():
+    smooth = twin_config(DURATION_S, friction(0.005), seed=SEED)
+    assert shapes_of(simulate(smooth).recording, smooth.robot) == [(0.005, 1.0)] * 6
+
+    sharp = twin_config(DURATION_S, friction(0.0005), seed=SEED)
+    shapes = shapes_of(simulate(sharp).recording, sharp.robot)
+    # The two heaviest axes' large Coulomb levels show the sharp turn clearly; no joint is
+    # given a softer turn or a curved viscous law.
+    assert all(eps <= 0.001 for eps, _ in shapes[:2])
+    assert all(eps <= 0.005 and exponent == 1.0 for eps, exponent in shapes)
+
+
+def test_a_viscous_law_with_an_exponent_is_identified_and_named_alone():
+    config = twin_config(DURATION_S, friction(0.005), seed=SEED)
+    twin = simulate(config)
+    # Joint 1's viscous law grows as |v|^1.4 instead of linearly: add the difference.
+    extra = np.zeros_like(twin.v_true)
+    v = twin.v_true[:, 0]
+    extra[:, 0] = VISCOUS[0] * (np.sign(v) * np.abs(v) ** 1.4 - v)
+    recording = replace(
+        twin.recording,
+        current=twin.recording.current + current_from_motor_torque(extra, config.robot.drives),
+    )
+    assert shapes_of(recording, config.robot) == [(0.005, 1.4)] + [(0.005, 1.0)] * 5
+    result = run_diagnosis(recording, config.robot)
+    names = {e.name for e in result.named_effects()}
+    assert names <= {'viscous_friction', 'coulomb_friction'}
+    (viscous,) = [e for e in result.effects if e.label.startswith('viscous_friction[joint_1')]
+    assert viscous.spec.settings['exponent'] == 1.4
+    assert viscous.coefficients[0] == pytest.approx(VISCOUS[0], rel=0.05)
+
+
+def test_friction_shape_grids_are_checked():
+    with pytest.raises(ConfigError, match='viscous_exponents'):
+        DiagnosisConfig(viscous_exponents=(0.0,))
+    with pytest.raises(ConfigError, match='smoothing_velocities'):
+        DiagnosisConfig(smoothing_velocities=(-1.0,))
+    with pytest.raises(ConfigError, match='standstill_velocity'):
+        DiagnosisConfig(standstill_velocity=-1.0)
