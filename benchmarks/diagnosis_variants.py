@@ -29,10 +29,12 @@ gives the size for a target magnitude.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from diagnosis_scoring import SINGLE, alias_members, filtered, named_set, twin
 from scipy.signal import lfilter
 
 from id_learning.dataset.preprocess import prepare_dataset
@@ -60,20 +62,14 @@ BASE_FRICTION = ('viscous_friction', 'coulomb_friction', 'stribeck_friction')
 COULOMB_NM = np.array([160.0, 210.0, 120.0, 28.0, 22.0, 9.0])
 VISCOUS_NMS = np.array([420.0, 520.0, 300.0, 60.0, 45.0, 20.0])
 
-JOINTS = ('joint_1', 'joint_2', 'joint_3', 'joint_4', 'joint_5', 'joint_6')
-#: single-effect variant scenarios: effect -> joints it goes on (rotated over seeds).
+#: single-effect variant scenarios: the twin-form scenarios' effects and joints
+#: (``diagnosis_scoring.SINGLE``) but for base friction, which every variant run carries, and
+#: with the encoder offset on the joints where a link's gravity shows it.
 VARIANT_SINGLE: dict[str, tuple[str, ...] | None] = {
-    'stribeck_friction': JOINTS,
-    'load_dependent_friction': ('joint_2', 'joint_3', 'joint_4', 'joint_5'),
-    'rotor_inertia': JOINTS,
-    'gravity_spring': ('joint_2', 'joint_3'),
-    'payload_mass': None,
-    'torque_constant_scale': JOINTS[:5],
-    'signal_delay': None,
-    'torque_offset': JOINTS,
-    'joint_offset': ('joint_2', 'joint_3', 'joint_5'),
-    'inertial_parameter_error': None,
-}
+    name: joints
+    for name, joints in SINGLE.items()
+    if name not in ('viscous_friction', 'coulomb_friction')
+} | {'joint_offset': ('joint_2', 'joint_3', 'joint_5')}
 
 
 @dataclass(frozen=True)
@@ -217,10 +213,6 @@ def apply_variant(
 
 def run_variant_case(case: dict[str, Any]) -> dict[str, Any]:
     """One diagnosis on a variant recording: base friction plus at most one variant effect."""
-    import time
-
-    from diagnosis_scoring import alias_members, filtered, named_set, twin
-
     start = time.perf_counter()
     seed, duration = case['seed'], case['duration_s']
     config = twin(seed, duration, {})

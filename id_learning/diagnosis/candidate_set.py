@@ -86,7 +86,11 @@ class CandidateSet:
         n_eff = problem.n_effective('train')
         shapes = []
         for j, joint in enumerate(problem.robot.joints):
-            others = self._others_on(j, lambda s, j=j: s.joint == j and s.name in FRICTION_SHAPED)
+
+            def shaped(spec: EffectSpec, j: int = j) -> bool:
+                return spec.joint == j and spec.name in FRICTION_SHAPED
+
+            others = self._others_on(j, shaped)
 
             def columns_of(spec: EffectSpec, j: int = j) -> np.ndarray:
                 return problem.columns(spec)[0]['train'][:, j, :]
@@ -187,26 +191,40 @@ class CandidateSet:
                 continue
             self._swap(label, refined)
             selected[index] = refined.label
-        return self._delay_of_model(self._load_on_model(selected, y, n_eff), y, n_eff)
+        return self._load_on_model(selected, y, n_eff)
 
-    def _delay_of_model(
+    def whole_model(
         self, selected: list[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
-    ) -> list[str]:
-        """Let a selected delay hold back the selected effects' torque too, not the URDF's alone.
+    ) -> bool:
+        """Give delays and torque-constant errors the whole model's torque; whether any changed.
 
-        The drive delivers the whole torque late, friction included: with the rigid body's rate
-        alone, a delay soaks up a share of friction (a viscous term's rate is an inertia).
+        A drive delivers the whole torque late, and a wrong torque constant scales all of it,
+        friction, payload and balancer included, not only the URDF's: with the rigid body's
+        torque alone a delay soaks up a share of friction (a viscous term's rate is an inertia)
+        and a torque-constant error trades with the payload. The other selected effects, at
+        their fitted values, enter every delay and torque-constant candidate's column (a torque
+        offset, which sits in the current sensor, is not scaled); the selection then runs again.
         """
-        delays = [g for g in selected if self.specs[g].name == 'signal_delay']
-        others = [g for g in selected if self.specs[g].name != 'signal_delay']
-        if not delays or not others or self.specs[delays[0]].settings.get('rate_of'):
-            return selected
+        kinds = ('signal_delay', 'torque_constant_scale')
+        others = [g for g in selected if self.specs[g].name not in kinds]
+        todo = [
+            label
+            for label in self.testable
+            if self.specs[label].name in kinds
+            and not ({'rate_of', 'of'} & set(self.specs[label].settings))
+        ]
+        if not others or not todo:
+            return False
         design = self.design(y, n_eff)
         fit = design.fit(selected)
-        self.problem.rate_terms = [(self.specs[g], design.physical(fit, g)) for g in others]
-        refined = self.specs[delays[0]].replace_settings(rate_of='model')
-        self._swap(delays[0], refined)
-        return [refined.label if g == delays[0] else g for g in selected]
+        terms = [(self.specs[g], design.physical(fit, g)) for g in others]
+        self.problem.rate_terms = terms
+        self.problem.scale_terms = [t for t in terms if t[0].name != 'torque_offset']
+        for label in todo:
+            spec = self.specs[label]
+            form = {'rate_of': 'model'} if spec.name == 'signal_delay' else {'of': 'model'}
+            self._swap(label, spec.replace_settings(**form))
+        return True
 
     def _swap(self, label: str, refined: EffectSpec) -> None:
         """Put a refined spec (and its columns) in the place of a candidate."""
@@ -365,5 +383,12 @@ def refine_setting(
             if np.allclose(com, current.settings['com_guess_m'], atol=1e-4):
                 break
             current = current.replace_settings(com_guess_m=com)
+        # A body with its own rotational inertia (a spindle, a gripper) when the data show it:
+        # six more coefficients must earn their BIC.
+        if not current.settings.get('inertia'):
+            point, full = rss_of(current)[0], rss_of(current.replace_settings(inertia=True))[0]
+            n = float(n_eff['train'].sum())
+            if full > 0 and n * math.log(point / full) > 6 * math.log(n) + 10.0:
+                current = current.replace_settings(inertia=True)
         return current
     return None

@@ -514,6 +514,9 @@ def describe_parameters(
                 spread = abs(com) * math.hypot(half_width[k] / max(abs(theta[k]), 1e-12),
                                                half_width[0] / mass)  # fmt: skip
                 out.append(entry(f'com_{axis}', com, com - spread, com + spread, 'm'))
+        for k, axes in enumerate(('xx', 'xy', 'yy', 'xz', 'yz', 'zz'), start=4):
+            if k < len(theta):  # rotational inertia about the centre of mass, frame axes
+                out.append(entry(f'inertia_{axes}', theta[k], lo[k], hi[k], 'kg*m^2'))
         return out
     if name == 'stribeck_friction':
         return [

@@ -25,7 +25,14 @@ from id_learning.dataset.statistics import integrated_autocorrelation
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.selection import Design, Fit
 
-__all__ = ['MIN_BLOCKS', 'BlockTest', 'fallback_joints', 'judge_effects', 'test_blocks']
+__all__ = [
+    'MIN_BLOCKS',
+    'BlockTest',
+    'fallback_joints',
+    'judge_effects',
+    'test_blocks',
+    'time_blocks',
+]
 
 #: Fewer blocks than this judge nothing (a t test over 4 blocks says little).
 MIN_BLOCKS = 5
@@ -61,10 +68,17 @@ class BlockTest:
 
 
 def test_blocks(problem: ResidualProblem, residual: np.ndarray) -> tuple[np.ndarray, float]:
-    """(N_test,) block index of each held-out row, and the block length [s].
+    """(N_test,) block index of each held-out row, and the block length [s] (``time_blocks``)."""
+    return time_blocks(problem, residual, 'test')
 
-    The length is the largest of 1 s and twice the correlation time on any joint of the held-out
-    ``residual`` (N_test, n) the model leaves, which is what makes blocks' gains scatter; a
+
+def time_blocks(
+    problem: ResidualProblem, residual: np.ndarray, part: str
+) -> tuple[np.ndarray, float]:
+    """(N_part,) block index of each row of a part, and the block length [s].
+
+    The length is the largest of 1 s and twice the correlation time on any joint of the
+    ``residual`` (N_part, n) the model leaves, which is what makes blocks' gains scatter; a
     recording's last block shorter than half of it joins the one before.
     """
     y = residual
@@ -73,12 +87,12 @@ def test_blocks(problem: ResidualProblem, residual: np.ndarray) -> tuple[np.ndar
         integrated_autocorrelation(y[:, j]) * seconds_per_row for j in range(y.shape[1])
     )
     block_s = max(_MIN_BLOCK_S, _CORRELATION_TIMES * float(correlation_s))
-    times = problem.times('test')
+    times = problem.times(part)
     # A run of rows ends at a recording's end and wherever time jumps or goes back: a dataset
     # joined from several recordings (the training parts of a run's bags) holds seams.
     steps = np.diff(times)
     seams = np.flatnonzero((steps <= 0) | (steps > _SEAM_ROWS * seconds_per_row)) + 1
-    ends = np.cumsum([len(r.rows['test']) for r in problem.recordings])[:-1]
+    ends = np.cumsum([len(r.rows[part]) for r in problem.recordings])[:-1]
     bounds = [0, *sorted(set(seams.tolist()) | set(ends.tolist())), len(times)]
     ids = np.empty(len(times), dtype=np.int64)
     next_id = 0

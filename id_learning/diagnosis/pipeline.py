@@ -21,6 +21,7 @@ result types in ``result``; this module runs the steps and assembles the result.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -31,7 +32,7 @@ from id_learning.dataset.recording import Recording
 from id_learning.dataset.statistics import (
     integrated_autocorrelation,
 )
-from id_learning.diagnosis.candidate_set import CandidateSet
+from id_learning.diagnosis.candidate_set import LABEL_GAIN_STD, CandidateSet
 from id_learning.diagnosis.candidates import (
     describe_parameters,
 )
@@ -41,6 +42,7 @@ from id_learning.diagnosis.heldout import (
     fallback_joints,
     judge_effects,
     test_blocks,
+    time_blocks,
 )
 from id_learning.diagnosis.locate import locate_residual
 from id_learning.diagnosis.problem import (
@@ -63,6 +65,7 @@ from id_learning.diagnosis.selection import (
     noise_consistency,
 )
 from id_learning.errors import DatasetError
+from id_learning.physics.terms import EffectSpec
 from id_learning.robot.config import RobotConfig
 
 #: Alternatives an alias set lists beside the kept effect, the closest mimics first.
@@ -92,17 +95,25 @@ def run_diagnosis(
     candidates = CandidateSet(problem)
     y = {part: problem.residual(part) for part in PARTS}
     n_eff = {part: problem.n_effective(part) for part in PARTS}
-    selection = forward_select(
-        candidates.design(y, n_eff),
-        candidates.testable,
-        candidates.plausible,
-        significance=config.significance,
-        max_groups=config.max_effects,
-        conflicts=candidates.conflicts,
-        noise_significance=config.noise_significance,
-        noise_tolerance=config.noise_tolerance,
-    )
+
+    def select() -> SelectionResult:
+        return forward_select(
+            candidates.design(y, n_eff),
+            candidates.testable,
+            candidates.plausible,
+            significance=config.significance,
+            max_groups=config.max_effects,
+            conflicts=candidates.conflicts,
+            noise_significance=config.noise_significance,
+            noise_tolerance=config.noise_tolerance,
+        )
+
+    selection = select()
     selected = candidates.refine(selection.selected, y, n_eff)
+    if candidates.whole_model(selected, y, n_eff):
+        # Delay and torque-constant candidates now see the whole model: select again.
+        selection = select()
+        selected = candidates.refine(selection.selected, y, n_eff)
     design = candidates.design(y, n_eff)
 
     def aliases_of(groups: list[str]) -> list[AliasSet]:
@@ -146,6 +157,59 @@ def run_diagnosis(
         aliases=aliases,
         blocks=blocks,
     )
+
+
+class _IntervalRule:
+    """How much wider than the design's covariance an effect's interval must be.
+
+    The design's covariance assumes what the filter leaves of white noise; a remainder
+    correlated longer (model-form error, real drives) holds fewer independent samples: the
+    long-run variance grows with the correlation time, and so do the intervals. A block
+    sandwich over the training part's time holds misfit the remainder shares with an effect's
+    columns; the wider of the two sets the interval.
+    """
+
+    def __init__(
+        self, problem: ResidualProblem, design: Design, final: Fit, remainder: list[Remainder]
+    ) -> None:
+        self.design, self.final = design, final
+        self.correlation = np.array([r.correlation_ratio for r in remainder])
+        blocks, _ = time_blocks(problem, design.residual(final, 'train'), 'train')
+        self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
+
+    def inflation(self, label: str, spec: EffectSpec) -> float:
+        joints = slice(None) if spec.joint is None else [spec.joint]
+        model = np.clip(np.diag(self.design.physical_covariance(self.final, label)), 1e-300, None)
+        block = np.diag(self.design.physical_covariance(self.sandwich, label))
+        return max(1.0, float(np.max(self.correlation[joints])), float(np.max(block / model)))
+
+
+#: Effects whose coefficients do not scale with the label's torque scale.
+_SCALE_FREE = ('signal_delay', 'joint_offset', 'torque_constant_scale')
+
+
+def _label_scale_std(
+    problem: ResidualProblem, candidates: CandidateSet, selected: list[str], spec: EffectSpec
+) -> float:
+    """Relative std of an effect's coefficients from the label's unknown torque scale.
+
+    tau_u from currents is known only to the datasheet torque constant's tolerance
+    (``LABEL_GAIN_STD``); on a joint whose torque-constant error the diagnosis names, that scale
+    is estimated (with the whole model) and carried by its own interval. Every coefficient in
+    torque units on another joint (a friction level, an offset, a payload mass on all joints)
+    carries the tolerance. Measured joint torques: no motor torque constant is in the label.
+    """
+    if problem.model.target != 'motor' or spec.name in _SCALE_FREE:
+        return 0.0
+    scaled = {
+        candidates.specs[g].joint
+        for g in selected
+        if candidates.specs[g].name == 'torque_constant_scale'
+        and candidates.specs[g].settings.get('of') == 'model'
+    }
+    joints = range(problem.robot.n_joints) if spec.joint is None else [spec.joint]
+    unknown = [j for j in joints if j not in scaled]
+    return LABEL_GAIN_STD * len(unknown) / max(len(list(joints)), 1)
 
 
 def _best_other(label: str, aliases: list[AliasSet], candidates: CandidateSet) -> str | None:
@@ -286,16 +350,16 @@ def _assemble(
     members = {label for alias in aliases for label in alias.members}
     t_crit = float(stats.t.ppf(0.975, max(design.n_eff_train - final.rank, 1.0)))
     effects = []
-    # The design's covariance assumes what the filter leaves of white noise; a remainder
-    # correlated longer (model-form error, real drives) holds fewer independent samples: the
-    # long-run variance grows with the correlation time, and so do the intervals.
-    correlation = np.array([r.correlation_ratio for r in remainder])
+    intervals = _IntervalRule(problem, design, final, remainder)
     for step, label in zip(steps, selected, strict=True):
         spec = candidates.specs[label]
         theta = design.physical(final, label)
-        joints = slice(None) if spec.joint is None else [spec.joint]
-        inflation = max(1.0, float(np.max(correlation[joints])))
-        interval_covariance = inflation * t_crit**2 * design.physical_covariance(final, label)
+        inflation = intervals.inflation(label, spec)
+        scale_std = _label_scale_std(problem, candidates, selected, spec)
+        interval_covariance = t_crit**2 * (
+            inflation * design.physical_covariance(final, label)
+            + scale_std**2 * np.outer(theta, theta)
+        )
         half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
         rms = _rmse(np.concatenate([design.contribution(final, label, p) for p in PARTS]))
         # Low confidence: a structured remainder on one of its joints outweighs what it explains.
@@ -320,7 +384,8 @@ def _assemble(
                 contribution_rms_nm=rms,
                 variance_explained=explained[label],
                 variance_explained_total=explained_total[label],
-                selection=_selection_record(step, test) | {'interval_inflation': inflation},
+                selection=_selection_record(step, test)
+                | {'interval_inflation': inflation, 'label_scale_std': scale_std},
             )
         )
     rejected = None

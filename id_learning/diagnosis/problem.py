@@ -194,8 +194,10 @@ class ResidualProblem:
         self.recordings: list[PreparedRecording] = []
         #: Link-side terms (spec, physical coefficients) the model-load friction sees.
         self.link_terms: list[tuple[EffectSpec, np.ndarray]] = []
-        #: Terms (spec, physical coefficients) whose torque a delay of the model's form delays.
+        #: Terms (spec, physical coefficients) whose torque a delay of the model's form delays
+        #: and a torque-constant error of the model's form scales (``CandidateSet.whole_model``).
         self.rate_terms: list[tuple[EffectSpec, np.ndarray]] = []
+        self.scale_terms: list[tuple[EffectSpec, np.ndarray]] = []
         self._quantities_for_library()
 
     def _noise(self) -> NoiseEstimate:
@@ -322,6 +324,9 @@ class ResidualProblem:
             x = effect_columns(spec, quantities, self.model)
             if spec.name == 'signal_delay' and spec.settings.get('rate_of') == 'model':
                 x = x - self._terms_rate(r)[:, :, None]
+            if spec.name == 'torque_constant_scale' and spec.settings.get('of') == 'model':
+                x = x.copy()
+                x[:, spec.joint, 0] += self._terms_torque(r, self.scale_terms)[:, spec.joint]
             xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
             for part in ('train', 'test'):
                 filtered[part].append(xf[r.rows[part]])
@@ -351,15 +356,22 @@ class ResidualProblem:
         A delay holds back the whole torque the drive delivers, friction included, not only
         the rigid body's (``CandidateSet.refine``).
         """
-        torque = np.zeros_like(r.quantities.q)
-        for spec, theta in self.rate_terms:
-            quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
-            torque += effect_columns(spec, quantities, self.model) @ theta
+        torque = self._terms_torque(r, self.rate_terms)
         rate = np.zeros_like(torque)
         for rows in r.dataset.recording_rows():
             if len(rows) > 2:
                 rate[rows] = differentiate(torque[rows], r.dataset.period_s)
         return rate
+
+    def _terms_torque(
+        self, r: PreparedRecording, terms: list[tuple[EffectSpec, np.ndarray]]
+    ) -> np.ndarray:
+        """(N, n) the torque of some terms along one recording [N*m] (unfiltered)."""
+        torque = np.zeros_like(r.quantities.q)
+        for spec, theta in terms:
+            quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
+            torque += effect_columns(spec, quantities, self.model) @ theta
+        return torque
 
     def _loaded(self, r: PreparedRecording) -> NominalQuantities:
         """A recording's quantities with the link torque of the nominal model plus link terms."""

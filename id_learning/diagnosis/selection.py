@@ -188,6 +188,27 @@ class Design:
         block = source[position : position + k, position : position + k]
         return block / np.outer(norm, norm)
 
+    def sandwich_covariance(self, fit: Fit, blocks: np.ndarray) -> np.ndarray:
+        """Covariance of a fit's coefficients from its training residual, blocks of time apart.
+
+        The sandwich (X'WX + P)^-1 (sum_b s_b s_b') (X'WX + P)^-1 with s_b the score of block b:
+        it holds whatever correlation and misfit the residual carries within blocks longer than
+        its correlation, not only what the noise model assumes. ``blocks``: (M,) block index of
+        each training row. In the normalised columns' units, like ``Fit.covariance``.
+        """
+        idx = self.indices(fit.groups)
+        if not idx.size:
+            return np.zeros((0, 0))
+        x = self.matrix['train'][:, idx]
+        error = self._yw['train'] - x @ fit.theta
+        n = self.y['train'].shape[1]
+        scores = (x * error[:, None]).reshape(-1, n, len(idx)).sum(axis=1)
+        labels = np.unique(blocks, return_inverse=True)[1]
+        per_block = np.zeros((int(labels.max()) + 1, len(idx)))
+        np.add.at(per_block, labels, scores)
+        bread = fit.noise_covariance
+        return bread @ (per_block.T @ per_block) @ bread
+
     def residual(self, fit: Fit, part: str) -> np.ndarray:
         """(M, n) residual torque [N*m] (unweighted) of a fit on one part."""
         idx = self.indices(fit.groups)

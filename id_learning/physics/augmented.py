@@ -93,13 +93,18 @@ class AugmentedModel:
     ) -> np.ndarray:
         """The nominal torque (or ``tau``) plus the additive terms, loads from the model.
 
-        Load-dependent friction of the model-load form (``uses_model_load``) comes last, on the
-        link torque of the nominal model plus the link-side terms.
+        Load-dependent friction of the model-load form (``uses_model_load``) comes after the
+        others, on the link torque of the nominal model plus the link-side terms; a
+        torque-constant error of the whole model's form last, on everything else but offsets.
         """
         tau = quantities.tau_nominal.copy() if tau is None else tau
         link = quantities.tau_rigid.copy()
-        deferred = []
+        offsets = np.zeros_like(tau)
+        deferred, scales = [], []
         for spec, theta in terms:
+            if spec.name == 'torque_constant_scale' and spec.settings.get('of') == 'model':
+                scales.append((spec, theta))
+                continue
             if uses_model_load(spec):
                 deferred.append((spec, theta))
                 continue
@@ -107,10 +112,17 @@ class AugmentedModel:
             tau += contribution
             if spec.name in LINK_SIDE_EFFECTS:
                 link += contribution
+            if spec.name == 'torque_offset':
+                offsets += contribution
         if deferred:
             loaded = replace(quantities, tau_rigid=link)
             for spec, theta in deferred:
                 tau += effect_columns(spec, loaded, self.nominal) @ theta
+        # A torque-constant error of the whole model's form scales everything the drive
+        # delivers (a current-sensor offset aside), as the diagnosis fitted it.
+        delivered = tau - offsets
+        for spec, theta in scales:
+            tau[:, spec.joint] += float(theta[0]) * delivered[:, spec.joint]
         return tau
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from id_learning.physics.inertial import payload_parameter_map
+from id_learning.physics.inertial import frame_parameter_map, payload_parameter_map
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import rotor_inertia_torque
@@ -69,15 +69,22 @@ class NominalModel:
             [model.joints[model.getJointId(name)].idx_v for name in robot.joints]
         )
         self._data = model.createData()
-        self._payload_maps: dict[tuple[str, tuple[float, ...]], tuple[int, np.ndarray]] = {}
+        self._payload_maps: dict[tuple[str, tuple[float, ...], bool], tuple[int, np.ndarray]] = {}
 
-    def payload_map(self, frame: str, com_guess_m: Sequence[float]) -> tuple[int, np.ndarray]:
-        """``payload_parameter_map`` of this model, computed once per frame and COM guess."""
-        key = (frame, tuple(float(x) for x in com_guess_m))
+    def payload_map(
+        self, frame: str, com_guess_m: Sequence[float], inertia: bool = False
+    ) -> tuple[int, np.ndarray]:
+        """``payload_parameter_map`` of this model, computed once per frame and COM guess.
+
+        ``inertia``: six more columns, the payload's rotational inertia about its centre of mass
+        in the frame's axes (xx, xy, yy, xz, yz, zz), for a body that is no point mass.
+        """
+        key = (frame, tuple(float(x) for x in com_guess_m), bool(inertia))
         if key not in self._payload_maps:
-            self._payload_maps[key] = payload_parameter_map(
-                self.dynamics, frame, np.asarray(key[1])
-            )
+            body, mapping = payload_parameter_map(self.dynamics, frame, np.asarray(key[1]))
+            if inertia:
+                mapping = np.hstack([mapping, frame_parameter_map(self.dynamics, frame)[1][:, 4:]])
+            self._payload_maps[key] = (body, mapping)
         return self._payload_maps[key]
 
     @property

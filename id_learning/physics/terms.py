@@ -91,9 +91,13 @@ class EffectSpec:
             parts.append(f'p={self.settings["periods_per_motor_turn"]}')
         if self.name == 'payload_mass':
             parts.append(str(self.settings['frame']))
+            if self.settings.get('inertia'):
+                parts.append('with inertia')
         if uses_model_load(self):
             parts.append('model load')
         if self.name == 'signal_delay' and self.settings.get('rate_of') == 'model':
+            parts.append('whole model')
+        if self.name == 'torque_constant_scale' and self.settings.get('of') == 'model':
             parts.append('whole model')
         if self.name == 'gravity_spring' and 'ratio' in self.settings:
             parts.append(f'r={self.settings["ratio"]:.3g}, phi={self.settings["phase_rad"]:.3g}')
@@ -222,7 +226,9 @@ def effect_columns(
     if name == 'payload_mass':
         if qs.regressor is None:
             raise ValueError('payload_mass needs quantities evaluated with regressor=True')
-        body, mapping = model.payload_map(str(settings['frame']), settings['com_guess_m'])
+        body, mapping = model.payload_map(
+            str(settings['frame']), settings['com_guess_m'], bool(settings.get('inertia'))
+        )
         block = qs.regressor[
             :, :, N_INERTIAL_PARAMETERS * body : N_INERTIAL_PARAMETERS * (body + 1)
         ]

@@ -116,3 +116,24 @@ def test_an_alias_set_ranks_its_alternatives_and_names_the_closest_two():
     assert set(short.unexplained) == {'c', 'e'}
     assert short.summary() == alias.summary()
     assert short.closest(1).further == 3
+
+
+def test_the_block_sandwich_matches_white_noise_and_grows_with_a_correlated_misfit(signals):
+    x = signals['c']  # white regressor on joint 1
+    design = design_with(2.0 * x[:, :, 0], {'c': x}, seed=3)
+    fit = design.fit(['c'])
+    blocks = np.arange(M) // 10  # 40 blocks of 10 training rows
+    model = design.physical_covariance(fit, 'c')[0, 0]
+    sandwich = design.sandwich_covariance(fit, blocks)[0, 0] / design.column_norm[0] ** 2
+    assert sandwich == pytest.approx(model, rel=0.35)
+
+    # A misfit that moves with the regressor's sign inside each block (a wrong form, not noise)
+    # leaves the noise-based covariance as is and widens the sandwich.
+    rng = np.random.default_rng(4)
+    flips = np.repeat(rng.choice([-1.0, 1.0], 2 * M // 10), 10)
+    misfit = 1.5 * flips * x[:, 1, 0]
+    biased = design_with(2.0 * x[:, :, 0] + np.stack([0 * misfit, misfit], 1), {'c': x}, seed=3)
+    fit = biased.fit(['c'])
+    model = biased.physical_covariance(fit, 'c')[0, 0]
+    sandwich = biased.sandwich_covariance(fit, blocks)[0, 0] / biased.column_norm[0] ** 2
+    assert sandwich > 1.5 * model

@@ -1,0 +1,111 @@
+"""Effects that act on the whole delivered torque (a delay, a torque-constant error), a payload
+with its own inertia, and the label scale every motor-side parameter carries."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support import twin_config
+
+from id_learning.diagnosis import evaluation_rows, filtered_prediction, run_diagnosis
+from id_learning.diagnosis.candidate_set import LABEL_GAIN_STD
+from id_learning.twin import simulate
+
+DURATION_S = 150.0
+SEED = 11
+VISCOUS = [420.0, 520.0, 300.0, 60.0, 45.0, 20.0]
+COULOMB = [160.0, 210.0, 120.0, 28.0, 22.0, 9.0]
+
+
+def friction() -> dict:
+    return {
+        'viscous_friction': {'enabled': True, 'coefficient': VISCOUS},
+        'coulomb_friction': {'enabled': True, 'level': COULOMB, 'smoothing_velocity': 0.005},
+    }
+
+
+def diagnosed(effects: dict, *, with_recording: bool = False):
+    config = twin_config(DURATION_S, effects, seed=SEED)
+    recording = simulate(config).recording
+    result = run_diagnosis(recording, config.robot)
+    return (result, recording) if with_recording else result
+
+
+def by_name(result, name: str, joint: str | None = None):
+    (effect,) = [
+        e for e in result.effects if e.name == name and (e.spec.joint_name or None) == joint
+    ]
+    return effect
+
+
+@pytest.fixture(scope='module')
+def delayed_friction():
+    """Heavy friction delivered 8 ms late: its rate is no rigid-body rate."""
+    return diagnosed(friction() | {'signal_delay': {'enabled': True, 'delay_s': 0.008}})
+
+
+def test_a_delay_holds_back_the_friction_too(delayed_friction):
+    delay = by_name(delayed_friction, 'signal_delay')
+    assert delay.spec.settings.get('rate_of') == 'model'
+    assert delay.coefficients[0] == pytest.approx(0.008, rel=0.15)
+    low, high = delay.coefficients_ci[0]
+    assert low <= 0.008 <= high
+    # A viscous term's rate would otherwise be taken for an inertia.
+    assert not [e for e in delayed_friction.named_effects() if e.name == 'rotor_inertia']
+
+
+def test_motor_side_coefficients_carry_the_datasheet_torque_constant(delayed_friction):
+    viscous = by_name(delayed_friction, 'viscous_friction', 'joint_1')
+    assert viscous.selection['label_scale_std'] == LABEL_GAIN_STD
+    low, high = viscous.coefficients_ci[0]
+    assert high - low >= 2 * 1.96 * LABEL_GAIN_STD * viscous.coefficients[0]
+    # A delay is a time: no torque scale in it.
+    assert by_name(delayed_friction, 'signal_delay').selection['label_scale_std'] == 0.0
+
+
+def test_a_torque_constant_error_scales_the_payload_and_friction_too():
+    scale = [1.0, 0.95, 1.0, 1.0, 1.0, 1.0]
+    result, recording = diagnosed(
+        friction()
+        | {
+            'torque_constant_scale': {'enabled': True, 'scale': scale},
+            'payload_mass': {
+                'enabled': True, 'mass_kg': 40.0, 'com_m': [0.16, 0.0, 0.02],
+                'inertia_kgm2': [0.0, 0.0, 0.0],
+            },
+        },
+        with_recording=True,
+    )  # fmt: skip
+    error = by_name(result, 'torque_constant_scale', 'joint_2')
+    assert error.spec.settings.get('of') == 'model'
+    (named_scale,) = [p for p in error.parameters if p['name'] == 'scale']
+    assert named_scale['value'] == pytest.approx(0.95, abs=0.01)
+    assert error.selection['label_scale_std'] == 0.0
+    assert by_name(result, 'payload_mass').coefficients[0] == pytest.approx(40.0, rel=0.05)
+    # On joint 2 the scale is estimated: its friction carries no datasheet tolerance.
+    assert by_name(result, 'viscous_friction', 'joint_2').selection['label_scale_std'] == 0.0
+    # The saved model applies the scale as it was fitted: to the whole torque of joint 2.
+    dataset, model = filtered_prediction(result, recording)
+    rows = evaluation_rows(dataset, result.settings)['test']
+    rmse = np.sqrt(np.mean((dataset.tau[rows] - model[rows]) ** 2, axis=0))
+    assert rmse[1] == pytest.approx(result.rmse_after_nm[1], rel=0.15)
+    assert rmse[1] < 0.2 * result.rmse_before_nm[1]
+
+
+def test_a_payload_with_its_own_inertia_is_fitted_as_a_body():
+    result = diagnosed(
+        {
+            'payload_mass': {
+                'enabled': True, 'mass_kg': 60.0, 'com_m': [0.2, 0.0, 0.05],
+                'inertia_kgm2': [2.0, 3.5, 3.5],
+            }
+        }
+    )  # fmt: skip
+    payload = by_name(result, 'payload_mass')
+    assert payload.spec.settings.get('inertia') is True
+    assert payload.coefficients[0] == pytest.approx(60.0, rel=0.05)
+    names = [p['name'] for p in payload.parameters]
+    assert 'inertia_yy' in names
+    inertia = {p['name']: p['value'] for p in payload.parameters}
+    assert inertia['inertia_zz'] == pytest.approx(3.5, rel=0.3)
+    assert np.isfinite(inertia['inertia_xx'])
