@@ -196,35 +196,35 @@ class CandidateSet:
     def whole_model(
         self, selected: list[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
     ) -> bool:
-        """Give delays and torque-constant errors the whole model's torque; whether any changed.
+        """Give delays and torque-constant errors the whole model's torque; whether new forms.
 
         A drive delivers the whole torque late, and a wrong torque constant scales all of it,
         friction, payload and balancer included, not only the URDF's: with the rigid body's
         torque alone a delay soaks up a share of friction (a viscous term's rate is an inertia)
         and a torque-constant error trades with the payload. The other selected effects, at
         their fitted values, enter every delay and torque-constant candidate's column (a torque
-        offset, which sits in the current sensor, is not scaled); the selection then runs again.
+        offset, which sits in the current sensor, is not scaled). True when candidates took the
+        whole model's form (the selection then runs again, and this once more, so that the
+        columns hold the final effects).
         """
         kinds = ('signal_delay', 'torque_constant_scale')
         others = [g for g in selected if self.specs[g].name not in kinds]
-        todo = [
-            label
-            for label in self.testable
-            if self.specs[label].name in kinds
-            and not ({'rate_of', 'of'} & set(self.specs[label].settings))
-        ]
-        if not others or not todo:
+        targets = [label for label in self.testable if self.specs[label].name in kinds]
+        if not others or not targets:
             return False
         design = self.design(y, n_eff)
         fit = design.fit(selected)
         terms = [(self.specs[g], design.physical(fit, g)) for g in others]
         self.problem.rate_terms = terms
         self.problem.scale_terms = [t for t in terms if t[0].name != 'torque_offset']
-        for label in todo:
+        changed = False
+        for label in targets:
             spec = self.specs[label]
             form = {'rate_of': 'model'} if spec.name == 'signal_delay' else {'of': 'model'}
-            self._swap(label, spec.replace_settings(**form))
-        return True
+            whole = spec.replace_settings(**form)
+            self._swap(label, whole)
+            changed |= whole.label != label
+        return changed
 
     def _swap(self, label: str, refined: EffectSpec) -> None:
         """Put a refined spec (and its columns) in the place of a candidate."""

@@ -111,9 +111,11 @@ def run_diagnosis(
     selection = select()
     selected = candidates.refine(selection.selected, y, n_eff)
     if candidates.whole_model(selected, y, n_eff):
-        # Delay and torque-constant candidates now see the whole model: select again.
+        # Delay and torque-constant candidates now see the whole model: select again, then
+        # give their columns the final effects.
         selection = select()
         selected = candidates.refine(selection.selected, y, n_eff)
+        candidates.whole_model(selected, y, n_eff)
     design = candidates.design(y, n_eff)
 
     def aliases_of(groups: list[str]) -> list[AliasSet]:

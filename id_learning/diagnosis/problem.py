@@ -234,7 +234,7 @@ class ResidualProblem:
             smooth = self._smooth(dataset)
             self.recordings.append(PreparedRecording(dataset, quantities, smooth, rows, nominal))
         self.standstill = StandstillProjection(
-            [(r.dataset, r.rows['train']) for r in self.recordings],
+            [(r.dataset, r.rows) for r in self.recordings],
             self.config.standstill_velocity,
             self.config.standstill_min_s,
         )
@@ -390,6 +390,12 @@ class ResidualProblem:
         return np.concatenate(out)
 
     def n_effective(self, part: str) -> np.ndarray:
-        """(n,) effective samples per joint on one part."""
+        """(n,) effective samples per joint on one part.
+
+        Each standstill's free held torque takes one from the training part (``standstill``).
+        """
         rows = sum(len(r.rows[part]) for r in self.recordings)
-        return rows * self.step / self.noise.correlation_samples
+        n_eff = rows * self.step / self.noise.correlation_samples
+        if part == 'train':
+            n_eff = np.maximum(n_eff - self.standstill.count, 1.0)
+        return n_eff

@@ -36,17 +36,25 @@ class StandstillProjection:
     """Per joint, an orthonormal basis of the standstill boxes on the training rows.
 
     Args:
-        recordings: per recording, its dataset and its kept training rows.
+        recordings: per recording, its dataset and its kept rows per part ('train', 'test').
         threshold: |v| [rad/s] of the fitting inputs below which a joint rests.
         min_s: shortest rest [s].
     """
 
     def __init__(
-        self, recordings: list[tuple[Dataset, np.ndarray]], threshold: float, min_s: float
+        self,
+        recordings: list[tuple[Dataset, dict[str, np.ndarray]]],
+        threshold: float,
+        min_s: float,
     ) -> None:
         n = recordings[0][0].q.shape[1] if recordings else 0
+        # A rest in the held-out part leaks only the filter's tail into the training rows: a box
+        # is kept where most of its (filtered) energy lies on training rows.
         per_recording = [
-            [box[rows] for box in _boxes(dataset, threshold, min_s)]
+            [
+                _mostly_on(box, rows['train'], rows['test'])
+                for box in _boxes(dataset, threshold, min_s)
+            ]
             for dataset, rows in recordings
         ]
         #: rests found per joint, over all recordings.
@@ -84,6 +92,17 @@ def _boxes(dataset: Dataset, threshold: float, min_s: float) -> list[np.ndarray]
                 cols.append(column)
         out.append(np.column_stack(cols) if cols else np.zeros((n_samples, 0)))
     return out
+
+
+def _mostly_on(boxes: np.ndarray, train: np.ndarray, test: np.ndarray) -> np.ndarray:
+    """The boxes (N, m) on the training rows; those with most of their energy on test rows dropped.
+
+    The rows of both parts are sampled alike, so their energies compare.
+    """
+    on_train = boxes[train]
+    energy = np.sum(on_train**2, axis=0)
+    kept = energy >= 0.5 * (energy + np.sum(boxes[test] ** 2, axis=0))
+    return on_train[:, kept & (energy > 0)]
 
 
 def _block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:

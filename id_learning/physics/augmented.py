@@ -28,6 +28,12 @@ __all__ = ['EFFECTS_JSON', 'AugmentedModel']
 EFFECTS_JSON = 'effects.json'
 
 
+def _whole_model(spec: EffectSpec, name: str) -> bool:
+    """Whether a term is a delay or torque-constant error of the whole model's form."""
+    key = {'signal_delay': 'rate_of', 'torque_constant_scale': 'of'}[name]
+    return spec.name == name and spec.settings.get(key) == 'model'
+
+
 class AugmentedModel:
     """The nominal model plus identified effects: what a ``rnea_effects`` artifact holds.
 
@@ -100,14 +106,16 @@ class AugmentedModel:
         tau = quantities.tau_nominal.copy() if tau is None else tau
         link = quantities.tau_rigid.copy()
         offsets = np.zeros_like(tau)
-        deferred, scales = [], []
+        deferred, scales, whole_delays = [], [], []
         for spec, theta in terms:
-            if spec.name == 'torque_constant_scale' and spec.settings.get('of') == 'model':
+            if _whole_model(spec, 'torque_constant_scale'):
                 scales.append((spec, theta))
                 continue
             if uses_model_load(spec):
                 deferred.append((spec, theta))
                 continue
+            if _whole_model(spec, 'signal_delay'):
+                whole_delays.append(float(theta[0]))
             contribution = effect_columns(spec, quantities, self.nominal) @ theta
             tau += contribution
             if spec.name in LINK_SIDE_EFFECTS:
@@ -118,12 +126,47 @@ class AugmentedModel:
             loaded = replace(quantities, tau_rigid=link)
             for spec, theta in deferred:
                 tau += effect_columns(spec, loaded, self.nominal) @ theta
+        for delay in whole_delays:
+            tau += self._delayed_terms(quantities, terms, delay)
         # A torque-constant error of the whole model's form scales everything the drive
         # delivers (a current-sensor offset aside), as the diagnosis fitted it.
         delivered = tau - offsets
         for spec, theta in scales:
             tau[:, spec.joint] += float(theta[0]) * delivered[:, spec.joint]
         return tau
+
+    def _delayed_terms(
+        self,
+        quantities: NominalQuantities,
+        terms: Sequence[tuple[EffectSpec, np.ndarray]],
+        delay: float,
+    ) -> np.ndarray:
+        """What a delay of the whole model's form adds for the other terms.
+
+        Their torque at the state ``delay`` seconds back (to first order) less their torque now;
+        the nominal torque's share is the delay term's own column.
+        """
+        others = [
+            (spec, theta)
+            for spec, theta in terms
+            if spec.name not in ('signal_delay', 'torque_offset')
+            and not _whole_model(spec, 'torque_constant_scale')
+        ]
+        if not others:
+            return np.zeros_like(quantities.q)
+        specs = [spec for spec, _ in others]
+        q, v, a, jerk = quantities.q, quantities.v, quantities.a, quantities.jerk
+        back = self.nominal.evaluate(
+            q - delay * v,
+            v - delay * a,
+            a - delay * jerk,
+            derivatives=needs_derivatives(specs),
+            regressor=needs_regressor(specs),
+        )
+        zeros = np.zeros_like(q)
+        return self._additive(back, others, zeros.copy()) - self._additive(
+            quantities, others, zeros.copy()
+        )
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.
@@ -132,17 +175,24 @@ class AugmentedModel:
         their joints in one vectorised call with their settings as arrays; the rest go through
         ``effect_columns`` as in ``torque``.
         """
-        groups: dict[str, list[tuple[EffectSpec, np.ndarray]]] = {}
+        groups: dict[tuple[str, tuple[str, ...]], list[tuple[EffectSpec, np.ndarray]]] = {}
         rest: list[tuple[EffectSpec, np.ndarray]] = []
+        # Whole-model terms see the other terms' torque: then nothing is folded past them.
+        whole = any(
+            _whole_model(spec, name)
+            for spec, _ in self.terms
+            for name in ('signal_delay', 'torque_constant_scale')
+        )
         for spec, theta in self.terms:
             scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
-            foldable = not (uses_model_load(spec) or spec.name in LINK_SIDE_EFFECTS)
+            foldable = not (uses_model_load(spec) or spec.name in LINK_SIDE_EFFECTS or whole)
             if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar and foldable:
-                groups.setdefault(spec.name, []).append((spec, theta))
+                key = (spec.name, tuple(sorted(spec.settings)))
+                groups.setdefault(key, []).append((spec, theta))
             else:
                 rest.append((spec, theta))
         folded = []
-        for name, members in groups.items():
+        for (name, _), members in groups.items():
             joints = np.array([spec.joint for spec, _ in members])
             keys = members[0][0].settings.keys()
             settings = {k: np.array([spec.settings[k] for spec, _ in members]) for k in keys}

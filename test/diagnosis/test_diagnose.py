@@ -167,14 +167,21 @@ def test_unknown_effects_in_the_config_are_refused():
         DiagnosisConfig(significance=0.0)
 
 
-def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
-    """Every kind of term and form at once, several per effect, against AugmentedModel.torque."""
+@pytest.mark.parametrize('whole', [False, True], ids=['rigid-body forms', 'whole-model forms'])
+def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi, whole):
+    """Every kind of term and form at once, several per effect, against AugmentedModel.torque.
+
+    Viscous laws linear and with exponents side by side; with ``whole``, a torque-constant error
+    and a delay of the whole model's form and a payload body with its own inertia.
+    """
     rng = np.random.default_rng(3)
     joints = mabi.joints
     terms = []
+    scale = {'of': 'model'} if whole else {}
     for j, joint in enumerate(joints):
         terms += [
-            (EffectSpec('viscous_friction', j, joint), rng.normal(size=1)),
+            (EffectSpec('viscous_friction', j, joint, {'exponent': 1.4} if j % 2 else {}),
+             rng.normal(size=1)),
             (EffectSpec('coulomb_friction', j, joint, {'smoothing_velocity': 0.005}),
              rng.normal(size=1)),
             (EffectSpec('stribeck_friction', j, joint,
@@ -183,7 +190,7 @@ def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
             (EffectSpec('load_dependent_friction', j, joint, {'smoothing_velocity': 0.004}),
              rng.normal(size=1)),
             (EffectSpec('rotor_inertia', j, joint), rng.normal(size=1) * 1e-4),
-            (EffectSpec('torque_constant_scale', j, joint), rng.normal(size=1) * 0.01),
+            (EffectSpec('torque_constant_scale', j, joint, scale), rng.normal(size=1) * 0.01),
             (EffectSpec('torque_offset', j, joint), rng.normal(size=1)),
             (EffectSpec('cogging', j, joint, {'periods_per_motor_turn': 6}),
              rng.normal(size=2)),
@@ -196,10 +203,12 @@ def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi):
         (EffectSpec('load_dependent_friction', 4, joints[4],
                     {'smoothing_velocity': 0.004, 'load': 'model'}), np.array([0.03])),
         (EffectSpec('joint_offset', 2, joints[2]), rng.normal(size=1) * 1e-3),
-        (EffectSpec('signal_delay'), np.array([0.004])),
+        (EffectSpec('signal_delay', settings={'rate_of': 'model'} if whole else {}),
+         np.array([0.004])),
         (EffectSpec('payload_mass', settings={'frame': mabi.payload_frame,
-                                                 'com_guess_m': [0.1, 0.0, 0.05]}),
-         np.array([20.0, 2.0, 0.0, 1.0])),
+                                                 'com_guess_m': [0.1, 0.0, 0.05],
+                                                 'inertia': whole}),
+         np.array([20.0, 2.0, 0.0, 1.0, *([0.3, 0.0, 0.4, 0.0, 0.0, 0.5] if whole else [])])),
     ]  # fmt: skip
     model = AugmentedModel(mabi, 'motor', terms)
     one = model.sample_function()

@@ -52,7 +52,8 @@ def test_standstill_projection_removes_a_held_torque_and_nothing_else(short_twin
     config, twin = short_twin
     dataset = prepare_dataset(twin.recording, config.robot)
     n_samples, n = dataset.v.shape
-    projection = StandstillProjection([(dataset, np.arange(n_samples))], threshold=2e-3, min_s=0.1)
+    rows = {'train': np.arange(n_samples), 'test': np.arange(0)}
+    projection = StandstillProjection([(dataset, rows)], threshold=2e-3, min_s=0.1)
     assert projection.count.sum() > 0
     j = int(np.argmax(projection.count))
     basis = projection.bases[j]

@@ -41,10 +41,13 @@ def by_name(result, name: str, joint: str | None = None):
 @pytest.fixture(scope='module')
 def delayed_friction():
     """Heavy friction delivered 8 ms late: its rate is no rigid-body rate."""
-    return diagnosed(friction() | {'signal_delay': {'enabled': True, 'delay_s': 0.008}})
+    return diagnosed(
+        friction() | {'signal_delay': {'enabled': True, 'delay_s': 0.008}}, with_recording=True
+    )
 
 
 def test_a_delay_holds_back_the_friction_too(delayed_friction):
+    delayed_friction, recording = delayed_friction
     delay = by_name(delayed_friction, 'signal_delay')
     assert delay.spec.settings.get('rate_of') == 'model'
     assert delay.coefficients[0] == pytest.approx(0.008, rel=0.15)
@@ -52,9 +55,15 @@ def test_a_delay_holds_back_the_friction_too(delayed_friction):
     assert low <= 0.008 <= high
     # A viscous term's rate would otherwise be taken for an inertia.
     assert not [e for e in delayed_friction.named_effects() if e.name == 'rotor_inertia']
+    # The saved model delays the friction as the diagnosis fitted it.
+    dataset, model = filtered_prediction(delayed_friction, recording)
+    rows = evaluation_rows(dataset, delayed_friction.settings)['test']
+    rmse = np.sqrt(np.mean((dataset.tau[rows] - model[rows]) ** 2, axis=0))
+    np.testing.assert_allclose(rmse, delayed_friction.rmse_after_nm, rtol=0.15)
 
 
 def test_motor_side_coefficients_carry_the_datasheet_torque_constant(delayed_friction):
+    delayed_friction, _ = delayed_friction
     viscous = by_name(delayed_friction, 'viscous_friction', 'joint_1')
     assert viscous.selection['label_scale_std'] == LABEL_GAIN_STD
     low, high = viscous.coefficients_ci[0]
