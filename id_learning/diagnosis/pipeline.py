@@ -64,6 +64,7 @@ from id_learning.diagnosis.selection import (
     forward_select,
     noise_consistency,
 )
+from id_learning.diagnosis.separation import separating_motion
 from id_learning.errors import DatasetError
 from id_learning.physics.terms import EffectSpec
 from id_learning.robot.config import RobotConfig
@@ -212,6 +213,15 @@ def _label_scale_std(
     joints = range(problem.robot.n_joints) if spec.joint is None else [spec.joint]
     unknown = [j for j in joints if j not in scaled]
     return LABEL_GAIN_STD * len(unknown) / max(len(list(joints)), 1)
+
+
+def _separated(problem: ResidualProblem, design: Design, final: Fit, alias: AliasSet) -> AliasSet:
+    """The alias set with the motion that would tell each listed alternative apart."""
+    separation = {
+        member: separating_motion(problem, design, final, alias.representative, member)
+        for member in alias.alternatives()
+    }
+    return replace(alias, separation=separation)
 
 
 def _best_other(label: str, aliases: list[AliasSet], candidates: CandidateSet) -> str | None:
@@ -430,7 +440,10 @@ def _assemble(
         noise=problem.noise,
         effective_samples=design.n_effective,
         effects=effects,
-        alias_sets=[alias.closest(ALIAS_ALTERNATIVES) for alias in aliases],
+        alias_sets=[
+            _separated(problem, design, final, alias.closest(ALIAS_ALTERNATIVES))
+            for alias in aliases
+        ],
         untestable=candidates.untestable_summary(),
         remainder=remainder,
         rmse_before_nm=_rmse(design.residual(design.fit([]), 'test')),

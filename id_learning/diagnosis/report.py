@@ -15,6 +15,7 @@ from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.locate import LOCATION_VARIABLES
 from id_learning.diagnosis.pipeline import DiagnosisResult, run_diagnosis
 from id_learning.diagnosis.result import FoundEffect
+from id_learning.diagnosis.separation import describe
 from id_learning.physics.augmented import EFFECTS_JSON
 from id_learning.robot.config import RobotConfig
 
@@ -174,9 +175,12 @@ def _effects(result: DiagnosisResult) -> list[str]:
         for alias in result.alias_sets:
             detail = ', '.join(
                 f'{m} ({alias.unexplained.get(m, float("nan")):.2g}; canonical correlation '
-                f'{alias.canonical_correlation.get(m, 1.0):.3f})'
+                f'{alias.canonical_correlation.get(m, 1.0):.3f}'
+                + (f'; to tell apart: {describe(alias.separation[m])}' if m in alias.separation
+                   else '')
+                + ')'
                 for m in alias.alternatives()
-            )
+            )  # fmt: skip
             further = f'; {alias.further} more mimic it less closely' if alias.further else ''
             lines.append(f'- {alias.representative} ≈ {detail}{further}')
         lines.append('')

@@ -237,6 +237,7 @@ class DiagnosisResult:
                     'unexplained_effective': alias.unexplained,
                     'alternatives_ranked': alias.alternatives(),
                     'further_alternatives': alias.further,
+                    'separating_motion': alias.separation,
                 }
                 for alias in self.alias_sets
             ],

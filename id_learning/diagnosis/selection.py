@@ -23,6 +23,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -421,6 +422,8 @@ class AliasSet:
             residual variance per effective sample (0: reproduced exactly).
         further: alternatives that also pass but mimic less closely than the members listed
             (``closest``).
+        separation: per listed alternative, the motion that would tell it from the
+            representative (``separation.separating_motion``).
     """
 
     representative: str
@@ -428,6 +431,7 @@ class AliasSet:
     canonical_correlation: dict[str, float] = field(default_factory=dict)
     unexplained: dict[str, float] = field(default_factory=dict)
     further: int = 0
+    separation: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def closest(self, count: int) -> AliasSet:
         """The set with only the ``count`` closest alternatives; the rest counted in ``further``.
@@ -444,6 +448,7 @@ class AliasSet:
             {k: v for k, v in self.canonical_correlation.items() if k in keep},
             {k: v for k, v in self.unexplained.items() if k in keep},
             self.further + dropped,
+            {k: v for k, v in self.separation.items() if k in keep},
         )
 
     def alternatives(self) -> list[str]:

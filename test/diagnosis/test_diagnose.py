@@ -313,3 +313,23 @@ def test_joint_torque_sensors_offer_no_motor_side_effects():
     for effect in result.effects:
         if effect.name == 'rotor_inertia':
             assert [p['name'] for p in effect.parameters] == ['axis_inertia_change_link_side']
+
+
+def test_an_alias_set_says_what_motion_would_tell_its_members_apart(tmp_path):
+    """An encoder offset on joint 2 that link parameters mimic: where do they differ?"""
+    config, twin = hidden({'joint_offset': {'enabled': True, 'offset': [0, 0.004, 0, 0, 0, 0]}})
+    result = diagnose(twin.recording, config.robot, out_dir=tmp_path)
+    assert result.alias_sets
+    for alias in result.alias_sets:
+        assert set(alias.separation) == set(alias.alternatives())
+        for separation in alias.separation.values():
+            assert separation['joint'] in config.robot.joints
+            assert separation['feature'] in ('speed', 'acceleration', 'position')
+            low, high = separation['range']
+            assert low <= high
+            assert separation['difference_rms_nm'] > 0
+            # The largest of four equal-count bins is at least the whole part's RMS.
+            assert separation['ratio_to_overall'] >= 1.0 - 1e-9
+    assert 'to tell apart: more motion of' in (tmp_path / 'report.md').read_text(encoding='utf-8')
+    data = json.loads((tmp_path / 'effects.json').read_text(encoding='utf-8'))
+    assert data['alias_sets'][0]['separating_motion']
