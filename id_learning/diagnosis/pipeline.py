@@ -215,13 +215,19 @@ def _label_scale_std(
     return LABEL_GAIN_STD * len(unknown) / max(len(list(joints)), 1)
 
 
-def _separated(problem: ResidualProblem, design: Design, final: Fit, alias: AliasSet) -> AliasSet:
-    """The alias set with the motion that would tell each listed alternative apart."""
-    separation = {
-        member: separating_motion(problem, design, final, alias.representative, member)
-        for member in alias.alternatives()
-    }
-    return replace(alias, separation=separation)
+def _separated(
+    problem: ResidualProblem, design: Design, final: Fit, aliases: list[AliasSet]
+) -> list[AliasSet]:
+    """The alias sets with their closest alternatives, and the motion that tells each apart."""
+    out = []
+    for alias in aliases:
+        short = alias.closest(ALIAS_ALTERNATIVES)
+        separation = {
+            member: separating_motion(problem, design, final, short.representative, member)
+            for member in short.alternatives()
+        }
+        out.append(replace(short, separation=separation))
+    return out
 
 
 def _best_other(label: str, aliases: list[AliasSet], candidates: CandidateSet) -> str | None:
@@ -440,10 +446,7 @@ def _assemble(
         noise=problem.noise,
         effective_samples=design.n_effective,
         effects=effects,
-        alias_sets=[
-            _separated(problem, design, final, alias.closest(ALIAS_ALTERNATIVES))
-            for alias in aliases
-        ],
+        alias_sets=_separated(problem, design, final, aliases),
         untestable=candidates.untestable_summary(),
         remainder=remainder,
         rmse_before_nm=_rmse(design.residual(design.fit([]), 'test')),
