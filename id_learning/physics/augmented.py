@@ -28,6 +28,10 @@ __all__ = ['EFFECTS_JSON', 'AugmentedModel']
 EFFECTS_JSON = 'effects.json'
 
 
+#: The torque (N, n) of terms evaluated apart from ``_additive``, on some quantities.
+Folded = Callable[[NominalQuantities], np.ndarray]
+
+
 def _whole_model(spec: EffectSpec, name: str) -> bool:
     """Whether a term is a delay or torque-constant error of the whole model's form."""
     key = {'signal_delay': 'rate_of', 'torque_constant_scale': 'of'}[name]
@@ -96,16 +100,21 @@ class AugmentedModel:
         quantities: NominalQuantities,
         terms: Sequence[tuple[EffectSpec, np.ndarray]],
         tau: np.ndarray | None = None,
+        folded: Folded | None = None,
     ) -> np.ndarray:
         """The nominal torque (or ``tau``) plus the additive terms, loads from the model.
 
+        ``folded``: the torque of terms evaluated apart (``sample_function``), added here.
         Load-dependent friction of the model-load form (``uses_model_load``) comes after the
-        others, on the link torque of the nominal model plus the link-side terms; a
-        torque-constant error of the whole model's form last, on everything else but offsets.
+        others, on the link torque of the nominal model plus the link-side terms; a delay of the
+        whole model's form then holds back every term but offsets; a torque-constant error of
+        the whole model's form comes last, on everything else but offsets.
         """
         tau = quantities.tau_nominal.copy() if tau is None else tau
         link = quantities.tau_rigid.copy()
         offsets = np.zeros_like(tau)
+        held_back = folded(quantities) if folded is not None else np.zeros_like(tau)
+        tau += held_back
         deferred, scales, whole_delays = [], [], []
         for spec, theta in terms:
             if _whole_model(spec, 'torque_constant_scale'):
@@ -122,12 +131,16 @@ class AugmentedModel:
                 link += contribution
             if spec.name == 'torque_offset':
                 offsets += contribution
+            elif spec.name != 'signal_delay':
+                held_back += contribution
         if deferred:
             loaded = replace(quantities, tau_rigid=link)
             for spec, theta in deferred:
-                tau += effect_columns(spec, loaded, self.nominal) @ theta
+                contribution = effect_columns(spec, loaded, self.nominal) @ theta
+                tau += contribution
+                held_back += contribution
         for delay in whole_delays:
-            tau += self._delayed_terms(quantities, terms, delay)
+            tau += self._delayed(quantities, terms, delay, held_back, folded)
         # A torque-constant error of the whole model's form scales everything the drive
         # delivers (a current-sensor offset aside), as the diagnosis fitted it.
         delivered = tau - offsets
@@ -135,16 +148,18 @@ class AugmentedModel:
             tau[:, spec.joint] += float(theta[0]) * delivered[:, spec.joint]
         return tau
 
-    def _delayed_terms(
+    def _delayed(
         self,
         quantities: NominalQuantities,
         terms: Sequence[tuple[EffectSpec, np.ndarray]],
         delay: float,
+        now: np.ndarray,
+        folded: Folded | None,
     ) -> np.ndarray:
         """What a delay of the whole model's form adds for the other terms.
 
-        Their torque at the state ``delay`` seconds back (to first order) less their torque now;
-        the nominal torque's share is the delay term's own column.
+        Their torque at the state ``delay`` seconds back (to first order) less their torque
+        ``now``; the nominal torque's share is the delay term's own column.
         """
         others = [
             (spec, theta)
@@ -152,8 +167,8 @@ class AugmentedModel:
             if spec.name not in ('signal_delay', 'torque_offset')
             and not _whole_model(spec, 'torque_constant_scale')
         ]
-        if not others:
-            return np.zeros_like(quantities.q)
+        if not others and folded is None:
+            return np.zeros_like(now)
         specs = [spec for spec, _ in others]
         q, v, a, jerk = quantities.q, quantities.v, quantities.a, quantities.jerk
         back = self.nominal.evaluate(
@@ -163,29 +178,26 @@ class AugmentedModel:
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
         )
-        zeros = np.zeros_like(q)
-        return self._additive(back, others, zeros.copy()) - self._additive(
-            quantities, others, zeros.copy()
-        )
+        return self._additive(back, others, np.zeros_like(now), folded) - now
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.
 
-        The single-joint effects (``JOINT_COLUMNS``) of one name and one column are folded: all
-        their joints in one vectorised call with their settings as arrays; the rest go through
-        ``effect_columns`` as in ``torque``.
+        The single-joint effects (``JOINT_COLUMNS``) of one name, one column and one set of
+        settings are folded: all their joints in one vectorised call with their settings as
+        arrays; the rest go through ``effect_columns`` as in ``torque``. (Offsets are not
+        folded beside a whole-model torque-constant error, which leaves them out.)
         """
         groups: dict[tuple[str, tuple[str, ...]], list[tuple[EffectSpec, np.ndarray]]] = {}
         rest: list[tuple[EffectSpec, np.ndarray]] = []
-        # Whole-model terms see the other terms' torque: then nothing is folded past them.
-        whole = any(
-            _whole_model(spec, name)
-            for spec, _ in self.terms
-            for name in ('signal_delay', 'torque_constant_scale')
-        )
+        scaled = any(_whole_model(spec, 'torque_constant_scale') for spec, _ in self.terms)
         for spec, theta in self.terms:
             scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
-            foldable = not (uses_model_load(spec) or spec.name in LINK_SIDE_EFFECTS or whole)
+            foldable = not (
+                uses_model_load(spec)
+                or spec.name in LINK_SIDE_EFFECTS
+                or (scaled and spec.name == 'torque_offset')
+            )
             if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar and foldable:
                 key = (spec.name, tuple(sorted(spec.settings)))
                 groups.setdefault(key, []).append((spec, theta))
@@ -202,14 +214,17 @@ class AugmentedModel:
         derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
         nominal, additive, fallback = self.nominal, self._additive, self._fallback
 
+        def folded_torque(qs: NominalQuantities) -> np.ndarray:
+            out = np.zeros_like(qs.tau_nominal)
+            for columns, joints, settings, theta in folded:
+                np.add.at(out[0], joints, columns(qs, joints, settings, nominal)[0][0] * theta)
+            return out
+
         def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             qs = nominal.evaluate(
                 q[None], v[None], a[None], derivatives=derivatives, regressor=regressor
             )
-            tau: np.ndarray = qs.tau_nominal[0].copy()
-            for columns, joints, settings, theta in folded:
-                np.add.at(tau, joints, columns(qs, joints, settings, nominal)[0][0] * theta)
-            out: np.ndarray = additive(qs, rest, tau[None])[0]
+            out: np.ndarray = additive(qs, rest, qs.tau_nominal.copy(), folded_torque)[0]
             out[fallback] = qs.tau_nominal[0, fallback]
             return out
 
