@@ -34,7 +34,8 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from diagnosis_scoring import SINGLE, alias_members, filtered, named_set, twin
+import yaml
+from diagnosis_scoring import SINGLE, TWIN, alias_members, filtered, named_set, twin
 from scipy.signal import lfilter
 
 from id_learning.dataset.preprocess import prepare_dataset
@@ -58,9 +59,10 @@ __all__ = [
 #: the friction curve's parts. A Stribeck hump is named where the variant's curve bends in a way
 #: Coulomb and viscous friction do not, which is the curve's shape, not another effect.
 BASE_FRICTION = ('viscous_friction', 'coulomb_friction', 'stribeck_friction')
-#: the twin's default friction levels, the scale of the variants' base friction.
-COULOMB_NM = np.array([160.0, 210.0, 120.0, 28.0, 22.0, 9.0])
-VISCOUS_NMS = np.array([420.0, 520.0, 300.0, 60.0, 45.0, 20.0])
+#: the twin's default friction levels [N*m], [N*m*s/rad]: the scale of the base friction.
+_DEFAULTS = yaml.safe_load(TWIN.read_text(encoding='utf-8'))['effects']
+COULOMB_NM = np.array(_DEFAULTS['coulomb_friction']['level'], dtype=float)
+VISCOUS_NMS = np.array(_DEFAULTS['viscous_friction']['coefficient'], dtype=float)
 
 #: single-effect variant scenarios: the twin-form scenarios' effects and joints
 #: (``diagnosis_scoring.SINGLE``) but for base friction, which every variant run carries, and

@@ -82,6 +82,9 @@ class CandidateSet:
     def _shape_friction(self) -> list[FrictionShape]:
         """Identify each joint's friction curve shape and put it in its friction candidates."""
         problem = self.problem
+        default = (problem.config.smoothing_velocity, 1.0)
+        if not set(FRICTION_SHAPED) & set(problem.config.effects):
+            return [default] * problem.robot.n_joints
         y = problem.residual('train')
         n_eff = problem.n_effective('train')
         shapes = []
@@ -100,7 +103,7 @@ class CandidateSet:
                 effective_samples=float(n_eff[j]), config=problem.config,
             )  # fmt: skip
             shapes.append(shape)
-            if shape == (problem.config.smoothing_velocity, 1.0):
+            if shape == default:
                 continue
             for label, spec in list(self.specs.items()):
                 if spec.joint == j and spec.name in FRICTION_SHAPED:

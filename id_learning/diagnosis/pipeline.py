@@ -210,9 +210,8 @@ def _label_scale_std(
         if candidates.specs[g].name == 'torque_constant_scale'
         and candidates.specs[g].settings.get('of') == 'model'
     }
-    joints = range(problem.robot.n_joints) if spec.joint is None else [spec.joint]
-    unknown = [j for j in joints if j not in scaled]
-    return LABEL_GAIN_STD * len(unknown) / max(len(list(joints)), 1)
+    joints = list(range(problem.robot.n_joints)) if spec.joint is None else [spec.joint]
+    return LABEL_GAIN_STD * sum(j not in scaled for j in joints) / len(joints)
 
 
 def _separated(

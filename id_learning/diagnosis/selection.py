@@ -168,9 +168,12 @@ class Design:
 
     def physical(self, fit: Fit, group: str) -> np.ndarray:
         """A group's coefficients in the columns' physical units."""
+        return self.coefficients(fit, group) / self.column_norm[self.slices[group]]
+
+    def coefficients(self, fit: Fit, group: str) -> np.ndarray:
+        """A group's coefficients in the normalised columns' units (``matrix``'s)."""
         position = self._position(fit, group)
-        k = self.slices[group].stop - self.slices[group].start
-        return fit.theta[position : position + k] / self.column_norm[self.slices[group]]
+        return fit.theta[position : position + self.slices[group].stop - self.slices[group].start]
 
     def _position(self, fit: Fit, group: str) -> int:
         position = 0
@@ -220,10 +223,7 @@ class Design:
     def contribution(self, fit: Fit, group: str, part: str) -> np.ndarray:
         """(M, n) filtered torque [N*m] one group adds in a fit."""
         root = np.sqrt(self.weights)
-        position = self._position(fit, group)
-        k = self.slices[group].stop - self.slices[group].start
-        theta = fit.theta[position : position + k]
-        prediction = self.matrix[part][:, self.slices[group]] @ theta
+        prediction = self.matrix[part][:, self.slices[group]] @ self.coefficients(fit, group)
         return prediction.reshape(self.y[part].shape) / root
 
     def weighted_columns(self, group: str, part: str = 'train') -> np.ndarray:

@@ -40,8 +40,7 @@ def separating_motion(
     others = [g for g in groups if g != kept]
     idx_kept = design.indices([kept])
     idx_mimic = np.concatenate([design.indices(others), design.indices([alternative])])
-    start = sum(len(design.indices([g])) for g in groups[: groups.index(kept)])
-    theta = fit.theta[start : start + len(idx_kept)]
+    theta = design.coefficients(fit, kept)
     gram = design.gram['train']
     beta = np.linalg.lstsq(
         gram[np.ix_(idx_mimic, idx_mimic)], gram[np.ix_(idx_mimic, idx_kept)] @ theta, rcond=None
