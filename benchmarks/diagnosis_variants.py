@@ -150,7 +150,11 @@ def apply_variant(
         return Variant(tau_u + _column(n_samples, n, j, extra), no_shift, inertia, section)
     if name == 'gravity_spring':
         assert j is not None
-        extra = -gas_spring(q[:, j], preload_n=40.0 * size)
+        # Mounted to balance: its torque opposes the joint's gravity torque, whichever way the
+        # robot's joint axis turns.
+        spring = gas_spring(q[:, j], preload_n=40.0 * size)
+        gravity = RigidBodyDynamics.from_config(robot).gravity(q)[:, j]
+        extra = -np.sign(np.mean(spring * gravity)) * spring
         section = {'preload_n': 40.0 * size, 'form': 'gas spring, arms 0.30/0.55 m'}
         return Variant(tau_u + _column(n_samples, n, j, extra), no_shift, None, section)
     if name == 'payload_mass':
@@ -292,7 +296,7 @@ def _apparent_offset_torque(base: TwinResult, robot: RobotConfig, shift: np.ndar
 
 
 def gas_spring(q: np.ndarray, preload_n: float) -> np.ndarray:
-    """Torque a polytropic gas balancer puts on its joint [N*m] (helps the motor when positive).
+    """Torque of a polytropic gas balancer on its joint [N*m], up to the mounting's sign.
 
     Rod between a point 0.30 m from the axis on the preceding link and 0.55 m on the moving link,
     0.15 rad out of phase with the joint zero; the gas is compressed as the rod extends:

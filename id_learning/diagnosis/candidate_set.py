@@ -354,9 +354,13 @@ def refine_setting(
         return None
     if spec.name == 'gravity_spring' and 'ratio' in spec.settings:
         # The balancer's geometry: the best of a grid of arm ratios and phases, then refined
-        # together (an encoder zero error shifts the phase by milliradians).
+        # together (an encoder zero error shifts the phase by milliradians). The ratio stays in
+        # the grid's range: towards 0 the three columns merge into sin and sin 2 of the angle,
+        # an ill-posed pair that fits the training part's noise, not a balancer.
+        low, high = min(BALANCER_RATIOS), max(BALANCER_RATIOS)
+
         def spring_rss(geometry: np.ndarray) -> float:
-            ratio = float(np.clip(geometry[0], 0.05, 0.98))
+            ratio = float(np.clip(geometry[0], low, high))
             return rss_of(spec.replace_settings(ratio=ratio, phase_rad=float(geometry[1])))[0]
 
         grid = [np.array([r, p]) for r in BALANCER_RATIOS for p in BALANCER_PHASES]
@@ -372,7 +376,7 @@ def refine_setting(
             },
         )
         if best.fun < rss_of(spec)[0]:
-            ratio = round(float(np.clip(best.x[0], 0.05, 0.98)), 5)
+            ratio = round(float(np.clip(best.x[0], low, high)), 5)
             return spec.replace_settings(ratio=ratio, phase_rad=round(float(best.x[1]), 5))
         return None
     if spec.name == 'payload_mass':
