@@ -170,6 +170,10 @@ class CandidateSet:
             self.specs[a].name == self.specs[b].name and self.specs[a].joint == self.specs[b].joint
         )
 
+    def is_general(self, label: str) -> bool:
+        """Whether a candidate is a general effect that special ones are cases of."""
+        return self.specs[label].name in set(SPECIAL_CASES.values())
+
     def conflicts(self, label: str, selected: Sequence[str]) -> bool:
         """Two Stribeck velocities of one joint never enter together."""
         if self.specs[label].name != 'stribeck_friction':

@@ -107,6 +107,7 @@ def run_diagnosis(
             conflicts=candidates.conflicts,
             noise_significance=config.noise_significance,
             noise_tolerance=config.noise_tolerance,
+            last_resort=candidates.is_general,
         )
 
     selection = select()

@@ -322,8 +322,15 @@ def forward_select(
     conflicts: ConflictCheck | None = None,
     noise_significance: float = 0.001,
     noise_tolerance: float = 1.25,
+    last_resort: Callable[[str], bool] | None = None,
 ) -> SelectionResult:
-    """Add candidate groups one at a time while each passes every test (see the module doc)."""
+    """Add candidate groups one at a time while each passes every test (see the module doc).
+
+    ``last_resort(label)`` marks general effects (every link's parameters) that enter only when
+    no other candidate passes: they reproduce most specific effects' torques, and taken early
+    they absorb an effect that one coefficient explains (a torque-constant error) and open
+    trades (the link masses against every joint's torque scale) that nothing else settles.
+    """
     n_eff = design.n_eff_train
     level = significance / max(len(candidates), 1)
     strict = level / 100.0
@@ -353,6 +360,8 @@ def forward_select(
                 e.reason,
             )
         quiet, _, _ = noise_consistency(design, current, noise_significance, noise_tolerance)
+        if last_resort is not None and any(not last_resort(e.label) for e in eligible):
+            eligible = [e for e in eligible if not last_resort(e.label)]
         best = min(eligible, key=lambda e: e.delta_bic) if eligible else None
         if best is None:
             rejected = min(evaluations, key=lambda e: e.p_value) if evaluations else None
