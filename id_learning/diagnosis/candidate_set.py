@@ -46,6 +46,9 @@ __all__ = ['LABEL_GAIN_STD', 'CandidateSet', 'refine_setting']
 #: Prior std of a label gain (torque-constant error) around 0, as in the identification.
 LABEL_GAIN_STD = 0.05
 
+#: The effects that ``SPECIAL_CASES`` are cases of.
+_GENERAL_EFFECTS = frozenset(SPECIAL_CASES.values())
+
 
 class CandidateSet:
     """The library's columns on every part, their testability and plausibility rules."""
@@ -172,7 +175,7 @@ class CandidateSet:
 
     def is_general(self, label: str) -> bool:
         """Whether a candidate is a general effect that special ones are cases of."""
-        return self.specs[label].name in set(SPECIAL_CASES.values())
+        return self.specs[label].name in _GENERAL_EFFECTS
 
     def conflicts(self, label: str, selected: Sequence[str]) -> bool:
         """Two Stribeck velocities of one joint never enter together."""

@@ -360,8 +360,8 @@ def forward_select(
                 e.reason,
             )
         quiet, _, _ = noise_consistency(design, current, noise_significance, noise_tolerance)
-        if last_resort is not None and any(not last_resort(e.label) for e in eligible):
-            eligible = [e for e in eligible if not last_resort(e.label)]
+        if last_resort is not None:
+            eligible = [e for e in eligible if not last_resort(e.label)] or eligible
         best = min(eligible, key=lambda e: e.delta_bic) if eligible else None
         if best is None:
             rejected = min(evaluations, key=lambda e: e.p_value) if evaluations else None
