@@ -39,6 +39,7 @@ from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.terms import (
     LINK_SIDE_EFFECTS,
     EffectSpec,
+    whole_model_settings,
 )
 
 __all__ = ['LABEL_GAIN_STD', 'CandidateSet', 'refine_setting']
@@ -230,8 +231,7 @@ class CandidateSet:
         changed = False
         for label in targets:
             spec = self.specs[label]
-            form = {'rate_of': 'model'} if spec.name == 'signal_delay' else {'of': 'model'}
-            whole = spec.replace_settings(**form)
+            whole = spec.replace_settings(**whole_model_settings(spec.name))
             self._swap(label, whole)
             changed |= whole.label != label
         return changed

@@ -66,7 +66,7 @@ from id_learning.diagnosis.selection import (
 )
 from id_learning.diagnosis.separation import separating_motion
 from id_learning.errors import DatasetError
-from id_learning.physics.terms import EffectSpec
+from id_learning.physics.terms import EffectSpec, whole_model_form
 from id_learning.robot.config import RobotConfig
 
 #: Alternatives an alias set lists beside the kept effect, the closest mimics first.
@@ -208,8 +208,7 @@ def _label_scale_std(
     scaled = {
         candidates.specs[g].joint
         for g in selected
-        if candidates.specs[g].name == 'torque_constant_scale'
-        and candidates.specs[g].settings.get('of') == 'model'
+        if whole_model_form(candidates.specs[g], 'torque_constant_scale')
     }
     joints = list(range(problem.robot.n_joints)) if spec.joint is None else [spec.joint]
     return LABEL_GAIN_STD * sum(j not in scaled for j in joints) / len(joints)

@@ -37,6 +37,7 @@ from id_learning.physics.terms import (
     needs_derivatives,
     needs_regressor,
     uses_model_load,
+    whole_model_form,
 )
 from id_learning.robot.config import RobotConfig
 
@@ -322,9 +323,9 @@ class ResidualProblem:
         for r in self.recordings:
             quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
             x = effect_columns(spec, quantities, self.model)
-            if spec.name == 'signal_delay' and spec.settings.get('rate_of') == 'model':
+            if whole_model_form(spec, 'signal_delay'):
                 x = x - self._terms_rate(r)[:, :, None]
-            if spec.name == 'torque_constant_scale' and spec.settings.get('of') == 'model':
+            if whole_model_form(spec, 'torque_constant_scale'):
                 x = x.copy()
                 x[:, spec.joint, 0] += self._terms_torque(r, self.scale_terms)[:, spec.joint]
             xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x

@@ -19,6 +19,7 @@ from id_learning.physics.terms import (
     needs_derivatives,
     needs_regressor,
     uses_model_load,
+    whole_model_form,
 )
 from id_learning.robot.config import RobotConfig
 
@@ -30,12 +31,6 @@ EFFECTS_JSON = 'effects.json'
 
 #: The torque (N, n) of terms evaluated apart from ``_additive``, on some quantities.
 Folded = Callable[[NominalQuantities], np.ndarray]
-
-
-def _whole_model(spec: EffectSpec, name: str) -> bool:
-    """Whether a term is a delay or torque-constant error of the whole model's form."""
-    key = {'signal_delay': 'rate_of', 'torque_constant_scale': 'of'}[name]
-    return spec.name == name and spec.settings.get(key) == 'model'
 
 
 class AugmentedModel:
@@ -117,13 +112,13 @@ class AugmentedModel:
         tau += held_back
         deferred, scales, whole_delays = [], [], []
         for spec, theta in terms:
-            if _whole_model(spec, 'torque_constant_scale'):
+            if whole_model_form(spec, 'torque_constant_scale'):
                 scales.append((spec, theta))
                 continue
             if uses_model_load(spec):
                 deferred.append((spec, theta))
                 continue
-            if _whole_model(spec, 'signal_delay'):
+            if whole_model_form(spec, 'signal_delay'):
                 whole_delays.append(float(theta[0]))
             contribution = effect_columns(spec, quantities, self.nominal) @ theta
             tau += contribution
@@ -165,7 +160,7 @@ class AugmentedModel:
             (spec, theta)
             for spec, theta in terms
             if spec.name not in ('signal_delay', 'torque_offset')
-            and not _whole_model(spec, 'torque_constant_scale')
+            and not whole_model_form(spec, 'torque_constant_scale')
         ]
         if not others and folded is None:
             return np.zeros_like(now)
@@ -190,7 +185,7 @@ class AugmentedModel:
         """
         groups: dict[tuple[str, tuple[str, ...]], list[tuple[EffectSpec, np.ndarray]]] = {}
         rest: list[tuple[EffectSpec, np.ndarray]] = []
-        scaled = any(_whole_model(spec, 'torque_constant_scale') for spec, _ in self.terms)
+        scaled = any(whole_model_form(spec, 'torque_constant_scale') for spec, _ in self.terms)
         for spec, theta in self.terms:
             scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
             foldable = not (

@@ -32,6 +32,8 @@ __all__ = [
     'needs_derivatives',
     'needs_regressor',
     'uses_model_load',
+    'whole_model_form',
+    'whole_model_settings',
 ]
 
 
@@ -95,9 +97,7 @@ class EffectSpec:
                 parts.append('with inertia')
         if uses_model_load(self):
             parts.append('model load')
-        if self.name == 'signal_delay' and self.settings.get('rate_of') == 'model':
-            parts.append('whole model')
-        if self.name == 'torque_constant_scale' and self.settings.get('of') == 'model':
+        if whole_model_form(self):
             parts.append('whole model')
         if self.name == 'gravity_spring' and 'ratio' in self.settings:
             parts.append(f'r={self.settings["ratio"]:.3g}, phi={self.settings["phase_rad"]:.3g}')
@@ -263,6 +263,25 @@ def gravity_loaded_joints(
     sweep = gravity.max(axis=0) - gravity.min(axis=0)
     share = sweep / model.robot.limits.torque
     return [j for j in range(model.robot.n_joints) if share[j] >= min_share]
+
+
+#: The setting that puts a delay or a torque-constant error in the whole model's form.
+_WHOLE_MODEL_KEY = {'signal_delay': 'rate_of', 'torque_constant_scale': 'of'}
+
+
+def whole_model_settings(name: str) -> dict[str, str]:
+    """Settings of a delay or torque-constant error that acts on the whole delivered torque."""
+    return {_WHOLE_MODEL_KEY[name]: 'model'}
+
+
+def whole_model_form(spec: EffectSpec, name: str | None = None) -> bool:
+    """Whether a term acts on the whole delivered torque (``whole_model_settings``).
+
+    A delay or torque-constant error (of effect ``name``, if given) of that form, not only on the
+    URDF's torque.
+    """
+    key = _WHOLE_MODEL_KEY.get(spec.name)
+    return key is not None and name in (None, spec.name) and spec.settings.get(key) == 'model'
 
 
 def uses_model_load(spec: EffectSpec) -> bool:
