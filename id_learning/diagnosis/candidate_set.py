@@ -110,7 +110,7 @@ class CandidateSet:
             if shape == default:
                 continue
             for label, spec in list(self.specs.items()):
-                if spec.joint == j and spec.name in FRICTION_SHAPED:
+                if shaped(spec):
                     self._swap(label, reshaped(spec, shape))
         return shapes
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import signal
+from scipy.linalg import block_diag
 
 from id_learning.dataset.preprocess import Dataset
 from id_learning.dataset.signals import butterworth
@@ -62,7 +63,7 @@ class StandstillProjection:
             [sum(cols[j].shape[1] for cols in per_recording) for j in range(n)], dtype=int
         )
         self.bases: list[np.ndarray | None] = [
-            _orthonormal(_block_diagonal([cols[j] for cols in per_recording])) for j in range(n)
+            _orthonormal(block_diag(*[cols[j] for cols in per_recording])) for j in range(n)
         ]
 
     def project(self, x: np.ndarray) -> np.ndarray:
@@ -103,17 +104,6 @@ def _mostly_on(boxes: np.ndarray, train: np.ndarray, test: np.ndarray) -> np.nda
     energy = np.sum(on_train**2, axis=0)
     kept = energy >= 0.5 * (energy + np.sum(boxes[test] ** 2, axis=0))
     return on_train[:, kept & (energy > 0)]
-
-
-def _block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
-    rows = sum(b.shape[0] for b in blocks)
-    width = sum(b.shape[1] for b in blocks)
-    out = np.zeros((rows, width))
-    r = c = 0
-    for b in blocks:
-        out[r : r + b.shape[0], c : c + b.shape[1]] = b
-        r, c = r + b.shape[0], c + b.shape[1]
-    return out
 
 
 def _orthonormal(x: np.ndarray) -> np.ndarray | None:
