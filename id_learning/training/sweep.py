@@ -41,6 +41,8 @@ _LOG = logging.getLogger(__name__)
 
 #: Tries to create or join a study while other workers create it too.
 STORAGE_ATTEMPTS = 10
+# PostgreSQL's duplicate_table, duplicate_object and duplicate_schema: a schema race lost.
+_DUPLICATE_SQLSTATES = frozenset({'42P07', '42710', '42P06'})
 #: A hyper-parameter's range: ('log', low, high), ('int', low, high) or ('choice', options).
 Space = tuple[Any, ...]
 
@@ -241,7 +243,7 @@ def _open_study(storage: str, study_name: str, seed: int | None) -> optuna.Study
         ConfigError: the storage cannot be opened (names the URL and the reason).
     """
     import optuna
-    from sqlalchemy.exc import IntegrityError, OperationalError, SQLAlchemyError
+    from sqlalchemy.exc import SQLAlchemyError
 
     # SQLite: wait for a busy database instead of failing at once (several local workers).
     engine = {'connect_args': {'timeout': 60}} if storage.startswith('sqlite') else {}
@@ -256,17 +258,39 @@ def _open_study(storage: str, study_name: str, seed: int | None) -> optuna.Study
                 sampler=optuna.samplers.TPESampler(seed=seed),
                 pruner=optuna.pruners.MedianPruner(n_startup_trials=2, n_warmup_steps=5),
             )
-        except (IntegrityError, OperationalError) as err:  # another worker was first
+        except SQLAlchemyError as err:
+            if not lost_schema_race(err):
+                raise ConfigError(f'sweep: cannot open the storage {storage!r}: {err}') from err
             last = err
             time.sleep(0.2 * (attempt + 1))
         except (
-            SQLAlchemyError,
             ValueError,
             ImportError,
             optuna.exceptions.StorageInternalError,
         ) as err:
             raise ConfigError(f'sweep: cannot open the storage {storage!r}: {err}') from err
     raise ConfigError(f'sweep: cannot open the storage {storage!r}: {last}')
+
+
+def lost_schema_race(err: Exception) -> bool:
+    """Whether opening the storage failed because another worker created the schema first.
+
+    Workers that start together on a fresh database both find a table missing and both create
+    it; the later one fails with a duplicate (table, object or key) or a locked database.
+    Retrying then finds the schema in place.
+    """
+    from sqlalchemy.exc import IntegrityError, OperationalError, ProgrammingError
+
+    if isinstance(err, IntegrityError | OperationalError):
+        return True
+    return isinstance(err, ProgrammingError) and _sqlstate(err) in _DUPLICATE_SQLSTATES
+
+
+def _sqlstate(err: Exception) -> str | None:
+    """The database's SQLSTATE code behind a SQLAlchemy error, where the driver gives one."""
+    orig = getattr(err, 'orig', None)
+    code = getattr(orig, 'sqlstate', None) or getattr(orig, 'pgcode', None)
+    return code if isinstance(code, str) else None
 
 
 def _plots(study: optuna.Study, out: Path) -> tuple[Path, ...]:

@@ -22,7 +22,12 @@ from id_learning.dataset.recording import load_recording
 from id_learning.errors import ConfigError
 from id_learning.models.data import TrainingData
 from id_learning.models.registry import make_model
-from id_learning.training.sweep import SEARCH_SPACES, run_sweep, validation_error
+from id_learning.training.sweep import (
+    SEARCH_SPACES,
+    lost_schema_race,
+    run_sweep,
+    validation_error,
+)
 from id_learning.twin import simulate, write_twin_output
 
 REPO = Path(__file__).resolve().parents[2]
@@ -201,3 +206,23 @@ def test_two_workers_share_one_study_through_postgresql(bag, tmp_path, postgres)
     workers = [_worker(bag, tmp_path / f'w{k}', postgres, 2, seed=k) for k in range(2)]
     _finish(workers)
     assert len(_complete(postgres)) == 4
+
+
+def test_a_duplicate_table_is_a_lost_schema_race_and_a_syntax_error_is_not(postgres):
+    sqlalchemy = pytest.importorskip('sqlalchemy')
+    engine = sqlalchemy.create_engine(postgres)
+    errors = []
+    try:
+        with engine.begin() as connection:
+            connection.execute(sqlalchemy.text('CREATE TABLE raced (k INTEGER)'))
+        for statement in ('CREATE TABLE raced (k INTEGER)', 'CREATE TABEL nonsense'):
+            with (
+                pytest.raises(sqlalchemy.exc.ProgrammingError) as caught,
+                engine.begin() as connection,
+            ):
+                connection.execute(sqlalchemy.text(statement))
+            errors.append(caught.value)
+    finally:
+        engine.dispose()
+    assert lost_schema_race(errors[0])
+    assert not lost_schema_race(errors[1])
