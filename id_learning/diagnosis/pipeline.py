@@ -32,7 +32,7 @@ from id_learning.dataset.recording import Recording
 from id_learning.dataset.statistics import (
     integrated_autocorrelation,
 )
-from id_learning.diagnosis.candidate_set import LABEL_GAIN_STD, CandidateSet
+from id_learning.diagnosis.candidate_set import CandidateSet
 from id_learning.diagnosis.candidates import (
     describe_parameters,
 )
@@ -66,7 +66,7 @@ from id_learning.diagnosis.selection import (
 )
 from id_learning.diagnosis.separation import separating_motion
 from id_learning.errors import DatasetError
-from id_learning.physics.terms import EffectSpec, whole_model_form
+from id_learning.physics.terms import EffectSpec
 from id_learning.robot.config import RobotConfig
 
 #: Alternatives an alias set lists beside the kept effect, the closest mimics first.
@@ -186,32 +186,6 @@ class _IntervalRule:
         model = np.clip(np.diag(self.design.physical_covariance(self.final, label)), 1e-300, None)
         block = np.diag(self.design.physical_covariance(self.sandwich, label))
         return max(1.0, float(np.max(self.correlation[joints])), float(np.max(block / model)))
-
-
-#: Effects whose coefficients do not scale with the label's torque scale.
-_SCALE_FREE = ('signal_delay', 'joint_offset', 'torque_constant_scale')
-
-
-def _label_scale_std(
-    problem: ResidualProblem, candidates: CandidateSet, selected: list[str], spec: EffectSpec
-) -> float:
-    """Relative std of an effect's coefficients from the label's unknown torque scale.
-
-    tau_u from currents is known only to the datasheet torque constant's tolerance
-    (``LABEL_GAIN_STD``); on a joint whose torque-constant error the diagnosis names, that scale
-    is estimated (with the whole model) and carried by its own interval. Every coefficient in
-    torque units on another joint (a friction level, an offset, a payload mass on all joints)
-    carries the tolerance. Measured joint torques: no motor torque constant is in the label.
-    """
-    if problem.model.target != 'motor' or spec.name in _SCALE_FREE:
-        return 0.0
-    scaled = {
-        candidates.specs[g].joint
-        for g in selected
-        if whole_model_form(candidates.specs[g], 'torque_constant_scale')
-    }
-    joints = list(range(problem.robot.n_joints)) if spec.joint is None else [spec.joint]
-    return LABEL_GAIN_STD * sum(j not in scaled for j in joints) / len(joints)
 
 
 def _separated(
@@ -368,16 +342,22 @@ def _assemble(
     t_crit = float(stats.t.ppf(0.975, max(design.n_eff_train - final.rank, 1.0)))
     effects = []
     intervals = _IntervalRule(problem, design, final, remainder)
+    unknowns, priors = candidates.datasheet_unknowns(selected)
+    marginal_design = design.with_priors(priors)
+    marginal = marginal_design.fit([*selected, *unknowns])
     for step, label in zip(steps, selected, strict=True):
         spec = candidates.specs[label]
         theta = design.physical(final, label)
         inflation = intervals.inflation(label, spec)
-        scale_std = _label_scale_std(problem, candidates, selected, spec)
-        interval_covariance = t_crit**2 * (
-            inflation * design.physical_covariance(final, label)
-            + scale_std**2 * np.outer(theta, theta)
+        half = t_crit * np.sqrt(
+            np.clip(np.diag(inflation * design.physical_covariance(final, label)), 0, None)
         )
-        half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
+        # The physical parameters with the unnamed datasheet values free within their tolerances.
+        value = marginal_design.physical(marginal, label)
+        interval_covariance = (
+            t_crit**2 * inflation * marginal_design.physical_covariance(marginal, label)
+        )
+        value_half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
         rms = _rmse(np.concatenate([design.contribution(final, label, p) for p in PARTS]))
         # Low confidence: a structured remainder on one of its joints outweighs what it explains.
         test = tests[label]
@@ -396,13 +376,12 @@ def _assemble(
                 coefficients=theta,
                 coefficients_ci=np.stack([theta - half, theta + half], axis=1),
                 parameters=describe_parameters(
-                    spec, theta, half, problem.model, interval_covariance
+                    spec, value, value_half, problem.model, interval_covariance
                 ),
                 contribution_rms_nm=rms,
                 variance_explained=explained[label],
                 variance_explained_total=explained_total[label],
-                selection=_selection_record(step, test)
-                | {'interval_inflation': inflation, 'label_scale_std': scale_std},
+                selection=_selection_record(step, test) | {'interval_inflation': inflation},
             )
         )
     rejected = None
@@ -455,6 +434,7 @@ def _assemble(
         location=location,
         stop_reason=selection.stop_reason,
         rejected=rejected,
+        marginalised=unknowns,
         config=config.to_dict()
         | {'n_candidates': len(candidates.testable), 'level': selection.level},
         series=series,

@@ -11,6 +11,7 @@ import numpy as np
 
 from id_learning.dataset.preprocess import Dataset
 from id_learning.dataset.recording import Recording
+from id_learning.diagnosis.candidate_set import LABEL_GAIN_STD, ROTOR_INERTIA_STD
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.locate import LOCATION_VARIABLES
 from id_learning.diagnosis.pipeline import DiagnosisResult, run_diagnosis
@@ -164,6 +165,14 @@ def _effects(result: DiagnosisResult) -> list[str]:
             'selection',
         ]
         lines += ['## Effects in the refit model', '', *_table(head, rows), '']
+        if result.marginalised:
+            lines += [
+                'Parameters are estimated with these datasheet values free within their '
+                f'tolerances (torque constant {LABEL_GAIN_STD:.0%}, rotor inertia '
+                f'{ROTOR_INERTIA_STD:.0%}, link parameters the CAD prior), as no effect names '
+                'them: ' + ', '.join(result.marginalised) + '.',
+                '',
+            ]
     if result.alias_sets:
         lines += [
             '## Alias sets',

@@ -39,9 +39,13 @@ class FoundEffect:
         confidence: 'high', or 'low' when its held-out gain over blocks of time is not
             significant (or cannot be judged), when its joint falls back to the nominal model,
             or when a structured remainder on its joints is larger than what it explains there.
-        coefficients: (k,) column coefficients in physical units (the model's parameters).
+        coefficients: (k,) column coefficients in physical units (the model's parameters, with
+            what the diagnosis does not name at its datasheet value).
         coefficients_ci: (k, 2) 95 % confidence intervals of the coefficients.
-        parameters: physical parameters with intervals (``describe_parameters``).
+        parameters: physical parameters with intervals (``describe_parameters``), estimated
+            with the datasheet values no effect names free within their tolerances
+            (``DiagnosisResult.marginalised``): a torque constant taken as exact would set the
+            scale of every parameter in torque units.
         contribution_rms_nm: (n,) RMS of the filtered torque it adds per joint [N*m].
         variance_explained: (n,) share of the nominal residual's held-out variance it removed.
         variance_explained_total: the same over all joints, noise-weighted.
@@ -121,6 +125,9 @@ class DiagnosisResult:
         rejected: the best candidate that did not enter, and why.
         nominal_joints: joints whose held-out part the effects do not improve: the refit model
             gives the nominal torque there.
+        marginalised: candidates for datasheet values no effect names (torque constants, rotor
+            inertias, link parameters) that the parameters were estimated with, free within
+            their tolerances (``CandidateSet.datasheet_unknowns``).
         config: the settings used (JSON-ready).
         settings: the diagnosis config (not serialised; ``config`` is its JSON form).
         series: on the kept rows of both parts (not serialised): 'time_s' (M,), 'is_test' (M,),
@@ -145,6 +152,7 @@ class DiagnosisResult:
     stop_reason: str
     rejected: dict[str, Any] | None
     nominal_joints: list[str] = field(default_factory=list)
+    marginalised: list[str] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
     series: dict[str, np.ndarray] = field(default_factory=dict)
     settings: DiagnosisConfig | None = None
@@ -262,6 +270,7 @@ class DiagnosisResult:
             ],
             'stop_reason': self.stop_reason,
             'rejected': self.rejected,
+            'marginalised': list(self.marginalised),
             'config': self.config,
         }
 

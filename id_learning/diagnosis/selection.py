@@ -19,6 +19,7 @@ reproduces as well (its replacement is not significantly worse) forms an alias s
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -119,13 +120,23 @@ class Design:
         self.cross = {part: self.matrix[part].T @ self._yw[part] for part in PARTS}
         self.yy = {part: float(self._yw[part] @ self._yw[part]) for part in PARTS}
         self.n_columns = n_columns
-        # Priors in the normalised columns' units: theta_phys = theta / norm.
         self.prior = np.zeros((n_columns, n_columns))
-        for label, precision in (priors or {}).items():
+        self._set_priors(priors or {})
+
+    def _set_priors(self, priors: dict[str, np.ndarray]) -> None:
+        """Put prior precisions (physical units) in the normalised columns' units."""
+        for label, precision in priors.items():
             if label in self.slices:
                 block = self.slices[label]
                 norm = self.column_norm[block]
                 self.prior[block, block] = np.asarray(precision) / np.outer(norm, norm)
+
+    def with_priors(self, priors: dict[str, np.ndarray]) -> Design:
+        """The design with the groups in ``priors`` carrying those prior precisions instead."""
+        out = copy.copy(self)
+        out.prior = self.prior.copy()
+        out._set_priors(priors)
+        return out
 
     @property
     def labels(self) -> list[str]:
