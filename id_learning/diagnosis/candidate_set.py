@@ -206,6 +206,11 @@ class CandidateSet:
             self.specs[a].name == self.specs[b].name and self.specs[a].joint == self.specs[b].joint
         )
 
+    def swappable(self, a: str, b: str) -> bool:
+        """Whether two candidates of different effects act on one joint (``find_aliases``)."""
+        sa, sb = self.specs[a], self.specs[b]
+        return sa.joint is not None and sa.joint == sb.joint and sa.name != sb.name
+
     def is_general(self, label: str) -> bool:
         """Whether a candidate is a general effect that special ones are cases of."""
         return self.specs[label].name in _GENERAL_EFFECTS

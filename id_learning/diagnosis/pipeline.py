@@ -128,6 +128,7 @@ def run_diagnosis(
             candidates.plausible,
             significance=config.alias_significance,
             variants=candidates.variants,
+            swappable=candidates.swappable,
         )
 
     aliases = aliases_of(selected)

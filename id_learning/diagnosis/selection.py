@@ -497,6 +497,7 @@ def find_aliases(
     *,
     significance: float = 0.01,
     variants: Callable[[str, str], bool] | None = None,
+    swappable: Callable[[str, str], bool] | None = None,
 ) -> list[AliasSet]:
     """For each selected group, the candidates that reproduce what it explains.
 
@@ -509,7 +510,10 @@ def find_aliases(
     the noise: a large group earns nothing for the noise it could fit. The canonical
     correlation of c with B's columns (others projected out) is kept.
     ``variants(a, b)`` marks variants of one effect (two Stribeck velocities of one joint), which
-    are no aliases of each other.
+    are no aliases of each other. Where ``swappable(a, b)``, B is an alias too when the model
+    with B in A's place fits both parts not significantly worse: a candidate of another form
+    (a balancer for a torque-constant error) may explain the data as well without reproducing
+    the kept effect's own torque.
     """
     full = design.fit(list(selected))
     n_eff = design.n_eff_train
@@ -538,21 +542,32 @@ def find_aliases(
                 part: _mimic_residual(design.gram[part], idx_s, idx_a, theta_a, beta)
                 for part in PARTS
             }
-            if any(residual[part] / scale[part] > critical for part in PARTS):
+            if all(residual[part] / scale[part] <= critical for part in PARTS):
+                # B would need exactly these coefficients to show what the data show; they
+                # are as uncertain as A's contribution is.
+                k_b = len(idx_b)
+                gram = design.gram['train']
+                mapping = (_inverse(gram[np.ix_(idx_s, idx_s)]) @ gram[np.ix_(idx_s, idx_a)])[
+                    -k_b:
+                ]
+                covariance = mapping @ full.noise_covariance[position_a, position_a] @ mapping.T
+                check = Fit((b,), beta[-k_b:], int(kept), {}, covariance, covariance)
+                left = residual['train'] / scale['train']
+            elif swappable is not None and swappable(a, b):
+                # B in A's place fits both parts as well: the data cannot tell which it is.
+                check = design.fit([*others, b])
+                loss = {part: (check.rss[part] - full.rss[part]) / scale[part] for part in PARTS}
+                if any(loss[part] > critical for part in PARTS):
+                    continue
+                left = max(loss['train'], 0.0)
+            else:
                 continue
-            # B would need exactly these coefficients to show what the data show; they are
-            # as uncertain as A's contribution is.
-            k_b = len(idx_b)
-            gram = design.gram['train']
-            mapping = (_inverse(gram[np.ix_(idx_s, idx_s)]) @ gram[np.ix_(idx_s, idx_a)])[-k_b:]
-            covariance = mapping @ full.noise_covariance[position_a, position_a] @ mapping.T
-            mimic = Fit((b,), beta[-k_b:], int(kept), {}, covariance, covariance)
-            if not plausibility(design, mimic).get(b, (True, ''))[0]:
+            if not plausibility(design, check).get(b, (True, ''))[0]:
                 continue
             beta_o, _ = _mimic(design.gram['train'], idx_o, idx_a, theta_a)
             total = _mimic_residual(design.gram['train'], idx_o, idx_a, theta_a, beta_o)
             members.append(b)
-            unexplained[b] = float(residual['train'] / scale['train'])
+            unexplained[b] = float(left)
             correlations[b] = (
                 float(math.sqrt(max(0.0, 1.0 - residual['train'] / total))) if total > 0 else 1.0
             )

@@ -137,3 +137,25 @@ def test_the_block_sandwich_matches_white_noise_and_grows_with_a_correlated_misf
     model = biased.physical_covariance(fit, 'c')[0, 0]
     sandwich = biased.sandwich_covariance(fit, blocks)[0, 0] / biased.column_norm[0] ** 2
     assert sandwich > 1.5 * model
+
+
+def test_a_candidate_that_fits_as_well_in_the_kept_ones_place_is_an_alias():
+    """A balancer-like group of three columns explains the data; a one-column scale (which also
+    scales a term the data lack) was kept. The balancer cannot reproduce the scale's own torque,
+    but in its place it fits both parts as well: an alias where the swap is allowed."""
+    t = np.linspace(0, 20, 2 * M)
+    columns = {
+        'scale': on_joint(np.sin(t) + 0.1 * np.sin(5 * t), 0),
+        'spring': np.stack([on_joint(f, 0)[:, :, 0] for f in (np.sin(t), np.cos(2 * t), t)], -1),
+        'other': on_joint(np.cos(3 * t), 0),
+    }
+    design = design_with(3.0 * columns['spring'][:, :, 0], columns)
+    labels = list(columns)
+
+    def same_joint(a: str, b: str) -> bool:
+        return True
+
+    assert find_aliases(design, ['scale'], labels, always_plausible) == []
+    (alias,) = find_aliases(design, ['scale'], labels, always_plausible, swappable=same_joint)
+    assert alias.members == ['scale', 'spring']  # 'other' fits far worse in its place
+    assert alias.unexplained['spring'] == 0.0
