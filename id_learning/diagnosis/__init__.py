@@ -8,6 +8,7 @@ model (``augmented_torque``, a ``physics.AugmentedModel``).
 
 from __future__ import annotations
 
+from id_learning.diagnosis.aliases import AliasSet
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.pipeline import (
     DiagnosisResult,
@@ -20,7 +21,6 @@ from id_learning.diagnosis.pipeline import (
     run_diagnosis,
 )
 from id_learning.diagnosis.report import diagnose
-from id_learning.diagnosis.selection import AliasSet
 from id_learning.diagnosis.training_part import diagnose_training_part, training_part
 
 __all__ = [

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
+from id_learning.diagnosis.aliases import AliasSet
 from id_learning.diagnosis.candidates import (
     SPECIAL_CASES,
     SPRING_STAND_INS,
@@ -29,11 +30,7 @@ from id_learning.diagnosis.friction_shape import (
     reshaped,
 )
 from id_learning.diagnosis.problem import ResidualProblem
-from id_learning.diagnosis.selection import (
-    AliasSet,
-    Design,
-    Fit,
-)
+from id_learning.diagnosis.selection import Design, Fit
 from id_learning.physics.balancer import BALANCER_PHASES, BALANCER_RATIOS
 from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.terms import (

@@ -32,6 +32,7 @@ from id_learning.dataset.recording import Recording
 from id_learning.dataset.statistics import (
     integrated_autocorrelation,
 )
+from id_learning.diagnosis.aliases import AliasSet, find_aliases
 from id_learning.diagnosis.candidate_set import CandidateSet
 from id_learning.diagnosis.candidates import (
     describe_parameters,
@@ -55,12 +56,10 @@ from id_learning.diagnosis.problem import (
 from id_learning.diagnosis.result import DiagnosisResult, FoundEffect, Remainder
 from id_learning.diagnosis.selection import (
     PARTS,
-    AliasSet,
     Design,
     Fit,
     GroupEvaluation,
     SelectionResult,
-    find_aliases,
     forward_select,
     noise_consistency,
 )
@@ -171,16 +170,31 @@ class _IntervalRule:
     correlated longer (model-form error, real drives) holds fewer independent samples: the
     long-run variance grows with the correlation time, and so do the intervals. A block
     sandwich over the training part's time holds misfit the remainder shares with an effect's
-    columns; the wider of the two sets the interval.
+    columns; the wider of the two sets the interval. The physical parameters are refitted with
+    the datasheet values no effect names free within their tolerances
+    (``CandidateSet.datasheet_unknowns``).
     """
 
     def __init__(
-        self, problem: ResidualProblem, design: Design, final: Fit, remainder: list[Remainder]
+        self,
+        problem: ResidualProblem,
+        candidates: CandidateSet,
+        design: Design,
+        final: Fit,
+        remainder: list[Remainder],
     ) -> None:
         self.design, self.final = design, final
         self.correlation = np.array([r.correlation_ratio for r in remainder])
         blocks, _ = time_blocks(problem, design.residual(final, 'train'), 'train')
         self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
+        self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
+        self.marginal_design = design.with_priors(priors)
+        self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
+
+    def parameters(self, label: str, inflation: float) -> tuple[np.ndarray, np.ndarray]:
+        """An effect's physical coefficients, datasheet values marginalised; their covariance."""
+        design, fit = self.marginal_design, self.marginal
+        return design.physical(fit, label), inflation * design.physical_covariance(fit, label)
 
     def inflation(self, label: str, spec: EffectSpec) -> float:
         joints = slice(None) if spec.joint is None else [spec.joint]
@@ -342,10 +356,7 @@ def _assemble(
     members = {label for alias in aliases for label in alias.members}
     t_crit = float(stats.t.ppf(0.975, max(design.n_eff_train - final.rank, 1.0)))
     effects = []
-    intervals = _IntervalRule(problem, design, final, remainder)
-    unknowns, priors = candidates.datasheet_unknowns(selected)
-    marginal_design = design.with_priors(priors)
-    marginal = marginal_design.fit([*selected, *unknowns])
+    intervals = _IntervalRule(problem, candidates, design, final, remainder)
     for step, label in zip(steps, selected, strict=True):
         spec = candidates.specs[label]
         theta = design.physical(final, label)
@@ -353,11 +364,8 @@ def _assemble(
         half = t_crit * np.sqrt(
             np.clip(np.diag(inflation * design.physical_covariance(final, label)), 0, None)
         )
-        # The physical parameters with the unnamed datasheet values free within their tolerances.
-        value = marginal_design.physical(marginal, label)
-        interval_covariance = (
-            t_crit**2 * inflation * marginal_design.physical_covariance(marginal, label)
-        )
+        value, covariance = intervals.parameters(label, inflation)
+        interval_covariance = t_crit**2 * covariance
         value_half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
         rms = _rmse(np.concatenate([design.contribution(final, label, p) for p in PARTS]))
         # Low confidence: a structured remainder on one of its joints outweighs what it explains.
@@ -385,18 +393,6 @@ def _assemble(
                 selection=_selection_record(step, test) | {'interval_inflation': inflation},
             )
         )
-    rejected = None
-    if selection.rejected is not None:
-        r = selection.rejected
-        rejected = {
-            'label': r.label,
-            'p_value': r.p_value,
-            'level': selection.level,
-            'delta_bic': r.delta_bic,
-            'held_out_gain': r.held_out_gain,
-            'plausible': r.plausible,
-            'reason': r.reason,
-        }
     after_test = _after(design, final, 'test', fallback)
     times = {part: problem.times(part) for part in PARTS}
     location = locate_residual(
@@ -434,13 +430,29 @@ def _assemble(
         waterfall=waterfall,
         location=location,
         stop_reason=selection.stop_reason,
-        rejected=rejected,
-        marginalised=unknowns,
+        rejected=_rejected_record(selection),
+        marginalised=intervals.unknowns,
         config=config.to_dict()
         | {'n_candidates': len(candidates.testable), 'level': selection.level},
         series=series,
         settings=config,
     )
+
+
+def _rejected_record(selection: SelectionResult) -> dict[str, Any] | None:
+    """The best candidate that did not enter, and why, JSON-ready; None if every one did."""
+    r = selection.rejected
+    if r is None:
+        return None
+    return {
+        'label': r.label,
+        'p_value': r.p_value,
+        'level': selection.level,
+        'delta_bic': r.delta_bic,
+        'held_out_gain': r.held_out_gain,
+        'plausible': r.plausible,
+        'reason': r.reason,
+    }
 
 
 def _selection_record(step: GroupEvaluation, test: BlockTest) -> dict[str, Any]:

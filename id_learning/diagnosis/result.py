@@ -12,11 +12,9 @@ import numpy as np
 from id_learning.dataset.statistics import (
     NoiseEstimate,
 )
+from id_learning.diagnosis.aliases import AliasSet
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.locate import JointLocation
-from id_learning.diagnosis.selection import (
-    AliasSet,
-)
 from id_learning.physics.augmented import AugmentedModel
 from id_learning.physics.nominal import NominalModel
 from id_learning.physics.terms import (

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from id_learning.diagnosis.selection import Design, find_aliases, forward_select
+from id_learning.diagnosis.aliases import find_aliases
+from id_learning.diagnosis.selection import Design, forward_select
 
 M, N = 400, 2
 
@@ -99,7 +100,7 @@ def test_fit_recovers_the_coefficient_with_an_honest_interval(signals):
 
 
 def test_an_alias_set_ranks_its_alternatives_and_names_the_closest_two():
-    from id_learning.diagnosis.selection import AliasSet
+    from id_learning.diagnosis.aliases import AliasSet
 
     alias = AliasSet(
         'a',
