@@ -133,11 +133,9 @@ class Bench:
         return condition()
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+        from id_learning.nodes.runtime import close_spun_node
+
+        close_spun_node(self.node, self.executor, self._thread, self._stop)
 
 
 def run_phase(

@@ -103,11 +103,9 @@ class Publisher:
         return count
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+        from id_learning.nodes.runtime import close_spun_node
+
+        close_spun_node(self.node, self.executor, self._thread, self._stop)
 
 
 def measure(bench: Publisher, rate: float, args, scratch: Path) -> dict[str, Any]:

@@ -59,6 +59,7 @@ def main() -> None:
     from sensor_msgs.msg import JointState
 
     from id_learning.nodes.qos import DIAGNOSTICS_QOS, sensor_qos
+    from id_learning.nodes.runtime import close_spun_node
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--bag', type=Path, default=DEFAULT_BAG)
@@ -124,11 +125,7 @@ def main() -> None:
     deadline = time.monotonic() + 5
     while diagnostics.get('state') != 'finished' and time.monotonic() < deadline:
         time.sleep(0.05)
-    stop.set()
-    spinner.join(5)
-    executor.shutdown()
-    node.destroy_node()
-    context.try_shutdown()
+    close_spun_node(node, executor, spinner, stop)
     if process.returncode != 0 or not arrivals:
         raise SystemExit(f'replay failed (exit {process.returncode}):\n{log[-3000:]}')
 

@@ -24,6 +24,7 @@ import id_learning
 from id_learning.nodes.online_check_plan import CheckSetup, Excerpt
 from id_learning.nodes.online_check_result import NS_PER_S, OnlineCheckError
 from id_learning.nodes.process import NodeProcess
+from id_learning.nodes.runtime import close_spun_node
 
 __all__ = [
     'Collected',
@@ -205,11 +206,7 @@ class Listener:
 
     def close(self) -> None:
         """Stop spinning and shut the node and its context down."""
-        self._stop.set()
-        self._thread.join(5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+        close_spun_node(self.node, self.executor, self._thread, self._stop)
 
 
 # -- the check's launch and wait steps ------------------------------------------------------------

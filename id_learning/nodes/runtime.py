@@ -24,7 +24,7 @@ from rclpy.task import Future
 
 from id_learning.errors import IdLearningError
 
-__all__ = ['ClosableNode', 'make_executor', 'run_node']
+__all__ = ['ClosableNode', 'close_spun_node', 'make_executor', 'run_node']
 
 SPIN_SLICE_S = 0.1
 
@@ -71,6 +71,32 @@ class _StopOnSignal:
     def restore(self) -> None:
         for number, handler in self._previous.items():
             signal.signal(number, handler)
+
+
+def close_spun_node(
+    node: rclpy.node.Node,
+    executor: rclpy.executors.Executor,
+    thread: threading.Thread,
+    stop: threading.Event,
+    timeout_s: float = 5.0,
+) -> None:
+    """Stop a node a thread of this process spins, then destroy it and shut its context down.
+
+    The spin thread ends first and the executor lets go of the node before the node is destroyed:
+    a node destroyed while it is spun, or still held by an executor, can crash the whole process
+    in the middleware (ros2/rclpy#663).
+
+    Raises:
+        RuntimeError: the spin thread did not stop within ``timeout_s`` (nothing is destroyed).
+    """
+    stop.set()
+    thread.join(timeout_s)
+    if thread.is_alive():
+        raise RuntimeError(f'{node.get_name()}: its spin thread did not stop in {timeout_s:g} s')
+    executor.remove_node(node)
+    node.destroy_node()
+    executor.shutdown()
+    node.context.try_shutdown()
 
 
 def print_usage(name: str, config_class: type) -> None:

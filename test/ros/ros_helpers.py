@@ -23,6 +23,7 @@ from typing import Any
 from support import REPO
 
 from id_learning.nodes.process import NodeProcess
+from id_learning.nodes.runtime import close_spun_node
 
 #: Deadline of a wait on a node that has to start first (imports torch on a loaded machine).
 STARTUP_S = 90.0
@@ -143,8 +144,4 @@ class Listener:
         return None
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+        close_spun_node(self.node, self.executor, self._thread, self._stop)
