@@ -20,6 +20,7 @@ result types in ``result``; this module runs the steps and assembles the result.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -68,8 +69,13 @@ from id_learning.errors import DatasetError
 from id_learning.physics.terms import EffectSpec
 from id_learning.robot.config import RobotConfig
 
+_LOG = logging.getLogger(__name__)
+
 #: Alternatives an alias set lists beside the kept effect, the closest mimics first.
 ALIAS_ALTERNATIVES = 2
+#: A datasheet value fitted further from its own than this many prior stds stands in for an
+#: effect the model lacks (per coefficient, root mean square).
+TOLERANCE_SIGMAS = 4.0
 
 __all__ = [
     'DiagnosisResult',
@@ -190,11 +196,40 @@ class _IntervalRule:
         self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
         self.marginal_design = design.with_priors(priors)
         self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
+        self.stand_ins = self._stand_ins()
+        if self.stand_ins:
+            _LOG.warning(
+                'datasheet values moved far outside their tolerances (%s): they stand in for '
+                "an effect the model lacks; parameters are the refit model's, with intervals "
+                'as wide as the tolerances leave them',
+                ', '.join(self.stand_ins),
+            )
+
+    def _stand_ins(self) -> list[str]:
+        """The unknowns the marginal fit moves more than ``TOLERANCE_SIGMAS`` prior stds."""
+        design, fit = self.marginal_design, self.marginal
+        out = []
+        for label in self.unknowns:
+            block = design.slices[label]
+            c = design.coefficients(fit, label)
+            precision = design.prior[block, block]
+            if precision.any() and c @ precision @ c > TOLERANCE_SIGMAS**2 * len(c):
+                out.append(label)
+        return out
 
     def parameters(self, label: str, inflation: float) -> tuple[np.ndarray, np.ndarray]:
-        """An effect's physical coefficients, datasheet values marginalised; their covariance."""
+        """An effect's physical coefficients, datasheet values marginalised; their covariance.
+
+        Where a datasheet value stands in for a missing effect the marginal refit explains that
+        effect, not the tolerance: the refit model's values then, with the tolerances' spread.
+        """
         design, fit = self.marginal_design, self.marginal
-        return design.physical(fit, label), inflation * design.physical_covariance(fit, label)
+        if not self.stand_ins:
+            return design.physical(fit, label), inflation * design.physical_covariance(fit, label)
+        final = self.final
+        residual_variance = final.rss['train'] / max(self.design.n_eff_train - final.rank, 1.0)
+        spread = design.physical_covariance(fit, label, noise_only=True) * residual_variance
+        return self.design.physical(final, label), inflation * spread
 
     def inflation(self, label: str, spec: EffectSpec) -> float:
         joints = slice(None) if spec.joint is None else [spec.joint]
