@@ -30,7 +30,9 @@ class AliasSet:
         canonical_correlation: canonical correlation of the representative's contribution with
             each member's filtered columns, after the other selected effects are projected out.
         unexplained: what a member leaves of the representative's contribution, in units of the
-            residual variance per effective sample (0: reproduced exactly).
+            residual variance per effective sample (0: reproduced exactly); for a member that
+            fits as well in its place without reproducing it, the training fit lost there (its
+            extra columns charged one residual variance each).
         further: alternatives that also pass but mimic less closely than the members listed
             (``closest``).
         separation: per listed alternative, the motion that would tell it from the
@@ -146,8 +148,11 @@ def find_aliases(
                 left = residual['train'] / scale['train']
             elif swappable is not None and swappable(a, b):
                 # B in A's place fits both parts as well: the data cannot tell which it is.
+                # Each column B has beyond A's fits one noise variance of the training part.
                 check = design.fit([*others, b])
+                extra = max(check.rank - full.rank, 0.0)
                 loss = {part: (check.rss[part] - full.rss[part]) / scale[part] for part in PARTS}
+                loss['train'] += extra
                 if any(loss[part] > critical for part in PARTS):
                     continue
                 left = max(loss['train'], 0.0)

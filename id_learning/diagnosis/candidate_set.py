@@ -171,7 +171,7 @@ class CandidateSet:
         labels, priors = [], {}
         for label in self.testable:
             spec = self.specs[label]
-            if spec.name not in kinds or (spec.name, spec.joint) in named or label in selected:
+            if spec.name not in kinds or (spec.name, spec.joint) in named:
                 continue
             if spec.name == 'rotor_inertia':
                 nominal = float(model.robot.drives.rotor_inertia[spec.joint])

@@ -73,8 +73,8 @@ _LOG = logging.getLogger(__name__)
 
 #: Alternatives an alias set lists beside the kept effect, the closest mimics first.
 ALIAS_ALTERNATIVES = 2
-#: A datasheet value fitted further from its own than this many prior stds stands in for an
-#: effect the model lacks (per coefficient, root mean square).
+#: A datasheet value fitted further from its own than this many prior stds (in any direction of
+#: its prior) stands in for an effect the model lacks.
 TOLERANCE_SIGMAS = 4.0
 
 __all__ = [
@@ -206,14 +206,16 @@ class _IntervalRule:
             )
 
     def _stand_ins(self) -> list[str]:
-        """The unknowns the marginal fit moves more than ``TOLERANCE_SIGMAS`` prior stds."""
+        """The unknowns moved more than ``TOLERANCE_SIGMAS`` prior stds in any prior direction."""
         design, fit = self.marginal_design, self.marginal
         out = []
         for label in self.unknowns:
             block = design.slices[label]
-            c = design.coefficients(fit, label)
             precision = design.prior[block, block]
-            if precision.any() and c @ precision @ c > TOLERANCE_SIGMAS**2 * len(c):
+            if not precision.any():
+                continue
+            whitened = np.linalg.cholesky(precision).T @ design.coefficients(fit, label)
+            if np.max(np.abs(whitened)) > TOLERANCE_SIGMAS:
                 out.append(label)
         return out
 
@@ -467,6 +469,7 @@ def _assemble(
         stop_reason=selection.stop_reason,
         rejected=_rejected_record(selection),
         marginalised=intervals.unknowns,
+        stand_ins=intervals.stand_ins,
         config=config.to_dict()
         | {'n_candidates': len(candidates.testable), 'level': selection.level},
         series=series,

@@ -165,20 +165,14 @@ def _effects(result: DiagnosisResult) -> list[str]:
             'selection',
         ]
         lines += ['## Effects in the refit model', '', *_table(head, rows), '']
-        if result.marginalised:
-            lines += [
-                'Parameters are estimated with these datasheet values free within their '
-                f'tolerances (torque constant {LABEL_GAIN_STD:.0%}, rotor inertia '
-                f'{ROTOR_INERTIA_STD:.0%}, link parameters the CAD prior), as no effect names '
-                'them: ' + ', '.join(result.marginalised) + '.',
-                '',
-            ]
+        lines += _marginalised(result)
     if result.alias_sets:
         lines += [
             '## Alias sets',
             '',
-            "Alternatives ranked by what they leave of the kept effect's torque (in residual "
-            'variances per effective sample: 0 reproduces it exactly).',
+            "Alternatives ranked by what they leave of the kept effect's torque, or for one that "
+            'fits as well in its place, by the fit it loses there (in residual variances per '
+            'effective sample: 0 reproduces it exactly or fits as well).',
             '',
         ]
         for alias in result.alias_sets:
@@ -193,6 +187,35 @@ def _effects(result: DiagnosisResult) -> list[str]:
             further = f'; {alias.further} more mimic it less closely' if alias.further else ''
             lines.append(f'- {alias.representative} ≈ {detail}{further}')
         lines.append('')
+    return lines
+
+
+def _marginalised(result: DiagnosisResult) -> list[str]:
+    """Which datasheet values the parameters were estimated with, and which stood in."""
+    if not result.marginalised:
+        return []
+    tolerances = {
+        'torque_constant_scale': f'torque constants {LABEL_GAIN_STD:.0%}',
+        'rotor_inertia': f'rotor inertias {ROTOR_INERTIA_STD:.0%}',
+        'inertial_parameter_error': 'link parameters the CAD prior',
+    }
+    kinds = [text for name, text in tolerances.items()
+             if any(label.startswith(name) for label in result.marginalised)]  # fmt: skip
+    lines = [
+        'Parameters are estimated with these datasheet values free within their tolerances ('
+        + ', '.join(kinds)
+        + '), as no effect names them: '
+        + ', '.join(result.marginalised)
+        + '.',
+        '',
+    ]
+    if result.stand_ins:
+        lines += [
+            '**Fitted far outside their tolerances**, standing in for an effect the model lacks: '
+            + ', '.join(result.stand_ins)
+            + ". The values above are the refit model's; the intervals carry the tolerances.",
+            '',
+        ]
     return lines
 
 

@@ -43,7 +43,9 @@ class FoundEffect:
         parameters: physical parameters with intervals (``describe_parameters``), estimated
             with the datasheet values no effect names free within their tolerances
             (``DiagnosisResult.marginalised``): a torque constant taken as exact would set the
-            scale of every parameter in torque units.
+            scale of every parameter in torque units. Where one of them stands in for a missing
+            effect (``DiagnosisResult.stand_ins``), the values are the coefficients' and only
+            the intervals carry the tolerances.
         contribution_rms_nm: (n,) RMS of the filtered torque it adds per joint [N*m].
         variance_explained: (n,) share of the nominal residual's held-out variance it removed.
         variance_explained_total: the same over all joints, noise-weighted.
@@ -126,6 +128,8 @@ class DiagnosisResult:
         marginalised: candidates for datasheet values no effect names (torque constants, rotor
             inertias, link parameters) that the parameters were estimated with, free within
             their tolerances (``CandidateSet.datasheet_unknowns``).
+        stand_ins: those of them that fitted far outside their tolerances: they stand in for an
+            effect the model lacks, and the parameters' values are the coefficients' instead.
         config: the settings used (JSON-ready).
         settings: the diagnosis config (not serialised; ``config`` is its JSON form).
         series: on the kept rows of both parts (not serialised): 'time_s' (M,), 'is_test' (M,),
@@ -151,6 +155,7 @@ class DiagnosisResult:
     rejected: dict[str, Any] | None
     nominal_joints: list[str] = field(default_factory=list)
     marginalised: list[str] = field(default_factory=list)
+    stand_ins: list[str] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
     series: dict[str, np.ndarray] = field(default_factory=dict)
     settings: DiagnosisConfig | None = None
@@ -269,6 +274,7 @@ class DiagnosisResult:
             'stop_reason': self.stop_reason,
             'rejected': self.rejected,
             'marginalised': list(self.marginalised),
+            'stand_ins': list(self.stand_ins),
             'config': self.config,
         }
 

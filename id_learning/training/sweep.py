@@ -35,7 +35,7 @@ from id_learning.training.datasets import combine_datasets, load_datasets
 if TYPE_CHECKING:
     import optuna
 
-__all__ = ['SEARCH_SPACES', 'SweepResult', 'run_sweep', 'validation_error']
+__all__ = ['SEARCH_SPACES', 'SweepResult', 'lost_schema_race', 'run_sweep', 'validation_error']
 
 _LOG = logging.getLogger(__name__)
 
@@ -277,7 +277,8 @@ def lost_schema_race(err: Exception) -> bool:
 
     Workers that start together on a fresh database both find a table missing and both create
     it; the later one fails with a duplicate (table, object or key) or a locked database.
-    Retrying then finds the schema in place.
+    Retrying then finds the schema in place. Every OperationalError counts (a database that is
+    busy or still starting), so an unreachable server is reported after the retries.
     """
     from sqlalchemy.exc import IntegrityError, OperationalError, ProgrammingError
 

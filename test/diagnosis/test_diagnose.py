@@ -104,7 +104,9 @@ def test_report_and_effects_json_hold_what_the_issue_asks_for(viscous_joint_1):
     assert effect['parameters'][0]['ci'][0] < effect['parameters'][0]['value']
     # Its datasheet tolerances are named where the parameters were estimated with them.
     (scale,) = [m for m in data['marginalised'] if m.startswith('torque_constant_scale[joint_1')]
-    assert scale in report.split('## Effects in the refit model')[1]
+    section = report.split('## Effects in the refit model')[1].split('\n## ')[0]
+    assert scale in section
+    assert data['stand_ins'] == []
     assert len(data['held_out_rmse_nm']['before']) == 6
     assert data['held_out_rmse_nm']['waterfall'][0]['added'] == result.effects[0].label
 

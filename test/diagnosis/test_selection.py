@@ -153,10 +153,12 @@ def test_a_candidate_that_fits_as_well_in_the_kept_ones_place_is_an_alias():
     design = design_with(3.0 * columns['spring'][:, :, 0], columns)
     labels = list(columns)
 
-    def same_joint(a: str, b: str) -> bool:
+    def always(a: str, b: str) -> bool:
         return True
 
     assert find_aliases(design, ['scale'], labels, always_plausible) == []
-    (alias,) = find_aliases(design, ['scale'], labels, always_plausible, swappable=same_joint)
+    (alias,) = find_aliases(design, ['scale'], labels, always_plausible, swappable=always)
     assert alias.members == ['scale', 'spring']  # 'other' fits far worse in its place
-    assert alias.unexplained['spring'] == 0.0
+    # The spring fits better, but its two extra columns are charged: a little is left.
+    assert 0.0 <= alias.unexplained['spring'] < 2.0
+    assert 0.9 < alias.canonical_correlation['spring'] < 1.0

@@ -184,6 +184,7 @@ def test_datasheet_values_standing_in_for_a_missing_effect_do_not_move_the_param
     effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
     config = twin_config(300.0, effects, seed=11)
     result = run_diagnosis(simulate(config).recording, config.robot)
+    assert any(label.startswith('torque_constant_scale') for label in result.stand_ins)
     scale = effects['torque_constant_scale']['scale']
     found = [e for e in result.effects if e.name == 'torque_constant_scale']
     assert found
