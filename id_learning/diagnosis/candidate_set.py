@@ -270,6 +270,20 @@ class CandidateSet:
             changed |= whole.label != label
         return changed
 
+    def saved(self) -> tuple[Any, ...]:
+        """What ``refine`` changes: specs, columns, the problem's terms (see ``restore``)."""
+        problem = self.problem
+        return (
+            dict(self.specs), dict(self.columns), dict(self.raw), dict(self.verdicts),
+            list(self.testable), problem.link_terms, problem.rate_terms, problem.scale_terms,
+        )  # fmt: skip
+
+    def restore(self, saved: tuple[Any, ...]) -> None:
+        """Go back to a ``saved`` state."""
+        problem = self.problem
+        (self.specs, self.columns, self.raw, self.verdicts, self.testable,
+         problem.link_terms, problem.rate_terms, problem.scale_terms) = saved  # fmt: skip
+
     def _swap(self, label: str, refined: EffectSpec) -> None:
         """Put a refined spec (and its columns) in the place of a candidate."""
         new = refined.label

@@ -147,16 +147,25 @@ def run_diagnosis(
     steps = list(selection.steps)
     unconfirmed = _unconfirmed_springs(candidates, design, selected, blocks, config)
     if unconfirmed:
-        # An unconfirmed spring gives way to the alias that leaves least of it, else goes.
+        # An unconfirmed spring gives way to the alias that leaves least of it, else goes ...
         stand_in = {label: _best_other(label, aliases, candidates) for label in unconfirmed}
         kept = [label not in unconfirmed or stand_in[label] for label in selected]
-        steps = [st for st, keep in zip(steps, kept, strict=True) if keep]
-        selected = [
-            stand_in.get(label) or label for label, k in zip(selected, kept, strict=True) if k
-        ]
-        selected = candidates.refine(selected, y, n_eff)
-        design = candidates.design(y, n_eff)
-        aliases = candidates.without_generalisations(aliases_of(selected))
+        saved = candidates.saved()
+        dropped = candidates.refine(
+            [stand_in.get(label) or label for label, k in zip(selected, kept, strict=True) if k],
+            y,
+            n_eff,
+        )
+        without = candidates.design(y, n_eff)
+        # ... unless the model it leaves, refitted (the load columns then lose the spring's
+        # torque too), leaves a structured remainder where there was none on a spring's joint.
+        joints = {problem.robot.joints[candidates.specs[g].joint or 0] for g in unconfirmed}
+        if _newly_structured(problem, (design, selected), (without, dropped)) & joints:
+            candidates.restore(saved)
+        else:
+            steps = [st for st, keep in zip(steps, kept, strict=True) if keep]
+            selected, design = dropped, without
+            aliases = candidates.without_generalisations(aliases_of(selected))
     return _assemble(
         problem,
         candidates,
@@ -253,6 +262,18 @@ def _separated(
         }
         out.append(replace(short, separation=separation))
     return out
+
+
+def _newly_structured(
+    problem: ResidualProblem, before: tuple[Design, list[str]], after: tuple[Design, list[str]]
+) -> set[str]:
+    """Joints whose remainder is structured after a change of the model and was not before."""
+    flags = [
+        {r.joint for r in _remainder(problem, design, design.fit(groups), problem.config)
+         if r.structured}
+        for design, groups in (before, after)
+    ]  # fmt: skip
+    return flags[1] - flags[0]
 
 
 def _best_other(label: str, aliases: list[AliasSet], candidates: CandidateSet) -> str | None:
