@@ -124,6 +124,9 @@ def find_aliases(
         position_a = _positions(design, full, a)
         theta_a = full.theta[position_a]
         idx_a, idx_o = design.indices([a]), design.indices(others)
+        # What the others alone leave of A's contribution (for the canonical correlations).
+        beta_o, _ = _mimic(design.gram['train'], idx_o, idx_a, theta_a)
+        total = _mimic_residual(design.gram['train'], idx_o, idx_a, theta_a, beta_o)
         members, correlations, unexplained = [a], {}, {}
         for b in candidates:
             if b in selected or (variants is not None and variants(a, b)):
@@ -160,8 +163,6 @@ def find_aliases(
                 continue
             if not plausibility(design, check).get(b, (True, ''))[0]:
                 continue
-            beta_o, _ = _mimic(design.gram['train'], idx_o, idx_a, theta_a)
-            total = _mimic_residual(design.gram['train'], idx_o, idx_a, theta_a, beta_o)
             members.append(b)
             unexplained[b] = float(left)
             correlations[b] = (

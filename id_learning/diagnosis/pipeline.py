@@ -159,7 +159,7 @@ def run_diagnosis(
         without = candidates.design(y, n_eff)
         # ... unless the model it leaves, refitted (the load columns then lose the spring's
         # torque too), leaves a structured remainder where there was none on a spring's joint.
-        joints = {problem.robot.joints[candidates.specs[g].joint or 0] for g in unconfirmed}
+        joints = {candidates.specs[g].joint_name for g in unconfirmed}
         if _newly_structured(problem, (design, selected), (without, dropped)) & joints:
             candidates.restore(saved)
         else:

@@ -181,18 +181,27 @@ def test_scales_named_beside_an_unnamed_one_are_honest_about_the_common_scale():
         assert parameter['value'] == pytest.approx(scale[joint], abs=0.03)
 
 
-def test_datasheet_values_standing_in_for_a_missing_effect_do_not_move_the_parameters(repo):
+@pytest.fixture(scope='module')
+def every_effect_seed_11(repo):
+    """(twin effects, config, recording): every effect of the default twin, seed 11, 300 s."""
+    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
+    config = twin_config(300.0, effects, seed=11)
+    return effects, config, simulate(config).recording
+
+
+def test_datasheet_values_standing_in_for_a_missing_effect_do_not_move_the_parameters(
+    every_effect_seed_11,
+):
     """Every effect of the default twin, seed 11, the balancer not among the candidates: freed
     within their tolerances, the unnamed torque constants take it up, far outside them (before
     the guard every named scale read 0.52). Such a fit explains the missing effect, not the
     tolerance: the parameters stay the refit model's, the intervals as wide as the tolerances
     leave them."""
-    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
-    config = twin_config(300.0, effects, seed=11)
+    effects, config, recording = every_effect_seed_11
     without_balancer = DiagnosisConfig(
         effects=tuple(name for name in EFFECT_NAMES if name != 'gravity_spring')
     )
-    result = run_diagnosis(simulate(config).recording, config.robot, without_balancer)
+    result = run_diagnosis(recording, config.robot, without_balancer)
     assert any(label.startswith('torque_constant_scale') for label in result.stand_ins)
     scale = effects['torque_constant_scale']['scale']
     found = [e for e in result.effects if e.name == 'torque_constant_scale']
@@ -204,13 +213,12 @@ def test_datasheet_values_standing_in_for_a_missing_effect_do_not_move_the_param
 
 
 def test_an_unconfirmed_balancer_stays_when_the_model_without_it_leaves_a_structured_remainder(
-    repo,
+    every_effect_seed_11,
 ):
     """Every effect of the default twin, seed 11: its 1 kN*m balancer is not confirmed over the
     held-out blocks beside forty other effects; dropped, the refit model left 26 N*m on joint 2
     (2.6 with it) and a structured remainder on joints 1-3."""
-    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
-    config = twin_config(300.0, effects, seed=11)
-    result = run_diagnosis(simulate(config).recording, config.robot)
+    _, config, recording = every_effect_seed_11
+    result = run_diagnosis(recording, config.robot)
     assert [e.spec.joint_name for e in result.effects if e.name == 'gravity_spring'] == ['joint_2']
     assert result.structured_joints() == []
