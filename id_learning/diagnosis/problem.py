@@ -8,8 +8,9 @@ label (or, with the study's preprocessing, built on the filtered motion).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any, TypeVar, cast
 
 import numpy as np
 from scipy import signal
@@ -40,6 +41,8 @@ from id_learning.physics.terms import (
     whole_model_form,
 )
 from id_learning.robot.config import RobotConfig
+
+_T = TypeVar('_T')
 
 __all__ = [
     'SWITCHING_EFFECTS',
@@ -199,6 +202,8 @@ class ResidualProblem:
         #: and a torque-constant error of the model's form scales (``CandidateSet.whole_model``).
         self.rate_terms: list[tuple[EffectSpec, np.ndarray]] = []
         self.scale_terms: list[tuple[EffectSpec, np.ndarray]] = []
+        #: Torques of term lists now set, per recording (``_memo``).
+        self._memo: dict[tuple[int, ...], tuple[tuple[object, ...], Any]] = {}
         self._quantities_for_library()
 
     def _noise(self) -> NoiseEstimate:
@@ -368,18 +373,42 @@ class ResidualProblem:
         self, r: PreparedRecording, terms: list[tuple[EffectSpec, np.ndarray]]
     ) -> np.ndarray:
         """(N, n) the torque of some terms along one recording [N*m] (unfiltered)."""
-        torque = np.zeros_like(r.quantities.q)
-        for spec, theta in terms:
-            quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
-            torque += effect_columns(spec, quantities, self.model) @ theta
-        return torque
+
+        def torque() -> np.ndarray:
+            out = np.zeros_like(r.quantities.q)
+            for spec, theta in terms:
+                quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
+                out += effect_columns(spec, quantities, self.model) @ theta
+            return out
+
+        return self._remembered((r, terms, self.link_terms), torque)
 
     def _loaded(self, r: PreparedRecording) -> NominalQuantities:
         """A recording's quantities with the link torque of the nominal model plus link terms."""
-        link = r.quantities.tau_rigid.copy()
-        for spec, theta in self.link_terms:
-            link += effect_columns(spec, r.quantities, self.model) @ theta
-        return replace(r.quantities, tau_rigid=link)
+
+        def loaded() -> NominalQuantities:
+            link = r.quantities.tau_rigid.copy()
+            for spec, theta in self.link_terms:
+                link += effect_columns(spec, r.quantities, self.model) @ theta
+            return replace(r.quantities, tau_rigid=link)
+
+        return self._remembered((r, self.link_terms), loaded)
+
+    def _remembered(self, keys: tuple[object, ...], compute: Callable[[], _T]) -> _T:
+        """``compute()``, kept while the objects in ``keys`` (a recording, term lists) are alive.
+
+        Every delay and torque-constant candidate, and every refit that settles the terms
+        (``CandidateSet.settle``), needs the same terms' torque along each recording.
+        """
+        key = tuple(id(k) for k in keys)
+        hit = self._memo.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], keys, strict=True)):
+            return cast(_T, hit[1])
+        value = compute()
+        live = {id(t) for t in (self.link_terms, self.rate_terms, self.scale_terms)}
+        self._memo = {k: v for k, v in self._memo.items() if set(k[1:]) <= live}
+        self._memo[key] = (keys, value)
+        return value
 
     def times(self, part: str) -> np.ndarray:
         """Times [s] of one part's kept rows; later recordings follow the earlier ones."""
