@@ -46,6 +46,9 @@ LABEL_GAIN_STD = 0.05
 #: Relative prior std of a datasheet rotor inertia (brake and gear input stage left out).
 ROTOR_INERTIA_STD = 0.3
 
+#: Step in a log setting for the columns' derivative (``setting_sensitivities``).
+_LOG_STEP = 0.05
+
 #: The effects that ``SPECIAL_CASES`` are cases of.
 _GENERAL_EFFECTS = frozenset(SPECIAL_CASES.values())
 
@@ -122,14 +125,19 @@ class CandidateSet:
                 out.append(column)
         return out
 
-    def design(self, y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]) -> Design:
-        """The regression problem over the testable candidates.
+    def design(
+        self,
+        y: dict[str, np.ndarray],
+        n_eff: dict[str, np.ndarray],
+        extra: dict[str, dict[str, np.ndarray]] | None = None,
+    ) -> Design:
+        """The regression problem over the testable candidates (and ``extra`` columns).
 
         The link parameters' changes (inertial_parameter_error) carry the CAD prior of
         ``physics.base_parameters``: a URDF's masses and centres of mass are good to ten per
         cent and a few centimetres, so the data move them only as far as they show.
         """
-        columns = {label: self.columns[label] for label in self.testable}
+        columns = {label: self.columns[label] for label in self.testable} | (extra or {})
         priors = {}
         for label in self.testable:
             name = self.specs[label].name
@@ -150,6 +158,30 @@ class CandidateSet:
         mapping = np.linalg.pinv(directions)
         covariance = (mapping * std**2) @ mapping.T
         return np.linalg.inv(covariance)
+
+    def setting_sensitivities(self, design: Design, fit: Fit) -> dict[str, dict[str, np.ndarray]]:
+        """Columns of the change of a fit's torque with each refined Stribeck velocity.
+
+        A Stribeck level is fitted at its velocity as refined on the same data, and the two
+        trade (the hump's area): taken as exact, the velocity leaves the level's interval too
+        narrow. Free beside the fit (one Gauss-Newton step in log v_s), these columns widen it
+        by what the velocity leaves unknown. Keyed ``<label>:log_velocity``.
+        """
+        out = {}
+        for label in fit.groups:
+            spec = self.specs[label]
+            if spec.name != 'stribeck_friction':
+                continue
+            level = design.physical(fit, label)
+            velocity = float(spec.settings['velocity'])
+            up, down = (
+                self.problem.columns(spec.replace_settings(velocity=velocity * math.exp(step)))[0]
+                for step in (_LOG_STEP, -_LOG_STEP)
+            )
+            out[f'{label}:log_velocity'] = {
+                part: (up[part] - down[part]) @ level[:, None] / (2 * _LOG_STEP) for part in up
+            }
+        return out
 
     def datasheet_unknowns(
         self, selected: Sequence[str]

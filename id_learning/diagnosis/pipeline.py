@@ -187,7 +187,8 @@ class _IntervalRule:
     sandwich over the training part's time holds misfit the remainder shares with an effect's
     columns; the wider of the two sets the interval. The physical parameters are refitted with
     the datasheet values no effect names free within their tolerances
-    (``CandidateSet.datasheet_unknowns``).
+    (``CandidateSet.datasheet_unknowns``), and with the refined settings free to move about
+    their values (``CandidateSet.setting_sensitivities``).
     """
 
     def __init__(
@@ -203,8 +204,10 @@ class _IntervalRule:
         blocks, _ = time_blocks(problem, design.residual(final, 'train'), 'train')
         self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
         self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
-        self.marginal_design = design.with_priors(priors)
-        self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
+        settings = candidates.setting_sensitivities(design, final)
+        self.marginal_design = candidates.design(design.y, design.n_effective, settings)
+        self.marginal_design = self.marginal_design.with_priors(priors)
+        self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns, *settings])
         self.stand_ins = self._stand_ins()
         if self.stand_ins:
             _LOG.warning(
