@@ -160,12 +160,12 @@ class CandidateSet:
         return np.linalg.inv(covariance)
 
     def setting_sensitivities(self, design: Design, fit: Fit) -> dict[str, dict[str, np.ndarray]]:
-        """Columns of the change of a fit's torque with each refined Stribeck velocity.
+        """Columns of the change of a fit's torque with each Stribeck velocity (log v_s).
 
-        A Stribeck level is fitted at its velocity as refined on the same data, and the two
-        trade (the hump's area): taken as exact, the velocity leaves the level's interval too
-        narrow. Free beside the fit (one Gauss-Newton step in log v_s), these columns widen it
-        by what the velocity leaves unknown. Keyed ``<label>:log_velocity``.
+        A Stribeck level is fitted at its velocity as refined (or picked) on the same data, and
+        the two trade (the hump's area): taken as exact, the velocity leaves the level's
+        interval too narrow. Free beside the fit (the linearised velocity), these columns widen
+        it by what the velocity leaves unknown. Keyed ``<label>:log_velocity``.
         """
         out = {}
         for label in fit.groups:

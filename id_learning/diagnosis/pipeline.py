@@ -187,8 +187,8 @@ class _IntervalRule:
     sandwich over the training part's time holds misfit the remainder shares with an effect's
     columns; the wider of the two sets the interval. The physical parameters are refitted with
     the datasheet values no effect names free within their tolerances
-    (``CandidateSet.datasheet_unknowns``), and with the refined settings free to move about
-    their values (``CandidateSet.setting_sensitivities``).
+    (``CandidateSet.datasheet_unknowns``); their intervals hold what the refined Stribeck
+    velocities leave unknown too (``CandidateSet.setting_sensitivities``).
     """
 
     def __init__(
@@ -205,9 +205,12 @@ class _IntervalRule:
         self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
         self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
         settings = candidates.setting_sensitivities(design, final)
-        self.marginal_design = candidates.design(design.y, design.n_effective, settings)
-        self.marginal_design = self.marginal_design.with_priors(priors)
-        self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns, *settings])
+        self.marginal_design = candidates.design(
+            design.y, design.n_effective, settings
+        ).with_priors(priors)
+        self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
+        # The values at the settings the report gives; their spread with the settings free.
+        self.widened = self.marginal_design.fit([*final.groups, *self.unknowns, *settings])
         self.stand_ins = self._stand_ins()
         if self.stand_ins:
             _LOG.warning(
@@ -239,7 +242,8 @@ class _IntervalRule:
         """
         design, fit = self.marginal_design, self.marginal
         if not self.stand_ins:
-            return design.physical(fit, label), inflation * design.physical_covariance(fit, label)
+            covariance = design.physical_covariance(self.widened, label)
+            return design.physical(fit, label), inflation * covariance
         final = self.final
         residual_variance = final.rss['train'] / max(self.design.n_eff_train - final.rank, 1.0)
         spread = design.physical_covariance(fit, label, noise_only=True) * residual_variance

@@ -202,7 +202,7 @@ class ResidualProblem:
         #: and a torque-constant error of the model's form scales (``CandidateSet.whole_model``).
         self.rate_terms: list[tuple[EffectSpec, np.ndarray]] = []
         self.scale_terms: list[tuple[EffectSpec, np.ndarray]] = []
-        #: Torques of term lists now set, per recording (``_memo``).
+        #: What the term lists now set give along each recording (``_remembered``).
         self._memo: dict[tuple[int, ...], tuple[tuple[object, ...], Any]] = {}
         self._quantities_for_library()
 
@@ -379,6 +379,7 @@ class ResidualProblem:
             for spec, theta in terms:
                 quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
                 out += effect_columns(spec, quantities, self.model) @ theta
+            out.setflags(write=False)  # shared by every caller
             return out
 
         return self._remembered((r, terms, self.link_terms), torque)
@@ -395,14 +396,15 @@ class ResidualProblem:
         return self._remembered((r, self.link_terms), loaded)
 
     def _remembered(self, keys: tuple[object, ...], compute: Callable[[], _T]) -> _T:
-        """``compute()``, kept while the objects in ``keys`` (a recording, term lists) are alive.
+        """``compute()``, kept while the term lists in ``keys`` are the problem's current ones.
 
-        Every delay and torque-constant candidate, and every refit that settles the terms
-        (``CandidateSet.settle``), needs the same terms' torque along each recording.
+        Every delay and torque-constant candidate of the whole model's form needs the same
+        terms' torque along each recording, and every model-load friction the same link torque.
+        ``keys``: the recording, then the term lists the value depends on.
         """
         key = tuple(id(k) for k in keys)
         hit = self._memo.get(key)
-        if hit is not None and all(a is b for a, b in zip(hit[0], keys, strict=True)):
+        if hit is not None:  # its keys are held, so no other object has their ids
             return cast(_T, hit[1])
         value = compute()
         live = {id(t) for t in (self.link_terms, self.rate_terms, self.scale_terms)}
