@@ -16,6 +16,7 @@ from scipy import optimize
 
 from id_learning.diagnosis.aliases import AliasSet
 from id_learning.diagnosis.candidates import (
+    PAYLOAD_COM_LIMIT_M,
     SPECIAL_CASES,
     SPRING_STAND_INS,
     ExcitationFacts,
@@ -475,6 +476,10 @@ def refine_setting(
                 return None
             com = (np.asarray(theta[1:4]) / theta[0]).tolist()
             if np.allclose(com, current.settings['com_guess_m'], atol=1e-4):
+                break
+            if np.linalg.norm(com) > PAYLOAD_COM_LIMIT_M:
+                # A weakly determined mass runs away: a centre of mass further out gives the
+                # mass column more inertia, the fit a smaller mass, the next centre further out.
                 break
             current = current.replace_settings(com_guess_m=com)
         # A body with its own rotational inertia (a spindle, a gripper) when the data show it:

@@ -28,6 +28,7 @@ from id_learning.physics.terms import (
 )
 
 __all__ = [
+    'PAYLOAD_COM_LIMIT_M',
     'SPECIAL_CASES',
     'ExcitationFacts',
     'PlausibilityFacts',
@@ -38,6 +39,10 @@ __all__ = [
     'testability',
 ]
 
+
+#: Farthest a payload's centre of mass may lie from its frame [m]: a tool or a spindle, not a
+#: lever arm.
+PAYLOAD_COM_LIMIT_M = 1.0
 
 #: Effects that are special cases of a more general one: the same physics with fewer columns. A
 #: payload is a mass at the flange and a rotor inertia the inertia of a moving part, both errors
@@ -324,8 +329,11 @@ def plausibility(
                 f'mass {mass:.3g} kg outside (0, {facts.moving_mass_kg:.3g}] kg (moving mass)'
             )
         com = np.asarray(theta[1:4]) / mass
-        if np.linalg.norm(com) > 1.0:
-            return False, f'centre of mass {np.linalg.norm(com):.2f} m from the frame (> 1 m)'
+        if np.linalg.norm(com) > PAYLOAD_COM_LIMIT_M:
+            return False, (
+                f'centre of mass {np.linalg.norm(com):.2f} m from the frame '
+                f'(> {PAYLOAD_COM_LIMIT_M:g} m)'
+            )
         return True, ''
     if name == 'joint_offset':
         bound = _single_parameter_bound(spec, model)

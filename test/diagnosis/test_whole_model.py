@@ -222,3 +222,17 @@ def test_an_unconfirmed_balancer_stays_when_the_model_without_it_leaves_a_struct
     result = run_diagnosis(recording, config.robot)
     assert [e.spec.joint_name for e in result.effects if e.name == 'gravity_spring'] == ['joint_2']
     assert result.structured_joints() == []
+
+
+def test_a_payloads_centre_of_mass_does_not_run_away_while_it_is_refined(repo):
+    """Every effect of the default twin, seed 18: the payload's centre of mass, refined in turn
+    with its mass, went 0.33 m then 2.7 m out (further out, the mass column carries more
+    inertia, the fit a smaller mass, the next centre further out): 10 kg for 40, interval
+    [8.5, 11.7]. The refinement stops at the plausible range."""
+    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
+    config = twin_config(300.0, effects, seed=18)
+    result = run_diagnosis(simulate(config).recording, config.robot)
+    (payload,) = [e for e in result.effects if e.name == 'payload_mass']
+    mass = payload.parameters[0]
+    assert mass['ci'][0] <= effects['payload_mass']['mass_kg'] <= mass['ci'][1]
+    assert np.linalg.norm(payload.spec.settings['com_guess_m']) <= 1.0
