@@ -205,12 +205,15 @@ class _IntervalRule:
         self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
         self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
         settings = candidates.setting_sensitivities(design, final)
-        self.marginal_design = candidates.design(
-            design.y, design.n_effective, settings
-        ).with_priors(priors)
+        base = candidates.design(design.y, design.n_effective, settings) if settings else design
+        self.marginal_design = base.with_priors(priors)
         self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
         # The values at the settings the report gives; their spread with the settings free.
-        self.widened = self.marginal_design.fit([*final.groups, *self.unknowns, *settings])
+        self.widened = (
+            self.marginal_design.fit([*final.groups, *self.unknowns, *settings])
+            if settings
+            else self.marginal
+        )
         self.stand_ins = self._stand_ins()
         if self.stand_ins:
             _LOG.warning(

@@ -181,12 +181,16 @@ def test_scales_named_beside_an_unnamed_one_are_honest_about_the_common_scale():
         assert parameter['value'] == pytest.approx(scale[joint], abs=0.03)
 
 
+def every_effect(repo, seed: int):
+    """(twin effects, config, recording): every effect of the default twin, 300 s."""
+    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
+    config = twin_config(300.0, effects, seed=seed)
+    return effects, config, simulate(config).recording
+
+
 @pytest.fixture(scope='module')
 def every_effect_seed_11(repo):
-    """(twin effects, config, recording): every effect of the default twin, seed 11, 300 s."""
-    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
-    config = twin_config(300.0, effects, seed=11)
-    return effects, config, simulate(config).recording
+    return every_effect(repo, 11)
 
 
 def test_datasheet_values_standing_in_for_a_missing_effect_do_not_move_the_parameters(
@@ -229,9 +233,8 @@ def test_a_payloads_centre_of_mass_does_not_run_away_while_it_is_refined(repo):
     with its mass, went 0.33 m then 2.7 m out (further out, the mass column carries more
     inertia, the fit a smaller mass, the next centre further out): 10 kg for 40, interval
     [8.5, 11.7]. The refinement stops at the plausible range."""
-    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
-    config = twin_config(300.0, effects, seed=18)
-    result = run_diagnosis(simulate(config).recording, config.robot)
+    effects, config, recording = every_effect(repo, 18)
+    result = run_diagnosis(recording, config.robot)
     (payload,) = [e for e in result.effects if e.name == 'payload_mass']
     mass = payload.parameters[0]
     assert mass['ci'][0] <= effects['payload_mass']['mass_kg'] <= mass['ci'][1]
