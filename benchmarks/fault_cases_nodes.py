@@ -150,9 +150,10 @@ def _overload(fx: Fixtures, rate: float) -> Outcome:
     text = (f'{len(sent)} references at {rate:g}x the IPO rate, {span} from the first served to '
             f'the last: {received} received ({published} published, {late} late), {skipped} '
             f'counted as skipped; {latency_text}')  # fmt: skip
-    # Within the span served, everything is accounted for; outside it (discovery at the start,
-    # the listener's own losses under this load) at most a tenth.
-    counted = received + skipped >= max(span, 0.9 * cycles)
+    # Within the span served, everything is accounted for. Before it, what the replay sent while
+    # the predictor's side of discovery was still matching is lost to any receiver (a quarter of
+    # the play at 20x once, on a loaded CI machine): the span must still hold most of the play.
+    counted = received + skipped >= span >= 0.5 * cycles
     return Outcome('handled' if counted else 'silently_accepted', text)
 
 
