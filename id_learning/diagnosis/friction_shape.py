@@ -17,7 +17,7 @@ import numpy as np
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.physics.terms import EffectSpec
 
-__all__ = ['FRICTION_SHAPED', 'FrictionShape', 'identify_friction_shape']
+__all__ = ['FRICTION_SHAPED', 'SHAPE_EVIDENCE', 'FrictionShape', 'identify_friction_shape']
 
 #: Candidates whose columns depend on the friction curve's shape.
 FRICTION_SHAPED = (
@@ -29,7 +29,7 @@ FRICTION_SHAPED = (
 #: Stribeck velocities [rad/s] beside the sign while judging the shape: a hump is no sharp sign.
 _HUMPS = (0.015, 0.05)
 #: Twice the log-likelihood ratio a setting other than the configured one must earn.
-_EVIDENCE = 10.0
+SHAPE_EVIDENCE = 10.0
 
 #: (v_eps [rad/s], viscous exponent) of one joint.
 FrictionShape = tuple[float, float]
@@ -91,7 +91,7 @@ def identify_friction_shape(
 
     def score(shape: FrictionShape) -> float:
         changed = (shape[0] != default[0]) + (shape[1] != default[1])
-        return fits[shape] / scale + _EVIDENCE * changed
+        return fits[shape] / scale + SHAPE_EVIDENCE * changed
 
     return min(shapes, key=score)
 
