@@ -280,7 +280,7 @@ class CandidateSet:
                 continue
             self._swap(label, refined)
             selected[index] = refined.label
-        return self._load_on_model(selected, y, n_eff)
+        return self.load_on_model(selected, y, n_eff)
 
     def _softer_than_configured(self, spec: EffectSpec) -> bool:
         """Whether a Stribeck hump's joint was given a softer turn than the configured one."""
@@ -399,7 +399,7 @@ class CandidateSet:
         self.verdicts.setdefault(new, self.verdicts[label])
         self.testable = [new if t == label else t for t in self.testable if t != new or t == label]
 
-    def _load_on_model(
+    def load_on_model(
         self, selected: list[str], y: dict[str, np.ndarray], n_eff: dict[str, np.ndarray]
     ) -> list[str]:
         """Let selected load-dependent friction see the model's link torque, not the URDF's.

@@ -123,6 +123,8 @@ def run_diagnosis(
         selection = select()
         selected = candidates.refine(selection.selected, y, n_eff)
         candidates.whole_model(selected, y, n_eff)
+        # The friction's load from this selection's fit, not the one before whole_model.
+        selected = candidates.load_on_model(selected, y, n_eff)
     design = candidates.design(y, n_eff)
 
     def aliases_of(groups: list[str]) -> list[AliasSet]:
