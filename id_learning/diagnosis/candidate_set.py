@@ -8,7 +8,7 @@ load-dependent friction) tuned on the training part.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -97,11 +97,7 @@ class CandidateSet:
         n_eff = problem.n_effective('train')
         shapes = []
         for j, joint in enumerate(problem.robot.joints):
-
-            def shaped(spec: EffectSpec, j: int = j) -> bool:
-                return spec.joint == j and spec.name in FRICTION_SHAPED
-
-            others = self._others_on(j, shaped)
+            others = self._others_on(j)
 
             def columns_of(spec: EffectSpec, j: int = j) -> np.ndarray:
                 return problem.columns(spec)[0]['train'][:, j, :]
@@ -119,18 +115,18 @@ class CandidateSet:
         """Give joint j's friction candidates among ``labels`` a curve shape; old -> new labels."""
         renamed = {}
         for label in labels:
-            spec = self.specs[label]
-            if spec.joint == j and spec.name in FRICTION_SHAPED:
-                renamed[label] = reshaped(spec, shape).label
-                self._swap(label, reshaped(spec, shape))
+            if _shaped_on(self.specs[label], j):
+                new = reshaped(self.specs[label], shape)
+                self._swap(label, new)
+                renamed[label] = new.label
         return renamed
 
-    def _others_on(self, j: int, skip: Callable[[EffectSpec], bool]) -> list[np.ndarray]:
-        """Training columns (M, k) on joint j of every testable candidate ``skip`` keeps."""
+    def _others_on(self, j: int) -> list[np.ndarray]:
+        """Training columns (M, k) on joint j of every testable candidate but its friction laws."""
         out = []
         for label in self.testable:
             column = self.columns[label]['train'][:, j, :]
-            if not skip(self.specs[label]) and np.any(column):
+            if not _shaped_on(self.specs[label], j) and np.any(column):
                 out.append(column)
         return out
 
@@ -313,15 +309,14 @@ class CandidateSet:
         current = self.friction_shapes[j]
         default = self.problem.config.smoothing_velocity
         rest = [g for g in selected if g != label]
-
-        def on_joint(g: str) -> bool:
-            return self.specs[g].joint == j and self.specs[g].name in FRICTION_SHAPED
-
         trials: dict[float, tuple[float, EffectSpec]] = {}
         for eps in sorted({default, current[0]}):
             shape = (eps, current[1])
             specs = {
-                g: reshaped(self.specs[g], shape) if on_joint(g) else self.specs[g] for g in rest
+                g: reshaped(self.specs[g], shape)
+                if _shaped_on(self.specs[g], j)
+                else self.specs[g]
+                for g in rest
             }
             others = {
                 s.label: self.columns[g] if s.label == g else self.problem.columns(s)[0]
@@ -342,7 +337,8 @@ class CandidateSet:
         if eps != current[0]:
             self.friction_shapes[j] = (eps, current[1])
             renamed = self._reshape(j, self.friction_shapes[j], list(self.testable))
-        self._swap(renamed.get(label, label), hump)
+        if hump.label != renamed.get(label, label):
+            self._swap(renamed.get(label, label), hump)
         return [hump.label if g == label else renamed.get(g, g) for g in selected]
 
     def whole_model(
@@ -481,6 +477,11 @@ class CandidateSet:
                 }
             )
         return out
+
+
+def _shaped_on(spec: EffectSpec, j: int) -> bool:
+    """Whether a candidate is one of joint j's friction laws (they share its curve shape)."""
+    return spec.joint == j and spec.name in FRICTION_SHAPED
 
 
 def refine_setting(
