@@ -48,6 +48,11 @@ LABEL_GAIN_STD = 0.05
 #: Relative prior std of a datasheet rotor inertia (brake and gear input stage left out).
 ROTOR_INERTIA_STD = 0.3
 
+#: Most refits of model-load friction and the link-side terms that load it, and the relative
+#: change of every coefficient at which they have settled (``load_on_model``).
+LOAD_ITERATIONS = 5
+LOAD_TOLERANCE = 0.01
+
 #: Step in a log setting for the columns' derivative (``setting_sensitivities``).
 _LOG_STEP = 0.05
 
@@ -152,7 +157,9 @@ class CandidateSet:
                 # A datasheet torque constant's tolerance: it and the link masses trade a
                 # common scale that only the priors settle.
                 priors[label] = np.array([[1.0 / LABEL_GAIN_STD**2]])
-        return Design(y, columns, self.problem.weights, n_eff, priors)
+        return Design(
+            y, columns, self.problem.weights, n_eff, priors, offset=self.problem.load_offset()
+        )
 
     def _cad_precision(self, spec: EffectSpec) -> np.ndarray:
         """Prior precision of the base-direction coefficients of the link parameters' change."""
@@ -326,7 +333,7 @@ class CandidateSet:
             hump = refine_setting(self.problem, others, hump, y=y, n_eff=n_eff) or hump
             design = Design(
                 y, {**others, hump.label: self.problem.columns(hump)[0]},
-                self.problem.weights, n_eff,
+                self.problem.weights, n_eff, offset=self.problem.load_offset(),
             )  # fmt: skip
             residual = design.residual(design.fit([*others, hump.label]), 'train')[:, j]
             trials[eps] = (float(self.problem.weights[j] * residual @ residual), hump)
@@ -378,14 +385,16 @@ class CandidateSet:
         problem = self.problem
         return (
             dict(self.specs), dict(self.columns), dict(self.raw), dict(self.verdicts),
-            list(self.testable), problem.link_terms, problem.rate_terms, problem.scale_terms,
+            list(self.testable), problem.link_terms, problem.load_terms, problem.rate_terms,
+            problem.scale_terms,
         )  # fmt: skip
 
     def restore(self, saved: tuple[Any, ...]) -> None:
         """Go back to a ``saved`` state."""
         problem = self.problem
         (self.specs, self.columns, self.raw, self.verdicts, self.testable,
-         problem.link_terms, problem.rate_terms, problem.scale_terms) = saved  # fmt: skip
+         problem.link_terms, problem.load_terms, problem.rate_terms,
+         problem.scale_terms) = saved  # fmt: skip
 
     def _swap(self, label: str, refined: EffectSpec) -> None:
         """Put a refined spec (and its columns) in the place of a candidate."""
@@ -402,23 +411,42 @@ class CandidateSet:
 
         A payload, a balancer or changed link parameters change the torque the gears carry;
         with the URDF's alone the friction coefficient soaks up their share (``uses_model_load``).
+        The friction and the link-side terms that load it are fitted together, linearised about
+        the last fit (``ResidualProblem.load_offset``) until the fit stops moving.
         """
         specs = [self.specs[label] for label in selected]
         loads = [i for i, s in enumerate(specs) if s.name == 'load_dependent_friction']
-        link = [
-            label for label, s in zip(selected, specs, strict=True) if s.name in LINK_SIDE_EFFECTS
-        ]
+        link = [g for g, s in zip(selected, specs, strict=True) if s.name in LINK_SIDE_EFFECTS]
+        problem, selected = self.problem, list(selected)
         if not loads or not link:
+            if problem.load_terms:  # a friction no longer selected loads no link column
+                problem.load_terms = []
+                self._refresh_link_side()
             return selected
-        design = self.design(y, n_eff)
-        fit = design.fit(selected)
-        self.problem.link_terms = [(self.specs[g], design.physical(fit, g)) for g in link]
-        selected = list(selected)
-        for i in loads:
-            refined = specs[i].replace_settings(load='model')
-            self._swap(selected[i], refined)
-            selected[i] = refined.label
+        previous = np.full(len(loads), np.inf)
+        for _ in range(LOAD_ITERATIONS):
+            design = self.design(y, n_eff)
+            fit = design.fit(selected)
+            problem.link_terms = [(self.specs[g], design.physical(fit, g)) for g in link]
+            terms = []
+            for i in loads:
+                refined = self.specs[selected[i]].replace_settings(load='model')
+                terms.append((refined, design.physical(fit, selected[i])))
+                self._swap(selected[i], refined)
+                selected[i] = refined.label
+            problem.load_terms = terms
+            self._refresh_link_side()
+            now = np.concatenate([theta for _, theta in terms])
+            if np.all(abs(now - previous) <= LOAD_TOLERANCE * abs(now)):
+                break
+            previous = now
         return selected
+
+    def _refresh_link_side(self) -> None:
+        """Rebuild the link-side candidates' columns (they carry the friction's share)."""
+        for label in self.testable:
+            if self.specs[label].name in LINK_SIDE_EFFECTS:
+                self._swap(label, self.specs[label])
 
     def _general_of(self, special: str, general: str) -> bool:
         return SPECIAL_CASES.get(self.specs[special].name) == self.specs[general].name
@@ -496,7 +524,10 @@ def refine_setting(
 
     def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
         cols, _, _ = problem.columns(candidate)
-        small = Design(y, {**others, candidate.label: cols}, problem.weights, n_eff)
+        small = Design(
+            y, {**others, candidate.label: cols}, problem.weights, n_eff,
+            offset=problem.load_offset(),
+        )  # fmt: skip
         fit = small.fit([*others, candidate.label])
         return fit.rss['train'], small, fit
 

@@ -33,8 +33,10 @@ from id_learning.diagnosis.standstill import StandstillProjection
 from id_learning.errors import DatasetError
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import (
+    LINK_SIDE_EFFECTS,
     EffectSpec,
     effect_columns,
+    load_slope,
     needs_derivatives,
     needs_regressor,
     uses_model_load,
@@ -198,12 +200,15 @@ class ResidualProblem:
         self.recordings: list[PreparedRecording] = []
         #: Link-side terms (spec, physical coefficients) the model-load friction sees.
         self.link_terms: list[tuple[EffectSpec, np.ndarray]] = []
+        #: Model-load frictions (spec, coefficient) whose share of the link torque every
+        #: link-side column carries on their joint (``_load_share``).
+        self.load_terms: list[tuple[EffectSpec, np.ndarray]] = []
         #: Terms (spec, physical coefficients) whose torque a delay of the model's form delays
         #: and a torque-constant error of the model's form scales (``CandidateSet.whole_model``).
         self.rate_terms: list[tuple[EffectSpec, np.ndarray]] = []
         self.scale_terms: list[tuple[EffectSpec, np.ndarray]] = []
         #: What the term lists now set give along each recording (``_remembered``).
-        self._memo: dict[tuple[int, ...], tuple[tuple[object, ...], Any]] = {}
+        self._memo: dict[tuple[str | int, ...], tuple[tuple[object, ...], Any]] = {}
         self._quantities_for_library()
 
     def _noise(self) -> NoiseEstimate:
@@ -328,6 +333,8 @@ class ResidualProblem:
         for r in self.recordings:
             quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
             x = effect_columns(spec, quantities, self.model)
+            if spec.name in LINK_SIDE_EFFECTS and self.load_terms:
+                x = x * (1.0 + self._load_share(r))[:, :, None]
             if whole_model_form(spec, 'signal_delay'):
                 x = x - self._terms_rate(r)[:, :, None]
             if whole_model_form(spec, 'torque_constant_scale'):
@@ -356,6 +363,47 @@ class ResidualProblem:
             retention,
         )
 
+    def load_offset(self) -> dict[str, np.ndarray] | None:
+        """Per part, (M, n) the constant of the model-load friction's linearisation [N*m].
+
+        A model-load friction c |L| s(v), with L the URDF's link torque plus the link-side
+        terms X theta, is bilinear in c and theta. About the last fit (c0, theta0) it is
+        c |L0| s(v) + c0 sign(L0) s(v) X (theta - theta0): its own column on the last fit's
+        load, a share c0 sign(L0) s(v) of every link-side column (``_load_share``), so that
+        a payload, a balancer or a link change and the friction they load are fitted together,
+        and this constant, -c0 sign(L0) s(v) X theta0, which every fit holds (``Design``).
+        ``CandidateSet.load_on_model`` iterates to where the fit settles (Gauss-Newton).
+        None without model-load friction.
+        """
+        if not self.load_terms:
+            return None
+
+        def offset() -> dict[str, np.ndarray]:
+            blocks: dict[str, list[np.ndarray]] = {part: [] for part in PARTS}
+            for r in self.recordings:
+                held = self._loaded(r).tau_rigid - r.quantities.tau_rigid
+                x = (-self._load_share(r) * held)[:, :, None]
+                xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
+                for part in PARTS:
+                    blocks[part].append(xf[r.rows[part], :, 0])
+            out = {part: np.concatenate(b) for part, b in blocks.items()}
+            out['train'] = self.standstill.project(out['train'])
+            return out
+
+        return self._remembered('load offset', (self, self.load_terms, self.link_terms), offset)
+
+    def _load_share(self, r: PreparedRecording) -> np.ndarray:
+        """(N, n) c0 sign(L0) s(v) of the model-load frictions: their share of a link torque."""
+
+        def share() -> np.ndarray:
+            out = np.zeros_like(r.quantities.q)
+            loaded = self._loaded(r)
+            for spec, theta in self.load_terms:
+                out[:, spec.joint] += float(theta[0]) * load_slope(spec, loaded)
+            return out
+
+        return self._remembered('load share', (r, self.load_terms, self.link_terms), share)
+
     def _terms_rate(self, r: PreparedRecording) -> np.ndarray:
         """(N, n) time derivative of the rate terms' torque along one recording [N*m/s].
 
@@ -382,7 +430,7 @@ class ResidualProblem:
             out.setflags(write=False)  # shared by every caller
             return out
 
-        return self._remembered((r, terms, self.link_terms), torque)
+        return self._remembered('torque', (r, terms, self.link_terms), torque)
 
     def _loaded(self, r: PreparedRecording) -> NominalQuantities:
         """A recording's quantities with the link torque of the nominal model plus link terms."""
@@ -393,22 +441,25 @@ class ResidualProblem:
                 link += effect_columns(spec, r.quantities, self.model) @ theta
             return replace(r.quantities, tau_rigid=link)
 
-        return self._remembered((r, self.link_terms), loaded)
+        return self._remembered('loaded', (r, self.link_terms), loaded)
 
-    def _remembered(self, keys: tuple[object, ...], compute: Callable[[], _T]) -> _T:
+    def _remembered(self, what: str, keys: tuple[object, ...], compute: Callable[[], _T]) -> _T:
         """``compute()``, kept while the term lists in ``keys`` are the problem's current ones.
 
         Every delay and torque-constant candidate of the whole model's form needs the same
         terms' torque along each recording, and every model-load friction the same link torque.
-        ``keys``: the recording, then the term lists the value depends on.
+        ``what``: the quantity; ``keys``: the recording (or the problem), then the term lists it
+        depends on.
         """
-        key = tuple(id(k) for k in keys)
+        key: tuple[str | int, ...] = (what, *(id(k) for k in keys))
         hit = self._memo.get(key)
         if hit is not None:  # its keys are held, so no other object has their ids
             return cast(_T, hit[1])
         value = compute()
-        live = {id(t) for t in (self.link_terms, self.rate_terms, self.scale_terms)}
-        self._memo = {k: v for k, v in self._memo.items() if set(k[1:]) <= live}
+        live = {
+            id(t) for t in (self.link_terms, self.load_terms, self.rate_terms, self.scale_terms)
+        }
+        self._memo = {k: v for k, v in self._memo.items() if set(k[2:]) <= live}
         self._memo[key] = (keys, value)
         return value
 

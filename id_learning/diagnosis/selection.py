@@ -77,6 +77,9 @@ class Design:
         priors: group label -> (k, k) prior precision of its physical coefficients (a Gaussian
             around zero, on the scale of effective samples): a fit of the group is then its
             posterior mean. For groups a CAD model already bounds (link parameters).
+        offset: {'train', 'test'} -> (M, n) a known torque every fit holds beside its groups
+            [N*m] (the constant of a linearisation, ``ResidualProblem.load_offset``); ``y``
+            stays the residual without it.
     """
 
     def __init__(
@@ -86,13 +89,19 @@ class Design:
         weights: np.ndarray,
         n_effective: dict[str, np.ndarray],
         priors: dict[str, np.ndarray] | None = None,
+        *,
+        offset: dict[str, np.ndarray] | None = None,
     ) -> None:
         """Stack, weight and normalise the columns; precompute the Gram matrices."""
         self.weights = np.asarray(weights, dtype=float)
         self.n_effective = {part: np.asarray(n_effective[part], dtype=float) for part in PARTS}
         root = np.sqrt(self.weights)
         self.y = {part: np.asarray(y[part], dtype=float) for part in PARTS}
-        self._yw = {part: (self.y[part] * root).reshape(-1) for part in PARTS}
+        self._explained = {
+            part: self.y[part] - offset[part] if offset is not None else self.y[part]
+            for part in PARTS
+        }
+        self._yw = {part: (self._explained[part] * root).reshape(-1) for part in PARTS}
         self.slices: dict[str, slice] = {}
         blocks: dict[str, list[np.ndarray]] = {part: [] for part in PARTS}
         start = 0
@@ -225,7 +234,7 @@ class Design:
         idx = self.indices(fit.groups)
         root = np.sqrt(self.weights)
         prediction = (self.matrix[part][:, idx] @ fit.theta).reshape(self.y[part].shape)
-        return self.y[part] - prediction / root
+        return self._explained[part] - prediction / root
 
     def contribution(self, fit: Fit, group: str, part: str) -> np.ndarray:
         """(M, n) filtered torque [N*m] one group adds in a fit."""

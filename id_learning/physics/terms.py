@@ -29,6 +29,7 @@ __all__ = [
     'EffectSpec',
     'effect_columns',
     'gravity_loaded_joints',
+    'load_slope',
     'needs_derivatives',
     'needs_regressor',
     'uses_model_load',
@@ -282,6 +283,18 @@ def whole_model_form(spec: EffectSpec, name: str | None = None) -> bool:
     """
     key = _WHOLE_MODEL_KEY.get(spec.name)
     return key is not None and name in (None, spec.name) and spec.settings.get(key) == 'model'
+
+
+def load_slope(spec: EffectSpec, quantities: NominalQuantities) -> np.ndarray:
+    """(N,) sign(L) s(v): how a load-dependent friction c |L| s(v) grows with its load.
+
+    Per unit coefficient and N*m of link torque L (``quantities.tau_rigid``) on its joint.
+    """
+    j = spec.joint
+    slope: np.ndarray = np.sign(quantities.tau_rigid[:, j]) * _friction_sign(
+        quantities, j, spec.settings
+    )
+    return slope
 
 
 def uses_model_load(spec: EffectSpec) -> bool:
