@@ -383,7 +383,7 @@ def _waterfall(
     The share is of the nominal residual's held-out variance, per joint and over all joints
     weighted by the noise.
     """
-    previous = design.residual(design.fit([]), 'test')
+    previous = design.y['test']  # the nominal model's (a fit holds a linearisation's constant)
     base = np.mean(previous**2, axis=0)
     base_total = float(np.sum(weights * np.sum(previous**2, axis=0)))
     waterfall, explained, explained_total = [], {}, {}
@@ -494,7 +494,7 @@ def _assemble(
         alias_sets=_separated(problem, design, final, aliases),
         untestable=candidates.untestable_summary(),
         remainder=remainder,
-        rmse_before_nm=_rmse(design.residual(design.fit([]), 'test')),
+        rmse_before_nm=_rmse(design.y['test']),
         rmse_after_nm=_rmse(after_test),
         nominal_joints=[robot.joints[j] for j in fallback],
         waterfall=waterfall,

@@ -141,6 +141,10 @@ def test_a_payload_and_the_friction_it_loads_are_fitted_together():
     rows = evaluation_rows(dataset, result.settings)['test']
     rmse = np.sqrt(np.mean((dataset.tau[rows] - model[rows]) ** 2, axis=0))
     np.testing.assert_allclose(rmse, result.rmse_after_nm, rtol=0.01)
+    # The nominal model's error is the nominal model's, not a fit's linearisation constant's.
+    _, nominal = filtered_prediction(result, recording, with_effects=False)
+    rmse = np.sqrt(np.mean((dataset.tau[rows] - nominal[rows]) ** 2, axis=0))
+    np.testing.assert_allclose(rmse, result.rmse_before_nm, rtol=0.005)
 
 
 def test_a_payload_with_its_own_inertia_is_fitted_as_a_body():
