@@ -157,9 +157,7 @@ class CandidateSet:
                 # A datasheet torque constant's tolerance: it and the link masses trade a
                 # common scale that only the priors settle.
                 priors[label] = np.array([[1.0 / LABEL_GAIN_STD**2]])
-        return Design(
-            y, columns, self.problem.weights, n_eff, priors, offset=self.problem.load_offset()
-        )
+        return self.problem.design(y, columns, n_eff, priors)
 
     def _cad_precision(self, spec: EffectSpec) -> np.ndarray:
         """Prior precision of the base-direction coefficients of the link parameters' change."""
@@ -331,10 +329,9 @@ class CandidateSet:
             }
             hump = reshaped(spec, shape)
             hump = refine_setting(self.problem, others, hump, y=y, n_eff=n_eff) or hump
-            design = Design(
-                y, {**others, hump.label: self.problem.columns(hump)[0]},
-                self.problem.weights, n_eff, offset=self.problem.load_offset(),
-            )  # fmt: skip
+            design = self.problem.design(
+                y, {**others, hump.label: self.problem.columns(hump)[0]}, n_eff
+            )
             residual = design.residual(design.fit([*others, hump.label]), 'train')[:, j]
             trials[eps] = (float(self.problem.weights[j] * residual @ residual), hump)
         scale = max(min(t[0] for t in trials.values()), 1e-300) / float(n_eff['train'][j])
@@ -524,10 +521,7 @@ def refine_setting(
 
     def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
         cols, _, _ = problem.columns(candidate)
-        small = Design(
-            y, {**others, candidate.label: cols}, problem.weights, n_eff,
-            offset=problem.load_offset(),
-        )  # fmt: skip
+        small = problem.design(y, {**others, candidate.label: cols}, n_eff)
         fit = small.fit([*others, candidate.label])
         return fit.rss['train'], small, fit
 

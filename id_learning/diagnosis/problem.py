@@ -28,6 +28,7 @@ from id_learning.diagnosis.candidates import (
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.selection import (
     PARTS,
+    Design,
 )
 from id_learning.diagnosis.standstill import StandstillProjection
 from id_learning.errors import DatasetError
@@ -362,6 +363,19 @@ class ResidualProblem:
             np.concatenate(raw_train),
             retention,
         )
+
+    def design(
+        self,
+        y: dict[str, np.ndarray],
+        columns: dict[str, dict[str, np.ndarray]],
+        n_eff: dict[str, np.ndarray],
+        priors: dict[str, np.ndarray] | None = None,
+    ) -> Design:
+        """The regression of ``y`` on ``columns`` with this problem's row weights.
+
+        Every fit holds the model-load friction's linearisation constant, if any (``load_offset``).
+        """
+        return Design(y, columns, self.weights, n_eff, priors, offset=self.load_offset())
 
     def load_offset(self) -> dict[str, np.ndarray] | None:
         """Per part, (M, n) the constant of the model-load friction's linearisation [N*m].
