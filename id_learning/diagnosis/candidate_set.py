@@ -8,7 +8,7 @@ load-dependent friction) tuned on the training part.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -148,16 +148,27 @@ class CandidateSet:
         cent and a few centimetres, so the data move them only as far as they show.
         """
         columns = {label: self.columns[label] for label in self.testable} | (extra or {})
-        priors = {}
-        for label in self.testable:
-            name = self.specs[label].name
-            if name == 'inertial_parameter_error':
-                priors[label] = self._cad_precision(self.specs[label])
-            elif name == 'torque_constant_scale':
+        return self.problem.design(y, columns, n_eff, self.priors(self.testable))
+
+    def priors(self, labels: Iterable[str]) -> dict[str, np.ndarray]:
+        """Prior precisions of the candidates among ``labels`` that carry one.
+
+        Every fit over them holds these, a setting's refinement too: there the link
+        parameters free of their CAD prior took a payload's mass at will, and its centre of
+        mass, refitted, ran out to a metre.
+        """
+        out = {}
+        for label in labels:
+            spec = self.specs.get(label)
+            if spec is None:
+                continue
+            if spec.name == 'inertial_parameter_error':
+                out[label] = self._cad_precision(spec)
+            elif spec.name == 'torque_constant_scale':
                 # A datasheet torque constant's tolerance: it and the link masses trade a
                 # common scale that only the priors settle.
-                priors[label] = np.array([[1.0 / LABEL_GAIN_STD**2]])
-        return self.problem.design(y, columns, n_eff, priors)
+                out[label] = np.array([[1.0 / LABEL_GAIN_STD**2]])
+        return out
 
     def _cad_precision(self, spec: EffectSpec) -> np.ndarray:
         """Prior precision of the base-direction coefficients of the link parameters' change."""
@@ -276,7 +287,9 @@ class CandidateSet:
             if spec.name not in ('stribeck_friction', 'payload_mass', 'gravity_spring'):
                 continue
             others = {g: self.columns[g] for g in selected if g != label}
-            refined = refine_setting(self.problem, others, spec, y=y, n_eff=n_eff)
+            refined = refine_setting(
+                self.problem, others, spec, y=y, n_eff=n_eff, priors=self.priors(others)
+            )
             if refined is None:
                 continue
             self._swap(label, refined)
@@ -328,9 +341,13 @@ class CandidateSet:
                 for g, s in specs.items()
             }
             hump = reshaped(spec, shape)
-            hump = refine_setting(self.problem, others, hump, y=y, n_eff=n_eff) or hump
+            priors = self.priors(others)
+            hump = (
+                refine_setting(self.problem, others, hump, y=y, n_eff=n_eff, priors=priors)
+                or hump
+            )
             design = self.problem.design(
-                y, {**others, hump.label: self.problem.columns(hump)[0]}, n_eff
+                y, {**others, hump.label: self.problem.columns(hump)[0]}, n_eff, priors
             )
             residual = design.residual(design.fit([*others, hump.label]), 'train')[:, j]
             trials[eps] = (float(self.problem.weights[j] * residual @ residual), hump)
@@ -516,12 +533,16 @@ def refine_setting(
     *,
     y: dict[str, np.ndarray],
     n_eff: dict[str, np.ndarray],
+    priors: dict[str, np.ndarray] | None = None,
 ) -> EffectSpec | None:
-    """Tune a selected effect's nonlinear setting on the training part, the others kept."""
+    """Tune a selected effect's nonlinear setting on the training part, the others kept.
+
+    ``priors``: prior precisions of some of the others (``CandidateSet.priors``).
+    """
 
     def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
         cols, _, _ = problem.columns(candidate)
-        small = problem.design(y, {**others, candidate.label: cols}, n_eff)
+        small = problem.design(y, {**others, candidate.label: cols}, n_eff, priors)
         fit = small.fit([*others, candidate.label])
         return fit.rss['train'], small, fit
 
