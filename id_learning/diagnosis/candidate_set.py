@@ -12,11 +12,9 @@ from collections.abc import Iterable, Sequence
 from typing import Any, cast
 
 import numpy as np
-from scipy import optimize
 
 from id_learning.diagnosis.aliases import AliasSet
 from id_learning.diagnosis.candidates import (
-    PAYLOAD_COM_LIMIT_M,
     SPECIAL_CASES,
     SPRING_STAND_INS,
     ExcitationFacts,
@@ -32,8 +30,8 @@ from id_learning.diagnosis.friction_shape import (
     reshaped,
 )
 from id_learning.diagnosis.problem import ResidualProblem
+from id_learning.diagnosis.refinement import refine_setting
 from id_learning.diagnosis.selection import Design, Fit
-from id_learning.physics.balancer import BALANCER_PHASES, BALANCER_RATIOS
 from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.terms import (
     LINK_SIDE_EFFECTS,
@@ -41,7 +39,7 @@ from id_learning.physics.terms import (
     whole_model_settings,
 )
 
-__all__ = ['LABEL_GAIN_STD', 'ROTOR_INERTIA_STD', 'CandidateSet', 'refine_setting']
+__all__ = ['LABEL_GAIN_STD', 'ROTOR_INERTIA_STD', 'CandidateSet']
 
 #: Prior std of a label gain (torque-constant error) around 0, as in the identification.
 LABEL_GAIN_STD = 0.05
@@ -343,8 +341,7 @@ class CandidateSet:
             hump = reshaped(spec, shape)
             priors = self.priors(others)
             hump = (
-                refine_setting(self.problem, others, hump, y=y, n_eff=n_eff, priors=priors)
-                or hump
+                refine_setting(self.problem, others, hump, y=y, n_eff=n_eff, priors=priors) or hump
             )
             design = self.problem.design(
                 y, {**others, hump.label: self.problem.columns(hump)[0]}, n_eff, priors
@@ -524,91 +521,3 @@ class CandidateSet:
 def _shaped_on(spec: EffectSpec, j: int) -> bool:
     """Whether a candidate is one of joint j's friction laws (they share its curve shape)."""
     return spec.joint == j and spec.name in FRICTION_SHAPED
-
-
-def refine_setting(
-    problem: ResidualProblem,
-    others: dict[str, dict[str, np.ndarray]],
-    spec: EffectSpec,
-    *,
-    y: dict[str, np.ndarray],
-    n_eff: dict[str, np.ndarray],
-    priors: dict[str, np.ndarray] | None = None,
-) -> EffectSpec | None:
-    """Tune a selected effect's nonlinear setting on the training part, the others kept.
-
-    ``priors``: prior precisions of some of the others (``CandidateSet.priors``).
-    """
-
-    def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
-        cols, _, _ = problem.columns(candidate)
-        small = problem.design(y, {**others, candidate.label: cols}, n_eff, priors)
-        fit = small.fit([*others, candidate.label])
-        return fit.rss['train'], small, fit
-
-    if spec.name == 'stribeck_friction':
-        start = float(spec.settings['velocity'])
-
-        def objective(log_vs: float) -> float:
-            return rss_of(spec.replace_settings(velocity=float(math.exp(log_vs))))[0]
-
-        best = optimize.minimize_scalar(
-            objective,
-            bounds=(math.log(start / 2.5), math.log(start * 2.5)),
-            method='bounded',
-            options={'xatol': 0.02},
-        )
-        if best.fun < rss_of(spec)[0]:
-            return spec.replace_settings(velocity=round(float(math.exp(best.x)), 5))
-        return None
-    if spec.name == 'gravity_spring' and 'ratio' in spec.settings:
-        # The balancer's geometry: the best of a grid of arm ratios and phases, then refined
-        # together (an encoder zero error shifts the phase by milliradians). The ratio stays in
-        # the grid's range: towards 0 the three columns merge into sin and sin 2 of the angle,
-        # an ill-posed pair that fits the training part's noise, not a balancer.
-        low, high = min(BALANCER_RATIOS), max(BALANCER_RATIOS)
-
-        def spring_rss(geometry: np.ndarray) -> float:
-            ratio = float(np.clip(geometry[0], low, high))
-            return rss_of(spec.replace_settings(ratio=ratio, phase_rad=float(geometry[1])))[0]
-
-        grid = [np.array([r, p]) for r in BALANCER_RATIOS for p in BALANCER_PHASES]
-        geometry = min(grid, key=spring_rss)
-        best = optimize.minimize(
-            spring_rss,
-            geometry,
-            method='Nelder-Mead',
-            options={
-                'xatol': 1e-4,
-                'fatol': 1e-9,
-                'initial_simplex': geometry + np.array([[0.0, 0.0], [0.05, 0.0], [0.0, 0.05]]),
-            },
-        )
-        if best.fun < rss_of(spec)[0]:
-            ratio = round(float(np.clip(best.x[0], low, high)), 5)
-            return spec.replace_settings(ratio=ratio, phase_rad=round(float(best.x[1]), 5))
-        return None
-    if spec.name == 'payload_mass':
-        current = spec
-        for _ in range(6):
-            _, small, fit = rss_of(current)
-            theta = small.physical(fit, current.label)
-            if theta[0] <= 0:
-                return None
-            com = (np.asarray(theta[1:4]) / theta[0]).tolist()
-            if np.allclose(com, current.settings['com_guess_m'], atol=1e-4):
-                break
-            if np.linalg.norm(com) > PAYLOAD_COM_LIMIT_M:
-                # A weakly determined mass runs away: a centre of mass further out gives the
-                # mass column more inertia, the fit a smaller mass, the next centre further out.
-                break
-            current = current.replace_settings(com_guess_m=com)
-        # A body with its own rotational inertia (a spindle, a gripper) when the data show it:
-        # six more coefficients must earn their BIC.
-        if not current.settings.get('inertia'):
-            point, full = rss_of(current)[0], rss_of(current.replace_settings(inertia=True))[0]
-            n = float(n_eff['train'].sum())
-            if full > 0 and n * math.log(point / full) > 6 * math.log(n) + 10.0:
-                current = current.replace_settings(inertia=True)
-        return current
-    return None
