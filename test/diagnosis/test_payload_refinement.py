@@ -23,8 +23,8 @@ EFFECTS = {
     'inertial_parameter_error': {'enabled': True, 'mass_rel_std': 0.03, 'com_std_m': 0.01},
     'rotor_inertia': {'enabled': True, 'scale': [1.25, 1.25, 1.3, 1.2, 1.2, 1.2]},
 }
-#: What the selection names beside the payload on such a twin (the wrist's rotor inertias are
-#: too small to).
+#: What the selection names beside the payload on such a twin, with the rotor inertias of joints
+#: 1-3 (the wrist's are too small to be named).
 CHOSEN = ('viscous_friction', 'coulomb_friction', 'payload_mass', 'inertial_parameter_error')
 
 
