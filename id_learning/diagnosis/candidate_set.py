@@ -7,6 +7,7 @@ load-dependent friction) tuned on the training part.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Sequence
 from typing import Any, cast
@@ -146,15 +147,24 @@ class CandidateSet:
         cent and a few centimetres, so the data move them only as far as they show.
         """
         columns = {label: self.columns[label] for label in self.testable} | (extra or {})
-        return self.problem.design(y, columns, n_eff, self.priors(self.testable))
+        return self.design_over(y, columns, n_eff)
 
-    def priors(self, labels: Iterable[str]) -> dict[str, np.ndarray]:
-        """Prior precisions of the candidates among ``labels`` that carry one.
+    def design_over(
+        self,
+        y: dict[str, np.ndarray],
+        columns: dict[str, dict[str, np.ndarray]],
+        n_eff: dict[str, np.ndarray],
+    ) -> Design:
+        """The regression over some columns, each candidate among them under its prior.
 
-        Every fit over them holds these, a setting's refinement too: there the link
-        parameters free of their CAD prior took a payload's mass at will, and its centre of
-        mass, refitted, ran out to a metre.
+        Every fit here holds the priors, a setting's refinement too: there the link parameters
+        free of their CAD prior took a payload's mass at will, and its centre of mass, refitted,
+        ran out to a metre.
         """
+        return self.problem.design(y, columns, n_eff, self._priors(columns))
+
+    def _priors(self, labels: Iterable[str]) -> dict[str, np.ndarray]:
+        """Prior precisions of the candidates among ``labels`` that carry one."""
         out = {}
         for label in labels:
             spec = self.specs.get(label)
@@ -286,7 +296,7 @@ class CandidateSet:
                 continue
             others = {g: self.columns[g] for g in selected if g != label}
             refined = refine_setting(
-                self.problem, others, spec, y=y, n_eff=n_eff, priors=self.priors(others)
+                self.problem, others, spec, lambda cols: self.design_over(y, cols, n_eff)
             )
             if refined is None:
                 continue
@@ -339,13 +349,9 @@ class CandidateSet:
                 for g, s in specs.items()
             }
             hump = reshaped(spec, shape)
-            priors = self.priors(others)
-            hump = (
-                refine_setting(self.problem, others, hump, y=y, n_eff=n_eff, priors=priors) or hump
-            )
-            design = self.problem.design(
-                y, {**others, hump.label: self.problem.columns(hump)[0]}, n_eff, priors
-            )
+            design_of = functools.partial(self.design_over, y, n_eff=n_eff)
+            hump = refine_setting(self.problem, others, hump, design_of) or hump
+            design = design_of({**others, hump.label: self.problem.columns(hump)[0]})
             residual = design.residual(design.fit([*others, hump.label]), 'train')[:, j]
             trials[eps] = (float(self.problem.weights[j] * residual @ residual), hump)
         scale = max(min(t[0] for t in trials.values()), 1e-300) / float(n_eff['train'][j])

@@ -7,6 +7,7 @@ selected effects kept free beside it, under the priors every fit over them holds
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy import optimize
@@ -24,20 +25,17 @@ def refine_setting(
     problem: ResidualProblem,
     others: dict[str, dict[str, np.ndarray]],
     spec: EffectSpec,
-    *,
-    y: dict[str, np.ndarray],
-    n_eff: dict[str, np.ndarray],
-    priors: dict[str, np.ndarray],
+    design_of: Callable[[dict[str, dict[str, np.ndarray]]], Design],
 ) -> EffectSpec | None:
     """Tune a selected effect's nonlinear setting on the training part, the others kept.
 
-    ``priors``: the prior precisions of the others that carry one (``CandidateSet.priors``):
-    every fit over them holds them.
+    ``design_of``: the regression over some columns, with the priors every fit over them holds
+    (``CandidateSet.design_over``).
     """
 
     def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
         cols, _, _ = problem.columns(candidate)
-        small = problem.design(y, {**others, candidate.label: cols}, n_eff, priors)
+        small = design_of({**others, candidate.label: cols})
         fit = small.fit([*others, candidate.label])
         return fit.rss['train'], small, fit
 
@@ -101,8 +99,9 @@ def refine_setting(
         # A body with its own rotational inertia (a spindle, a gripper) when the data show it:
         # six more coefficients must earn their BIC.
         if not current.settings.get('inertia'):
-            point, full = rss_of(current)[0], rss_of(current.replace_settings(inertia=True))[0]
-            n = float(n_eff['train'].sum())
+            point, small, _ = rss_of(current)
+            full = rss_of(current.replace_settings(inertia=True))[0]
+            n = small.n_eff_train
             if full > 0 and n * math.log(point / full) > 6 * math.log(n) + 10.0:
                 current = current.replace_settings(inertia=True)
         return current
