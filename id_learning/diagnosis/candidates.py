@@ -3,21 +3,19 @@
 Every effect term of the physics layer (``physics.terms``) on every joint where it can act is a
 candidate. Each candidate carries the condition under which the excitation can show it at all
 (``testability``) and a sign/size rule for a physical value (``plausibility``);
-``describe_parameters`` turns fitted coefficients into the effect's physical parameters.
+``parameters.describe_parameters`` turns fitted coefficients into physical parameters.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from scipy import stats
 
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.errors import ConfigError
-from id_learning.physics.base_parameters import base_parameters
 from id_learning.physics.inertial import inertial_base_directions
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
@@ -33,7 +31,6 @@ __all__ = [
     'ExcitationFacts',
     'PlausibilityFacts',
     'build_library',
-    'describe_parameters',
     'plausibility',
     'spring_joints',
     'testability',
@@ -43,6 +40,11 @@ __all__ = [
 #: Farthest a payload's centre of mass may lie from its frame [m]: a tool or a spindle, not a
 #: lever arm.
 PAYLOAD_COM_LIMIT_M = 1.0
+
+#: How far an encoder zero error may move the payload frame before a cell notices it [m]
+#: (every taught point off by as much), and the largest joint offset plausible at all [rad].
+MASTERING_TOLERANCE_M = 0.03
+JOINT_OFFSET_MAX_RAD = 0.2
 
 #: Effects that are special cases of a more general one: the same physics with fewer columns. A
 #: payload is a mass at the flange and a rotor inertia the inertia of a moving part, both errors
@@ -232,7 +234,12 @@ def testability(
 
 def _single_parameter_bound(spec: EffectSpec, model: NominalModel) -> float:
     if spec.name == 'joint_offset':
-        return 0.02  # rad: an encoder zero error beyond ~1 degree is a calibration failure
+        assert spec.joint is not None
+        # Judged by what it does at the payload frame: taught points off by up to the offset
+        # times the frame's farthest distance from the axis. A heavy axis 2 m from the flange
+        # may hide 1 degree, a wrist axis 0.25 m from it several.
+        lever = float(model.lever_arms()[spec.joint])
+        return min(JOINT_OFFSET_MAX_RAD, MASTERING_TOLERANCE_M / max(lever, 1e-9))
     if spec.name == 'signal_delay':
         return max(0.05, 10.0 * model.robot.ipo_period_s)  # s
     raise ValueError(spec.name)
@@ -316,9 +323,16 @@ def plausibility(
         gravity = facts.gravity[:, j]
         if np.std(spring) == 0 or np.std(gravity) == 0:
             return False, 'no gravity torque to balance'
-        correlation = float(np.corrcoef(spring, gravity)[0, 1])
-        if correlation >= 0:
-            return False, f'it would add to gravity (correlation {correlation:+.2f}), not balance'
+        # Mounted to carry the arm's weight: it falls where gravity's torque rises, or it takes
+        # load off on average (a balancer on joint 3 turns with q3, gravity there with q2 + q3:
+        # their shapes may rise together while the balancer's mean still opposes gravity's).
+        shape = float(np.corrcoef(spring, gravity)[0, 1])
+        mean = float(spring @ gravity / np.linalg.norm(spring) / np.linalg.norm(gravity))
+        if shape >= 0 and mean >= 0:
+            return False, (
+                f'it would add to gravity (correlation {shape:+.2f}, {mean:+.2f} about zero), '
+                'not balance'
+            )
         if np.sqrt(np.mean(spring**2)) > 1.5 * np.sqrt(np.mean(gravity**2)):
             return False, 'it would exceed 1.5 times the gravity torque it balances'
         return True, ''
@@ -439,162 +453,3 @@ def _within(value: float, spread: float, low: float, high: float, unit: str) -> 
         f'value {value:.4g} +- {spread:.2g} {unit} outside the plausible range '
         f'[{low:.4g}, {high:.4g}]'
     )
-
-
-# -- parameters for the report ------------------------------------------------------------------
-def describe_parameters(
-    spec: EffectSpec,
-    theta: np.ndarray,
-    half_width: np.ndarray,
-    model: NominalModel,
-    interval_covariance: np.ndarray | None = None,
-) -> list[dict[str, Any]]:
-    """Physical parameters with confidence intervals, in the twin's terms where one exists.
-
-    Args:
-        spec: the candidate.
-        theta: (k,) fitted column coefficients in physical units.
-        half_width: (k,) half widths of their confidence intervals (same units).
-        model: the nominal model (datasheet values for scales).
-        interval_covariance: (k, k) covariance of theta scaled so that the square roots of its
-            diagonal are ``half_width``; needed for parameters that mix coefficients (the
-            base parameters of ``inertial_parameter_error``).
-
-    Returns:
-        One dict per parameter: name, value, ci (low, high), unit.
-    """
-    robot = model.robot
-    j = spec.joint
-
-    def entry(name: str, value: float, low: float, high: float, unit: str) -> dict[str, Any]:
-        return {
-            'name': name,
-            'value': float(value),
-            'ci': [float(min(low, high)), float(max(low, high))],
-            'unit': unit,
-        }
-
-    lo, hi = theta - half_width, theta + half_width
-    name = spec.name
-    if name == 'inertial_parameter_error':
-        return _base_parameter_changes(spec, theta, model, interval_covariance)
-    if name == 'rotor_inertia' and j is not None and model.target != 'motor':
-        n2 = float(robot.drives.gear_ratio[j]) ** 2
-        return [
-            entry('axis_inertia_change_link_side', n2 * theta[0], n2 * lo[0], n2 * hi[0], 'kg*m^2')
-        ]
-    if name == 'rotor_inertia' and j is not None:
-        nominal = robot.drives.rotor_inertia[j]
-        out = [entry('rotor_inertia_motor_side', nominal + theta[0], nominal + lo[0],
-                     nominal + hi[0], 'kg*m^2')]  # fmt: skip
-        if nominal > 0:
-            out.append(
-                entry(
-                    'scale',
-                    1 + theta[0] / nominal,
-                    1 + lo[0] / nominal,
-                    1 + hi[0] / nominal,
-                    '1',
-                )
-            )
-        return out
-    if name == 'torque_constant_scale':
-        # tau_u from currents = tau_true / s; the column is the nominal torque, so s = 1 / (1 + c).
-        def scale(c: float) -> float:
-            return 1.0 / (1.0 + c) if c > -1 else math.inf
-
-        return [entry('scale', scale(theta[0]), scale(hi[0]), scale(lo[0]), '1')]
-    if name == 'cogging':
-        amplitude = float(np.hypot(theta[0], theta[1]))
-        spread = float(np.hypot(half_width[0], half_width[1]))
-        return [
-            entry('amplitude', amplitude, max(amplitude - spread, 0.0), amplitude + spread, 'N*m'),
-            entry(
-                'phase', math.atan2(theta[1], theta[0]), -math.pi, math.pi, 'rad'
-            ),  # phase interval is not meaningful near zero amplitude
-        ]
-    if name == 'payload_mass':
-        mass = float(theta[0])
-        out = [entry('mass', mass, lo[0], hi[0], 'kg')]
-        if mass > 0:
-            for axis, k in zip('xyz', range(1, 4), strict=True):
-                com = theta[k] / mass
-                spread = abs(com) * math.hypot(half_width[k] / max(abs(theta[k]), 1e-12),
-                                               half_width[0] / mass)  # fmt: skip
-                out.append(entry(f'com_{axis}', com, com - spread, com + spread, 'm'))
-        for k, axes in enumerate(('xx', 'xy', 'yy', 'xz', 'yz', 'zz'), start=4):
-            if k < len(theta):  # rotational inertia about the centre of mass, frame axes
-                out.append(entry(f'inertia_{axes}', theta[k], lo[k], hi[k], 'kg*m^2'))
-        return out
-    if name == 'stribeck_friction':
-        return [
-            entry('level', theta[0], lo[0], hi[0], 'N*m'),
-            entry(
-                'velocity',
-                spec.settings['velocity'],
-                spec.settings['velocity'],
-                spec.settings['velocity'],
-                'rad/s',
-            ),
-        ]
-    if name == 'gravity_spring':
-        if 'ratio' in spec.settings:
-            ratio, phase = spec.settings['ratio'], spec.settings['phase_rad']
-            return [
-                entry('arm_ratio', ratio, ratio, ratio, '1'),
-                entry('phase', phase, phase, phase, 'rad'),
-                *[entry(f'f{k}', theta[k], lo[k], hi[k], 'N*m') for k in range(len(theta))],
-            ]
-        unit = {1: 'N*m/rad'}
-        return [
-            entry(f'c{k}', theta[k - 1], lo[k - 1], hi[k - 1], unit.get(k, f'N*m/rad^{k}'))
-            for k in range(1, len(theta) + 1)
-        ]
-    names = PARAMETERS[name]
-    return [entry(names[k][0], theta[k], lo[k], hi[k], names[k][1]) for k in range(len(theta))]
-
-
-def _base_parameter_changes(
-    spec: EffectSpec,
-    theta: np.ndarray,
-    model: NominalModel,
-    interval_covariance: np.ndarray | None,
-) -> list[dict[str, Any]]:
-    """The base parameters whose interval excludes the URDF's value, and how many there are.
-
-    A change c along the identifiable directions D moves the link parameters by D c and the
-    base parameters (``physics.base_parameters``) by E D c; each is named after the parameter
-    it stands for, with what it groups.
-    """
-    directions = np.asarray(spec.settings['base_directions'])
-    base = base_parameters(model.dynamics, model.robot.limits)
-    mapping = base.matrix @ directions
-    urdf = base.matrix @ model.dynamics.inertial_parameters()
-    change = mapping @ theta
-    if interval_covariance is None:
-        half = np.zeros_like(change)
-    else:
-        half = np.sqrt(
-            np.clip(np.einsum('ik,kl,il->i', mapping, interval_covariance, mapping), 0, None)
-        )
-    changed = np.flatnonzero(np.abs(change) > half)
-    out: list[dict[str, Any]] = [
-        {
-            'name': 'changed_base_parameters',
-            'value': int(changed.size),
-            'ci': None,
-            'unit': f'count of {base.count} (interval excludes the URDF value)',
-        }
-    ]
-    for i in changed:
-        value = urdf[i] + change[i]
-        out.append(
-            {
-                'name': base.names[i],
-                'value': float(value),
-                'ci': [float(value - half[i]), float(value + half[i])],
-                'unit': base.units[i],
-                'urdf': float(urdf[i]),
-            }
-        )
-    return out

@@ -35,9 +35,6 @@ from id_learning.dataset.statistics import (
 )
 from id_learning.diagnosis.aliases import AliasSet, find_aliases
 from id_learning.diagnosis.candidate_set import CandidateSet
-from id_learning.diagnosis.candidates import (
-    describe_parameters,
-)
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.heldout import (
     BlockTest,
@@ -47,6 +44,7 @@ from id_learning.diagnosis.heldout import (
     time_blocks,
 )
 from id_learning.diagnosis.locate import locate_residual
+from id_learning.diagnosis.parameters import describe_parameters
 from id_learning.diagnosis.problem import (
     ResidualProblem,
     as_datasets,

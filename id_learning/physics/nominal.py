@@ -22,6 +22,9 @@ from id_learning.robot.drives import rotor_inertia_torque
 
 __all__ = ['NominalModel', 'NominalQuantities']
 
+#: Poses over which a joint's lever arm to the payload frame is taken at its largest.
+LEVER_POSES = 256
+
 
 @dataclass(frozen=True, eq=False)
 class NominalQuantities:
@@ -70,6 +73,7 @@ class NominalModel:
         )
         self._data = model.createData()
         self._payload_maps: dict[tuple[str, tuple[float, ...], bool], tuple[int, np.ndarray]] = {}
+        self._lever_arms: np.ndarray | None = None
 
     def payload_map(
         self, frame: str, com_guess_m: Sequence[float], inertia: bool = False
@@ -86,6 +90,21 @@ class NominalModel:
                 mapping = np.hstack([mapping, frame_parameter_map(self.dynamics, frame)[1][:, 4:]])
             self._payload_maps[key] = (body, mapping)
         return self._payload_maps[key]
+
+    def lever_arms(self) -> np.ndarray:
+        """(n,) the farthest the payload frame moves per radian of each joint [m/rad].
+
+        The largest over poses drawn across the joint ranges (fixed draws: the same robot gets
+        the same figures).
+        """
+        if self._lever_arms is None:
+            limits = self.robot.limits
+            poses = np.random.default_rng(0).uniform(
+                limits.position_lower, limits.position_upper, (LEVER_POSES, self.robot.n_joints)
+            )
+            frame = self.robot.payload_frame
+            self._lever_arms = np.max([self.dynamics.lever_arms(frame, q) for q in poses], axis=0)
+        return self._lever_arms
 
     @property
     def rotor_inertia_joint_side(self) -> np.ndarray:

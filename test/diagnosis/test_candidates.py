@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from id_learning.diagnosis import DiagnosisConfig
-from id_learning.diagnosis.candidates import build_library
-from id_learning.physics import EFFECT_NAMES, NominalModel
+from id_learning.diagnosis.candidates import PlausibilityFacts, build_library, plausibility
+from id_learning.physics import EFFECT_NAMES, EffectSpec, NominalModel
 from id_learning.twin.effects import EFFECT_NAMES as TWIN_EFFECT_NAMES
 
 
@@ -27,3 +27,27 @@ def test_library_names_every_effect_once_per_joint_or_robot_wide(mabi):
     assert len(labels) == len(set(labels))
     config = DiagnosisConfig(effects=('viscous_friction', 'torque_offset'))
     assert len(build_library(model, quantities, config)) == 2 * model.robot.n_joints
+
+
+def test_a_balancer_is_plausible_when_it_takes_load_off_on_average(mabi):
+    """A balancer on joint 3 turns with q3, gravity there with q2 + q3: along a motion their
+    shapes may rise together while the balancer still carries weight (its torque's mean against
+    gravity's). It balances when it falls where gravity rises or takes load off on average."""
+    model = NominalModel(mabi)
+    t = np.linspace(0.0, 20.0, 2001)
+    gravity = np.zeros((len(t), mabi.n_joints))
+    gravity[:, 2] = -400.0 + 300.0 * np.sin(t)
+    facts = PlausibilityFacts(np.ones(mabi.n_joints), gravity, 1000.0, np.zeros((6, 10)))
+    spec = EffectSpec('gravity_spring', 2, mabi.joints[2], {'ratio': 0.5, 'phase_rad': 0.0})
+
+    def verdict(spring: np.ndarray) -> tuple[bool, str]:
+        contribution = np.zeros_like(gravity)
+        contribution[:, 2] = spring
+        return plausibility(spec, np.ones(3), contribution, model, facts)
+
+    shape = 20.0 * np.sin(t)  # rises with gravity's shape (correlation +1 about the means)
+    assert verdict(30.0 + shape)[0]
+    assert verdict(-30.0 - shape)[0]  # adds on average, but falls where gravity rises
+    ok, reason = verdict(-30.0 + shape)
+    assert not ok
+    assert 'add to gravity' in reason

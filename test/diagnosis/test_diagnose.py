@@ -338,3 +338,18 @@ def test_an_alias_set_says_what_motion_would_tell_its_members_apart(tmp_path):
     assert 'to tell apart: more motion of' in (tmp_path / 'report.md').read_text(encoding='utf-8')
     data = json.loads((tmp_path / 'effects.json').read_text(encoding='utf-8'))
     assert data['alias_sets'][0]['separating_motion']
+
+
+def test_a_wrist_encoder_zero_several_degrees_off_is_kept_with_its_link_parameter_alias():
+    """Six degrees on joint 5 move the flange 2.4 cm (a wrist mastered by eye): plausible. The
+    wrist's centre of mass turned about the axis looks the same to gravity, so the link
+    parameters stand beside it as its alias, and nothing else is named."""
+    config, twin = hidden({'joint_offset': {'enabled': True, 'offset': [0, 0, 0, 0, 0.1, 0]}})
+    result = run_diagnosis(twin.recording, config.robot)
+    assert result.named_effects() == []
+    (alias,) = result.alias_sets
+    assert alias.representative == 'joint_offset[joint_5]'
+    assert alias.alternatives() == ['inertial_parameter_error']
+    (offset,) = result.effects
+    low, high = offset.parameters[0]['ci']
+    assert low <= 0.1 <= high

@@ -81,6 +81,20 @@ def world_axes(
     return placement.translation.copy(), placement.rotation @ axes[name]
 
 
+def payload_frame_setup(config: RobotConfig) -> tuple[Any, ...]:
+    """An independent model, its data, velocity index, URDF axes, the payload frame's id and
+    the names of the joints that carry it."""
+    model = reference_model(config)
+    frame_id = model.getFrameId(config.payload_frame)
+    carrying = set()
+    joint_id = model.frames[frame_id].parentJoint
+    while joint_id > 0:
+        carrying.add(model.names[joint_id])
+        joint_id = model.parents[joint_id]
+    index = velocity_index(model, config.joints)
+    return model, model.createData(), index, urdf_axes(config.urdf_path), frame_id, carrying
+
+
 # -- agreement with pinocchio, and identities between computation paths --------------------------
 def test_rnea_equals_pinocchio_rnea_on_an_independent_model(
     robot_name: str,
@@ -360,16 +374,7 @@ def test_point_payload_changes_gravity_by_the_closed_form_torque(
     mass, com = 7.5, np.array([0.04, -0.03, 0.11])  # kg, m in the payload frame
     loaded = dynamics.with_payload(config.payload_frame, mass, com)
 
-    model = reference_model(config)
-    data = model.createData()
-    index = velocity_index(model, config.joints)
-    axes = urdf_axes(config.urdf_path)
-    frame_id = model.getFrameId(config.payload_frame)
-    supporting = set()
-    joint_id = model.frames[frame_id].parentJoint
-    while joint_id > 0:
-        supporting.add(model.names[joint_id])
-        joint_id = model.parents[joint_id]
+    model, data, index, axes, frame_id, supporting = payload_frame_setup(config)
     assert supporting  # the payload hangs on at least one joint
     q, _, _ = random_states(config, np.random.default_rng(22), count=20)
 
@@ -388,6 +393,32 @@ def test_point_payload_changes_gravity_by_the_closed_form_torque(
     change = loaded.gravity(q) - dynamics.gravity(q)
     assert np.abs(expected).max() > 1.0
     np.testing.assert_allclose(change, expected, rtol=1e-9, atol=1e-9)
+
+
+def test_lever_arms_are_the_payload_frames_distance_from_each_axis(
+    robot_name: str,
+    robot_configs: dict[str, RobotConfig],
+    robot_dynamics: dict[str, RigidBodyDynamics],
+) -> None:
+    """How far the frame moves per radian: |axis x (frame - axis origin)|, zero on the joints
+    that do not carry it."""
+    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
+    model, data, index, axes, frame_id, supporting = payload_frame_setup(config)
+    q, _, _ = random_states(config, np.random.default_rng(23), count=5)
+    for k in range(len(q)):
+        q_pin = np.zeros(model.nq)
+        q_pin[index] = q[k]
+        pin.framesForwardKinematics(model, data, q_pin)
+        point = data.oMf[frame_id].translation
+        expected = np.zeros(config.n_joints)
+        for i, name in enumerate(config.joints):
+            if name in supporting:
+                origin, axis = world_axes(model, data, axes, name)
+                expected[i] = np.linalg.norm(np.cross(axis, point - origin))
+        assert expected.max() > 0.1
+        np.testing.assert_allclose(
+            dynamics.lever_arms(config.payload_frame, q[k]), expected, atol=1e-12
+        )
 
 
 def test_payload_rotational_inertia_leaves_gravity_unchanged_but_not_inertia(
