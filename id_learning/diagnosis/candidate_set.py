@@ -250,7 +250,7 @@ class CandidateSet:
             out[group] = plausibility(
                 self.specs[group],
                 theta,
-                self.raw[group] @ theta,
+                self.raw[group],
                 self.problem.model,
                 self.facts,
                 # Estimation noise, not the misfit of effects still missing, widens the margin.

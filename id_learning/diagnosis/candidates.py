@@ -265,7 +265,7 @@ class PlausibilityFacts:
 def plausibility(
     spec: EffectSpec,
     theta: np.ndarray,
-    contribution: np.ndarray,
+    columns: np.ndarray,
     model: NominalModel,
     facts: PlausibilityFacts,
     *,
@@ -280,7 +280,8 @@ def plausibility(
     Args:
         spec: the candidate.
         theta: (k,) its parameters in physical units.
-        contribution: (N, n) the torque it adds along the training motion [N*m] (unfiltered).
+        columns: (N, n, k) its columns along the training motion (unfiltered): the torque it
+            adds is columns @ theta [N*m].
         model: the nominal model (robot limits, drives).
         facts: nominal torque levels.
         covariance: (k, k) covariance of theta; exact values if None.
@@ -319,16 +320,19 @@ def plausibility(
         return _in_range(value, low, high, 'kg*m^2')
     if name == 'gravity_spring':
         assert j is not None
-        spring = contribution[:, j]
-        gravity = facts.gravity[:, j]
+        x = columns[:, j, :]
+        spring, gravity = x @ theta, facts.gravity[:, j]
         if np.std(spring) == 0 or np.std(gravity) == 0:
             return False, 'no gravity torque to balance'
         # Mounted to carry the arm's weight: it falls where gravity's torque rises, or it takes
         # load off on average (a balancer on joint 3 turns with q3, gravity there with q2 + q3:
         # their shapes may rise together while the balancer's mean still opposes gravity's).
-        shape = float(np.corrcoef(spring, gravity)[0, 1])
-        mean = float(spring @ gravity / np.linalg.norm(spring) / np.linalg.norm(gravity))
-        if shape >= 0 and mean >= 0:
+        # Both are linear in theta: refused only where both add to gravity beyond the margin.
+        about_mean, about_zero = (g @ x / len(x) for g in (gravity - gravity.mean(), gravity))
+        if all(c @ theta - margin * math.sqrt(max(c @ covariance @ c, 0.0)) > 0
+               for c in (about_mean, about_zero)):  # fmt: skip
+            shape = float(np.corrcoef(spring, gravity)[0, 1])
+            mean = float(spring @ gravity / np.linalg.norm(spring) / np.linalg.norm(gravity))
             return False, (
                 f'it would add to gravity (correlation {shape:+.2f}, {mean:+.2f} about zero), '
                 'not balance'

@@ -40,10 +40,13 @@ def test_a_balancer_is_plausible_when_it_takes_load_off_on_average(mabi):
     facts = PlausibilityFacts(np.ones(mabi.n_joints), gravity, 1000.0, np.zeros((6, 10)))
     spec = EffectSpec('gravity_spring', 2, mabi.joints[2], {'ratio': 0.5, 'phase_rad': 0.0})
 
-    def verdict(spring: np.ndarray) -> tuple[bool, str]:
-        contribution = np.zeros_like(gravity)
-        contribution[:, 2] = spring
-        return plausibility(spec, np.ones(3), contribution, model, facts)
+    def verdict(spring: np.ndarray, sd: float = 0.0) -> tuple[bool, str]:
+        columns = np.zeros((*gravity.shape, 3))
+        columns[:, 2, 0] = spring
+        covariance = np.diag([sd**2, 0.0, 0.0])
+        return plausibility(
+            spec, np.array([1.0, 0, 0]), columns, model, facts, covariance=covariance
+        )
 
     shape = 20.0 * np.sin(t)  # rises with gravity's shape (correlation +1 about the means)
     assert verdict(30.0 + shape)[0]
@@ -51,3 +54,6 @@ def test_a_balancer_is_plausible_when_it_takes_load_off_on_average(mabi):
     ok, reason = verdict(-30.0 + shape)
     assert not ok
     assert 'add to gravity' in reason
+    # Adding to gravity by less than its uncertainty says: not refused for its noise.
+    assert verdict(-30.0 + shape, sd=0.5)[0]
+    assert not verdict(-30.0 + shape, sd=0.1)[0]
