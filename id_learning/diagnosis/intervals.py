@@ -1,0 +1,139 @@
+"""How wide a named effect's intervals are: correlation, datasheet tolerances and aliases."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from id_learning.diagnosis.aliases import AliasSet
+from id_learning.diagnosis.candidate_set import CandidateSet
+from id_learning.diagnosis.heldout import time_blocks
+from id_learning.diagnosis.problem import ResidualProblem
+from id_learning.diagnosis.result import Remainder
+from id_learning.diagnosis.selection import Design, Fit
+from id_learning.physics.terms import EffectSpec
+
+__all__ = ['ALIAS_ALTERNATIVES', 'TOLERANCE_SIGMAS', 'IntervalRule']
+
+_LOG = logging.getLogger(__name__)
+
+#: Alternatives an alias set lists beside the kept effect, the closest mimics first.
+ALIAS_ALTERNATIVES = 2
+#: A datasheet value fitted further from its own than this many prior stds (in any direction of
+#: its prior) stands in for an effect the model lacks.
+TOLERANCE_SIGMAS = 4.0
+
+
+class IntervalRule:
+    """How much wider than the design's covariance an effect's interval must be.
+
+    The design's covariance assumes what the filter leaves of white noise; a remainder
+    correlated longer (model-form error, real drives) holds fewer independent samples: the
+    long-run variance grows with the correlation time, and so do the intervals. A block
+    sandwich over the training part's time holds misfit the remainder shares with an effect's
+    columns; the wider of the two sets the interval. The physical parameters are refitted with
+    the datasheet values no effect names free within their tolerances
+    (``CandidateSet.datasheet_unknowns``); their intervals hold what the refined Stribeck
+    velocities leave unknown too (``CandidateSet.setting_sensitivities``), and what the data
+    leave open between an alias set's members: the largest move of a value when one of the
+    closest alternatives stands in for a kept effect is added to its covariance.
+    """
+
+    def __init__(
+        self,
+        problem: ResidualProblem,
+        candidates: CandidateSet,
+        design: Design,
+        final: Fit,
+        remainder: list[Remainder],
+        *,
+        aliases: Sequence[AliasSet] = (),
+    ) -> None:
+        self.design, self.final = design, final
+        self.correlation = np.array([r.correlation_ratio for r in remainder])
+        blocks, _ = time_blocks(problem, design.residual(final, 'train'), 'train')
+        self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
+        self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
+        settings = candidates.setting_sensitivities(design, final)
+        base = candidates.design(design.y, design.n_effective, settings) if settings else design
+        self.marginal_design = base.with_priors(priors)
+        self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
+        # The values at the settings the report gives; their spread with the settings free.
+        self.widened = (
+            self.marginal_design.fit([*final.groups, *self.unknowns, *settings])
+            if settings
+            else self.marginal
+        )
+        self.stand_ins = self._stand_ins()
+        self.swaps = [
+            self._swapped(alias.representative, member)
+            for alias in aliases
+            for member in alias.alternatives()[:ALIAS_ALTERNATIVES]
+        ]
+        if self.stand_ins:
+            _LOG.warning(
+                'datasheet values moved far outside their tolerances (%s): they stand in for '
+                "an effect the model lacks; parameters are the refit model's, with intervals "
+                'as wide as the tolerances leave them',
+                ', '.join(self.stand_ins),
+            )
+
+    def _stand_ins(self) -> list[str]:
+        """The unknowns moved more than ``TOLERANCE_SIGMAS`` prior stds in any prior direction."""
+        design, fit = self.marginal_design, self.marginal
+        out = []
+        for label in self.unknowns:
+            block = design.slices[label]
+            precision = design.prior[block, block]
+            if not precision.any():
+                continue
+            whitened = np.linalg.cholesky(precision).T @ design.coefficients(fit, label)
+            if np.max(np.abs(whitened)) > TOLERANCE_SIGMAS:
+                out.append(label)
+        return out
+
+    def _swapped(self, kept: str, alternative: str) -> Fit:
+        """The marginal refit with an alias set's alternative in its kept effect's place."""
+        groups = [alternative if g == kept else g for g in self.final.groups]
+        unknowns = [u for u in self.unknowns if u not in groups]
+        return self.marginal_design.fit([*groups, *unknowns])
+
+    def model_spread(self, label: str, covariance: np.ndarray) -> np.ndarray:
+        """(k, k) d d^T, d the largest move of an effect's values (against ``covariance``).
+
+        The move when one of an alias set's closest alternatives stands in for its kept effect;
+        zero without aliases.
+        """
+        design = self.marginal_design
+        value = design.physical(self.marginal, label)
+        precision = np.linalg.pinv(covariance)
+        moves = [design.physical(fit, label) - value for fit in self.swaps if label in fit.groups]
+        if not moves:
+            return np.zeros_like(covariance)
+        worst = max(moves, key=lambda d: float(d @ precision @ d))
+        return np.outer(worst, worst)
+
+    def parameters(self, label: str, inflation: float) -> tuple[np.ndarray, np.ndarray]:
+        """An effect's physical coefficients, datasheet values marginalised; their covariance.
+
+        Where a datasheet value stands in for a missing effect the marginal refit explains that
+        effect, not the tolerance: the refit model's values then, with the tolerances' spread.
+        """
+        design, fit = self.marginal_design, self.marginal
+        if not self.stand_ins:
+            covariance = inflation * design.physical_covariance(self.widened, label)
+            return design.physical(fit, label), covariance + self.model_spread(label, covariance)
+        final = self.final
+        residual_variance = final.rss['train'] / max(self.design.n_eff_train - final.rank, 1.0)
+        spread = design.physical_covariance(fit, label, noise_only=True) * residual_variance
+        return self.design.physical(final, label), inflation * spread
+
+    def inflation(self, label: str, spec: EffectSpec) -> float:
+        """How much wider than the design's covariance: correlation time or block sandwich."""
+        joints = slice(None) if spec.joint is None else [spec.joint]
+        model = np.clip(np.diag(self.design.physical_covariance(self.final, label)), 1e-300, None)
+        block = np.diag(self.design.physical_covariance(self.sandwich, label))
+        return max(1.0, float(np.max(self.correlation[joints])), float(np.max(block / model)))
