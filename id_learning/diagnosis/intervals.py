@@ -39,7 +39,8 @@ class IntervalRule:
     (``CandidateSet.datasheet_unknowns``); their intervals hold what the refined Stribeck
     velocities leave unknown too (``CandidateSet.setting_sensitivities``), and what the data
     leave open between an alias set's members: the largest move of a value when one of the
-    closest alternatives stands in for a kept effect is added to its covariance.
+    closest alternatives stands in for a kept effect is added to its covariance, as one more
+    standard deviation.
     """
 
     def __init__(
@@ -59,6 +60,7 @@ class IntervalRule:
         self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
         settings = candidates.setting_sensitivities(design, final)
         base = candidates.design(design.y, design.n_effective, settings) if settings else design
+        self.candidates, self.base = candidates, base
         self.marginal_design = base.with_priors(priors)
         self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
         # The values at the settings the report gives; their spread with the settings free.
@@ -68,9 +70,10 @@ class IntervalRule:
             else self.marginal
         )
         self.stand_ins = self._stand_ins()
+        # (Where a datasheet value stands in, the parameters are the refit model's: no swaps.)
         self.swaps = [
             self._swapped(alias.representative, member)
-            for alias in aliases
+            for alias in ([] if self.stand_ins else aliases)
             for member in alias.alternatives()[:ALIAS_ALTERNATIVES]
         ]
         if self.stand_ins:
@@ -95,11 +98,17 @@ class IntervalRule:
                 out.append(label)
         return out
 
-    def _swapped(self, kept: str, alternative: str) -> Fit:
-        """The marginal refit with an alias set's alternative in its kept effect's place."""
+    def _swapped(self, kept: str, alternative: str) -> tuple[Design, Fit]:
+        """The marginal refit with an alias set's alternative in its kept effect's place.
+
+        The datasheet values are those the swapped model leaves unnamed: a kept torque constant
+        or rotor inertia swapped out is free within its tolerance again, an alternative that is
+        one is free of it.
+        """
         groups = [alternative if g == kept else g for g in self.final.groups]
-        unknowns = [u for u in self.unknowns if u not in groups]
-        return self.marginal_design.fit([*groups, *unknowns])
+        unknowns, priors = self.candidates.datasheet_unknowns(groups)
+        design = self.base.with_priors(priors)
+        return design, design.fit([*groups, *unknowns])
 
     def model_spread(self, label: str, covariance: np.ndarray) -> np.ndarray:
         """(k, k) d d^T, d the largest move of an effect's values (against ``covariance``).
@@ -110,7 +119,7 @@ class IntervalRule:
         design = self.marginal_design
         value = design.physical(self.marginal, label)
         precision = np.linalg.pinv(covariance)
-        moves = [design.physical(fit, label) - value for fit in self.swaps if label in fit.groups]
+        moves = [d.physical(fit, label) - value for d, fit in self.swaps if label in fit.groups]
         if not moves:
             return np.zeros_like(covariance)
         worst = max(moves, key=lambda d: float(d @ precision @ d))

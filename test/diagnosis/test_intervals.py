@@ -53,8 +53,8 @@ def test_a_value_an_alias_alternative_moves_gets_that_move_in_its_interval():
     np.testing.assert_allclose(same, value)
     # The move: the viscous coefficient refitted with load-dependent friction in Coulomb's place.
     groups = [other if g == kept else g for g in selected]
-    unknowns = [u for u in wide.unknowns if u not in groups]
-    swapped = wide.marginal_design.fit([*groups, *unknowns])
+    unknowns, priors = candidates.datasheet_unknowns(groups)
+    swapped = wide.base.with_priors(priors).fit([*groups, *unknowns])
     move = wide.marginal_design.physical(swapped, viscous) - value
     assert abs(move[0]) > 0.1 * np.sqrt(covariance[0, 0])  # the swap matters here
     np.testing.assert_allclose(widened - covariance, np.outer(move, move), rtol=1e-9)
