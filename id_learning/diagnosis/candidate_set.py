@@ -295,9 +295,8 @@ class CandidateSet:
             if spec.name not in ('stribeck_friction', 'payload_mass', 'gravity_spring'):
                 continue
             others = {g: self.columns[g] for g in selected if g != label}
-            refined = refine_setting(
-                self.problem, others, spec, lambda cols: self.design_over(y, cols, n_eff)
-            )
+            design_of = functools.partial(self.design_over, y, n_eff=n_eff)
+            refined = refine_setting(self.problem, others, spec, design_of)
             if refined is None:
                 continue
             self._swap(label, refined)

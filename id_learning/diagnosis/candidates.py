@@ -331,8 +331,8 @@ def plausibility(
         about_mean, about_zero = (g @ x / len(x) for g in (gravity - gravity.mean(), gravity))
         if all(c @ theta - margin * math.sqrt(max(c @ covariance @ c, 0.0)) > 0
                for c in (about_mean, about_zero)):  # fmt: skip
-            shape = float(np.corrcoef(spring, gravity)[0, 1])
-            mean = float(spring @ gravity / np.linalg.norm(spring) / np.linalg.norm(gravity))
+            shape = about_mean @ theta / (np.std(spring) * np.std(gravity))
+            mean = about_zero @ theta / math.sqrt(np.mean(spring**2) * np.mean(gravity**2))
             return False, (
                 f'it would add to gravity (correlation {shape:+.2f}, {mean:+.2f} about zero), '
                 'not balance'

@@ -402,7 +402,7 @@ class RigidBodyDynamics:
         """(n,) how far the origin of ``frame`` moves per radian of each joint at q [m/rad]."""
         index = frame_id(self.model, frame)
         jacobian = pin.computeFrameJacobian(
-            self.model, self.model.createData(), self._to_pin(q), index, pin.LOCAL_WORLD_ALIGNED
+            self.model, self._data, self._to_pin(q), index, pin.LOCAL_WORLD_ALIGNED
         )
         return np.asarray(np.linalg.norm(jacobian[:3, self._index], axis=0))
 
