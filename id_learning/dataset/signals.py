@@ -1,6 +1,6 @@
-"""Signal operations on uniformly sampled columns: the zero-phase low-pass and differentiation.
+"""Signal operations on uniformly sampled columns: zero-phase low-pass, derivative, time shift.
 
-Both work on arrays (N, n), one column per joint, sampled every ``period_s`` seconds.
+All work on arrays (N, n), one column per joint, sampled every ``period_s`` seconds.
 ``scipy.signal`` is imported on first use: it takes about a second, which the ROS nodes that
 import this module (the replay) would otherwise pay at start-up.
 """
@@ -13,7 +13,7 @@ import numpy as np
 
 from id_learning.errors import DatasetError
 
-__all__ = ['butterworth', 'differentiate', 'lowpass']
+__all__ = ['butterworth', 'differentiate', 'lowpass', 'time_shifted']
 
 
 @lru_cache(maxsize=128)
@@ -56,3 +56,19 @@ def lowpass(x: np.ndarray, cutoff_hz: np.ndarray, period_s: float, order: int = 
 def differentiate(x: np.ndarray, period_s: float) -> np.ndarray:
     """Time derivative of uniformly sampled columns by central differences (second-order edges)."""
     return np.gradient(np.asarray(x, dtype=float), period_s, axis=0, edge_order=2)
+
+
+def time_shifted(x: np.ndarray, delay_s: float, period_s: float) -> np.ndarray:
+    """Columns x (N, ...) sampled every ``period_s``, at each sample's time less ``delay_s``.
+
+    A cubic spline through the samples (for signals well inside the sampling band, such as
+    filtered torques); the first ``delay_s`` are extrapolated.
+    """
+    from scipy import interpolate
+
+    x = np.asarray(x, dtype=float)
+    if len(x) < 4:
+        raise DatasetError(f'time_shifted: {len(x)} samples are too few for a cubic spline')
+    t = np.arange(len(x)) * period_s
+    shifted: np.ndarray = interpolate.CubicSpline(t, x, axis=0)(t - delay_s)
+    return shifted

@@ -392,6 +392,10 @@ class CandidateSet:
         for label in targets:
             spec = self.specs[label]
             whole = spec.replace_settings(**whole_model_settings(spec.name))
+            if spec.name == 'signal_delay' and label in selected:
+                # Its column about the delay just fitted (``delay_about``).
+                delay = float(design.physical(fit, label)[0])
+                whole = whole.replace_settings(about=max(delay, 0.0))
             self._swap(label, whole)
             changed |= whole.label != label
         return changed

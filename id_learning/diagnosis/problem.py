@@ -17,7 +17,7 @@ from scipy import signal
 
 from id_learning.dataset.preprocess import Dataset, prepare_dataset
 from id_learning.dataset.recording import Recording
-from id_learning.dataset.signals import butterworth, differentiate
+from id_learning.dataset.signals import butterworth, differentiate, time_shifted
 from id_learning.dataset.statistics import (
     NoiseEstimate,
     estimate_noise,
@@ -36,6 +36,7 @@ from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import (
     LINK_SIDE_EFFECTS,
     EffectSpec,
+    delay_about,
     effect_columns,
     load_slope,
     needs_derivatives,
@@ -332,16 +333,19 @@ class ResidualProblem:
         raw_energy = kept_energy = 0.0
         switching = spec.name in SWITCHING_EFFECTS
         for r in self.recordings:
-            quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
-            x = effect_columns(spec, quantities, self.model)
-            if spec.name in LINK_SIDE_EFFECTS and self.load_terms:
-                x = x * (1.0 + self._load_share(r))[:, :, None]
-            if whole_model_form(spec, 'signal_delay'):
-                x = x - self._terms_rate(r)[:, :, None]
-            if whole_model_form(spec, 'torque_constant_scale'):
-                x = x.copy()
-                x[:, spec.joint, 0] += self._terms_torque(r, self.scale_terms)[:, spec.joint]
-            xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
+            if delay_about(spec) > 0:
+                x, xf = self._delay_secant(r, spec)
+            else:
+                quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
+                x = effect_columns(spec, quantities, self.model)
+                if spec.name in LINK_SIDE_EFFECTS and self.load_terms:
+                    x = x * (1.0 + self._load_share(r))[:, :, None]
+                if whole_model_form(spec, 'signal_delay'):
+                    x = x - self._terms_rate(r)[:, :, None]
+                if whole_model_form(spec, 'torque_constant_scale'):
+                    x = x.copy()
+                    x[:, spec.joint, 0] += self._terms_torque(r, self.scale_terms)[:, spec.joint]
+                xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
             for part in ('train', 'test'):
                 filtered[part].append(xf[r.rows[part]])
             train = r.rows['train']
@@ -417,6 +421,29 @@ class ResidualProblem:
             return out
 
         return self._remembered('load share', (r, self.load_terms, self.link_terms), share)
+
+    def _delay_secant(
+        self, r: PreparedRecording, spec: EffectSpec
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A delay's column about a delay d0 > 0 [N*m/s], raw and as the label meets it.
+
+        (tau(t - d0) - tau(t)) / d0 of the torque it delays (the nominal one, plus the rate
+        terms' in the whole model's form): at d = d0 the column times d is the delay's torque
+        exactly, where the rate (the column about 0) leaves a d^2 / 2 tau'' error that grows
+        with the delay and the label's band. The shift is taken on the torque as the label
+        meets it (smooth), so that a friction step is not interpolated.
+        """
+        d0 = delay_about(spec)
+        total = r.quantities.tau_nominal
+        if whole_model_form(spec, 'signal_delay'):
+            total = total + self._terms_torque(r, self.rate_terms)
+        dataset = r.dataset
+        met = as_label(total, dataset)
+        raw, seen = np.empty_like(total), np.empty_like(total)
+        for rows in dataset.recording_rows():
+            raw[rows] = time_shifted(total[rows], d0, dataset.period_s) - total[rows]
+            seen[rows] = time_shifted(met[rows], d0, dataset.period_s) - met[rows]
+        return raw[:, :, None] / d0, seen[:, :, None] / d0
 
     def _terms_rate(self, r: PreparedRecording) -> np.ndarray:
         """(N, n) time derivative of the rate terms' torque along one recording [N*m/s].

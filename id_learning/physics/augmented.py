@@ -120,6 +120,7 @@ class AugmentedModel:
                 continue
             if whole_model_form(spec, 'signal_delay'):
                 whole_delays.append(float(theta[0]))
+                continue
             contribution = effect_columns(spec, quantities, self.nominal) @ theta
             tau += contribution
             if spec.name in LINK_SIDE_EFFECTS:
@@ -151,10 +152,13 @@ class AugmentedModel:
         now: np.ndarray,
         folded: Folded | None,
     ) -> np.ndarray:
-        """What a delay of the whole model's form adds for the other terms.
+        """What a delay of the whole model's form adds: the torque ``delay`` seconds back.
 
-        Their torque at the state ``delay`` seconds back (to first order) less their torque
-        ``now``; the nominal torque's share is the delay term's own column.
+        The nominal torque and every other term but offsets and torque-constant errors, at
+        the state ``delay`` back (positions and velocities to second order, accelerations to
+        first), less their torque ``now`` (theirs, the nominal torque aside). Not the rate
+        times the delay, whose d^2 / 2 tau'' error grows with the delay: the diagnosis fits
+        the delay on the shifted torque (``ResidualProblem``).
         """
         others = [
             (spec, theta)
@@ -162,18 +166,16 @@ class AugmentedModel:
             if spec.name not in ('signal_delay', 'torque_offset')
             and not whole_model_form(spec, 'torque_constant_scale')
         ]
-        if not others and folded is None:
-            return np.zeros_like(now)
         specs = [spec for spec, _ in others]
         q, v, a, jerk = quantities.q, quantities.v, quantities.a, quantities.jerk
         back = self.nominal.evaluate(
-            q - delay * v,
-            v - delay * a,
+            q - delay * v + 0.5 * delay**2 * a,
+            v - delay * a + 0.5 * delay**2 * jerk,
             a - delay * jerk,
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
         )
-        return self._additive(back, others, np.zeros_like(now), folded) - now
+        return self._additive(back, others, None, folded) - quantities.tau_nominal - now
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.

@@ -242,8 +242,14 @@ def effect_columns(
 
 
 def needs_derivatives(specs: list[EffectSpec]) -> bool:
-    """Whether any candidate needs d tau / d q, d tau / d v or M(q)."""
-    return any(spec.name in ('joint_offset', 'signal_delay') for spec in specs)
+    """Whether any candidate needs d tau / d q, d tau / d v or M(q).
+
+    (A delay of the whole model's form is evaluated at the state it holds back.)
+    """
+    return any(
+        spec.name == 'joint_offset' or (spec.name == 'signal_delay' and not whole_model_form(spec))
+        for spec in specs
+    )
 
 
 def needs_regressor(specs: list[EffectSpec]) -> bool:
@@ -283,6 +289,15 @@ def whole_model_form(spec: EffectSpec, name: str | None = None) -> bool:
     """
     key = _WHOLE_MODEL_KEY.get(spec.name)
     return key is not None and name in (None, spec.name) and spec.settings.get(key) == 'model'
+
+
+def delay_about(spec: EffectSpec) -> float:
+    """The delay [s] a signal-delay term's column is taken about; 0: its rate (first order).
+
+    A fit sets it to its last estimate, so that a delay of several IPO cycles is fitted on the
+    torque it actually shifts (``ResidualProblem``); the coefficient is the delay either way.
+    """
+    return float(spec.settings.get('about', 0.0)) if spec.name == 'signal_delay' else 0.0
 
 
 def load_slope(spec: EffectSpec, quantities: NominalQuantities) -> np.ndarray:

@@ -11,8 +11,8 @@ from support import sine_recording
 
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
-from id_learning.dataset.signals import differentiate, lowpass
-from id_learning.errors import CheckpointError, ConfigError
+from id_learning.dataset.signals import differentiate, lowpass, time_shifted
+from id_learning.errors import CheckpointError, ConfigError, DatasetError
 from id_learning.training import combine_datasets
 
 
@@ -123,3 +123,17 @@ def test_the_label_filter_runs_on_each_recording_of_a_combined_dataset_alone(sho
     np.testing.assert_allclose(filtered[n : 2 * n], expected['second'][:n], atol=1e-12)
     np.testing.assert_allclose(filtered[2 * n : n + m], expected['first'][n:], atol=1e-12)
     np.testing.assert_allclose(filtered[n + m :], expected['second'][n:], atol=1e-12)
+
+
+def test_a_sampled_signal_shifts_by_a_fraction_of_a_sample():
+    period, delay = 0.008, 0.027  # 3.375 samples
+    t = np.arange(2000) * period
+    x = np.stack([np.sin(2 * np.pi * 1.1 * t), np.cos(2 * np.pi * 0.3 * t + 1.0)], axis=1)
+    shifted = time_shifted(x, delay, period)
+    expected = np.stack(
+        [np.sin(2 * np.pi * 1.1 * (t - delay)), np.cos(2 * np.pi * 0.3 * (t - delay) + 1.0)],
+        axis=1,
+    )
+    np.testing.assert_allclose(shifted[10:], expected[10:], atol=1e-6)
+    with pytest.raises(DatasetError, match='too few'):
+        time_shifted(x[:3], delay, period)

@@ -69,6 +69,27 @@ def test_a_delay_holds_back_the_friction_too(delayed_friction):
     np.testing.assert_allclose(rmse, delayed_friction.rmse_after_nm, rtol=0.15)
 
 
+def test_a_delay_of_three_ipo_cycles_is_fitted_on_the_torque_it_shifts():
+    """24 ms: the delay's column is taken about its last estimate, not as the torque's rate."""
+    result, recording = diagnosed(
+        friction() | {'signal_delay': {'enabled': True, 'delay_s': 0.024}}, with_recording=True
+    )
+    assert {e.name for e in result.named_effects()} <= {
+        'viscous_friction',
+        'coulomb_friction',
+        'signal_delay',
+    }
+    delay = by_name(result, 'signal_delay')
+    assert delay.coefficients[0] == pytest.approx(0.024, rel=0.05)
+    low, high = delay.coefficients_ci[0]
+    assert low <= 0.024 <= high
+    assert delay.spec.settings['about'] == pytest.approx(delay.coefficients[0], rel=0.02)
+    dataset, model = filtered_prediction(result, recording)
+    rows = evaluation_rows(dataset, result.settings)['test']
+    rmse = np.sqrt(np.mean((dataset.tau[rows] - model[rows]) ** 2, axis=0))
+    np.testing.assert_allclose(rmse, result.rmse_after_nm, rtol=0.05)
+
+
 def test_motor_side_parameters_carry_the_datasheet_torque_constants(delayed_friction):
     """No torque constant named: the common scale of every torque-unit parameter is the
     datasheet's, known to its tolerance on each joint; the parameters carry it, the model's

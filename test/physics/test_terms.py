@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 from id_learning.errors import RobotModelError
-from id_learning.physics import EffectSpec, NominalModel, effect_columns
+from id_learning.physics import AugmentedModel, EffectSpec, NominalModel, effect_columns
 from id_learning.physics.inertial import inertial_base_directions, transform_dynamic_parameters
 
 N_SAMPLES = 60
@@ -107,6 +107,36 @@ def test_signal_delay_column_is_minus_the_time_derivative_of_the_nominal_torque(
     quantities = model.evaluate(*motion(model.robot, t), derivatives=True)
     columns = effect_columns(EffectSpec('signal_delay'), quantities, model)
     np.testing.assert_allclose(-columns[:, :, 0], finite, rtol=1e-5, atol=1e-3)
+
+
+def test_a_whole_model_delay_is_the_torque_of_the_motion_it_holds_back(mabi):
+    """At constant acceleration the state d back is exact to second order: the delayed model's
+    torque is the undelayed one's on the motion d earlier, friction and nominal torque alike."""
+    rng = np.random.default_rng(4)
+    n, d = mabi.n_joints, 0.024  # three IPO cycles
+    q0, v0, a0 = rng.uniform(-0.5, 0.5, (3, n))
+    t = np.linspace(0.0, 2.0, 15)[:, None]
+
+    def state(times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return q0 + v0 * times + 0.5 * a0 * times**2, v0 + a0 * times, a0 + 0 * times
+
+    friction = [
+        (EffectSpec('viscous_friction', j, mabi.joints[j]), np.array([100.0])) for j in range(n)
+    ] + [
+        (EffectSpec('coulomb_friction', j, mabi.joints[j], {'smoothing_velocity': 0.005}),
+         np.array([50.0]))
+        for j in range(n)
+    ]  # fmt: skip
+    delay = EffectSpec('signal_delay', settings={'rate_of': 'model'})
+    delayed = AugmentedModel(mabi, 'motor', [*friction, (delay, np.array([d]))])
+    undelayed = AugmentedModel(mabi, 'motor', friction)
+    q, v, a = state(t)
+    np.testing.assert_allclose(
+        delayed.torque(q, v, a, np.zeros_like(a)),
+        undelayed.torque(*state(t - d)),
+        rtol=1e-9,
+        atol=1e-8,
+    )
 
 
 def test_payload_columns_reproduce_a_point_mass_that_pinocchio_attaches(model, quantities):
