@@ -245,6 +245,39 @@ def _single_parameter_bound(spec: EffectSpec, model: NominalModel) -> float:
     raise ValueError(spec.name)
 
 
+def _viscous_curve(
+    theta: np.ndarray,
+    covariance: np.ndarray,
+    margin: float,
+    *,
+    exponent: float,
+    max_velocity: float,
+    limit: float,
+) -> tuple[bool, str]:
+    """A linear-plus-power viscous law b v + c v^delta: dissipative and within the limit.
+
+    Its torque at each speed up to the joint's limit is linear in (b, c): it must not be
+    negative, nor exceed the torque limit at the top speed, beyond its margin.
+    """
+    speeds = max_velocity * np.linspace(0.02, 1.0, 50)
+    basis = np.stack([speeds, speeds**exponent], axis=1)
+    torque = basis @ theta
+    spread = margin * np.sqrt(np.clip(np.einsum('ik,kl,il->i', basis, covariance, basis), 0, None))
+    low = int(np.argmin(torque + spread))
+    if torque[low] + spread[low] < 0:
+        return False, (
+            f'viscous law {theta[0]:.4g} v + {theta[1]:.4g} v^{exponent:g} gives '
+            f'{torque[low]:.4g} +- {spread[low] / margin:.2g} N*m at {speeds[low]:.3g} rad/s: '
+            'friction that drives the joint'
+        )
+    if torque[-1] - spread[-1] > limit:
+        return False, (
+            f'viscous law {theta[0]:.4g} v + {theta[1]:.4g} v^{exponent:g} gives '
+            f'{torque[-1]:.4g} N*m at the top speed, beyond the torque limit {limit:g}'
+        )
+    return True, ''
+
+
 @dataclass(frozen=True, eq=False)
 class PlausibilityFacts:
     """Nominal torque levels the size rules compare against; (n,) arrays [N*m].
@@ -303,9 +336,18 @@ def plausibility(
         assert limit is not None
         assert j is not None
         exponent = float(spec.settings.get('exponent', 1.0))
-        bound = limit / robot.limits.velocity[j] ** exponent
-        unit = 'N*m*s/rad' if exponent == 1.0 else f'N*m*(s/rad)^{exponent:g}'
-        return _in_range(value, 0.0, bound, unit)
+        if k == 1:
+            bound = limit / robot.limits.velocity[j] ** exponent
+            unit = 'N*m*s/rad' if exponent == 1.0 else f'N*m*(s/rad)^{exponent:g}'
+            return _in_range(value, 0.0, bound, unit)
+        return _viscous_curve(
+            theta,
+            covariance,
+            margin,
+            exponent=exponent,
+            max_velocity=float(robot.limits.velocity[j]),
+            limit=limit,
+        )
     if name in ('coulomb_friction', 'stribeck_friction'):
         assert limit is not None
         return _in_range(value, 0.0, 0.5 * limit, 'N*m')

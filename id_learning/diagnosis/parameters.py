@@ -98,6 +98,13 @@ def describe_parameters(
             if k < len(theta):  # rotational inertia about the centre of mass, frame axes
                 out.append(entry(f'inertia_{axes}', theta[k], lo[k], hi[k], 'kg*m^2'))
         return out
+    if name == 'viscous_friction' and len(theta) == 2:
+        exponent = float(spec.settings['exponent'])
+        return [
+            entry('coefficient', theta[0], lo[0], hi[0], 'N*m*s/rad'),
+            entry('power_coefficient', theta[1], lo[1], hi[1], f'N*m*(s/rad)^{exponent:g}'),
+            entry('exponent', exponent, exponent, exponent, '1'),
+        ]
     if name == 'stribeck_friction':
         return [
             entry('level', theta[0], lo[0], hi[0], 'N*m'),

@@ -89,7 +89,8 @@ class EffectSpec:
         if self.name == 'stribeck_friction':
             parts.append(f'v_s={self.settings["velocity"]:g}')
         if self.name == 'viscous_friction' and self.settings.get('exponent', 1.0) != 1.0:
-            parts.append(f'delta={self.settings["exponent"]:g}')
+            linear = 'v + ' if self.settings.get('linear') else ''
+            parts.append(f'{linear}|v|^{self.settings["exponent"]:g}')
         if self.name == 'cogging':
             parts.append(f'p={self.settings["periods_per_motor_turn"]}')
         if self.name == 'payload_mass':
@@ -135,14 +136,19 @@ def _friction_sign(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -
     return sign
 
 
-def _viscous(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -> np.ndarray:
-    """v, or sign(v) |v|^delta for a viscous law with an exponent (``settings['exponent']``)."""
+def _viscous(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -> tuple[np.ndarray, ...]:
+    """v; or sign(v) |v|^delta (``settings['exponent']``), after v where ``settings['linear']``.
+
+    Gear grease thickens or thins with speed: a drive's viscous torque grows linearly at low
+    speed and bends at high speed, which a power law alone, one shape from zero speed on, does
+    not follow over a long speed range. (A power law alone is what earlier files hold.)
+    """
     v: np.ndarray = qs.v[:, j]
     exponent = settings.get('exponent', 1.0)
     if np.all(np.asarray(exponent) == 1.0):
-        return v
-    out: np.ndarray = np.sign(v) * np.abs(v) ** np.asarray(exponent, dtype=float)
-    return out
+        return (v,)
+    power: np.ndarray = np.sign(v) * np.abs(v) ** np.asarray(exponent, dtype=float)
+    return (v, power) if settings.get('linear') else (power,)
 
 
 def _gravity_spring(
@@ -175,7 +181,7 @@ JointColumns = Callable[
 #: quantities, the joint index j and the spec's settings. Written with numpy broadcasting, so j
 #: may also be an index array with settings arrays of its length: all joints of an effect at once.
 JOINT_COLUMNS: dict[str, JointColumns] = {
-    'viscous_friction': lambda qs, j, s, model: (_viscous(qs, j, s),),
+    'viscous_friction': lambda qs, j, s, model: _viscous(qs, j, s),
     'coulomb_friction': lambda qs, j, s, model: (_friction_sign(qs, j, s),),
     'stribeck_friction': lambda qs, j, s, model: (
         np.exp(-((qs.v[:, j] / s['velocity']) ** 2)) * _friction_sign(qs, j, s),

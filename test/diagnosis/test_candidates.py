@@ -57,3 +57,29 @@ def test_a_balancer_is_plausible_when_it_takes_load_off_on_average(mabi):
     # Adding to gravity by less than its uncertainty says: not refused for its noise.
     assert verdict(-30.0 + shape, sd=0.5)[0]
     assert not verdict(-30.0 + shape, sd=0.1)[0]
+
+
+def test_a_viscous_law_with_a_linear_part_must_dissipate_within_the_torque_limit(mabi):
+    """b v + c v^delta: any sign of b or c, as long as the torque opposes the motion at every
+    speed up to the limit and stays below the torque limit there, beyond its margin."""
+    model = NominalModel(mabi)
+    j = 1
+    facts = PlausibilityFacts(np.ones(mabi.n_joints), np.zeros((10, 6)), 1000.0, np.zeros((6, 10)))
+    spec = EffectSpec('viscous_friction', j, mabi.joints[j], {'exponent': 0.6, 'linear': True})
+    top, limit = mabi.limits.velocity[j], mabi.limits.torque[j]
+    columns = np.zeros((1, mabi.n_joints, 2))
+
+    def verdict(b: float, c: float, sd: float = 0.0) -> tuple[bool, str]:
+        covariance = np.diag([sd**2, 0.0])
+        return plausibility(spec, np.array([b, c]), columns, model, facts, covariance=covariance)
+
+    assert verdict(500.0, -50.0)[0]  # thins with speed, still dissipative everywhere
+    # Thins so much that at the top speed it would drive the joint.
+    c = -2.0 * 500.0 * top / top**0.6
+    ok, reason = verdict(500.0, c)
+    assert not ok
+    assert 'drives the joint' in reason
+    assert verdict(500.0, c, sd=1e4)[0]  # ... unless the data cannot tell
+    ok, reason = verdict(2.0 * limit / top, 0.0)
+    assert not ok
+    assert 'torque limit' in reason

@@ -176,17 +176,24 @@ def test_unknown_effects_in_the_config_are_refused():
 def test_the_folded_one_sample_torque_equals_the_batch_torque(mabi, whole):
     """Every kind of term and form at once, several per effect, against AugmentedModel.torque.
 
-    Viscous laws linear and with exponents side by side; with ``whole``, a torque-constant error
-    and a delay of the whole model's form and a payload body with its own inertia.
+    Viscous laws linear, linear plus a power and a power alone side by side; with ``whole``, a
+    torque-constant error and a delay of the whole model's form and a payload body with its own
+    inertia.
     """
     rng = np.random.default_rng(3)
     joints = mabi.joints
     terms = []
     scale = {'of': 'model'} if whole else {}
+    # (settings, coefficients) of each viscous law
+    viscous: list[tuple[dict, int]] = [
+        ({}, 1),
+        ({'exponent': 1.4}, 1),
+        ({'exponent': 0.6, 'linear': True}, 2),
+    ]
     for j, joint in enumerate(joints):
         terms += [
-            (EffectSpec('viscous_friction', j, joint, {'exponent': 1.4} if j % 2 else {}),
-             rng.normal(size=1)),
+            (EffectSpec('viscous_friction', j, joint, viscous[j % 3][0]),
+             rng.normal(size=viscous[j % 3][1])),
             (EffectSpec('coulomb_friction', j, joint, {'smoothing_velocity': 0.005}),
              rng.normal(size=1)),
             (EffectSpec('stribeck_friction', j, joint,
