@@ -381,7 +381,9 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
 def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     wanted = set(args.scenarios.split(','))
     cases: list[dict[str, Any]] = []
-    common = {'duration_s': args.duration, 'magnitude': args.magnitude}
+    common: dict[str, Any] = {'duration_s': args.duration, 'magnitude': args.magnitude}
+    if args.base_frequency is not None:
+        common['excitation'] = {'base_frequency_hz': args.base_frequency}
     for seed in range(args.seed0, args.seed0 + args.seeds):
         if 'nothing' in wanted:
             cases.append({**common, 'scenario': 'nothing', 'seed': seed, 'hidden': []})
@@ -417,7 +419,7 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
             cases.append(
                 {**common, 'scenario': 'aliased:coulomb_small_motion', 'seed': seed,
                  'hidden': [('coulomb_friction', 'joint_3')],
-                 'excitation': {'position_fraction': 0.03}}
+                 'excitation': common.get('excitation', {}) | {'position_fraction': 0.03}}
             )  # fmt: skip
         if 'untestable' in wanted:
             # The twin's default cogging amplitudes (1.5 to 6 N*m at 0.5 to 6 % of the torque
@@ -537,6 +539,13 @@ def main() -> int:
     )
     parser.add_argument(
         '--scenarios', default='nothing,single,large,pair,aliased,untestable,outside,variant'
+    )
+    parser.add_argument(
+        '--base-frequency',
+        type=float,
+        default=None,
+        help="the excitation's base frequency [Hz] (default: the twin config's; its harmonics "
+        'reach 3 times it: 0.1 puts them at the 0.3 Hz cut-offs)',
     )
     parser.add_argument(
         '--effects',

@@ -221,7 +221,7 @@ def run_variant_case(case: dict[str, Any]) -> dict[str, Any]:
     """One diagnosis on a variant recording: base friction plus at most one variant effect."""
     start = time.perf_counter()
     seed, duration = case['seed'], case['duration_s']
-    config = twin(seed, duration, {})
+    config = twin(seed, duration, {}, **case.get('excitation', {}))
     robot = config.robot
     base = simulate(config)
     dataset = prepare_dataset(base.recording, robot)
