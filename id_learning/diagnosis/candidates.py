@@ -257,7 +257,8 @@ def _viscous_curve(
     """A linear-plus-power viscous law b v + c v^delta: dissipative and within the limit.
 
     Its torque at each speed up to the joint's limit is linear in (b, c): it must not be
-    negative, nor exceed the torque limit at the top speed, beyond its margin.
+    negative, nor exceed the torque limit, beyond its margin (from 2 % of the top speed on:
+    below, the Coulomb level holds the curve up).
     """
     speeds = max_velocity * np.linspace(0.02, 1.0, 50)
     basis = np.stack([speeds, speeds**exponent], axis=1)
@@ -270,10 +271,12 @@ def _viscous_curve(
             f'{torque[low]:.4g} +- {spread[low] / margin:.2g} N*m at {speeds[low]:.3g} rad/s: '
             'friction that drives the joint'
         )
-    if torque[-1] - spread[-1] > limit:
+    high = int(np.argmax(torque - spread))
+    if torque[high] - spread[high] > limit:
         return False, (
             f'viscous law {theta[0]:.4g} v + {theta[1]:.4g} v^{exponent:g} gives '
-            f'{torque[-1]:.4g} N*m at the top speed, beyond the torque limit {limit:g}'
+            f'{torque[high]:.4g} N*m at {speeds[high]:.3g} rad/s, beyond the torque limit '
+            f'{limit:g}'
         )
     return True, ''
 

@@ -98,13 +98,16 @@ def describe_parameters(
             if k < len(theta):  # rotational inertia about the centre of mass, frame axes
                 out.append(entry(f'inertia_{axes}', theta[k], lo[k], hi[k], 'kg*m^2'))
         return out
-    if name == 'viscous_friction' and len(theta) == 2:
+    if name == 'viscous_friction' and spec.settings.get('exponent', 1.0) != 1.0:
         exponent = float(spec.settings['exponent'])
+        power = len(theta) - 1  # after the linear part, if any
+        linear = [entry('coefficient', theta[0], lo[0], hi[0], 'N*m*s/rad')] if power else []
         return [
-            entry('coefficient', theta[0], lo[0], hi[0], 'N*m*s/rad'),
-            entry('power_coefficient', theta[1], lo[1], hi[1], f'N*m*(s/rad)^{exponent:g}'),
+            *linear,
+            entry('power_coefficient', theta[power], lo[power], hi[power],
+                  f'N*m*(s/rad)^{exponent:g}'),
             entry('exponent', exponent, exponent, exponent, '1'),
-        ]
+        ]  # fmt: skip
     if name == 'stribeck_friction':
         return [
             entry('level', theta[0], lo[0], hi[0], 'N*m'),

@@ -249,8 +249,8 @@ def augmented_torque(
         q: (N, n) joint positions [rad].
         v: (N, n) joint velocities [rad/s].
         a: (N, n) joint accelerations [rad/s^2].
-        jerk: (N, n) joint jerks [rad/s^3] for the signal-delay term; zero if None (the term is
-            then d tau / dq v + d tau / dv a only).
+        jerk: (N, n) joint jerks [rad/s^3] for the signal-delay term; zero if None (the state
+            the delay holds back then lacks the jerk's share).
 
     Returns:
         (N, n) tau_u (or joint torque, per ``result.target``) [N*m].

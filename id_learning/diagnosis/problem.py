@@ -439,8 +439,10 @@ class ResidualProblem:
             total = total + self._terms_torque(r, self.rate_terms)
         dataset = r.dataset
         met = as_label(total, dataset)
-        raw, seen = np.empty_like(total), np.empty_like(total)
+        raw, seen = np.zeros_like(total), np.zeros_like(total)
         for rows in dataset.recording_rows():
+            if len(rows) < 4:  # too short for a spline: inside the filter's start-up, trimmed
+                continue
             raw[rows] = time_shifted(total[rows], d0, dataset.period_s) - total[rows]
             seen[rows] = time_shifted(met[rows], d0, dataset.period_s) - met[rows]
         return raw[:, :, None] / d0, seen[:, :, None] / d0

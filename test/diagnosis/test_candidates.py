@@ -6,6 +6,7 @@ import numpy as np
 
 from id_learning.diagnosis import DiagnosisConfig
 from id_learning.diagnosis.candidates import PlausibilityFacts, build_library, plausibility
+from id_learning.diagnosis.parameters import describe_parameters
 from id_learning.physics import EFFECT_NAMES, EffectSpec, NominalModel
 from id_learning.twin.effects import EFFECT_NAMES as TWIN_EFFECT_NAMES
 
@@ -65,17 +66,19 @@ def test_a_viscous_law_with_a_linear_part_must_dissipate_within_the_torque_limit
     model = NominalModel(mabi)
     j = 1
     facts = PlausibilityFacts(np.ones(mabi.n_joints), np.zeros((10, 6)), 1000.0, np.zeros((6, 10)))
-    spec = EffectSpec('viscous_friction', j, mabi.joints[j], {'exponent': 0.6, 'linear': True})
     top, limit = mabi.limits.velocity[j], mabi.limits.torque[j]
     columns = np.zeros((1, mabi.n_joints, 2))
 
-    def verdict(b: float, c: float, sd: float = 0.0) -> tuple[bool, str]:
+    def verdict(b: float, c: float, sd: float = 0.0, exponent: float = 1.4) -> tuple[bool, str]:
+        spec = EffectSpec(
+            'viscous_friction', j, mabi.joints[j], {'exponent': exponent, 'linear': True}
+        )
         covariance = np.diag([sd**2, 0.0])
         return plausibility(spec, np.array([b, c]), columns, model, facts, covariance=covariance)
 
-    assert verdict(500.0, -50.0)[0]  # thins with speed, still dissipative everywhere
-    # Thins so much that at the top speed it would drive the joint.
-    c = -2.0 * 500.0 * top / top**0.6
+    assert verdict(500.0, -50.0)[0]  # bends down at speed, still dissipative everywhere
+    # Bends so far that at the top speed it would drive the joint.
+    c = -2.0 * 500.0 * top / top**1.4
     ok, reason = verdict(500.0, c)
     assert not ok
     assert 'drives the joint' in reason
@@ -83,3 +86,32 @@ def test_a_viscous_law_with_a_linear_part_must_dissipate_within_the_torque_limit
     ok, reason = verdict(2.0 * limit / top, 0.0)
     assert not ok
     assert 'torque limit' in reason
+    # Within the limit at the top speed, beyond it on the way: 1.26 times it at 0.63 of it.
+    b, c = 3.0 * limit / top, -2.5 * limit / top**3
+    assert b * top + c * top**3 < limit
+    ok, reason = verdict(b, c, exponent=3.0)
+    assert not ok
+    assert 'torque limit' in reason
+
+
+def test_a_viscous_law_names_its_terms(mabi):
+    model = NominalModel(mabi)
+    half = np.array([1.0, 2.0])
+
+    def names(settings: dict, theta: np.ndarray) -> list[tuple[str, float]]:
+        spec = EffectSpec('viscous_friction', 0, mabi.joints[0], settings)
+        return [
+            (p['name'], p['value'])
+            for p in describe_parameters(spec, theta, half[: len(theta)], model)
+        ]
+
+    assert names({}, np.array([400.0])) == [('coefficient', 400.0)]
+    assert names({'exponent': 0.6}, np.array([300.0])) == [
+        ('power_coefficient', 300.0),
+        ('exponent', 0.6),
+    ]
+    assert names({'exponent': 1.4, 'linear': True}, np.array([400.0, 50.0])) == [
+        ('coefficient', 400.0),
+        ('power_coefficient', 50.0),
+        ('exponent', 1.4),
+    ]

@@ -118,6 +118,7 @@ def test_a_curved_viscous_law_is_identified_and_named_alone(true_exponent):
         current=twin.recording.current + current_from_motor_torque(extra, config.robot.drives),
     )
     shapes = shapes_of(recording, config.robot)
+    assert shapes[0][1] != 1.0
     assert (shapes[0][1] > 1.0) == (true_exponent > 1.0)
     assert shapes[1:] == [(0.005, 1.0)] * 5
     result = run_diagnosis(recording, config.robot)
