@@ -144,8 +144,8 @@ def main() -> int:
             f'({100 * entry["within_15pc"] / n:.0f} %), 95 % interval holds the truth '
             f'{entry["covered"]:3d} ({100 * entry["covered"] / n:.0f} %)'
         )
-    curved = [r['effect'] for r in rows if not r['judged']]
-    print(f'{len(curved)} curved viscous laws not judged (no linear coefficient to compare)')
+    curved = sum(not r['judged'] for r in rows)
+    print(f'{curved} curved viscous laws not judged (no linear coefficient to compare)')
     return 0
 
 

@@ -264,19 +264,18 @@ def _viscous_curve(
     basis = np.stack([speeds, speeds**exponent], axis=1)
     torque = basis @ theta
     spread = margin * np.sqrt(np.clip(np.einsum('ik,kl,il->i', basis, covariance, basis), 0, None))
+    law = f'viscous law {theta[0]:.4g} v + {theta[1]:.4g} v^{exponent:g} gives'
     low = int(np.argmin(torque + spread))
     if torque[low] + spread[low] < 0:
         return False, (
-            f'viscous law {theta[0]:.4g} v + {theta[1]:.4g} v^{exponent:g} gives '
-            f'{torque[low]:.4g} +- {spread[low] / margin:.2g} N*m at {speeds[low]:.3g} rad/s: '
-            'friction that drives the joint'
+            f'{law} {torque[low]:.4g} +- {spread[low] / margin:.2g} N*m at '
+            f'{speeds[low]:.3g} rad/s: friction that drives the joint'
         )
     high = int(np.argmax(torque - spread))
     if torque[high] - spread[high] > limit:
         return False, (
-            f'viscous law {theta[0]:.4g} v + {theta[1]:.4g} v^{exponent:g} gives '
-            f'{torque[high]:.4g} N*m at {speeds[high]:.3g} rad/s, beyond the torque limit '
-            f'{limit:g}'
+            f'{law} {torque[high]:.4g} N*m at {speeds[high]:.3g} rad/s, beyond the torque '
+            f'limit {limit:g}'
         )
     return True, ''
 

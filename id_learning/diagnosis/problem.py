@@ -438,14 +438,13 @@ class ResidualProblem:
         if whole_model_form(spec, 'signal_delay'):
             total = total + self._terms_torque(r, self.rate_terms)
         dataset = r.dataset
-        met = as_label(total, dataset)
-        raw, seen = np.zeros_like(total), np.zeros_like(total)
+        both = np.stack([total, as_label(total, dataset)], axis=-1)  # raw, as the label meets it
+        change = np.zeros_like(both)
         for rows in dataset.recording_rows():
             if len(rows) < 4:  # too short for a spline: inside the filter's start-up, trimmed
                 continue
-            raw[rows] = time_shifted(total[rows], d0, dataset.period_s) - total[rows]
-            seen[rows] = time_shifted(met[rows], d0, dataset.period_s) - met[rows]
-        return raw[:, :, None] / d0, seen[:, :, None] / d0
+            change[rows] = time_shifted(both[rows], d0, dataset.period_s) - both[rows]
+        return change[..., :1] / d0, change[..., 1:] / d0
 
     def _terms_rate(self, r: PreparedRecording) -> np.ndarray:
         """(N, n) time derivative of the rate terms' torque along one recording [N*m/s].
