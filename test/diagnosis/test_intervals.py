@@ -19,7 +19,10 @@ FRICTION = {
 }
 
 
-def test_a_value_an_alias_alternative_moves_gets_that_move_in_its_interval():
+def _rule_with_alias(alternative_name: str, kept_name: str = 'coulomb_friction'):
+    """Twin friction only, selected with ``kept_name`` on joint 3, kept in an alias set with an
+    alternative of the given kind. The plain rule, the rule with the alias, the viscous label,
+    the swapped fit and the viscous coefficient's move."""
     config = twin_config(120.0, FRICTION, seed=5)
     twin = simulate(config)
     settings = DiagnosisConfig()
@@ -39,22 +42,53 @@ def test_a_value_an_alias_alternative_moves_gets_that_move_in_its_interval():
         return label
 
     selected = [g for g in candidates.testable if specs[g].name in FRICTION]
-    kept, viscous = on_joint_3('coulomb_friction'), on_joint_3('viscous_friction')
-    other = on_joint_3('load_dependent_friction')
+    kept, viscous = on_joint_3(kept_name), on_joint_3('viscous_friction')
+    selected += [kept] if kept not in selected else []
+    # (Of several Stribeck velocities the widest hump, the closest to a Coulomb step.)
+    alternatives = [g for g in candidates.testable if specs[g].name == alternative_name]
+    other = max(
+        (g for g in alternatives if specs[g].joint == 2),
+        key=lambda g: float(specs[g].settings.get('velocity', 0.0)),
+    )
     final = design.fit(selected)
     remainder = _remainder(problem, design, final, settings)
     alias = AliasSet(kept, [kept, other], unexplained={other: 0.0})
 
     plain = IntervalRule(problem, candidates, design, final, remainder)
     wide = IntervalRule(problem, candidates, design, final, remainder, aliases=[alias])
+    # The move: the viscous coefficient refitted with the alternative in Coulomb's place.
+    groups = [other if g == kept else g for g in selected]
+    unknowns, priors = candidates.datasheet_unknowns(groups)
+    swapped = wide.base.with_priors(priors).fit([*groups, *unknowns])
+    value, _ = plain.parameters(viscous, 1.0)
+    move = wide.marginal_design.physical(swapped, viscous) - value
+    return plain, wide, viscous, swapped, move
+
+
+def test_a_value_an_alias_alternative_moves_gets_that_move_weighted_by_its_fit():
+    """A rotor inertia on joint 3 the twin does not have, kept in an alias set with a torque
+    offset: either fits about as well, and the viscous coefficient moves between them."""
+    plain, wide, viscous, swapped, move = _rule_with_alias('torque_offset', 'rotor_inertia')
     value, covariance = plain.parameters(viscous, 1.0)
     same, widened = wide.parameters(viscous, 1.0)
 
     np.testing.assert_allclose(same, value)
-    # The move: the viscous coefficient refitted with load-dependent friction in Coulomb's place.
-    groups = [other if g == kept else g for g in selected]
-    unknowns, priors = candidates.datasheet_unknowns(groups)
-    swapped = wide.base.with_priors(priors).fit([*groups, *unknowns])
-    move = wide.marginal_design.physical(swapped, viscous) - value
-    assert abs(move[0]) > 0.1 * np.sqrt(covariance[0, 0])  # the swap matters here
-    np.testing.assert_allclose(widened - covariance, np.outer(move, move), rtol=1e-9)
+    assert abs(move[0]) > 0.05 * np.sqrt(covariance[0, 0])  # the swap matters here
+    # The Akaike weight of the swapped model against the kept one, from their own fits.
+    kept = wide.marginal
+    variance = kept.rss['train'] / (wide.design.n_eff_train - kept.rank)
+    aic = (swapped.rss['train'] - kept.rss['train']) / variance + 2 * (swapped.rank - kept.rank)
+    weight = float(np.exp(-0.5 * max(aic, 0.0)))
+    assert 0.05 < weight < 0.95  # neither as good nor ruled out
+    np.testing.assert_allclose(widened - covariance, weight * np.outer(move, move), rtol=1e-9)
+
+
+def test_an_alternative_that_fits_clearly_worse_does_not_widen_the_interval():
+    """A twin with sharp Coulomb friction on joint 3: a Stribeck hump at 80 mrad/s in its place
+    leaves the step at reversals unexplained. Its move is no value the data allow."""
+    plain, wide, viscous, swapped, move = _rule_with_alias('stribeck_friction')
+    _, covariance = plain.parameters(viscous, 1.0)
+    _, widened = wide.parameters(viscous, 1.0)
+    assert swapped.rss['train'] > 1.01 * wide.marginal.rss['train']
+    assert abs(move[0]) > np.sqrt(covariance[0, 0])  # it would have widened it
+    np.testing.assert_allclose(widened, covariance, rtol=1e-9)
