@@ -339,6 +339,7 @@ def forward_select(
     noise_significance: float = 0.001,
     noise_tolerance: float = 1.25,
     last_resort: Callable[[str], bool] | None = None,
+    start: Sequence[str] = (),
 ) -> SelectionResult:
     """Add candidate groups one at a time while each passes every test (see the module doc).
 
@@ -346,16 +347,18 @@ def forward_select(
     no other candidate passes: they reproduce most specific effects' torques, and taken early
     they absorb an effect that one coefficient explains (a torque-constant error) and open
     trades (the link masses against every joint's torque scale) that nothing else settles.
+    ``start``: groups already selected; the selection resumes from them (``steps`` then holds
+    the new groups' only).
     """
     n_eff = design.n_eff_train
     level = significance / max(len(candidates), 1)
     strict = level / 100.0
-    selected: list[str] = []
+    selected: list[str] = list(start)
     steps: list[GroupEvaluation] = []
     current = design.fit(selected)
     stop_reason = 'reached the maximum number of effects'
     rejected: GroupEvaluation | None = None
-    for _ in range(max_groups):
+    for _ in range(max(max_groups - len(selected), 0)):
         evaluations = []
         for label in candidates:
             if label in selected or (conflicts is not None and conflicts(label, selected)):

@@ -68,6 +68,18 @@ def test_distinct_candidates_are_no_aliases(signals):
     assert find_aliases(design, selection.selected, list(columns), always_plausible) == []
 
 
+def test_the_selection_resumes_from_groups_already_selected(signals):
+    columns = {k: signals[k] for k in ('a', 'c', 'd')}
+    design = design_with(3.0 * signals['a'][:, :, 0] + 2.0 * signals['d'][:, :, 0], columns)
+    resumed = forward_select(design, list(columns), always_plausible, start=['a'])
+    assert resumed.selected == ['a', 'd']
+    assert [step.label for step in resumed.steps] == ['d']  # the new group's step only
+    # The groups it starts from count towards the maximum.
+    full = forward_select(design, list(columns), always_plausible, start=['a'], max_groups=1)
+    assert full.selected == ['a']
+    assert full.stop_reason == 'reached the maximum number of effects'
+
+
 def test_pure_noise_selects_nothing(signals):
     columns = {k: signals[k] for k in ('a', 'c', 'd')}
     design = design_with(np.zeros((2 * M, N)), columns, seed=5)

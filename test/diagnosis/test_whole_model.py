@@ -293,6 +293,25 @@ def test_a_payloads_centre_of_mass_does_not_run_away_while_it_is_refined(repo):
     assert np.linalg.norm(payload.spec.settings['com_guess_m']) <= 1.0
 
 
+def test_the_selection_resumes_once_a_refinement_makes_a_candidate_plausible(repo):
+    """Every effect of the default twin, seed 21 at 600 s: the link parameters were refused,
+    the flange link's inertia changing by 0.19 kg*m^2, as long as the payload was a point mass.
+    Refined, the payload took its own inertia, but the selection had stopped: joints 2-5 kept a
+    remainder of up to four times the noise's correlation time, and every interval, widened by
+    it, read +-66 %. The selection resumes from the refined effects."""
+    effects = yaml.safe_load((repo / 'config/twin_default.yaml').read_text())['effects']
+    config = twin_config(600.0, effects, seed=21)
+    result = run_diagnosis(simulate(config).recording, config.robot)
+    assert result.structured_joints() == []
+    assert 'inertial_parameter_error' in {e.name for e in result.effects}
+    scale = effects['torque_constant_scale']['scale']
+    for effect in result.effects:
+        if effect.name == 'torque_constant_scale':
+            (parameter,) = effect.parameters
+            assert parameter['value'] == pytest.approx(scale[effect.spec.joint], rel=0.05)
+            assert parameter['ci'][1] - parameter['ci'][0] < 0.2
+
+
 def test_a_stribeck_hump_is_not_made_up_by_a_softer_turn_through_zero_speed(repo):
     """Every effect of the default twin, seed 10: the friction shape, judged beside humps at
     15 and 50 mrad/s, gave joint 1 a softer turn (10 mrad/s for 5); its refined hump then went
