@@ -143,3 +143,56 @@ def test_friction_shape_grids_are_checked():
         DiagnosisConfig(smoothing_velocities=(-1.0,))
     with pytest.raises(ConfigError, match='standstill_velocity'):
         DiagnosisConfig(standstill_velocity=-1.0)
+
+
+def _refined_shape(recording, robot, joint: int, judged: tuple[float, float]):
+    """Joint ``joint`` given the ``judged`` shape, its twin friction and a hump at 50 mrad/s
+    selected (every other joint's too), then refined: the joint's shape and refined hump."""
+    config = DiagnosisConfig()
+    problem = ResidualProblem(as_datasets(recording, robot, config), robot, config)
+    candidates = CandidateSet(problem)
+    if candidates.friction_shapes[joint] != judged:
+        candidates.friction_shapes[joint] = judged
+        candidates._reshape(joint, judged, list(candidates.testable))
+    specs = candidates.specs
+    selected = [
+        g
+        for g in candidates.testable
+        if specs[g].name in ('viscous_friction', 'coulomb_friction')
+        or (specs[g].name == 'stribeck_friction' and specs[g].settings['velocity'] == 0.05)
+    ]
+    y = {part: problem.residual(part) for part in ('train', 'test')}
+    n_eff = {part: problem.n_effective(part) for part in ('train', 'test')}
+    refined = candidates.refine(selected, y, n_eff)
+    (hump,) = [
+        specs[g]
+        for g in refined
+        if specs[g].name == 'stribeck_friction' and specs[g].joint == joint
+    ]
+    return candidates.friction_shapes[joint], hump
+
+
+def test_a_curved_viscous_law_taken_for_a_hump_is_judged_again_beside_it():
+    # Twin seed 15 at 600 s with every effect: joint 3's law was judged |v|^0.8 beside humps at
+    # 15 and 50 mrad/s, its 30 mrad/s hump refined to 51 mrad/s and the Coulomb level read 93
+    # for 120. Beside the hump at its own velocity the twin's linear law is found again.
+    config = twin_config(DURATION_S, with_stribeck(), seed=SEED)
+    recording = simulate(config).recording
+    shape, hump = _refined_shape(recording, config.robot, 2, (0.005, 0.8))
+    assert shape == (0.005, 1.0)
+    assert hump.settings['velocity'] == pytest.approx(0.03, rel=0.15)
+
+
+def test_a_curved_viscous_law_that_is_there_survives_the_hump_beside_it():
+    config = twin_config(DURATION_S, with_stribeck(), seed=SEED)
+    twin = simulate(config)
+    extra = np.zeros_like(twin.v_true)
+    v = twin.v_true[:, 0]
+    extra[:, 0] = VISCOUS[0] * (np.sign(v) * np.abs(v) ** 0.6 - v)
+    recording = replace(
+        twin.recording,
+        current=twin.recording.current + current_from_motor_torque(extra, config.robot.drives),
+    )
+    shape, hump = _refined_shape(recording, config.robot, 0, (0.005, 0.6))
+    assert shape[1] == 0.6
+    assert hump.settings['velocity'] == pytest.approx(0.03, rel=0.15)
