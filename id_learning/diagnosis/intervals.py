@@ -141,7 +141,7 @@ class IntervalRule:
         part's), each effective parameter more charged 2.
         """
         kept = self.marginal
-        variance = max(kept.rss['train'] / max(self.design.n_eff_train - kept.rank, 1.0), 1e-300)
+        variance = max(self.design.residual_variance(kept.rss['train'], kept.rank), 1e-300)
         aic = (fit.rss['train'] - kept.rss['train']) / variance + 2.0 * (fit.rank - kept.rank)
         return math.exp(-0.5 * max(aic, 0.0))
 
@@ -156,7 +156,7 @@ class IntervalRule:
             covariance = inflation * design.physical_covariance(self.widened, label)
             return design.physical(fit, label), covariance + self.model_spread(label, covariance)
         final = self.final
-        residual_variance = final.rss['train'] / max(self.design.n_eff_train - final.rank, 1.0)
+        residual_variance = self.design.residual_variance(final.rss['train'], final.rank)
         spread = design.physical_covariance(fit, label, noise_only=True) * residual_variance
         return self.design.physical(final, label), inflation * spread
 

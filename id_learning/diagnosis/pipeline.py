@@ -110,16 +110,20 @@ def run_diagnosis(
             start=start,
         )
 
+    def settled(groups: list[str]) -> list[str]:
+        """Refine a selection, give the whole-model columns its effects; the new labels."""
+        refined = candidates.refine(groups, y, n_eff)
+        candidates.whole_model(refined, y, n_eff)
+        # The friction's load from this selection's fit, not the one before whole_model.
+        return candidates.load_on_model(refined, y, n_eff)
+
     selection = select()
     selected = candidates.refine(selection.selected, y, n_eff)
     if candidates.whole_model(selected, y, n_eff):
         # Delay and torque-constant candidates now see the whole model: select again, then
         # give their columns the final effects.
         selection = select()
-        selected = candidates.refine(selection.selected, y, n_eff)
-        candidates.whole_model(selected, y, n_eff)
-        # The friction's load from this selection's fit, not the one before whole_model.
-        selected = candidates.load_on_model(selected, y, n_eff)
+        selected = settled(selection.selected)
     for _ in range(_RESUMPTIONS):
         # A refined setting can make a candidate plausible that was not: with the payload's
         # own inertia found, the flange link's parameters no longer need it (twin seed 21 at
@@ -129,9 +133,7 @@ def run_diagnosis(
         if len(resumed.selected) == len(selected):
             break
         selection = replace(resumed, steps=[*selection.steps, *resumed.steps])
-        selected = candidates.refine(resumed.selected, y, n_eff)
-        candidates.whole_model(selected, y, n_eff)
-        selected = candidates.load_on_model(selected, y, n_eff)
+        selected = settled(resumed.selected)
     design = candidates.design(y, n_eff)
 
     def aliases_of(groups: list[str]) -> list[AliasSet]:

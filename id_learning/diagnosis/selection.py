@@ -178,9 +178,12 @@ class Design:
             g = self.gram[part][np.ix_(idx, idx)]
             value = self.yy[part] - 2.0 * theta @ self.cross[part][idx] + theta @ g @ theta
             rss[part] = max(float(value), 0.0)
-        dof = max(self.n_eff_train - rank, 1.0)
-        covariance = inverse * (rss['train'] / dof)
+        covariance = inverse * self.residual_variance(rss['train'], rank)
         return Fit(tuple(groups), theta, rank, rss, covariance, inverse)
+
+    def residual_variance(self, rss_train: float, rank: float) -> float:
+        """Training residual variance per effective degree of freedom of a fit's rss and rank."""
+        return rss_train / max(self.n_eff_train - rank, 1.0)
 
     def physical(self, fit: Fit, group: str) -> np.ndarray:
         """A group's coefficients in the columns' physical units."""
