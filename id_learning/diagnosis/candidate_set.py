@@ -55,6 +55,9 @@ LOAD_TOLERANCE = 0.01
 #: Step in a log setting for the columns' derivative (``setting_sensitivities``).
 _LOG_STEP = 0.05
 
+#: Effects whose columns hold the other effects' torque in the whole model's form.
+_WHOLE_MODEL_KINDS = ('signal_delay', 'torque_constant_scale')
+
 #: The effects that ``SPECIAL_CASES`` are cases of.
 _GENERAL_EFFECTS = frozenset(SPECIAL_CASES.values())
 
@@ -385,21 +388,30 @@ class CandidateSet:
         whole model's form (the selection then runs again, and this once more, so that the
         columns hold the final effects).
         """
-        kinds = ('signal_delay', 'torque_constant_scale')
-        others = [g for g in selected if self.specs[g].name not in kinds]
-        targets = [label for label in self.testable if self.specs[label].name in kinds]
+        others = [g for g in selected if self.specs[g].name not in _WHOLE_MODEL_KINDS]
+        targets = [g for g in self.testable if self.specs[g].name in _WHOLE_MODEL_KINDS]
         if not others or not targets:
             return False
         design = self.design(y, n_eff)
-        fit = design.fit(selected)
+        return self.hold_torque_of(design, design.fit(selected))
+
+    def hold_torque_of(self, design: Design, fit: Fit) -> bool:
+        """Put a fit's torque in the delay and torque-constant columns; whether new forms.
+
+        Every group of the fit but the delays and torque constants enters at its fitted value
+        (``whole_model``); the delay's column is taken about its fitted delay, if it is in the
+        fit. A delay's value depends on the torque its column holds (it is fitted on that
+        torque's rate), so a fit that reports it (``IntervalRule``) holds its own torque.
+        """
+        others = [g for g in fit.groups if self.specs[g].name not in _WHOLE_MODEL_KINDS]
         terms = [(self.specs[g], design.physical(fit, g)) for g in others]
         self.problem.rate_terms = terms
         self.problem.scale_terms = [t for t in terms if t[0].name != 'torque_offset']
         changed = False
-        for label in targets:
+        for label in [g for g in self.testable if self.specs[g].name in _WHOLE_MODEL_KINDS]:
             spec = self.specs[label]
             whole = spec.replace_settings(**whole_model_settings(spec.name))
-            if spec.name == 'signal_delay' and label in selected:
+            if spec.name == 'signal_delay' and label in fit.groups:
                 # Its column about the delay just fitted (``delay_about``).
                 delay = float(design.physical(fit, label)[0])
                 whole = whole.replace_settings(about=max(delay, 0.0))

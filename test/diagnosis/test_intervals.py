@@ -92,3 +92,57 @@ def test_an_alternative_that_fits_clearly_worse_does_not_widen_the_interval():
     assert swapped.rss['train'] > 1.01 * wide.marginal.rss['train']
     assert abs(move[0]) > np.sqrt(covariance[0, 0])  # it would have widened it
     np.testing.assert_allclose(widened, covariance, rtol=1e-9)
+
+
+def test_a_delay_is_read_on_the_torque_of_the_fit_that_reports_it():
+    """Friction delivered 8 ms late by rotors 30 % heavier than their datasheet: the reported
+    (marginal) fit frees the rotor inertias, which moves the friction the delay's column holds.
+    The column holds that fit's torque, not the final fit's (there the delay took the missing
+    rotor inertia and read -1.4 ms), and holding it once more leaves the delay where it is."""
+    effects = FRICTION | {
+        'signal_delay': {'enabled': True, 'delay_s': 0.008},
+        'rotor_inertia': {'enabled': True, 'scale': [1.3] * 6},
+    }
+    config = twin_config(120.0, effects, seed=5)
+    settings = DiagnosisConfig()
+    problem = ResidualProblem(
+        as_datasets(simulate(config).recording, config.robot, settings), config.robot, settings
+    )
+    candidates = CandidateSet(problem)
+    y = {part: problem.residual(part) for part in ('train', 'test')}
+    n_eff = {part: problem.n_effective(part) for part in ('train', 'test')}
+
+    def selected() -> list[str]:
+        kinds = (*FRICTION, 'signal_delay')
+        return [g for g in candidates.testable if candidates.specs[g].name in kinds]
+
+    assert candidates.whole_model(selected(), y, n_eff)  # the delay takes the whole model
+    groups = selected()
+    (delay,) = [g for g in groups if candidates.specs[g].name == 'signal_delay']
+    design = candidates.design(y, n_eff)
+    final = design.fit(groups)
+    rule = IntervalRule(
+        problem, candidates, design, final, _remainder(problem, design, final, settings)
+    )
+
+    held = {spec.label: theta for spec, theta in problem.rate_terms}
+    reported = {g: rule.marginal_design.physical(rule.marginal, g) for g in groups}
+    moved = [
+        g
+        for g in groups
+        if g != delay and not np.allclose(design.physical(final, g), reported[g], rtol=0.02)
+    ]
+    assert moved  # the datasheet values, freed, move the friction
+    for g in groups:
+        if g != delay:
+            np.testing.assert_allclose(held[g], reported[g], rtol=1e-3)
+    value, covariance = rule.parameters(delay, 1.0)
+    std = float(np.sqrt(covariance[0, 0]))
+    assert abs(value[0] - 0.008) < 2.0 * std
+    assert abs(design.physical(final, delay)[0] - 0.008) > 2.0 * std  # what it was read as
+    # A fixed point: holding the reported fit's torque again moves the delay by a hair.
+    candidates.hold_torque_of(rule.marginal_design, rule.marginal)
+    again = IntervalRule(
+        problem, candidates, design, final, _remainder(problem, design, final, settings)
+    )
+    assert abs(again.parameters(delay, 1.0)[0][0] - value[0]) < 0.02 * std
