@@ -45,7 +45,8 @@ class IntervalRule:
     leave open between an alias set's members: the largest move of a value when one of the
     closest alternatives stands in for a kept effect, weighted by how well that model fits, is
     added to its covariance, as one more standard deviation. The delay and torque-constant
-    columns hold the torque of the fit the values come from (``HELD_TORQUE_STEPS``).
+    columns hold the torque of the fit the values come from (``HELD_TORQUE_STEPS``): the rule
+    leaves the candidates' and the problem's whole-model columns holding it.
     """
 
     def __init__(
