@@ -389,8 +389,7 @@ class CandidateSet:
         columns hold the final effects).
         """
         others = [g for g in selected if self.specs[g].name not in _WHOLE_MODEL_KINDS]
-        targets = [g for g in self.testable if self.specs[g].name in _WHOLE_MODEL_KINDS]
-        if not others or not targets:
+        if not others or not self._whole_model_candidates():
             return False
         design = self.design(y, n_eff)
         return self.hold_torque_of(design, design.fit(selected))
@@ -408,7 +407,7 @@ class CandidateSet:
         self.problem.rate_terms = terms
         self.problem.scale_terms = [t for t in terms if t[0].name != 'torque_offset']
         changed = False
-        for label in [g for g in self.testable if self.specs[g].name in _WHOLE_MODEL_KINDS]:
+        for label in self._whole_model_candidates():
             spec = self.specs[label]
             whole = spec.replace_settings(**whole_model_settings(spec.name))
             if spec.name == 'signal_delay' and label in fit.groups:
@@ -418,6 +417,10 @@ class CandidateSet:
             self._swap(label, whole)
             changed |= whole.label != label
         return changed
+
+    def _whole_model_candidates(self) -> list[str]:
+        """The testable delay and torque-constant candidates."""
+        return [g for g in self.testable if self.specs[g].name in _WHOLE_MODEL_KINDS]
 
     def saved(self) -> tuple[Any, ...]:
         """What ``refine`` changes: specs, columns, the problem's terms (see ``restore``)."""

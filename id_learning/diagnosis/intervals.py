@@ -65,25 +65,25 @@ class IntervalRule:
         self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
         self.unknowns, priors = candidates.datasheet_unknowns(final.groups)
         settings = candidates.setting_sensitivities(design, final)
-        base = candidates.design(design.y, design.n_effective, settings) if settings else design
-        self.candidates, self.base = candidates, base
-        self.marginal_design = base.with_priors(priors)
-        self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
-        holds = any(whole_model_form(candidates.specs[g]) for g in self.marginal.groups)
+        self.candidates = candidates
+        groups = [*final.groups, *self.unknowns]
+
+        def refit(base: Design) -> None:
+            self.base, self.marginal_design = base, base.with_priors(priors)
+            self.marginal = self.marginal_design.fit(groups)
+
+        refit(candidates.design(design.y, design.n_effective, settings) if settings else design)
+        holds = any(whole_model_form(candidates.specs[g]) for g in groups)
         for _ in range(HELD_TORQUE_STEPS if holds else 0):
             # The delay and torque-constant columns hold the torque of the fit they are
             # reported from: with the datasheet values free, a payload's mass or a friction
             # level moves, and a delay read on the final fit's torque rate is another's
             # (twin seed 10 at 600 s: 4.61 ms on it, 4.27 on its own, for 4).
             candidates.hold_torque_of(self.marginal_design, self.marginal)
-            self.base = base = candidates.design(design.y, design.n_effective, settings or None)
-            self.marginal_design = base.with_priors(priors)
-            self.marginal = self.marginal_design.fit([*final.groups, *self.unknowns])
+            refit(candidates.design(design.y, design.n_effective, settings or None))
         # The values at the settings the report gives; their spread with the settings free.
         self.widened = (
-            self.marginal_design.fit([*final.groups, *self.unknowns, *settings])
-            if settings
-            else self.marginal
+            self.marginal_design.fit([*groups, *settings]) if settings else self.marginal
         )
         self.stand_ins = self._stand_ins()
         # (Where a datasheet value stands in, the parameters are the refit model's: no swaps.)
