@@ -210,7 +210,7 @@ class CandidateSet:
                 self.problem.columns(spec.replace_settings(velocity=velocity * math.exp(step)))[0]
                 for step in (_LOG_STEP, -_LOG_STEP)
             )
-            out[f'{label}:log_velocity'] = {
+            out[log_velocity_of(label)] = {
                 part: (up[part] - down[part]) @ level[:, None] / (2 * _LOG_STEP) for part in up
             }
         return out
@@ -547,6 +547,11 @@ class CandidateSet:
                 }
             )
         return out
+
+
+def log_velocity_of(label: str) -> str:
+    """A Stribeck candidate's linearised log-velocity column (``setting_sensitivities``)."""
+    return f'{label}:log_velocity'
 
 
 def _shaped_on(spec: EffectSpec, j: int) -> bool:

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from id_learning.diagnosis.aliases import AliasSet
-from id_learning.diagnosis.candidate_set import CandidateSet
+from id_learning.diagnosis.candidate_set import CandidateSet, log_velocity_of
 from id_learning.diagnosis.heldout import time_blocks
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.result import Remainder
@@ -38,8 +38,9 @@ class IntervalRule:
     correlated longer (model-form error, real drives) holds fewer independent samples: the
     long-run variance grows with the correlation time, and so do the intervals. A block
     sandwich over the training part's time holds misfit the remainder shares with an effect's
-    columns; the wider of the two sets the interval. The physical parameters are refitted with
-    the datasheet values no effect names free within their tolerances
+    columns; the wider of the two sets the interval. The physical parameters are refitted on
+    both parts (the held-out part chose the effects; the values use every sample) with the
+    datasheet values no effect names free within their tolerances
     (``CandidateSet.datasheet_unknowns``); their intervals hold what the refined Stribeck
     velocities leave unknown too (``CandidateSet.setting_sensitivities``), and what the data
     leave open between an alias set's members: the largest move of a value when one of the
@@ -68,8 +69,9 @@ class IntervalRule:
         self.candidates = candidates
         groups = [*final.groups, *self.unknowns]
 
-        def refit(base: Design) -> None:
-            self.base, self.marginal_design = base, base.with_priors(priors)
+        def refit(design: Design) -> None:
+            self.base = problem.pooled(design)
+            self.marginal_design = self.base.with_priors(priors)
             self.marginal = self.marginal_design.fit(groups)
 
         refit(candidates.design(design.y, design.n_effective, settings) if settings else design)
@@ -81,7 +83,8 @@ class IntervalRule:
             # (twin seed 10 at 600 s: 4.61 ms on it, 4.27 on its own, for 4).
             candidates.hold_torque_of(self.marginal_design, self.marginal)
             refit(candidates.design(design.y, design.n_effective, settings or None))
-        # The values at the settings the report gives; their spread with the settings free.
+        # The values and their spread with the refined settings free beside them (linearised:
+        # one Gauss-Newton step from the settings refined on the training part).
         self.widened = (
             self.marginal_design.fit([*groups, *settings]) if settings else self.marginal
         )
@@ -93,6 +96,8 @@ class IntervalRule:
             for member in alias.alternatives()[:ALIAS_ALTERNATIVES]
         ]
         if self.stand_ins:
+            whole = problem.pooled(design)
+            self.whole_final = whole, whole.fit(final.groups)
             _LOG.warning(
                 'datasheet values moved far outside their tolerances (%s): they stand in for '
                 "an effect the model lacks; parameters are the refit model's, with intervals "
@@ -152,11 +157,12 @@ class IntervalRule:
     def akaike_weight(self, fit: Fit) -> float:
         """exp(-AIC difference / 2) of a refit against the kept marginal one, at most 1.
 
-        The deviance in the kept model's residual variance per effective sample (the training
-        part's), each effective parameter more charged 2.
+        The deviance in the kept model's residual variance per effective sample (over both
+        parts), each effective parameter more charged 2.
         """
         kept = self.marginal
-        variance = max(self.design.residual_variance(kept.rss['train'], kept.rank), 1e-300)
+        variance = self.marginal_design.residual_variance(kept.rss['train'], kept.rank)
+        variance = max(variance, 1e-300)
         aic = (fit.rss['train'] - kept.rss['train']) / variance + 2.0 * (fit.rank - kept.rank)
         return math.exp(-0.5 * max(aic, 0.0))
 
@@ -166,14 +172,32 @@ class IntervalRule:
         Where a datasheet value stands in for a missing effect the marginal refit explains that
         effect, not the tolerance: the refit model's values then, with the tolerances' spread.
         """
-        design, fit = self.marginal_design, self.marginal
+        design = self.marginal_design
         if not self.stand_ins:
             covariance = inflation * design.physical_covariance(self.widened, label)
-            return design.physical(fit, label), covariance + self.model_spread(label, covariance)
-        final = self.final
-        residual_variance = self.design.residual_variance(final.rss['train'], final.rank)
-        spread = design.physical_covariance(fit, label, noise_only=True) * residual_variance
-        return self.design.physical(final, label), inflation * spread
+            value = design.physical(self.widened, label)
+            return value, covariance + self.model_spread(label, covariance)
+        whole, final = self.whole_final
+        residual_variance = whole.residual_variance(final.rss['train'], final.rank)
+        spread = design.physical_covariance(self.marginal, label, noise_only=True)
+        return whole.physical(final, label), inflation * spread * residual_variance
+
+    def settings(self, label: str, inflation: float, t_crit: float) -> dict[str, list[float]]:
+        """A refined setting read again on every sample: name -> [value, low, high].
+
+        A Stribeck velocity is refined on the training part; beside the values' fit its log
+        moves once more (``widened``), within an interval that follows from that fit. Empty
+        where none is free (and where a datasheet value stands in: the refit model's then).
+        """
+        key = log_velocity_of(label)
+        if self.stand_ins or key not in self.widened.groups:
+            return {}
+        design = self.marginal_design
+        step = float(design.physical(self.widened, key)[0])
+        variance = inflation * float(design.physical_covariance(self.widened, key)[0, 0])
+        half = t_crit * math.sqrt(max(variance, 0.0))
+        velocity = float(self.candidates.specs[label].settings['velocity'])
+        return {'velocity': [velocity * math.exp(step + d) for d in (0.0, -half, half)]}
 
     def inflation(self, label: str, spec: EffectSpec) -> float:
         """How much wider than the design's covariance: correlation time or block sandwich."""

@@ -20,6 +20,8 @@ def describe_parameters(
     half_width: np.ndarray,
     model: NominalModel,
     interval_covariance: np.ndarray | None = None,
+    *,
+    settings: dict[str, list[float]] | None = None,
 ) -> list[dict[str, Any]]:
     """Physical parameters with confidence intervals, in the twin's terms where one exists.
 
@@ -31,6 +33,8 @@ def describe_parameters(
         interval_covariance: (k, k) covariance of theta scaled so that the square roots of its
             diagonal are ``half_width``; needed for parameters that mix coefficients (the
             base parameters of ``inertial_parameter_error``).
+        settings: refined settings estimated again beside the fit, name -> [value, low, high]
+            (a Stribeck velocity); otherwise the spec's value, as exact.
 
     Returns:
         One dict per parameter: name, value, ci (low, high), unit.
@@ -109,15 +113,10 @@ def describe_parameters(
             entry('exponent', exponent, exponent, exponent, '1'),
         ]  # fmt: skip
     if name == 'stribeck_friction':
+        v, v_low, v_high = (settings or {}).get('velocity', [spec.settings['velocity']] * 3)
         return [
             entry('level', theta[0], lo[0], hi[0], 'N*m'),
-            entry(
-                'velocity',
-                spec.settings['velocity'],
-                spec.settings['velocity'],
-                spec.settings['velocity'],
-                'rad/s',
-            ),
+            entry('velocity', v, v_low, v_high, 'rad/s'),
         ]
     if name == 'gravity_spring':
         if 'ratio' in spec.settings:

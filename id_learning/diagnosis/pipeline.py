@@ -383,7 +383,12 @@ def _assemble(
                 coefficients=theta,
                 coefficients_ci=np.stack([theta - half, theta + half], axis=1),
                 parameters=describe_parameters(
-                    spec, value, value_half, problem.model, interval_covariance
+                    spec,
+                    value,
+                    value_half,
+                    problem.model,
+                    interval_covariance,
+                    settings=intervals.settings(label, inflation, t_crit),
                 ),
                 contribution_rms_nm=rms,
                 variance_explained=explained[label],

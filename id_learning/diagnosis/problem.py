@@ -514,6 +514,15 @@ class ResidualProblem:
             offset += float(t[-1]) + self.period
         return np.concatenate(out)
 
+    def pooled(self, design: Design) -> Design:
+        """``design`` with the held-out part joined to the training part for the values' fit.
+
+        The held-out part is projected off its own standstills, as the training part is.
+        """
+        return design.pooled(
+            lambda x: self.standstill.project(x, 'test'), self.standstill.counts['test']
+        )
+
     def n_effective(self, part: str) -> np.ndarray:
         """(n,) effective samples per joint on one part.
 
@@ -522,5 +531,5 @@ class ResidualProblem:
         rows = sum(len(r.rows[part]) for r in self.recordings)
         n_eff = rows * self.step / self.noise.correlation_samples
         if part == 'train':
-            n_eff = np.maximum(n_eff - self.standstill.count, 1.0)
+            n_eff = np.maximum(n_eff - self.standstill.counts['train'], 1.0)
         return n_eff

@@ -41,10 +41,11 @@ class FoundEffect:
             what the diagnosis does not name at its datasheet value).
         coefficients_ci: (k, 2) 95 % confidence intervals of the coefficients.
         parameters: physical parameters with intervals (``describe_parameters``), estimated
-            with the datasheet values no effect names free within their tolerances
+            on both parts (the held-out part too, once it chose the effects) with the datasheet
+            values no effect names free within their tolerances
             (``DiagnosisResult.marginalised``): a torque constant taken as exact would set the
             scale of every parameter in torque units. Where one of them stands in for a missing
-            effect (``DiagnosisResult.stand_ins``), the values are the coefficients' and only
+            effect (``DiagnosisResult.stand_ins``), the values are the refit model's and only
             the intervals carry the tolerances.
         contribution_rms_nm: (n,) RMS of the filtered torque it adds per joint [N*m].
         variance_explained: (n,) share of the nominal residual's held-out variance it removed.

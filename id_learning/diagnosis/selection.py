@@ -23,6 +23,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -141,6 +142,43 @@ class Design:
         out = copy.copy(self)
         out.prior = self.prior.copy()
         out._set_priors(priors)
+        return out
+
+    def pooled(
+        self,
+        project: Callable[[np.ndarray], np.ndarray] | None = None,
+        nuisance: np.ndarray | None = None,
+    ) -> Design:
+        """The design whose training part holds the held-out part too; ``'test'`` is unchanged.
+
+        The held-out part judges which effects enter; once the model is chosen its values are
+        best read from every sample (fitted on the training part alone, a delay's or a friction
+        level's variance is 1 / 0.7 of what the recording allows). ``project`` takes out of the
+        held-out rows (M, n) or columns (M, n, k) the fit nuisances the training part was
+        projected off (its standstills: ``ResidualProblem.pooled``); ``nuisance``: (n,) the
+        effective samples they take per joint.
+        """
+        y, explained = self.y['test'], self._explained['test']
+        yw, matrix, n_eff = self._yw['test'], self.matrix['test'], self.n_effective['test']
+        if project is not None:
+            rows, n = y.shape
+            y, explained = project(y), project(explained)
+            yw = project(yw.reshape(rows, n)).reshape(-1)
+            matrix = project(matrix.reshape(rows, n, -1)).reshape(rows * n, -1)
+            n_eff = np.maximum(n_eff - (0.0 if nuisance is None else nuisance), 1.0)
+        out = copy.copy(self)
+
+        def joined(parts: dict[str, np.ndarray], held_out: np.ndarray) -> dict[str, np.ndarray]:
+            return {'train': np.concatenate([parts['train'], held_out]), 'test': parts['test']}
+
+        def summed(parts: dict[str, Any], held_out: Any) -> dict[str, Any]:
+            return {'train': parts['train'] + held_out, 'test': parts['test']}
+
+        out.y, out._explained = joined(self.y, y), joined(self._explained, explained)
+        out._yw, out.matrix = joined(self._yw, yw), joined(self.matrix, matrix)
+        out.gram = summed(self.gram, matrix.T @ matrix)
+        out.cross, out.yy = summed(self.cross, matrix.T @ yw), summed(self.yy, float(yw @ yw))
+        out.n_effective = summed(self.n_effective, n_eff)
         return out
 
     @property

@@ -7,7 +7,9 @@ noise too). The diagnosis therefore gives each standstill of each joint a free h
 box over the standstill, filtered like the label, projected out of the residual and of every
 candidate's columns (Frisch-Waugh-Lovell, so every fit behaves as if these nuisance columns were
 in it). What the held torque was is then never blamed on an effect. Only the training part is
-projected: the held-out part is judged as a model would predict it, held torques and all.
+projected for selection: the held-out part is judged as a model would predict it, held torques
+and all. Once the effects are chosen their values are read from both parts, the held-out part
+projected off its own standstills alike (``project(x, 'test')``).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ def standstill_intervals(
 
 
 class StandstillProjection:
-    """Per joint, an orthonormal basis of the standstill boxes on the training rows.
+    """Per part and joint, an orthonormal basis of the standstill boxes on the part's rows.
 
     Args:
         recordings: per recording, its dataset and its kept rows per part ('train', 'test').
@@ -49,27 +51,33 @@ class StandstillProjection:
         min_s: float,
     ) -> None:
         n = recordings[0][0].q.shape[1] if recordings else 0
-        # A rest in the held-out part leaks only the filter's tail into the training rows: a box
-        # is kept where most of its (filtered) energy lies on training rows.
+        # A rest in one part leaks only the filter's tail into the other's rows: a box belongs
+        # to the part that holds most of its (filtered) energy.
         per_recording = [
-            [
-                _mostly_on(box, rows['train'], rows['test'])
-                for box in _boxes(dataset, threshold, min_s)
-            ]
+            [_split(box, rows['train'], rows['test']) for box in _boxes(dataset, threshold, min_s)]
             for dataset, rows in recordings
         ]
-        #: rests found per joint, over all recordings.
-        self.count = np.array(
-            [sum(cols[j].shape[1] for cols in per_recording) for j in range(n)], dtype=int
-        )
-        self.bases: list[np.ndarray | None] = [
-            _orthonormal(block_diag(*[cols[j] for cols in per_recording])) for j in range(n)
-        ]
+        #: part -> rests found per joint, over all recordings.
+        self.counts = {
+            part: np.array(
+                [sum(cols[j][part].shape[1] for cols in per_recording) for j in range(n)],
+                dtype=int,
+            )
+            for part in ('train', 'test')
+        }
+        #: part -> per joint, the basis over that part's rows (None: no rest).
+        self.bases: dict[str, list[np.ndarray | None]] = {
+            part: [
+                _orthonormal(block_diag(*[cols[j][part] for cols in per_recording]))
+                for j in range(n)
+            ]
+            for part in ('train', 'test')
+        }
 
-    def project(self, x: np.ndarray) -> np.ndarray:
-        """Training-row values (M, n) or columns (M, n, k) without their part along the boxes."""
+    def project(self, x: np.ndarray, part: str = 'train') -> np.ndarray:
+        """A part's values (M, n) or columns (M, n, k) without their share along its boxes."""
         out = np.array(x, dtype=float, copy=True)
-        for j, basis in enumerate(self.bases):
+        for j, basis in enumerate(self.bases[part]):
             if basis is not None:
                 out[:, j] = out[:, j] - basis @ (basis.T @ out[:, j])
         return out
@@ -95,15 +103,18 @@ def _boxes(dataset: Dataset, threshold: float, min_s: float) -> list[np.ndarray]
     return out
 
 
-def _mostly_on(boxes: np.ndarray, train: np.ndarray, test: np.ndarray) -> np.ndarray:
-    """The boxes (N, m) on the training rows; those with most of their energy on test rows dropped.
+def _split(boxes: np.ndarray, train: np.ndarray, test: np.ndarray) -> dict[str, np.ndarray]:
+    """Part -> the boxes (N, m) on its rows that hold most of their energy there.
 
     The rows of both parts are sampled alike, so their energies compare.
     """
-    on_train = boxes[train]
-    energy = np.sum(on_train**2, axis=0)
-    kept = energy >= 0.5 * (energy + np.sum(boxes[test] ** 2, axis=0))
-    return on_train[:, kept & (energy > 0)]
+    on = {'train': boxes[train], 'test': boxes[test]}
+    energy = {part: np.sum(x**2, axis=0) for part, x in on.items()}
+    mostly_train = energy['train'] >= 0.5 * (energy['train'] + energy['test'])
+    return {
+        'train': on['train'][:, mostly_train & (energy['train'] > 0)],
+        'test': on['test'][:, ~mostly_train & (energy['test'] > 0)],
+    }
 
 
 def _orthonormal(x: np.ndarray) -> np.ndarray | None:

