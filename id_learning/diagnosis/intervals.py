@@ -69,8 +69,8 @@ class IntervalRule:
         self.candidates = candidates
         groups = [*final.groups, *self.unknowns]
 
-        def refit(design: Design) -> None:
-            self.base = problem.pooled(design)
+        def refit(training: Design) -> None:
+            self.base = problem.pooled(training)
             self.marginal_design = self.base.with_priors(priors)
             self.marginal = self.marginal_design.fit(groups)
 
@@ -187,7 +187,7 @@ class IntervalRule:
 
         A Stribeck velocity is refined on the training part; beside the values' fit its log
         moves once more (``widened``), within an interval that follows from that fit. Empty
-        where none is free (and where a datasheet value stands in: the refit model's then).
+        where none is free, and where a datasheet value stands in (the refined value stands).
         """
         key = log_velocity_of(label)
         if self.stand_ins or key not in self.widened.groups:
