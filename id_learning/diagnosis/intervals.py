@@ -6,6 +6,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import replace
+from functools import cached_property
 
 import numpy as np
 
@@ -60,7 +61,7 @@ class IntervalRule:
         *,
         aliases: Sequence[AliasSet] = (),
     ) -> None:
-        self.design, self.final = design, final
+        self.problem, self.design, self.final = problem, design, final
         self.correlation = np.array([r.correlation_ratio for r in remainder])
         blocks, _ = time_blocks(problem, design.residual(final, 'train'), 'train')
         self.sandwich = replace(final, covariance=design.sandwich_covariance(final, blocks))
@@ -96,8 +97,6 @@ class IntervalRule:
             for member in alias.alternatives()[:ALIAS_ALTERNATIVES]
         ]
         if self.stand_ins:
-            whole = problem.pooled(design)
-            self.whole_final = whole, whole.fit(final.groups)
             _LOG.warning(
                 'datasheet values moved far outside their tolerances (%s): they stand in for '
                 "an effect the model lacks; parameters are the refit model's, with intervals "
@@ -177,10 +176,16 @@ class IntervalRule:
             covariance = inflation * design.physical_covariance(self.widened, label)
             value = design.physical(self.widened, label)
             return value, covariance + self.model_spread(label, covariance)
-        whole, final = self.whole_final
+        whole, final = self._refit_final
         residual_variance = whole.residual_variance(final.rss['train'], final.rank)
         spread = design.physical_covariance(self.marginal, label, noise_only=True)
         return whole.physical(final, label), inflation * spread * residual_variance
+
+    @cached_property
+    def _refit_final(self) -> tuple[Design, Fit]:
+        """The final model refitted on both parts: the values where a datasheet value stands in."""
+        whole = self.problem.pooled(self.design)
+        return whole, whole.fit(self.final.groups)
 
     def settings(self, label: str, inflation: float, t_crit: float) -> dict[str, list[float]]:
         """A refined setting read again on every sample: name -> [value, low, high].
