@@ -48,6 +48,7 @@ _TOP_KEYS = (
     'joints',
     'nan_policy',
     'implausible_policy',
+    'beyond_limits_policy',
     'jitter_tolerance',
     'resample',
     'motors',
@@ -159,6 +160,9 @@ class ImportMapping:
         nan_policy: 'refuse' raises on an empty or non-finite cell, 'drop' drops its row.
         implausible_policy: 'refuse' raises on a value no arm can have (far beyond the robot's
             limits, or a non-physical magnitude: see ``import_values``), 'drop' drops its row.
+        beyond_limits_policy: 'refuse' raises on a value past the plausibility gate (just beyond
+            the robot's limits) but not implausible, 'drop' drops its row (a drive's garbage
+            samples). Rows dropped by both policies may be at most half of the rows.
         jitter_tolerance: largest stamp deviation from the sampling grid snapped onto it, as a
             fraction of the period (below 0.5 so that the nearest grid point is unambiguous).
         resample: how stamps become the sampling grid, and where the log splits in segments.
@@ -175,6 +179,7 @@ class ImportMapping:
     comment: str | None = '#'
     nan_policy: Literal['refuse', 'drop'] = 'refuse'
     implausible_policy: Literal['refuse', 'drop'] = 'refuse'
+    beyond_limits_policy: Literal['refuse', 'drop'] = 'refuse'
     jitter_tolerance: float = 0.25
     resample: ResamplePolicy = field(default_factory=ResamplePolicy)
     motors: MotorSide | None = None
@@ -220,7 +225,7 @@ def _check_options(mapping: ImportMapping, where: str) -> None:
         )
     if mapping.comment is not None and not (isinstance(mapping.comment, str) and mapping.comment):
         raise ConfigError(f'{where}: comment must be a non-empty prefix or null')
-    for key in ('nan_policy', 'implausible_policy'):
+    for key in ('nan_policy', 'implausible_policy', 'beyond_limits_policy'):
         if getattr(mapping, key) not in ('refuse', 'drop'):
             raise ConfigError(
                 f"{where}: {key} must be 'refuse' or 'drop', got {getattr(mapping, key)!r}"

@@ -8,7 +8,13 @@ Two checks name the file, the line (CSV) or row (NPZ), the column and the value:
   non-physical magnitudes (``MAGNITUDE_BOUNDS``). Corrupt rows of a logger look like this (values
   of 1e306 in a log's first lines), so the mapping's ``implausible_policy`` may drop them;
 - the plausibility gate's bounds (``dataset.plausibility``), with a robot config only: a value
-  past them but not implausible is a wrong unit, offset or config, never dropped.
+  past them but not implausible is a limit question when just beyond the limit (the config's
+  limit, an encoder offset, an arm past a soft limit), else a wrong unit, scale or offset; the
+  message says which (``plausibility.beyond_hint``). ``beyond_limits_policy`` may drop such rows
+  (a drive's garbage samples).
+
+Rows dropped by both policies together may be at most ``MAX_DROPPED_SHARE`` of the rows: more is
+a wrong mapping or robot config, refused whatever the policies.
 """
 
 from __future__ import annotations
@@ -21,10 +27,14 @@ import numpy as np
 
 from id_learning.dataset.import_mapping import UNITS, ColumnSpec, MotorSide
 from id_learning.dataset.plausibility import (
-    LIMITS_HINT,
     POSITION_MARGIN_RAD,
     TORQUE_FACTOR,
     VELOCITY_FACTOR,
+    beyond_hint,
+    beyond_position,
+    beyond_rate,
+    farthest_position,
+    reads_as_degrees,
 )
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
@@ -32,19 +42,24 @@ from id_learning.robot.config import RobotConfig
 __all__ = [
     'IMPLAUSIBLE_FACTOR',
     'MAGNITUDE_BOUNDS',
+    'MAX_DROPPED_SHARE',
     'Field',
     'RowChecks',
+    'apply_row_policies',
     'joint_side',
     'si_values',
 ]
 
 #: Velocities, currents and torques this many times what the robot's limits allow are implausible.
 IMPLAUSIBLE_FACTOR = 10.0
-#: More than this share of the rows implausible is a unit or mapping error, never dropped.
-MAX_IMPLAUSIBLE_SHARE = 0.5
+#: More than this share of the rows implausible or past the gate is a unit, mapping or robot
+#: config error, never dropped.
+MAX_DROPPED_SHARE = 0.5
 #: Without a robot config: magnitudes no joint of an arm reaches (rad, rad/s, A, N*m).
 MAGNITUDE_BOUNDS = {'position': 1e3, 'velocity': 1e3, 'current': 1e4, 'torque': 1e6}
 _UNIT_OF = {'position': 'rad', 'velocity': 'rad/s', 'current': 'A', 'torque': 'N*m'}
+_GATE_FACTOR = {'velocity': VELOCITY_FACTOR, 'current': TORQUE_FACTOR, 'torque': TORQUE_FACTOR}
+_DEGREES_REMEDY = 'set its unit: deg'
 
 
 @dataclass(frozen=True)
@@ -133,6 +148,15 @@ class RowChecks:
     def _fields_of(self, quantity: str) -> list[Field]:
         return [item for item in self.fields if item.quantity == quantity]
 
+    def _limit(self, robot: RobotConfig, quantity: str) -> np.ndarray:
+        """(n,) the limit of a velocity [rad/s], current [A] or torque [N*m] per joint."""
+        limits = robot.limits
+        if quantity == 'velocity':
+            return limits.velocity
+        if quantity == 'current':
+            return limits.torque / (robot.drives.gear_ratio * robot.drives.torque_constant)
+        return limits.torque
+
     def _bounds(self, quantity: str, wide: bool) -> tuple[np.ndarray, np.ndarray] | None:
         """(low, high) per joint, or None when the quantity has no bound at this level."""
         robot = self.robot
@@ -141,18 +165,14 @@ class RowChecks:
                 return None
             magnitude = MAGNITUDE_BOUNDS[quantity]
             return np.array([-magnitude]), np.array([magnitude])
-        limits, factor = robot.limits, IMPLAUSIBLE_FACTOR if wide else None
+        limits = robot.limits
         if quantity == 'position':
             span = limits.position_upper - limits.position_lower
             margin = np.maximum(span, 2.0 * math.pi) if wide else POSITION_MARGIN_RAD
             return limits.position_lower - margin, limits.position_upper + margin
-        bound: np.ndarray
-        if quantity == 'velocity':
-            bound = limits.velocity * (factor or VELOCITY_FACTOR)
-        else:
-            bound = limits.torque * (factor or TORQUE_FACTOR)
-            if quantity == 'current':
-                bound = bound / (robot.drives.gear_ratio * robot.drives.torque_constant)
+        bound = self._limit(robot, quantity) * (
+            IMPLAUSIBLE_FACTOR if wide else _GATE_FACTOR[quantity]
+        )
         return -bound, bound
 
     def violations(self, values: dict[str, np.ndarray], wide: bool) -> np.ndarray:
@@ -167,8 +187,24 @@ class RowChecks:
                 bad |= ((array < bounds[0]) | (array > bounds[1])).any(axis=1)
         return bad
 
-    def describe(self, values: dict[str, np.ndarray], row: int, wide: bool) -> tuple[str, int]:
-        """The first column of ``row`` outside the bounds, described, and its joint's index."""
+    def describe(
+        self,
+        values: dict[str, np.ndarray],
+        row: int,
+        *,
+        wide: bool,
+        keep: np.ndarray | None = None,
+        hint: bool = True,
+    ) -> tuple[str, int]:
+        """The first column of ``row`` outside the bounds of this level, described, and its joint.
+
+        Args:
+            values: (N, n) SI joint-side values per quantity.
+            row: the row to describe.
+            wide: the implausible level (True) or the gate (False).
+            keep: (N,) the rows whose values the degrees rule reads; None: all.
+            hint: add what the value most likely is and its remedy (``beyond_hint``).
+        """
         for quantity, array in values.items():
             if wide and not np.isfinite(array[row]).all():
                 j = int(np.argmax(~np.isfinite(array[row])))
@@ -177,80 +213,130 @@ class RowChecks:
             bounds = self._bounds(quantity, wide)
             if bounds is None:
                 continue
-            low, high = np.broadcast_to(bounds[0], array.shape[1]), bounds[1]
-            high = np.broadcast_to(high, array.shape[1])
+            low = np.broadcast_to(bounds[0], array.shape[1])
+            high = np.broadcast_to(bounds[1], array.shape[1])
             outside = (array[row] < low) | (array[row] > high)
             if outside.any():
                 j = int(np.argmax(outside))
-                item = self._fields_of(quantity)[j]
-                unit = _UNIT_OF[quantity]
-                text = (
-                    f'{item.describe()}: {array[row, j]:.6g} {unit} is outside '
-                    f'[{low[j]:.4g}, {high[j]:.4g}] {unit}'
-                )
-                as_radians = np.radians(array[:, j])
-                finite = np.isfinite(as_radians)
-                if quantity == 'position' and self.robot is not None and finite.any():
-                    gate = self._bounds('position', wide=False)
-                    assert gate is not None
-                    fits = as_radians[finite]
-                    if np.all((fits >= gate[0][j]) & (fits <= gate[1][j])):
-                        text += (
-                            '; read as degrees every value of this column fits the limits: '
-                            'set its unit: deg'
-                        )
-                return text, j
+                value, unit = float(array[row, j]), _UNIT_OF[quantity]
+                column = array[:, j] if keep is None else array[keep, j]
+                if wide:
+                    text = f'is outside [{low[j]:.4g}, {high[j]:.4g}] {unit}'
+                    if hint and self._reads_as_degrees(quantity, column, j):
+                        text += '; ' + beyond_hint(math.inf, True, _DEGREES_REMEDY)
+                else:
+                    text = self._beyond(quantity, value, column, j, hint)
+                return f'{self._fields_of(quantity)[j].describe()}: {value:.6g} {unit} {text}', j
         raise AssertionError('describe() called for a row within the bounds')
 
+    def _reads_as_degrees(self, quantity: str, column: np.ndarray, j: int) -> bool:
+        if quantity != 'position' or self.robot is None:
+            return False
+        limits = self.robot.limits
+        return reads_as_degrees(column, limits.position_lower[j], limits.position_upper[j])
 
-def refuse_implausible(
+    def _beyond(self, quantity: str, value: float, column: np.ndarray, j: int, hint: bool) -> str:
+        """How far a value past the gate lies beyond its limit, and (``hint``) what it is."""
+        robot = self.robot
+        assert robot is not None  # the gate has bounds only with a robot config
+        lower, upper = robot.limits.position_lower[j], robot.limits.position_upper[j]
+
+        def excess(x: float) -> tuple[float, str]:
+            if quantity == 'position':
+                return beyond_position(x, lower, upper)
+            limit = float(self._limit(robot, quantity)[j])
+            return beyond_rate(x, limit, _GATE_FACTOR[quantity], _UNIT_OF[quantity])
+
+        share, text = excess(value)
+        if quantity == 'position':
+            text += f' (the gate allows {POSITION_MARGIN_RAD:g} rad)'
+        if not hint:  # a dropped row's reason: no pass over the column per row
+            return f'is {text}'
+        if quantity == 'position':
+            farthest = farthest_position(column, lower, upper)
+        else:
+            farthest = float(column[np.argmax(np.abs(column))])
+        far_share, _ = excess(farthest)
+        if far_share > share:
+            text += f'; the farthest value of this column lies {100 * far_share:.3g} % beyond'
+        degrees = self._reads_as_degrees(quantity, column, j)
+        return f'is {text}; {beyond_hint(max(share, far_share), degrees, _DEGREES_REMEDY)}'
+
+
+def apply_row_policies(
     checks: RowChecks,
     values: dict[str, np.ndarray],
     keep: np.ndarray,
     positions: np.ndarray,
     *,
-    policy: str,
+    implausible_policy: str,
+    beyond_limits_policy: str,
     where: str,
     label: str,
 ) -> tuple[np.ndarray, list[tuple[int, str]]]:
-    """Apply the implausible-value policy: the rows kept, and (position, reason) of those dropped.
+    """Apply the implausible-value and beyond-limits policies to the rows kept so far.
 
-    Then refuse, whatever the policy, the first kept row past the gate's bounds.
+    Args:
+        checks: the bounds of the written columns.
+        values: (N, n) SI joint-side values per quantity.
+        keep: (N,) rows kept by the NaN policy.
+        positions: (N,) each row's line (CSV) or row (NPZ), for messages.
+        implausible_policy: 'refuse' or 'drop' rows with an implausible value.
+        beyond_limits_policy: 'refuse' or 'drop' rows past the gate but not implausible.
+        where: the log file, for messages.
+        label: what ``positions`` count: 'line' or 'row'.
+
+    Returns:
+        The rows kept, and (position, reason) of each row dropped.
 
     Raises:
-        DatasetError: under 'refuse', the first implausible value; a value past the gate.
+        DatasetError: under 'refuse', the first row the policy covers; whatever the policies,
+            more than ``MAX_DROPPED_SHARE`` of the rows to drop.
     """
+    n_rows = max(int(np.count_nonzero(keep)), 1)
     implausible = keep & checks.violations(values, wide=True)
-    dropped: list[tuple[int, str]] = []
     if implausible.any():
-        rows = np.flatnonzero(implausible)
-        share = rows.size / max(int(np.count_nonzero(keep)), 1)
-        if share > MAX_IMPLAUSIBLE_SHARE:
-            text, _ = checks.describe(values, int(rows[0]), wide=True)
+        row = int(np.argmax(implausible))
+        text, _ = checks.describe(values, row, wide=True, keep=keep)
+        n_bad = int(implausible.sum())
+        if n_bad > MAX_DROPPED_SHARE * n_rows:
             raise DatasetError(
-                f'{where}: {label} {positions[rows[0]]}, {text}; {rows.size} of '
-                f'{int(np.count_nonzero(keep))} rows hold implausible values: a wrong unit, '
-                'scale, offset or column in the mapping, not corrupt rows'
+                f'{where}: {label} {positions[row]}, {text}; {n_bad} of {n_rows} rows hold '
+                'implausible values: a wrong unit, scale, offset or column in the mapping, not '
+                'corrupt rows'
             )
-        if policy == 'refuse':
-            text, _ = checks.describe(values, int(rows[0]), wide=True)
+        if implausible_policy == 'refuse':
             raise DatasetError(
-                f'{where}: {label} {positions[rows[0]]}, {text}: no arm has such a value (a '
-                f'corrupt row?); {rows.size} rows hold implausible values. Fix the log or set '
+                f'{where}: {label} {positions[row]}, {text}: no arm has such a value (a corrupt '
+                f'row?); {n_bad} rows hold implausible values. Fix the log or set '
                 'implausible_policy: drop'
             )
-        dropped = [
-            (int(positions[row]), 'implausible ' + checks.describe(values, int(row), True)[0])
-            for row in rows
-        ]
-        keep = keep & ~implausible
-    past_gate = keep & checks.violations(values, wide=False)
+    past_gate = keep & ~implausible & checks.violations(values, wide=False)
     if past_gate.any():
         row = int(np.argmax(past_gate))
-        text, _ = checks.describe(values, row, wide=False)
-        raise DatasetError(
-            f'{where}: {label} {positions[row]}, {text}: beyond what the plausibility gate '
-            f"allows ({int(past_gate.sum())} rows); check the column's unit, scale and offset; "
-            f'{LIMITS_HINT}'
+        text, _ = checks.describe(values, row, wide=False, keep=keep & ~implausible)
+        n_past, n_drop = int(past_gate.sum()), int(past_gate.sum() + implausible.sum())
+        if n_drop > MAX_DROPPED_SHARE * n_rows:
+            raise DatasetError(
+                f'{where}: {label} {positions[row]}, {text}; {n_drop} of {n_rows} rows are '
+                'past the plausibility gate or implausible: too many to drop, the mapping (unit, '
+                'scale, offset, column) or the robot config is wrong'
+            )
+        if beyond_limits_policy == 'refuse':
+            raise DatasetError(
+                f'{where}: {label} {positions[row]}, {text} ({n_past} rows past the '
+                'plausibility gate); if they are corrupt rows, set beyond_limits_policy: drop '
+                'to drop them (reported)'
+            )
+    dropped = [
+        (
+            int(positions[row]),
+            f'{kind} {checks.describe(values, int(row), wide=wide, hint=False)[0]}',
         )
-    return keep, dropped
+        for kind, wide, rows in (
+            ('implausible', True, implausible),
+            ('beyond the limits,', False, past_gate),
+        )
+        for row in np.flatnonzero(rows)
+    ]
+    return keep & ~implausible & ~past_gate, dropped

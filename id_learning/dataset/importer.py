@@ -9,8 +9,9 @@ which are logged motor side. Values are converted to SI joint side (rad, rad/s, 
 Several files (or a folder of them) go into one bag, one after the other; each file, and each
 stretch of a file between pauses longer than ``resample.max_gap_s``, is a segment, which
 preprocessing and the train/test split treat as a recording of its own. Nothing is filled or
-dropped silently: rows dropped by the NaN and implausible-value policies, holes bridged by
-resampling, pauses that end a segment and segments too short to keep are all in the report.
+dropped silently: rows dropped by the NaN, implausible-value and beyond-limits policies (with
+column, joint and value), holes bridged by resampling, pauses that end a segment and segments too
+short to keep are all in the report.
 
 This module reads the mapped columns and writes the bag; the mapping and its checks are in
 ``import_mapping.py``, the CSV and NPZ readers in ``import_readers.py``, the values and row checks
@@ -41,8 +42,8 @@ from id_learning.dataset.import_stamps import grid_period_s, relative_times, sna
 from id_learning.dataset.import_values import (
     Field,
     RowChecks,
+    apply_row_policies,
     joint_side,
-    refuse_implausible,
     si_values,
 )
 from id_learning.dataset.plausibility import check_efforts, check_motion
@@ -85,8 +86,8 @@ class ImportReport:
         velocity_source: 'column' (mapped) or 'differentiated' (from position).
         row_label: what row positions count: 'line' (1-based CSV line, header and comments
             included) or 'row' (0-based NPZ array index).
-        dropped_rows: (position, reason) of each row dropped under the NaN or implausible-value
-            policy.
+        dropped_rows: (position, reason) of each row dropped under the NaN, implausible-value or
+            beyond-limits policy; the reason names the column, its joint and the value.
         method: the resample policy's method.
         grid: what snapping or resampling did (steps, jitter, holes, pauses, short segments).
     """
@@ -122,6 +123,16 @@ class ImportReport:
         """Grid slots left empty inside segments (loading fills them)."""
         return 0 if self.grid is None else self.grid.n_gaps
 
+    def _first_dropped(self) -> str:
+        """Per kind of dropped row (its reason up to the column), the count and the first one."""
+        kinds: dict[str, list[tuple[int, str]]] = {}
+        for row, reason in self.dropped_rows:
+            kinds.setdefault(reason.partition('column')[0], []).append((row, reason))
+        return ''.join(
+            f'\n    first of {len(rows)}: {self.row_label} {rows[0][0]}, {rows[0][1]}'
+            for rows in kinds.values()
+        )
+
     def summary(self, max_positions: int = 5) -> str:
         """Counts, and the first ``max_positions`` positions of each kind of loss."""
         label = self.row_label
@@ -154,6 +165,7 @@ class ImportReport:
             f'{len(self.dropped_rows)} rows dropped; period {self.period_s * 1e3:g} ms, '
             f'{timing}; velocity {self.velocity_source}'
             + listed([row for row, _ in self.dropped_rows], 'rows dropped')
+            + self._first_dropped()
             + listed([(a, b) for a, b, _ in grid.holes], 'holes bridged')
             + listed([(a, b) for a, b, _ in grid.breaks], 'pauses that end a segment')
             + listed([(a, b) for a, b, _ in grid.short], 'segments dropped as too short')
@@ -367,16 +379,17 @@ def _read_file(
     if mapping.motors is not None:
         values = joint_side(values, mapping.motors, order, robot, mapping.where)
     positions = table.positions(len(raw))
-    keep, implausible = refuse_implausible(
+    keep, beyond = apply_row_policies(
         RowChecks(fields, robot),
         values,
         keep,
         positions,
-        policy=mapping.implausible_policy,
+        implausible_policy=mapping.implausible_policy,
+        beyond_limits_policy=mapping.beyond_limits_policy,
         where=str(source),
         label=table.row_label,
     )
-    dropped = sorted(dropped + implausible)
+    dropped = sorted(dropped + beyond)
     if np.count_nonzero(keep) < 2:
         raise DatasetError(
             f'{source}: {np.count_nonzero(keep)} usable rows; at least 2 are needed'
@@ -472,8 +485,9 @@ def import_logs(
     Raises:
         ConfigError: the mapping does not fit the log or the robot (missing column, joint names,
             no velocity while ``velocity_from_position`` is False).
-        DatasetError: unreadable log, non-numeric or (under 'refuse') non-finite or implausible
-            cells, values past the plausibility gate (each names line and column), stamps
+        DatasetError: unreadable log, non-numeric or (under 'refuse') non-finite, implausible or
+            beyond-limits cells (each names line and column), more than half of the rows to drop
+            for implausible or beyond-limits values, stamps
             backwards, repeated or (under 'snap') off the grid, no segment long enough, or files
             on different grids.
         BagError: ``out`` exists and ``overwrite`` is False.

@@ -5,13 +5,14 @@ so train, evaluate and diagnose; import; the replay's reference; the predictor, 
 time with ``SampleGate``): values finite, stamps strictly increasing (and, for recordings, no gap
 longer than a few IPO periods), positions inside the joint limits plus a margin, velocities within
 a stated factor of their limits. A violation names where it was found, the sample, its stamp, the
-joint and the value, and, when positions outside the limits would fit them read as degrees, says
-so.
+joint, the value and how far it lies beyond the limit. One rule (``reads_as_degrees``,
+``beyond_hint``), shared with import, tells what such a value is: a position column is named as
+degrees only when its spread in radians is far wider than the joint's range while read as degrees
+it fits; a value just beyond a limit is a limit question (the config's limit, an encoder offset,
+an arm past a soft limit), never a unit question.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -20,16 +21,23 @@ from id_learning.robot.config import JointLimits
 
 __all__ = [
     'ACCELERATION_FACTOR',
+    'DEGREES_SPREAD_FACTOR',
+    'NEAR_LIMIT_SHARE',
     'POSITION_MARGIN_RAD',
     'TORQUE_FACTOR',
     'VELOCITY_FACTOR',
     'SampleGate',
+    'beyond_hint',
+    'beyond_position',
+    'beyond_rate',
     'check_accelerations',
     'check_efforts',
     'check_finite',
     'check_limits',
     'check_motion',
     'check_stamps',
+    'farthest_position',
+    'reads_as_degrees',
 ]
 
 #: Where a refusal sends a user whose arm really moves there.
@@ -45,6 +53,88 @@ ACCELERATION_FACTOR = 2.0
 #: Measured torques, and currents times gear ratio and torque constant, may reach this multiple of
 #: the torque limits (friction and a drive's peak current lie above the rated limit).
 TORQUE_FACTOR = 2.0
+#: A position column is named as degrees only when its spread in radians is more than this multiple
+#: of its joint's range (no motion of that joint) while read as degrees every value fits.
+DEGREES_SPREAD_FACTOR = 2.0
+#: A value beyond a limit by at most this share of the joint's range (positions) or of the limit
+#: (velocities, currents, torques) is a limit question, not a unit question.
+NEAR_LIMIT_SHARE = 0.1
+#: The remedies for a value just beyond a limit.
+LIMIT_QUESTION_HINT = (
+    "just beyond the limit, a limit question rather than a unit one: check the robot config's "
+    'limit against the URDF or datasheet, and for an encoder offset; if the arm went past a soft '
+    "limit, widen the config's limit"
+)
+
+
+def reads_as_degrees(q: np.ndarray, lower: float, upper: float) -> bool:
+    """Whether a position column taken as radians is clearly in degrees: the one rule for it.
+
+    A column just beyond a limit fits the limits read as degrees too, yet it is a limit question;
+    degrees are the better explanation only when the column's spread in radians exceeds
+    ``DEGREES_SPREAD_FACTOR`` x the joint's range and, read as degrees, every value fits the limits
+    plus ``POSITION_MARGIN_RAD``.
+
+    Args:
+        q: (N,) the column's positions as taken [rad]; non-finite values are ignored.
+        lower: the joint's lower limit [rad].
+        upper: the joint's upper limit [rad].
+    """
+    finite = np.asarray(q, float)
+    finite = finite[np.isfinite(finite)]
+    if finite.size == 0 or np.ptp(finite) <= DEGREES_SPREAD_FACTOR * (upper - lower):
+        return False
+    as_radians = np.radians(finite)
+    fits = (as_radians >= lower - POSITION_MARGIN_RAD) & (
+        as_radians <= upper + POSITION_MARGIN_RAD
+    )
+    return bool(fits.all())
+
+
+def beyond_position(value: float, lower: float, upper: float) -> tuple[float, str]:
+    """How far a position [rad] lies beyond its nearer limit: (share of the range, text)."""
+    side, limit = ('upper', upper) if value > upper else ('lower', lower)
+    excess = abs(value - limit)
+    share = excess / (upper - lower)
+    return share, (
+        f'{excess:.4g} rad beyond the {side} limit {limit:.6g} rad, {100 * share:.3g} % of the '
+        "joint's range"
+    )
+
+
+def farthest_position(q: np.ndarray, lower: float, upper: float) -> float:
+    """The position in ``q`` (N,) [rad] farthest beyond a limit, or the nearest to one."""
+    q = np.asarray(q, float)
+    beyond = np.maximum(q - upper, lower - q)
+    return float(q[np.nanargmax(beyond)])
+
+
+def beyond_rate(value: float, limit: float, factor: float, unit: str) -> tuple[float, str]:
+    """How far |value| lies beyond ``factor`` x its ``limit``: (share of the limit, text)."""
+    excess = abs(value) - factor * limit
+    share = excess / limit
+    return share, (
+        f'{excess:.4g} {unit} beyond {factor:g} x its limit {limit:.4g} {unit}, '
+        f'{100 * share:.3g} % of the limit'
+    )
+
+
+def beyond_hint(share: float, degrees: bool, unit_remedy: str) -> str:
+    """What a value past the gate most likely is, and its remedy.
+
+    Args:
+        share: how far it lies beyond (``beyond_position``, ``beyond_rate``).
+        degrees: ``reads_as_degrees`` of its column (False for other quantities).
+        unit_remedy: what to do when the column is in degrees.
+    """
+    if degrees:
+        return (
+            f'read as degrees every value fits the limits, and in radians the values span over '
+            f"{DEGREES_SPREAD_FACTOR:g} x the joint's range: {unit_remedy}"
+        )
+    if share <= NEAR_LIMIT_SHARE:
+        return LIMIT_QUESTION_HINT
+    return f'check the unit, scale and offset; {LIMITS_HINT}'
 
 
 class SampleGate:
@@ -212,22 +302,18 @@ def _check_positions(
         return
     sample, column = _first(outside)
     value = q[sample, column]
-    as_radians = np.radians(q[:, column])
-    degrees = bool(
-        np.all((as_radians >= low[column]) & (as_radians <= high[column]))
-        and np.ptp(q[:, column]) > 2.0 * math.pi
-    )
-    hint = (
-        '; read as degrees every sample of this joint fits its limits: the log is in degrees, '
-        'positions must be in radians'
-        if degrees
-        else f'; {LIMITS_HINT}'
-    )
+    lower, upper = limits.position_lower[column], limits.position_upper[column]
+    share, excess = beyond_position(value, lower, upper)
+    farthest, _ = beyond_position(farthest_position(q[:, column], lower, upper), lower, upper)
+    if farthest > share:
+        excess += f'; the farthest sample of this joint lies {100 * farthest:.3g} % beyond'
+    degrees = reads_as_degrees(q[:, column], lower, upper)
+    remedy = 'the log is in degrees, positions must be in radians'
     raise DatasetError(
         f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
-        f'position {value:.6g} rad is outside the limits [{limits.position_lower[column]:.4g}, '
-        f'{limits.position_upper[column]:.4g}] rad plus {POSITION_MARGIN_RAD:g} rad '
-        f'({int(outside[:, column].sum())} samples of this joint){hint}'
+        f'position {value:.6g} rad is outside the limits [{lower:.4g}, {upper:.4g}] rad plus '
+        f'{POSITION_MARGIN_RAD:g} rad: {excess} ({int(outside[:, column].sum())} samples of this '
+        f'joint); {beyond_hint(max(share, farthest), degrees, remedy)}'
     )
 
 
@@ -249,10 +335,12 @@ def _check_rate(
     found = _beyond(values, factor * limit)
     if found is not None:
         sample, column, count = found
+        value = values[sample, column]
+        share, excess = beyond_rate(value, limit[column], factor, unit)
         raise DatasetError(
             f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
-            f'{name} {values[sample, column]:.6g} {unit} exceeds {factor:g} x its limit '
-            f'{limit[column]:.4g} {unit} ({count} samples of this joint); {LIMITS_HINT}'
+            f'{name} {value:.6g} {unit} exceeds {factor:g} x its limit: {excess} ({count} '
+            f'samples of this joint); {beyond_hint(share, False, "")}'
         )
 
 

@@ -77,6 +77,21 @@ def test_positions_in_degrees_are_named_as_degrees(mabi, motion):
     assert 'degrees' not in str(caught.value)
 
 
+def test_a_position_just_past_a_wide_joints_limit_is_a_limit_question_not_degrees(mabi, motion):
+    joints, stamps, q, v = motion
+    q = q.copy()
+    lower, upper = mabi.limits.position_lower[3], mabi.limits.position_upper[3]  # +-5.1 rad
+    q[:, 3] = np.linspace(lower + 0.1, upper + 0.02 * (upper - lower), N)  # spans over 2 pi
+    assert np.ptp(q[:, 3]) > 2 * np.pi
+    with pytest.raises(DatasetError) as caught:
+        check(mabi, joints, stamps, q, v)
+    text = str(caught.value)
+    assert 'joint joint_4: position' in text
+    assert "beyond the upper limit 5.1 rad, 2 % of the joint's range" in text
+    assert 'limit question' in text
+    assert 'degrees' not in text
+
+
 def test_a_velocity_beyond_the_stated_factor_of_its_limit_is_refused(mabi, motion):
     joints, stamps, q, v = motion
     v = v.copy()
