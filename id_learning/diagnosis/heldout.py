@@ -14,14 +14,19 @@ end), and an effect's gain is judged by a one-sided t test over the blocks' gain
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
-from id_learning.dataset.statistics import integrated_autocorrelation
+from id_learning.dataset.blocks import (
+    MIN_BLOCKS,
+    block_gains,
+    block_ids,
+    block_length_s,
+    holm,
+    one_sided_p,
+)
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.selection import Design, Fit
 
@@ -33,14 +38,6 @@ __all__ = [
     'test_blocks',
     'time_blocks',
 ]
-
-#: Fewer blocks than this judge nothing (a t test over 4 blocks says little).
-MIN_BLOCKS = 5
-#: Blocks span at least this many residual correlation times, and at least 1 s.
-_CORRELATION_TIMES = 2.0
-_MIN_BLOCK_S = 1.0
-#: A step of more than this many kept rows' spacing is a seam between recordings.
-_SEAM_ROWS = 3.0
 
 
 @dataclass(frozen=True)
@@ -81,57 +78,10 @@ def time_blocks(
     ``residual`` (N_part, n) the model leaves, which is what makes blocks' gains scatter; a
     recording's last block shorter than half of it joins the one before.
     """
-    y = residual
     seconds_per_row = problem.step * problem.period
-    correlation_s = max(
-        integrated_autocorrelation(y[:, j]) * seconds_per_row for j in range(y.shape[1])
-    )
-    block_s = max(_MIN_BLOCK_S, _CORRELATION_TIMES * float(correlation_s))
-    times = problem.times(part)
-    # A run of rows ends at a recording's end and wherever time jumps or goes back: a dataset
-    # joined from several recordings (the training parts of a run's bags) holds seams.
-    steps = np.diff(times)
-    seams = np.flatnonzero((steps <= 0) | (steps > _SEAM_ROWS * seconds_per_row)) + 1
+    block_s = block_length_s(residual, seconds_per_row)
     ends = np.cumsum([len(r.rows[part]) for r in problem.recordings])[:-1]
-    bounds = [0, *sorted(set(seams.tolist()) | set(ends.tolist())), len(times)]
-    ids = np.empty(len(times), dtype=np.int64)
-    next_id = 0
-    for a, b in itertools.pairwise(bounds):
-        if b <= a:
-            continue
-        t = times[a:b] - times[a]
-        local = np.floor(t / block_s).astype(np.int64)
-        if local.max() > 0 and t[-1] - local.max() * block_s < block_s / 2:
-            local[local == local.max()] -= 1
-        ids[a:b] = local + next_id
-        next_id += int(local.max()) + 1
-    return ids, block_s
-
-
-def _block_gains(worse: np.ndarray, better: np.ndarray, blocks: np.ndarray) -> np.ndarray:
-    """(B, n) per block and joint: the share of ``worse``'s mean square that ``better`` removes.
-
-    Shares per block, not amounts, so that blocks of strong and of weak excitation weigh alike.
-    """
-    labels = np.unique(blocks)
-    out = np.zeros((len(labels), worse.shape[1]))
-    for k, label in enumerate(labels):
-        rows = blocks == label
-        before = np.mean(worse[rows] ** 2, axis=0)
-        after = np.mean(better[rows] ** 2, axis=0)
-        out[k] = np.where(before > 0, (before - after) / np.where(before > 0, before, 1.0), 0.0)
-    return out
-
-
-def _one_sided(gains: np.ndarray) -> float:
-    """The one-sided p of 'mean gain <= 0', a t test over the blocks; nan with too few."""
-    if len(gains) < MIN_BLOCKS:
-        return float('nan')
-    spread = float(np.std(gains, ddof=1))
-    if spread == 0.0:
-        return 0.0 if float(np.mean(gains)) > 0 else 1.0
-    t = float(np.mean(gains)) / (spread / np.sqrt(len(gains)))
-    return float(stats.t.sf(t, len(gains) - 1))
+    return block_ids(problem.times(part), block_s, seconds_per_row, ends), block_s
 
 
 def judge_effects(
@@ -146,23 +96,12 @@ def judge_effects(
     raw: dict[str, tuple[float, int, float]] = {}
     for label in selected:
         without = design.residual(design.fit([s for s in selected if s != label]), 'test')
-        gains = _block_gains(without, with_all, blocks).sum(axis=1)
-        raw[label] = (_one_sided(gains), len(gains), float(np.mean(gains)))
+        gains = block_gains(without, with_all, blocks).sum(axis=1)
+        raw[label] = (one_sided_p(gains), len(gains), float(np.mean(gains)))
     return {
         label: BlockTest(p, raw[label][1], block_s, raw[label][2])
-        for label, p in _holm({label: value[0] for label, value in raw.items()}).items()
+        for label, p in holm({label: value[0] for label, value in raw.items()}).items()
     }
-
-
-def _holm(p_values: dict[str, float]) -> dict[str, float]:
-    """Holm's step-down adjustment (nan stays nan)."""
-    judged = sorted((p, label) for label, p in p_values.items() if not np.isnan(p))
-    out = {label: p for label, p in p_values.items() if np.isnan(p)}
-    running, m = 0.0, len(judged)
-    for k, (p, label) in enumerate(judged):
-        running = max(running, min(1.0, (m - k) * p))
-        out[label] = running
-    return out
 
 
 def fallback_joints(design: Design, final: Fit, blocks: np.ndarray) -> list[int]:
@@ -173,6 +112,6 @@ def fallback_joints(design: Design, final: Fit, blocks: np.ndarray) -> list[int]
     judged on all joints together and leaves a small, real share on each.)
     """
     after = design.residual(final, 'test')
-    gains = _block_gains(design.y['test'], after, blocks)
+    gains = block_gains(design.y['test'], after, blocks)
     touched = np.any(after != design.y['test'], axis=0)
     return [int(j) for j in np.flatnonzero(touched) if not float(np.mean(gains[:, j])) > 0]
