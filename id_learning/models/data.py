@@ -10,6 +10,8 @@ import numpy as np
 
 from id_learning.dataset.preprocess import Dataset
 from id_learning.physics.augmented import AugmentedModel
+from id_learning.physics.identification import IdentificationConfig, identify
+from id_learning.physics.identified import IdentifiedPhysics
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
@@ -63,6 +65,23 @@ class TrainingData:
     robot: RobotConfig
     validation_fraction: float = 0.15
     diagnosed: DiagnosedEffects | None = None
+    #: Physics identified on the training part, per identification setting: ``rnea_id`` and
+    #: ``rnea_id_mlp`` of one run share it (``identified``); kept by ``dataclasses.replace``.
+    identifications: dict[str, IdentifiedPhysics] = field(default_factory=dict, repr=False)
+
+    def identified(
+        self, config: IdentificationConfig, deadline: float | None = None
+    ) -> IdentifiedPhysics:
+        """The physics identified on the training part with ``config``, once per setting.
+
+        ``deadline``: the first identification's budget (``physics.identification.identify``).
+        """
+        key = repr(config)
+        if key not in self.identifications:
+            self.identifications[key] = identify(
+                self.dataset, self.robot, config, deadline=deadline
+            )
+        return self.identifications[key]
 
     @cached_property
     def physics(self) -> PhysicsFeatures:

@@ -11,6 +11,7 @@ the network learns only what the identified physics leaves.
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self
 
@@ -28,7 +29,7 @@ from id_learning.models.data import TrainingData
 from id_learning.models.network_common import NumpyNormalisedMlp, require_fitted
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
 from id_learning.physics.base_parameters import CadPrior
-from id_learning.physics.identification import IdentificationConfig, identify
+from id_learning.physics.identification import IdentificationConfig
 from id_learning.physics.identified import FRICTION_LAWS, IdentifiedPhysics
 from id_learning.robot.config import RobotConfig
 
@@ -55,6 +56,7 @@ def identification_config(config: Any) -> IdentificationConfig:
         prior=CadPrior(mass_rel=config.mass_rel_std, com_abs_m=config.com_std_m),
         gain_std=config.gain_std,
         iterations=config.iterations,
+        confirm=config.confirm,
     )
 
 
@@ -74,6 +76,10 @@ class RneaIdConfig(ModelConfig):
         com_std_m: the CAD prior's std of a body's centre of mass [m].
         gain_std: the prior std of a label gain around 0.
         iterations: linearisations of the bilinear terms.
+        confirm: balancers, the payload and bodies that leave their CAD prior's 95 % range
+            enter only where the training part's held-out tail confirms them.
+        max_seconds: the identification's time budget [s] (None: none); a fit cut short by it
+            says so in its report (``cut_short``).
     """
 
     kind: Literal['rnea_id'] = 'rnea_id'
@@ -86,6 +92,8 @@ class RneaIdConfig(ModelConfig):
     com_std_m: float = 0.03
     gain_std: float = 0.05
     iterations: int = 3
+    confirm: bool = True
+    max_seconds: float | None = None
 
     def __post_init__(self) -> None:
         """Check the kind and the identification settings."""
@@ -94,6 +102,8 @@ class RneaIdConfig(ModelConfig):
 
 
 def _check_identification(config: Any) -> None:
+    if getattr(config, 'max_seconds', None) is not None and not config.max_seconds > 0:
+        raise ConfigError(f'{config.kind}: max_seconds must be > 0, got {config.max_seconds}')
     for key in ('mass_rel_std', 'com_std_m', 'gain_std'):
         if not getattr(config, key) > 0:
             raise ConfigError(f'{config.kind}: {key} must be > 0, got {getattr(config, key)}')
@@ -143,7 +153,9 @@ class RneaIdModel(InverseDynamicsModel):
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Identify on the training part of ``data``."""
         del progress  # seconds
-        self.physics_ = identify(data.dataset, self.robot, identification_config(self.config))
+        budget = self.config.max_seconds
+        deadline = None if budget is None else time.perf_counter() + budget
+        self.physics_ = data.identified(identification_config(self.config), deadline)
         self.input_range_ = data.dataset.input_scaler.to_dict()
         return self
 
@@ -196,6 +208,7 @@ class RneaIdMlpConfig(RneaMlpConfig):
     com_std_m: float = 0.03
     gain_std: float = 0.05
     iterations: int = 3
+    confirm: bool = True
 
     def __post_init__(self) -> None:
         """Check the network's and the identification's settings."""
@@ -215,8 +228,10 @@ class RneaIdMlpModel(RneaMlpModel):
         self.physics_: IdentifiedPhysics | None = None
 
     def training_physics(self, data: TrainingData) -> np.ndarray:
-        """Identify on the training part; the identified torque on every sample."""
-        self.physics_ = identify(data.dataset, self.robot, identification_config(self.config))
+        """Identify on the training part (shared with rnea_id); its torque on every sample."""
+        budget = self.config.max_seconds
+        deadline = None if budget is None else time.perf_counter() + budget
+        self.physics_ = data.identified(identification_config(self.config), deadline)
         ds = data.dataset
         return self.physics_.torque(ds.q, ds.v, ds.a)
 

@@ -9,15 +9,23 @@ force), the torque is linear in three coefficients:
 
     tau = c0 sin(theta) / s + c1 sin(theta) + c2 s sin(theta),
 
-while the geometry (r, phase) enters nonlinearly and is chosen by search. r and 1 / r give the
-same shape, so r < 1; r near 1 makes the balancer short near upright and its torque sharp there.
+while the geometry (r, phase) enters nonlinearly: it is chosen on a coarse grid and refined by
+Gauss-Newton on the basis's analytic derivatives (``balancer_basis_derivatives``). r and 1 / r
+give the same shape, so r < 1; r near 1 makes the balancer short near upright and its torque
+sharp there.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ['BALANCER_PHASES', 'BALANCER_RATIOS', 'BALANCER_TERMS', 'balancer_basis']
+__all__ = [
+    'BALANCER_PHASES',
+    'BALANCER_RATIOS',
+    'BALANCER_TERMS',
+    'balancer_basis',
+    'balancer_basis_derivatives',
+]
 
 #: Columns of the balancer basis (force polynomial of degree 2 in the length).
 BALANCER_TERMS = 3
@@ -38,3 +46,24 @@ def balancer_basis(q: np.ndarray, ratio: float, phase: float) -> np.ndarray:
     length = np.sqrt(1.0 + ratio**2 - 2.0 * ratio * np.cos(theta))
     sine = np.sin(theta)
     return np.stack([sine / length, sine, length * sine], axis=-1)
+
+
+def balancer_basis_derivatives(q: np.ndarray, ratio: float, phase: float) -> np.ndarray:
+    """The basis's derivatives (..., 3, 2) with respect to the ratio r and the phase [1/rad].
+
+    ``[..., k, 0]`` is d column_k / d r, ``[..., k, 1]`` is d column_k / d phase; the refinement
+    of a geometry steps along them (Gauss-Newton), so none of it is derivative-free search.
+    """
+    theta = np.asarray(q, dtype=float) + phase
+    sine, cosine = np.sin(theta), np.cos(theta)
+    length = np.sqrt(1.0 + ratio**2 - 2.0 * ratio * cosine)
+    d_ratio = (ratio - cosine) / length  # d length / d r
+    d_theta = ratio * sine / length  # d length / d theta
+    out = np.empty((*theta.shape, BALANCER_TERMS, 2))
+    out[..., 0, 0] = -sine * d_ratio / length**2
+    out[..., 0, 1] = cosine / length - sine * d_theta / length**2
+    out[..., 1, 0] = 0.0
+    out[..., 1, 1] = cosine
+    out[..., 2, 0] = sine * d_ratio
+    out[..., 2, 1] = cosine * length + sine * d_theta
+    return out

@@ -38,15 +38,19 @@ from id_learning.physics.base_parameters import (
     base_parameters,
     pseudo_inertia_basis,
 )
-from id_learning.physics.identification_problem import (
-    IdentificationConfig,
-    Problem,
-    choose_balancers,
-    choose_stribeck,
+from id_learning.physics.confirmation import (
+    HELD_OUT_FRACTION,
+    body_departures,
+    claims,
+    holdout_split,
+    judge_claims,
 )
+from id_learning.physics.identification_problem import IdentificationConfig, Problem
+from id_learning.physics.identification_search import choose_balancers, choose_stribeck
 from id_learning.physics.identified import IdentifiedPhysics
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
 from id_learning.robot.config import RobotConfig
+from id_learning.threads import single_blas_thread
 
 __all__ = ['IdentificationConfig', 'identify']
 
@@ -120,32 +124,117 @@ def _solve(problem: Problem, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, 
     return x, covariance, status
 
 
+def _fit(
+    problem: Problem, x: np.ndarray, stribeck: np.ndarray, iterations: int | None = None
+) -> tuple[np.ndarray, np.ndarray, str, np.ndarray]:
+    """Linearise and solve (``config.iterations`` times); the nonlinear settings chosen on the way.
+
+    Every solve but the last reweighs the rows by what the fit leaves (``Problem.reweight``).
+
+    Returns:
+        (x, its covariance, the solver's status, the Stribeck velocities).
+    """
+    iterations = iterations or problem.config.iterations
+    covariance = np.zeros((len(problem.layout), len(problem.layout)))
+    status = 'optimal'
+    for iteration in range(iterations):
+        a, b = problem.design(x, stribeck)
+        x, covariance, status = _solve(problem, a, b)
+        if iteration < iterations - 1:
+            problem.reweight((a @ x - b).reshape(problem.n, -1))
+        if iteration < 2:
+            if iteration == 0:
+                stribeck = choose_stribeck(problem, x, stribeck)
+            choose_balancers(problem, x, stribeck)
+    return x, covariance, status, stribeck
+
+
+def _refit(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> np.ndarray:
+    """One solve linearised around ``x`` (a claim's absence while judging it)."""
+    return _solve(problem, *problem.design(x, stribeck))[0]
+
+
+def _confirmed(
+    problem: Problem, x: np.ndarray, stribeck: np.ndarray, deadline: float | None
+) -> tuple[Problem, np.ndarray, np.ndarray, dict[str, Any]]:
+    """Judge the claims on the training part's held-out tail; the problem holding the confirmed.
+
+    Past the ``deadline`` no claim is judged, so none is confirmed (the report says so).
+
+    Returns:
+        (the problem without the refused claims, a start for its fit, Stribeck velocities, the
+        judgements for the report).
+    """
+    config = problem.config
+    fit_rows, held_rows = holdout_split(problem)
+    inner, held = problem.subset(fit_rows), problem.subset(held_rows)
+    x, covariance, _, stribeck = _fit(inner, x, stribeck)
+    to_judge = claims(inner, body_departures(inner, x, covariance))
+    if _past(deadline):
+        to_judge, judged = [], {}
+        refused_unjudged = claims(inner, body_departures(inner, x, covariance))
+    else:
+        judged = judge_claims(
+            inner, held, x, stribeck, to_judge, solve=_refit, significance=config.significance
+        )
+        refused_unjudged = []
+    refused = [c for c in to_judge if not judged[c.label].confirmed] + refused_unjudged
+    kept = problem.without_balancers([c.joint for c in refused if c.joint is not None])
+    for j in kept.balancer_joints:
+        kept.set_geometry(j, *inner.geometry[j])
+    kept = kept.pinned([name for c in refused if c.kind != 'balancer' for name in c.names])
+    kept.row_weight = inner.row_weight
+    report = {
+        'held_out_fraction': HELD_OUT_FRACTION,
+        'held_out_s': float(len(held.rows) * problem.step * problem.dataset.period_s),
+        'claims': [
+            {'claim': c.label, 'kind': c.kind, **judged[c.label].to_dict()} for c in to_judge
+        ],
+        'unjudged': [c.label for c in refused_unjudged],
+    }
+    return kept, kept.layout.transfer(x, inner.layout), stribeck, report
+
+
+def _past(deadline: float | None) -> bool:
+    return deadline is not None and time.perf_counter() > deadline
+
+
+@single_blas_thread
 def identify(
-    dataset: Dataset, robot: RobotConfig, config: IdentificationConfig | None = None
+    dataset: Dataset,
+    robot: RobotConfig,
+    config: IdentificationConfig | None = None,
+    *,
+    deadline: float | None = None,
 ) -> IdentifiedPhysics:
     """Identify the rigid body and drives on the training part of ``dataset`` (module docstring).
+
+    ``deadline`` (``time.perf_counter()`` seconds): past it, no claim is judged (none is then
+    confirmed) and the final fit is linearised once; ``report['cut_short']`` names what was cut.
 
     Raises:
         DatasetError: the training part is too short, or the solver finds no solution.
     """
     config = config or IdentificationConfig()
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     problem = Problem(dataset, robot, config)
-    layout = problem.layout
-    x = np.asarray(layout.prior_mean, dtype=float)
+    x = np.asarray(problem.layout.prior_mean, dtype=float)
     x = np.where(np.isfinite(x), x, 0.0)
     stribeck = np.full(problem.n, float(np.median(config.stribeck_velocities)))
-    covariance = np.zeros((len(layout), len(layout)))
-    status = 'optimal'
-    for iteration in range(config.iterations):
-        a, b = problem.design(x, stribeck)
-        x, covariance, status = _solve(problem, a, b)
-        if iteration < 2:
-            if iteration == 0:
-                stribeck = choose_stribeck(problem, x, stribeck)
-            choose_balancers(problem, x, stribeck)
-    blocks = layout.blocks
-    n = problem.n
+    confirmation = None
+    cut_short = []
+    if config.confirm:
+        problem, x, stribeck, confirmation = _confirmed(problem, x, stribeck, deadline)
+        if confirmation['unjudged']:
+            cut_short.append('the held-out judging of the claims (none confirmed)')
+    iterations = None
+    if _past(deadline):
+        iterations = 1
+        cut_short.append('the final fit (linearised once)')
+    x, covariance, status, stribeck = _fit(problem, x, stribeck, iterations)
+    layout, blocks, n = problem.layout, problem.layout.blocks, problem.n
+    pinned = [layout.index[name] for name in layout.pinned_names()]
+    x[pinned] = np.asarray(layout.prior_mean)[pinned]
 
     def block(name: str) -> np.ndarray:
         return x[blocks[name]].copy() if name in blocks else np.zeros(n)
@@ -153,7 +242,11 @@ def identify(
     a, b = problem.design(x, stribeck)
     seconds = time.perf_counter() - start
     report = _report(problem, x, covariance=covariance, a=a, b=b, seconds=seconds)
+    report['cpu_seconds'] = time.process_time() - cpu_start
     report['solver_status'] = status
+    report['confirmation'] = confirmation
+    report['cut_short'] = cut_short
+    report['bodies'] = _bodies(problem, x, covariance, confirmation)
     if status != 'optimal':
         _LOG.warning(
             '%s: the identification solver ended %s (%s): the solution is kept; its '
@@ -179,6 +272,23 @@ def identify(
         balancer_phase=np.array([problem.geometry.get(j, (0.5, 0.0))[1] for j in range(n)]),
         report=report,
     )
+
+
+def _bodies(
+    problem: Problem,
+    x: np.ndarray,
+    covariance: np.ndarray,
+    confirmation: dict[str, Any] | None,
+) -> list[dict[str, Any]]:
+    """Each body's mass against its prior, and what the held-out part said of its departure."""
+    judged = {c['claim']: c for c in (confirmation or {}).get('claims', [])}
+    pinned = set(problem.layout.pinned_names())
+    out = []
+    for k, entry in enumerate(body_departures(problem, x, covariance)):
+        label = f'{entry["body"]} ({entry["joint"]})'
+        held = f'body {k + 1} 0' in pinned
+        out.append({**entry, 'held_at_prior': held, 'held_out': judged.get(label)})
+    return out
 
 
 def _report(

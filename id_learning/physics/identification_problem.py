@@ -1,19 +1,20 @@
-"""The identification's least-squares problem: its layout, its rows, and the nonlinear searches.
+"""The identification's least-squares problem: its layout and its rows.
 
 ``Problem`` stacks one recording's training part into a weighted, linearised system around the
 current estimate (see ``physics.identification`` for the model and the method);
-``choose_stribeck`` and ``choose_balancers`` pick the nonlinear settings (Stribeck velocity,
-balancer geometry) with the linear parameters refitted.
+``physics.identification_search`` picks its nonlinear settings.
 """
 
 from __future__ import annotations
 
+import copy
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from id_learning.dataset.preprocess import Dataset
-from id_learning.dataset.statistics import estimate_noise
+from id_learning.dataset.statistics import estimate_noise, integrated_autocorrelation
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.physics.balancer import (
     BALANCER_PHASES,
@@ -29,14 +30,7 @@ from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS, RigidBodyDynam
 from id_learning.physics.terms import gravity_loaded_joints
 from id_learning.robot.config import RobotConfig
 
-__all__ = [
-    'IdentificationConfig',
-    'Layout',
-    'NormalEquations',
-    'Problem',
-    'choose_balancers',
-    'choose_stribeck',
-]
+__all__ = ['PINNED_STD', 'IdentificationConfig', 'Layout', 'Problem']
 
 
 @dataclass(frozen=True)
@@ -44,7 +38,8 @@ class IdentificationConfig:
     """What the identification estimates and how strongly it trusts the CAD model.
 
     Attributes:
-        friction: friction laws per joint (motor target; joint torques carry no friction).
+        friction: friction laws per joint. Joint-torque labels carry the friction on the link
+            side of the sensor (a Panda's bearings and output stage), motor labels all of it.
         smoothing_velocity: v_eps of the friction laws' smoothed sign [rad/s].
         stribeck_velocities: candidate Stribeck velocities v_s [rad/s]; the best per joint is
             kept.
@@ -71,6 +66,10 @@ class IdentificationConfig:
         gain_std: std of the label gain around 0 (a datasheet torque constant's tolerance).
         iterations: linearisations of the bilinear terms (the first uses the URDF).
         solver: cvxpy solver of the constrained problem.
+        confirm: judge what the CAD model does not hold (balancers, a payload, a body leaving
+            its prior's 95 % range) on the training part's held-out tail, and hold what it does
+            not confirm at its prior (``physics.confirmation``).
+        significance: the level at which the held-out blocks confirm a claim (Holm-corrected).
     """
 
     friction: tuple[str, ...] = FRICTION_LAWS
@@ -90,6 +89,8 @@ class IdentificationConfig:
     gain_std: float = 0.05
     iterations: int = 3
     solver: str = 'CLARABEL'
+    confirm: bool = True
+    significance: float = 0.01
 
     def __post_init__(self) -> None:
         """Check names and ranges, naming the key."""
@@ -108,9 +109,18 @@ class IdentificationConfig:
             )
         if not self.balancer_phases:
             raise ConfigError('identification.balancer_phases: need at least one phase')
+        if not 0 < self.significance < 0.5:
+            raise ConfigError(
+                f'identification.significance must lie in (0, 0.5), got {self.significance}'
+            )
         for key in ('smoothing_velocity', 'rotor_rel_std', 'gain_std'):
             if not getattr(self, key) > 0:
                 raise ConfigError(f'identification.{key} must be > 0, got {getattr(self, key)}')
+
+
+#: The prior std of a parameter held at its prior mean (``Layout.pin``): the solver scales each
+#: unknown by its std, so the parameter cannot move while the problem stays well conditioned.
+PINNED_STD = 1e-12
 
 
 @dataclass(eq=False)
@@ -121,6 +131,36 @@ class Layout:
     prior_mean: list[float] = field(default_factory=list)
     prior_std: list[float] = field(default_factory=list)  # inf: no prior
     blocks: dict[str, slice] = field(default_factory=dict)
+
+    @property
+    def index(self) -> dict[str, int]:
+        """Each parameter's position in x."""
+        return {name: k for k, name in enumerate(self.names)}
+
+    def copy(self) -> Layout:
+        """An independent copy (priors and pins may then change)."""
+        return Layout(
+            list(self.names), list(self.prior_mean), list(self.prior_std), dict(self.blocks)
+        )
+
+    def pin(self, names: Sequence[str]) -> None:
+        """Hold the parameters ``names`` at their prior mean (a prior of zero width)."""
+        index = self.index
+        for name in names:
+            self.prior_std[index[name]] = PINNED_STD
+
+    def pinned_names(self) -> list[str]:
+        """The parameters held at their prior mean."""
+        return [n for n, std in zip(self.names, self.prior_std, strict=True) if std == PINNED_STD]
+
+    def transfer(self, x: np.ndarray, other: Layout) -> np.ndarray:
+        """The estimate ``x`` of ``other``'s layout in this one; the rest at the prior mean."""
+        out = np.where(np.isfinite(self.prior_mean), self.prior_mean, 0.0)
+        index = other.index
+        for k, name in enumerate(self.names):
+            if name in index:
+                out[k] = x[index[name]]
+        return out
 
     def add(self, block: str, names: list[str], mean: np.ndarray, std: np.ndarray | float) -> None:
         """Append a block of parameters with their prior mean and std (inf: no prior)."""
@@ -141,7 +181,7 @@ class Problem:
         self.dataset, self.robot, self.config = dataset, robot, config
         self.n = robot.n_joints
         self.motor = dataset.target == 'motor'
-        self.laws = tuple(law for law in FRICTION_LAWS if law in config.friction and self.motor)
+        self.laws = tuple(law for law in FRICTION_LAWS if law in config.friction)
         self.nominal = RigidBodyDynamics.from_config(robot)
         self.theta0 = self.nominal.inertial_parameters()
         # The noise level from a contiguous stretch: the training part, or under a shuffled
@@ -166,6 +206,8 @@ class Problem:
         spacing = float(self.step)
         if dataset.is_shuffled:
             spacing = (self.rows[-1] - self.rows[0] + 1) / len(self.rows)
+        self.spacing = spacing
+        self.noise_correlation = tau
         self.row_weight = np.sqrt(spacing / tau) / sigma
         self.noise_std = sigma
         q, v, a = dataset.q, dataset.v, dataset.a
@@ -197,6 +239,61 @@ class Problem:
             self.set_geometry(j, float(np.median(config.balancer_ratios)), 0.0)
         self.layout = self._layout()
 
+    def subset(self, keep: np.ndarray) -> Problem:
+        """The same problem on some of its kept rows (``keep``: positions into ``rows``)."""
+        out = copy.copy(self)
+        out.rows = self.rows[keep]
+        out.filtered_regressor = [r[keep] for r in self.filtered_regressor]
+        if self.filtered_rate is not None:
+            out.filtered_rate = [r[keep] for r in self.filtered_rate]
+        if self.rotor_column is not None:
+            out.rotor_column = self.rotor_column[keep]
+        out.label = self.label[keep]
+        out.geometry = dict(self.geometry)
+        out.balancer_basis = dict(self.balancer_basis)
+        out.balancer_columns = {j: c[keep] for j, c in self.balancer_columns.items()}
+        out._balancer_rates = {}
+        return out
+
+    def without_balancers(self, joints: Sequence[int]) -> Problem:
+        """The same problem without the balancers on ``joints`` (its layout rebuilt)."""
+        out = copy.copy(self)
+        out.balancer_joints = [j for j in self.balancer_joints if j not in joints]
+        for name in ('geometry', 'balancer_basis', 'balancer_columns'):
+            kept = {j: value for j, value in getattr(self, name).items() if j not in joints}
+            setattr(out, name, kept)
+        out._balancer_rates = {}
+        out.layout = out._layout()
+        out.layout.pin([n for n in self.layout.pinned_names() if n in out.layout.index])
+        return out
+
+    def pinned(self, names: Sequence[str]) -> Problem:
+        """The same problem with the parameters ``names`` held at their prior mean."""
+        out = copy.copy(self)
+        out.layout = self.layout.copy()
+        out.layout.pin(names)
+        return out
+
+    def reweight(self, residual: np.ndarray) -> None:
+        """Weigh each joint's rows by what the model leaves there, not by the label noise alone.
+
+        ``residual`` (n, rows): a fit's weighted residual on the kept rows. Where the model
+        cannot follow the labels (a form it lacks, on a real robot), its residual is larger and
+        correlated for longer than the noise: the data then hold fewer independent samples and
+        weigh less against the CAD prior, so a body does not take a wrong mass to absorb it.
+        Where the model reaches the noise floor the weights stay the noise's.
+        """
+        raw = residual / self.row_weight[:, None]
+        rms = np.sqrt(np.mean(raw**2, axis=1))
+        correlation = self.noise_correlation.astype(float).copy()
+        if not self.dataset.is_shuffled:
+            for j in range(self.n):
+                correlation[j] = max(
+                    correlation[j], integrated_autocorrelation(raw[j]) * self.step
+                )
+        sigma = np.maximum(self.noise_std, rms)
+        self.row_weight = np.sqrt(self.spacing / correlation) / sigma
+
     @property
     def has_delay(self) -> bool:
         """Whether a signal delay is estimated."""
@@ -226,6 +323,10 @@ class Problem:
         basis = balancer_basis(self.q[:, joint], ratio, phase)
         self.balancer_basis[joint] = basis
         self.balancer_columns[joint] = self._filter(basis, joint)[self.rows]
+
+    def kept_columns(self, x: np.ndarray, joint: int) -> np.ndarray:
+        """Columns (N, k) of one joint as its label meets them, on the kept rows."""
+        return self._filter(x, joint)[self.rows]
 
     def _balancer_joints(self) -> list[int]:
         setting, joints = self.config.balancer, self.robot.joints
@@ -374,137 +475,3 @@ class Problem:
             a[j] *= self.row_weight[j]
             b[j] *= self.row_weight[j]
         return a.reshape(n * rows, -1), b.reshape(-1)
-
-
-def choose_stribeck(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> np.ndarray:
-    """Per joint, the candidate Stribeck velocity whose refit leaves the least residual.
-
-    Only the joint's own drive columns are refitted (ordinary least squares), the rest held.
-    """
-    if 'stribeck' not in problem.laws:
-        return stribeck
-    blocks, n, rows = problem.layout.blocks, problem.n, len(problem.rows)
-    best = stribeck.copy()
-    a, b = problem.design(x, stribeck)
-    a, b = a.reshape(n, rows, -1), b.reshape(n, rows)
-    local = [blocks[name].start for name in ('rotor', 'gain', *problem.laws, 'offset')
-             if name in blocks]  # fmt: skip
-    for j in range(n):
-        columns = [k + j for k in local]
-        held = np.delete(np.arange(a.shape[2]), columns)
-        target = b[j] - a[j][:, held] @ x[held]
-        errors = []
-        for vs in problem.config.stribeck_velocities:
-            trial = stribeck.copy()
-            trial[j] = vs
-            column = problem.friction(x, trial)['stribeck'][:, j]
-            design = a[j][:, columns].copy()
-            design[:, columns.index(blocks['stribeck'].start + j)] = column * problem.row_weight[j]
-            coefficients, *_ = np.linalg.lstsq(design, target, rcond=None)
-            errors.append(float(np.sum((design @ coefficients - target) ** 2)))
-        best[j] = problem.config.stribeck_velocities[int(np.argmin(errors))]
-    return best
-
-
-def joint_system(
-    problem: Problem, x: np.ndarray, stribeck: np.ndarray, j: int, local: list[int]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Joint j's rows: its local columns (weighted) and the target with the rest held at x."""
-    a, b = problem.design(x, stribeck)
-    rows = len(problem.rows)
-    a, b = a.reshape(problem.n, rows, -1)[j], b.reshape(problem.n, rows)[j]
-    held = np.delete(np.arange(a.shape[1]), local)
-    return a[:, local], b - a[:, held] @ x[held]
-
-
-@dataclass(eq=False)
-class NormalEquations:
-    """The regularised normal equations of (A, b), columns scaled to unit norm."""
-
-    a: np.ndarray
-    b: np.ndarray
-    scale: np.ndarray
-    gram: np.ndarray
-    right: np.ndarray
-    precision: np.ndarray
-    mean: np.ndarray
-
-    @classmethod
-    def of(cls, a: np.ndarray, b: np.ndarray, layout: Layout) -> NormalEquations:
-        """The equations of the system (a, b) with the layout's priors."""
-        mean = np.asarray(layout.prior_mean)
-        std = np.asarray(layout.prior_std)
-        precision = np.where(np.isfinite(std), 1.0 / std**2, 0.0)
-        scale = np.linalg.norm(a, axis=0)
-        scale = np.where(scale > 0, scale, 1.0)
-        scaled = a / scale
-        # In the scaled unknowns u = x * scale: A x = (A / scale) u.
-        right = scaled.T @ b + precision * mean / scale
-        return cls(scaled, b, scale, scaled.T @ scaled, right, precision, mean)
-
-    def misfit_with(self, columns: np.ndarray, rows: slice, new: np.ndarray) -> float:
-        """The minimised objective with ``columns`` replaced by ``new`` on ``rows``.
-
-        ``new`` is zero outside ``rows``; the objective is up to the constant b^T b.
-        """
-        new = new / self.scale[columns]
-        g, r = self.gram.copy(), self.right.copy()
-        cross = self.a[rows].T @ new
-        g[:, columns] = cross
-        g[columns, :] = cross.T
-        g[np.ix_(columns, columns)] = new.T @ new
-        r[columns] = new.T @ self.b[rows]
-        regular = g + np.diag(self.precision / self.scale**2) + 1e-12 * np.eye(len(g))
-        u = np.linalg.solve(regular, r)
-        prior = np.sum(self.precision * (u / self.scale - self.mean) ** 2)
-        return float(u @ g @ u - 2 * u @ r + prior)
-
-
-def choose_balancers(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> None:
-    """Per balancer joint, the geometry whose refit leaves the least (regularised) misfit.
-
-    Every parameter is refitted for each candidate geometry (the priors included, the
-    constraints left out), because a balancer trades against the first moment of the link it
-    holds: a grid of ratios and phases, then the ratio refined. The normal equations are
-    updated for the joint's three balancer columns only, so a candidate costs milliseconds.
-    """
-    from scipy import optimize
-
-    layout, config = problem.layout, problem.config
-    for j in problem.balancer_joints:
-        equations = NormalEquations.of(*problem.design(x, stribeck), layout)
-        rows = slice(j * len(problem.rows), (j + 1) * len(problem.rows))
-        first = layout.blocks['balancer'].start + problem.balancer_joints.index(j) * BALANCER_TERMS
-        columns = np.arange(first, first + BALANCER_TERMS)
-
-        def misfit(
-            ratio: float,
-            phase: float,
-            *,
-            j: int = j,
-            rows: slice = rows,
-            columns: np.ndarray = columns,
-            equations: NormalEquations = equations,
-        ) -> float:
-            problem.set_geometry(j, ratio, phase)
-            new = problem.balancer_columns[j] * problem.row_weight[j]
-            return equations.misfit_with(columns, rows, new)
-
-        grid = [(r, p) for r in config.balancer_ratios for p in config.balancer_phases]
-        start = min(grid, key=lambda g: misfit(*g))
-        # Refined together: an encoder zero error shifts the phase by milliradians.
-        best = optimize.minimize(
-            lambda g, misfit=misfit: misfit(float(np.clip(g[0], 0.05, 0.98)), float(g[1])),
-            np.array(start),
-            method='Nelder-Mead',
-            options={
-                'xatol': 1e-4,
-                'fatol': 1e-9,
-                'initial_simplex': [
-                    start,
-                    (start[0] + 0.05, start[1]),
-                    (start[0], start[1] + 0.05),
-                ],
-            },
-        )
-        problem.set_geometry(j, float(np.clip(best.x[0], 0.05, 0.98)), float(best.x[1]))

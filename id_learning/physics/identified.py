@@ -82,7 +82,7 @@ class IdentifiedPhysics:
         theta: (10 B,) inertial parameters of every body.
         rotor: (n,) rotor inertia, motor side [kg*m^2] (zero for joint torques).
         gain: (n,) label gain g (zero for joint torques).
-        friction: law -> (n,) coefficients (empty for joint torques).
+        friction: law -> (n,) coefficients.
         stribeck_velocity: (n,) v_s per joint [rad/s].
         smoothing_velocity: v_eps [rad/s].
         offset: (n,) torque offsets [N*m].

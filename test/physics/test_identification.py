@@ -157,7 +157,9 @@ def test_a_payload_the_data_would_make_negative_stays_physical(mabi):
     assert flange[0] > 0.5 * dynamics.inertial_parameters().reshape(-1, 10)[-1][0]
 
 
-def test_joint_torque_labels_keep_the_link_side_terms_only(mabi):
+def test_joint_torque_labels_keep_the_link_side_terms_and_the_friction_they_show(mabi):
+    """This twin has no friction at all: the friction its joint torques are given is nil (a
+    Panda's sensors see the friction of the bearings on their link side: it is estimated)."""
     config = replace(twin_config(150.0, {}, seed=8), joint_torque_sensors=True)
     result = simulate(config)
     dataset = prepare_dataset(result.recording, mabi, PreprocessConfig(target='joint'))
@@ -165,8 +167,12 @@ def test_joint_torque_labels_keep_the_link_side_terms_only(mabi):
     assert model.target == 'joint'
     np.testing.assert_array_equal(model.rotor, 0.0)
     np.testing.assert_array_equal(model.gain, 0.0)
-    assert model.friction == {}
     assert model.delay_s == 0.0
+    assert set(model.friction) == {'viscous', 'coulomb', 'stribeck', 'load_dependent'}
+    friction = model.parts(dataset.q, dataset.v, dataset.a)['friction']
+    rms = np.sqrt(np.mean(friction**2, axis=0))
+    # 1 % of the joint's torque, and 0.05 N*m where the joint carries almost none (the wrist).
+    assert (rms < np.maximum(0.01 * np.sqrt(np.mean(dataset.tau**2, axis=0)), 0.05)).all(), rms
 
 
 def test_identified_physics_round_trips_and_its_sample_path_equals_the_batch(identified, mabi):
