@@ -56,6 +56,9 @@ class DiagnosisConfig:
         min_retention: an effect is untestable when the filter keeps less than this share of
             its regressors' energy (its signature lies above the cut-off).
         min_effective_samples: refuse recordings with fewer effective samples per part.
+        max_seconds: the diagnosis's time budget [s] (None: none). Past it no further selection
+            step, resumption or special case starts; the result says what was cut short
+            (``DiagnosisResult.cut_short``); the held-out confirmation of springs still runs.
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
@@ -81,6 +84,7 @@ class DiagnosisConfig:
     min_below_cutoff_fraction: float = 0.2
     min_retention: float = 0.1
     min_effective_samples: float = 10.0
+    max_seconds: float | None = None
 
     def __post_init__(self) -> None:
         """Check names and ranges, naming the key."""
@@ -112,6 +116,8 @@ class DiagnosisConfig:
                 raise ConfigError(
                     f'diagnosis.{key}: value {value!r} is out of range [{low:g}, {high:g}]'
                 )
+        if self.max_seconds is not None and not self.max_seconds > 0:
+            raise ConfigError(f'diagnosis.max_seconds: must be > 0, got {self.max_seconds}')
         if self.edge_trim_s is not None and self.edge_trim_s < 0:
             raise ConfigError(f'diagnosis.edge_trim_s: must be >= 0, got {self.edge_trim_s}')
         if self.viscous_exponents and not all(0.2 <= d <= 3.0 for d in self.viscous_exponents):

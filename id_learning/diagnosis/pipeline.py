@@ -21,6 +21,7 @@ result types in ``result``; this module runs the steps and assembles the result.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -54,6 +55,7 @@ from id_learning.diagnosis.problem import (
 )
 from id_learning.diagnosis.result import DiagnosisResult, FoundEffect, Remainder
 from id_learning.diagnosis.selection import (
+    BUDGET_STOP,
     PARTS,
     Design,
     Fit,
@@ -65,6 +67,7 @@ from id_learning.diagnosis.selection import (
 from id_learning.diagnosis.separation import separating_motion
 from id_learning.errors import DatasetError
 from id_learning.robot.config import RobotConfig
+from id_learning.threads import single_blas_thread
 
 _LOG = logging.getLogger(__name__)
 #: Times the selection resumes after its effects' settings are refined.
@@ -84,6 +87,7 @@ __all__ = [
 
 
 # -- the diagnosis --------------------------------------------------------------------------------
+@single_blas_thread
 def run_diagnosis(
     data: Recording | Dataset | Sequence[Recording | Dataset],
     robot: RobotConfig,
@@ -91,6 +95,7 @@ def run_diagnosis(
 ) -> DiagnosisResult:
     """The diagnosis without writing anything (see ``diagnose``)."""
     config = config or DiagnosisConfig()
+    budget = _Budget(config.max_seconds)
     problem = ResidualProblem(as_datasets(data, robot, config), robot, config)
     candidates = CandidateSet(problem)
     y = {part: problem.residual(part) for part in PARTS}
@@ -108,6 +113,7 @@ def run_diagnosis(
             noise_tolerance=config.noise_tolerance,
             last_resort=candidates.is_general,
             start=start,
+            deadline=budget.deadline,
         )
 
     def settled(groups: list[str]) -> list[str]:
@@ -119,12 +125,16 @@ def run_diagnosis(
 
     selection = select()
     selected = candidates.refine(selection.selected, y, n_eff)
-    if candidates.whole_model(selected, y, n_eff):
+    if candidates.whole_model(selected, y, n_eff) and budget.allows(
+        'the selection with the whole model'
+    ):
         # Delay and torque-constant candidates now see the whole model: select again, then
         # give their columns the final effects.
         selection = select()
         selected = settled(selection.selected)
     for _ in range(_RESUMPTIONS):
+        if not budget.allows('the selection resumed after refinement'):
+            break
         # A refined setting can make a candidate plausible that was not: with the payload's
         # own inertia found, the flange link's parameters no longer need it (twin seed 21 at
         # 600 s, every effect on: they were refused for 0.19 kg*m^2 on body 6 and left a
@@ -148,7 +158,11 @@ def run_diagnosis(
         )
 
     aliases = aliases_of(selected)
-    specific = candidates.special_cases(selected, aliases)
+    specific = (
+        candidates.special_cases(selected, aliases)
+        if budget.allows('the special cases of the alias sets')
+        else selected
+    )
     if specific != selected:
         selected = candidates.refine(specific, y, n_eff)
         design = candidates.design(y, n_eff)
@@ -186,7 +200,28 @@ def run_diagnosis(
         selected=selected,
         aliases=aliases,
         blocks=blocks,
+        cut_short=budget.cut_short(selection),
     )
+
+
+class _Budget:
+    """The diagnosis's time budget: whether a step may start, and what was cut short."""
+
+    def __init__(self, seconds: float | None) -> None:
+        self.deadline = None if seconds is None else time.perf_counter() + seconds
+        self.skipped: list[str] = []
+
+    def allows(self, step: str) -> bool:
+        """Whether the budget leaves time for ``step``; noted as cut short when not."""
+        if self.deadline is None or time.perf_counter() <= self.deadline:
+            return True
+        self.skipped.append(step)
+        return False
+
+    def cut_short(self, selection: SelectionResult) -> list[str]:
+        """The steps left out, the selection's own steps first."""
+        stopped = ['selection steps'] if selection.stop_reason == BUDGET_STOP else []
+        return [*stopped, *self.skipped]
 
 
 def _separated(
@@ -338,6 +373,7 @@ def _assemble(
     selected: list[str],
     aliases: list[AliasSet],
     blocks: tuple[np.ndarray, float],
+    cut_short: list[str],
 ) -> DiagnosisResult:
     """Refit with the selected effects and collect what the report shows.
 
@@ -433,6 +469,7 @@ def _assemble(
         waterfall=waterfall,
         location=location,
         stop_reason=selection.stop_reason,
+        cut_short=cut_short,
         rejected=_rejected_record(selection),
         marginalised=intervals.unknowns,
         stand_ins=intervals.stand_ins,

@@ -10,7 +10,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy import optimize
 
 from id_learning.diagnosis.candidates import PAYLOAD_COM_LIMIT_M
 from id_learning.diagnosis.problem import ResidualProblem
@@ -19,6 +18,10 @@ from id_learning.physics.balancer import BALANCER_PHASES, BALANCER_RATIOS
 from id_learning.physics.terms import EffectSpec
 
 __all__ = ['refine_setting']
+
+
+#: Rounds of the shrinking grids that refine a setting, each a third as wide as the one before.
+_GRID_ROUNDS = 6
 
 
 def refine_setting(
@@ -30,7 +33,10 @@ def refine_setting(
     """Tune a selected effect's nonlinear setting on the training part, the others kept.
 
     ``design_of``: the regression over some columns, with the priors every fit over them holds
-    (``CandidateSet.design_over``).
+    (``CandidateSet.design_over``). A Stribeck velocity and a balancer's geometry are chosen on
+    a coarse grid, then on grids shrinking about the best point, each point a closed-form refit
+    of every selected effect (``Design.rss_with``: the effect's new columns against the others'
+    fixed ones), so no derivative-free search runs here.
     """
 
     def rss_of(candidate: EffectSpec) -> tuple[float, Design, Fit]:
@@ -39,48 +45,49 @@ def refine_setting(
         fit = small.fit([*others, candidate.label])
         return fit.rss['train'], small, fit
 
-    if spec.name == 'stribeck_friction':
-        start = float(spec.settings['velocity'])
+    if spec.name in ('stribeck_friction', 'gravity_spring') and (
+        spec.name == 'stribeck_friction' or 'ratio' in spec.settings
+    ):
+        start_rss, base, _ = rss_of(spec)
+        groups = [*others, spec.label]
 
-        def objective(log_vs: float) -> float:
-            return rss_of(spec.replace_settings(velocity=float(math.exp(log_vs))))[0]
+        def train_rss(candidate: EffectSpec) -> float:
+            return base.rss_with(groups, spec.label, problem.columns(candidate)[0])['train']
 
-        best = optimize.minimize_scalar(
-            objective,
-            bounds=(math.log(start / 2.5), math.log(start * 2.5)),
-            method='bounded',
-            options={'xatol': 0.02},
-        )
-        if best.fun < rss_of(spec)[0]:
-            return spec.replace_settings(velocity=round(float(math.exp(best.x)), 5))
-        return None
-    if spec.name == 'gravity_spring' and 'ratio' in spec.settings:
+        if spec.name == 'stribeck_friction':
+            start = math.log(float(spec.settings['velocity']))
+
+            def at_velocity(point: np.ndarray) -> EffectSpec:
+                return spec.replace_settings(velocity=round(float(math.exp(point[0])), 5))
+
+            # Within a factor 2.5 of the selection's candidate velocity.
+            span = math.log(2.5)
+            best, value = _grid_search(
+                lambda p: train_rss(at_velocity(p)),
+                [np.array([start + span * k / 4]) for k in range(-4, 5)],
+                low=np.array([start - span]),
+                high=np.array([start + span]),
+                steps=np.array([span / 8]),
+            )
+            return at_velocity(best) if value < start_rss else None
         # The balancer's geometry: the best of a grid of arm ratios and phases, then refined
         # together (an encoder zero error shifts the phase by milliradians). The ratio stays in
         # the grid's range: towards 0 the three columns merge into sin and sin 2 of the angle,
         # an ill-posed pair that fits the training part's noise, not a balancer.
         low, high = min(BALANCER_RATIOS), max(BALANCER_RATIOS)
 
-        def spring_rss(geometry: np.ndarray) -> float:
-            ratio = float(np.clip(geometry[0], low, high))
-            return rss_of(spec.replace_settings(ratio=ratio, phase_rad=float(geometry[1])))[0]
+        def at_geometry(point: np.ndarray) -> EffectSpec:
+            ratio = round(float(np.clip(point[0], low, high)), 5)
+            return spec.replace_settings(ratio=ratio, phase_rad=round(float(point[1]), 5))
 
-        grid = [np.array([r, p]) for r in BALANCER_RATIOS for p in BALANCER_PHASES]
-        geometry = min(grid, key=spring_rss)
-        best = optimize.minimize(
-            spring_rss,
-            geometry,
-            method='Nelder-Mead',
-            options={
-                'xatol': 1e-4,
-                'fatol': 1e-9,
-                'initial_simplex': geometry + np.array([[0.0, 0.0], [0.05, 0.0], [0.0, 0.05]]),
-            },
+        best, value = _grid_search(
+            lambda p: train_rss(at_geometry(p)),
+            [np.array([r, p]) for r in BALANCER_RATIOS for p in BALANCER_PHASES],
+            low=np.array([low, -np.inf]),
+            high=np.array([high, np.inf]),
+            steps=np.array([0.05, 0.05]),
         )
-        if best.fun < rss_of(spec)[0]:
-            ratio = round(float(np.clip(best.x[0], low, high)), 5)
-            return spec.replace_settings(ratio=ratio, phase_rad=round(float(best.x[1]), 5))
-        return None
+        return at_geometry(best) if value < start_rss else None
     if spec.name == 'payload_mass':
         current = spec
         for _ in range(6):
@@ -106,3 +113,38 @@ def refine_setting(
                 current = current.replace_settings(inertia=True)
         return current
     return None
+
+
+def _grid_search(
+    objective: Callable[[np.ndarray], float],
+    coarse: list[np.ndarray],
+    *,
+    low: np.ndarray,
+    high: np.ndarray,
+    steps: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """The best point of a coarse grid, then of grids about it that shrink, within bounds.
+
+    Each round tries the 3^d points at -step, 0, +step about the best so far; the step is
+    divided by 3 once the centre stays best (a round that moves the centre is repeated there,
+    at most twice in a row). After ``_GRID_ROUNDS`` shrinks the point is known to steps / 729.
+    """
+    values = [objective(point) for point in coarse]
+    best = np.asarray(coarse[int(np.argmin(values))], dtype=float)
+    value = float(min(values))
+    step = np.asarray(steps, dtype=float)
+    offsets = np.array(np.meshgrid(*[[-1.0, 0.0, 1.0]] * len(best))).reshape(len(best), -1).T
+    shrinks, moves = 0, 0
+    while shrinks < _GRID_ROUNDS:
+        centre = best
+        for offset in offsets:
+            if offset.any():
+                point = np.clip(centre + offset * step, low, high)
+                trial = objective(point)
+                if trial < value:
+                    best, value = point, trial
+        if best is centre or moves >= 2:
+            step, shrinks, moves = step / 3.0, shrinks + 1, 0
+        else:
+            moves += 1
+    return best, value

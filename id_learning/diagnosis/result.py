@@ -123,6 +123,7 @@ class DiagnosisResult:
         waterfall: per added effect, (label, (n,) held-out RMSE after adding it [N*m]).
         location: per joint, where the nominal residual lives.
         stop_reason: why the selection stopped.
+        cut_short: the steps the time budget left out (``DiagnosisConfig.max_seconds``).
         rejected: the best candidate that did not enter, and why.
         nominal_joints: joints whose held-out part the effects do not improve: the refit model
             gives the nominal torque there.
@@ -155,6 +156,7 @@ class DiagnosisResult:
     stop_reason: str
     rejected: dict[str, Any] | None
     nominal_joints: list[str] = field(default_factory=list)
+    cut_short: list[str] = field(default_factory=list)
     marginalised: list[str] = field(default_factory=list)
     stand_ins: list[str] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
@@ -273,6 +275,7 @@ class DiagnosisResult:
                 for loc in self.location
             ],
             'stop_reason': self.stop_reason,
+            'cut_short': list(self.cut_short),
             'rejected': self.rejected,
             'marginalised': list(self.marginalised),
             'stand_ins': list(self.stand_ins),

@@ -21,6 +21,7 @@ from __future__ import annotations
 import copy
 import logging
 import math
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -31,6 +32,7 @@ from scipy import stats
 from id_learning.dataset.statistics import f_test
 
 __all__ = [
+    'BUDGET_STOP',
     'Design',
     'Fit',
     'GroupEvaluation',
@@ -41,6 +43,8 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 
 PARTS = ('train', 'test')
+#: The stop reason of a selection cut short by its time budget.
+BUDGET_STOP = 'the time budget ran out'
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,21 +207,50 @@ class Design:
         if not idx.size:
             rss = {part: self.yy[part] for part in PARTS}
             return Fit(tuple(groups), np.zeros(0), 0, rss, np.zeros((0, 0)), np.zeros((0, 0)))
-        data = self.gram['train'][np.ix_(idx, idx)]
-        gram = data + self.prior[np.ix_(idx, idx)]
-        values, vectors = np.linalg.eigh(gram)
-        keep = values > 1e-10 * max(values.max(), 1e-300)
-        inverse = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
-        theta = inverse @ self.cross['train'][idx]
-        # With a prior, the effective number of parameters: trace((G + P)^-1 G).
-        rank = float(np.trace(inverse @ data)) if self.prior.any() else float(keep.sum())
-        rss = {}
-        for part in PARTS:
-            g = self.gram[part][np.ix_(idx, idx)]
-            value = self.yy[part] - 2.0 * theta @ self.cross[part][idx] + theta @ g @ theta
-            rss[part] = max(float(value), 0.0)
+        grams = {part: self.gram[part][np.ix_(idx, idx)] for part in PARTS}
+        crosses = {part: self.cross[part][idx] for part in PARTS}
+        theta, inverse, rank, rss = _solve(
+            grams,
+            crosses,
+            self.yy,
+            self.prior[np.ix_(idx, idx)],
+            with_prior=bool(self.prior.any()),
+        )
         covariance = inverse * self.residual_variance(rss['train'], rank)
         return Fit(tuple(groups), theta, rank, rss, covariance, inverse)
+
+    def rss_with(
+        self, groups: Sequence[str], label: str, columns: dict[str, np.ndarray]
+    ) -> dict[str, float]:
+        """A fit's rss over ``groups`` with ``label``'s columns replaced by ``columns``.
+
+        ``columns``: per part (M, n, k), as wide as the group's. A setting's refinement tries
+        many columns for one group: this costs their products with the design's columns, not a
+        new design's whole Gram matrix.
+        """
+        idx = self.indices(groups)
+        block = np.arange(self.n_columns)[self.slices[label]]
+        position = np.flatnonzero(np.isin(idx, block))
+        root = np.sqrt(self.weights)
+        k = len(block)
+        new = {part: (columns[part] * root[None, :, None]).reshape(-1, k) for part in PARTS}
+        norms = np.linalg.norm(new['train'], axis=0)
+        norms = np.where(norms > 0, norms, 1.0)
+        grams, crosses = {}, {}
+        for part in PARTS:
+            x = new[part] / norms
+            g = self.gram[part][np.ix_(idx, idx)].copy()
+            products = (x.T @ self.matrix[part])[:, idx]
+            g[position, :] = products
+            g[:, position] = products.T
+            g[np.ix_(position, position)] = x.T @ x
+            c = self.cross[part][idx].copy()
+            c[position] = x.T @ self._yw[part]
+            grams[part], crosses[part] = g, c
+        prior = self.prior[np.ix_(idx, idx)].copy()
+        ratio = self.column_norm[block] / norms
+        prior[np.ix_(position, position)] *= np.outer(ratio, ratio)
+        return _solve(grams, crosses, self.yy, prior, with_prior=bool(self.prior.any()))[3]
 
     def residual_variance(self, rss_train: float, rank: float) -> float:
         """Training residual variance per effective degree of freedom of a fit's rss and rank."""
@@ -369,6 +402,33 @@ def noise_consistency(
     return bool(consistent.all()), ratio, p_values
 
 
+def _solve(
+    grams: dict[str, np.ndarray],
+    crosses: dict[str, np.ndarray],
+    yy: dict[str, float],
+    prior: np.ndarray,
+    *,
+    with_prior: bool,
+) -> tuple[np.ndarray, np.ndarray, float, dict[str, float]]:
+    """The regularised least squares of a fit from its Gram blocks (minimum norm if singular).
+
+    Returns:
+        (theta, (G + P)^+ in normalised units, the effective number of parameters, rss per part).
+    """
+    data = grams['train']
+    values, vectors = np.linalg.eigh(data + prior)
+    keep = values > 1e-10 * max(values.max(), 1e-300)
+    inverse = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
+    theta = inverse @ crosses['train']
+    # With a prior, the effective number of parameters: trace((G + P)^-1 G).
+    rank = float(np.trace(inverse @ data)) if with_prior else float(keep.sum())
+    rss = {}
+    for part in PARTS:
+        value = yy[part] - 2.0 * theta @ crosses[part] + theta @ grams[part] @ theta
+        rss[part] = max(float(value), 0.0)
+    return theta, inverse, rank, rss
+
+
 def forward_select(
     design: Design,
     candidates: Sequence[str],
@@ -381,6 +441,7 @@ def forward_select(
     noise_tolerance: float = 1.25,
     last_resort: Callable[[str], bool] | None = None,
     start: Sequence[str] = (),
+    deadline: float | None = None,
 ) -> SelectionResult:
     """Add candidate groups one at a time while each passes every test (see the module doc).
 
@@ -389,7 +450,8 @@ def forward_select(
     they absorb an effect that one coefficient explains (a torque-constant error) and open
     trades (the link masses against every joint's torque scale) that nothing else settles.
     ``start``: groups already selected; the selection resumes from them (``steps`` then holds
-    the new groups' only).
+    the new groups' only). ``deadline`` (``time.perf_counter()`` seconds): no step starts after
+    it, and the stop reason says the budget ran out.
     """
     n_eff = design.n_eff_train
     level = significance / max(len(candidates), 1)
@@ -400,6 +462,9 @@ def forward_select(
     stop_reason = 'reached the maximum number of effects'
     rejected: GroupEvaluation | None = None
     for _ in range(max(max_groups - len(selected), 0)):
+        if deadline is not None and time.perf_counter() > deadline:
+            stop_reason = BUDGET_STOP
+            break
         evaluations = []
         for label in candidates:
             if label in selected or (conflicts is not None and conflicts(label, selected)):

@@ -62,5 +62,6 @@ def diagnose_training_part(
         'effects': [effect.label for effect in result.named_effects()],
         'alias_sets': [list(alias.members) for alias in result.alias_sets],
         'untestable': [list(item) for item in result.untestable_effects()],
+        'cut_short': list(result.cut_short),
     }
     return result.augmented_model, summary

@@ -230,3 +230,23 @@ def test_a_pooled_fit_takes_the_held_out_parts_nuisances_out_as_the_training_par
     assert pooled.n_effective['train'] == pytest.approx(
         design.n_effective['train'] + design.n_effective['test'] - [1.0, 0.0]
     )
+
+
+def test_a_group_with_other_columns_fits_as_a_design_built_anew(signals):
+    """``rss_with`` updates one group's Gram blocks; the fit must equal one built from scratch,
+    a prior on the group included (its precision follows the new columns' norms)."""
+    rng = np.random.default_rng(4)
+    y = 2.0 * signals['a'][:, :, 0] + 0.5 * signals['d'][:, :, 0]
+    other = 3.0 * signals['c'] + 0.2 * rng.standard_normal(signals['c'].shape)
+    base = design_with(y, signals)
+    base = base.with_priors({'c': np.array([[4.0]])})
+    replaced = {**signals, 'c': other}
+    fresh = design_with(y, replaced).with_priors({'c': np.array([[4.0]])})
+    groups = ['a', 'c', 'd']
+    half = len(y) // 2
+    columns = {'train': other[:half], 'test': other[half:]}
+    rss = base.rss_with(groups, 'c', columns)
+    expected = fresh.fit(groups).rss
+    for part in ('train', 'test'):
+        assert rss[part] == pytest.approx(expected[part], rel=1e-9)
+    assert rss['train'] != pytest.approx(base.fit(groups).rss['train'], rel=1e-6)
