@@ -86,6 +86,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         study_table=options.study_table(args, robot),
         overwrite=args.force,
         trim_unpaired_tail=args.trim_unpaired_tail,
+        announce=lambda line: print(f'id-learning train: {line}', file=sys.stderr, flush=True),
     )
     print(metrics_table(run.metrics))
     print(f'models: {run.out / "models"}; metrics: {run.metrics_path}; report: {run.report}')
@@ -178,7 +179,9 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         '--max-seconds-per-model',
         type=options.positive_float,
-        help='wall-clock budget per model fit [s] (default: none, early stopping decides)',
+        help='wall-clock budget per model fit [s], the identification and the diagnosis of '
+        'the training part included; a fit cut short says so in the report (default: none, '
+        'early stopping decides)',
     )
     p.add_argument(
         '--hyper-file',

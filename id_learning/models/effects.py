@@ -156,14 +156,19 @@ class RneaEffectsConfig(ModelConfig):
 
     Attributes:
         effects: a diagnosis' effects.json or output folder; empty: diagnose the training part.
+        max_seconds: the time budget of the training part's diagnosis [s] (None: none); a
+            diagnosis cut short by it says what it left out.
     """
 
     kind: Literal['rnea_effects'] = 'rnea_effects'
     effects: str = ''
+    max_seconds: float | None = None
 
     def __post_init__(self) -> None:
-        """Check the kind."""
+        """Check the kind and the budget."""
         check_kind(self, 'rnea_effects')
+        if self.max_seconds is not None and not self.max_seconds > 0:
+            raise ConfigError(f'rnea_effects: max_seconds must be > 0, got {self.max_seconds}')
 
 
 class RneaEffectsModel(InverseDynamicsModel):

@@ -23,9 +23,12 @@ from id_learning.models.fitting import select_device
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
+    'FIT_ORDER',
     'TRAIN_THREADS',
     'ModelResult',
+    'cut_short',
     'fit_models',
+    'fit_order',
     'model_overrides',
     'resolve_overrides',
 ]
@@ -75,6 +78,18 @@ def model_overrides(
     return overrides
 
 
+def cut_short(model: InverseDynamicsModel, history: dict[str, Any] | None) -> list[str]:
+    """What the fit's time budget left out: epochs, identification or diagnosis steps."""
+    out = []
+    if history is not None and history.get('stopped_by') == 'time_budget':
+        out.append('training stopped at its time budget')
+    physics = getattr(model, 'physics_', None)
+    out += list(getattr(physics, 'report', {}).get('cut_short', []))
+    diagnosis = getattr(model, 'diagnosis_', None) or {}
+    out += [f'diagnosis: {step}' for step in diagnosis.get('cut_short', [])]
+    return out
+
+
 def _history(model: InverseDynamicsModel) -> dict[str, Any] | None:
     for name in ('history_', 'train_history_'):
         history = getattr(model, name, None)
@@ -83,36 +98,61 @@ def _history(model: InverseDynamicsModel) -> dict[str, Any] | None:
     return None
 
 
-def _with_diagnosis(
-    data: TrainingData, kinds: Sequence[str], overrides: dict[str, dict[str, Any]]
-) -> tuple[TrainingData, dict[str, float], dict[str, str]]:
-    """Diagnose the training part once if a kind builds on its effects (no effects file given).
+#: The order kinds are fitted in, cheapest first, so that a run saves its fast models before
+#: the slow ones start: least squares, the identification, the diagnosis, then the networks
+#: (on physics first). Kinds not listed come last, in the order given.
+FIT_ORDER = (
+    'rnea_lq',
+    'rnea_id',
+    'rnea_effects',
+    'rnea_id_mlp',
+    'rnea_mlp',
+    'rnea_effects_mlp',
+    'mlp',
+    'lstm',
+    'delan',
+    'lnn',
+    'lnn_mlp',
+)
 
-    Returns:
-        The training data with the diagnosis, per kind that uses it the seconds it took, and,
-        when the diagnosis failed, per such kind why (those kinds cannot be fitted).
-    """
-    from id_learning.diagnosis import diagnose_training_part
+
+def fit_order(kinds: Sequence[str]) -> list[str]:
+    """``kinds`` in the order they are fitted (``FIT_ORDER``); the report keeps the given order."""
+    rank = {kind: k for k, kind in enumerate(FIT_ORDER)}
+    return sorted(kinds, key=lambda kind: rank.get(kind, len(FIT_ORDER)))
+
+
+def _diagnosis_users(kinds: Sequence[str], overrides: dict[str, dict[str, Any]]) -> list[str]:
+    """The kinds that build on the diagnosis of the training part (no effects file given)."""
     from id_learning.models.registry import make_config
 
-    users = [k for k in kinds if getattr(make_config(k, **overrides[k]), 'effects', None) == '']
-    if not users:
-        return data, {}, {}
+    return [k for k in kinds if getattr(make_config(k, **overrides[k]), 'effects', None) == '']
+
+
+def _with_diagnosis(
+    data: TrainingData, users: Sequence[str], max_seconds: float | None
+) -> tuple[TrainingData, float, str | None]:
+    """Diagnose the training part for the kinds that build on its effects, within a budget.
+
+    Returns:
+        The training data with the diagnosis, the seconds it took, and why it failed (None when
+        it did not; the kinds that build on it cannot be fitted then).
+    """
+    from id_learning.diagnosis import DiagnosisConfig, diagnose_training_part
+
     start = time.perf_counter()
     try:
-        model, summary = diagnose_training_part(data.dataset, data.robot)
+        model, summary = diagnose_training_part(
+            data.dataset, data.robot, DiagnosisConfig(max_seconds=max_seconds)
+        )
     except Exception as err:  # the other kinds do not need it: they go on
         reason = f'the diagnosis of the training part failed: {type(err).__name__}: {err}'
         expected = isinstance(err, IdLearningError)  # a stated reason needs no traceback
         _LOG.error('%s; not fitted: %s', reason, ', '.join(users), exc_info=not expected)
-        return data, {}, dict.fromkeys(users, reason)
+        return data, 0.0, reason
     seconds = time.perf_counter() - start
-    _LOG.info('diagnosed the training part in %.1f s for %s', seconds, users)
-    return (
-        replace(data, diagnosed=DiagnosedEffects(model, summary)),
-        dict.fromkeys(users, seconds),
-        {},
-    )
+    _LOG.info('diagnosed the training part in %.1f s for %s', seconds, list(users))
+    return replace(data, diagnosed=DiagnosedEffects(model, summary)), seconds, None
 
 
 def resolve_overrides(
@@ -153,21 +193,30 @@ def fit_models(
     progress: bool,
     on_fitted: Callable[[ModelResult], None] | None = None,
 ) -> tuple[dict[str, ModelResult], dict[str, str]]:
-    """Fit each kind in order on ``data``; each result's folder is ``models_dir / kind``.
+    """Fit each kind on ``data``, cheapest first (``fit_order``); folders ``models_dir / kind``.
 
     A kind whose fit fails is skipped, with the reason; the others go on (hours of fitting are
     not lost to one model). ``on_fitted`` is called with each result as soon as it is fitted
-    (the trainer saves it then). A kind's ``train_seconds`` include the diagnosis of the
-    training part when it builds on it.
+    (the trainer saves it then). The diagnosis of the training part runs when the first kind
+    that builds on it is due, within that kind's budget (``max_seconds``), and counts in its
+    ``train_seconds``.
 
     Returns:
-        The fitted models by kind, and the failed kinds with why.
+        The fitted models by kind (in the order of ``kinds``), and the failed kinds with why.
     """
     from id_learning.models.registry import make_model
 
-    data, diagnosis_seconds, failures = _with_diagnosis(data, kinds, overrides)
+    users = _diagnosis_users(kinds, overrides)
+    diagnosis_seconds: dict[str, float] = {}
+    failures: dict[str, str] = {}
     results: dict[str, ModelResult] = {}
-    for kind in tqdm(kinds, desc='models', unit='model', disable=not progress):
+    for kind in tqdm(fit_order(kinds), desc='models', unit='model', disable=not progress):
+        if kind in users and data.diagnosed is None and not failures.keys() & set(users):
+            budget = overrides[kind].get('max_seconds')
+            data, seconds, failed = _with_diagnosis(data, users, budget)
+            if failed is not None:
+                failures.update(dict.fromkeys(users, failed))
+            diagnosis_seconds = dict.fromkeys(users, seconds)
         if kind in failures:
             continue
         _LOG.info('fitting %s on %d samples', kind, data.n_fit)
@@ -186,13 +235,14 @@ def fit_models(
             continue
         # A kind built on the diagnosis of the training part pays for it too.
         seconds = time.perf_counter() - start + diagnosis_seconds.get(kind, 0.0)
+        history = _history(model)
         results[kind] = ModelResult(
             kind,
             model,
             models_dir / kind,
-            {'train_seconds': seconds, 'history': _history(model)},
+            {'train_seconds': seconds, 'history': history, 'cut_short': cut_short(model, history)},
         )
         _LOG.info('%s fitted in %.1f s', kind, seconds)
         if on_fitted is not None:
             on_fitted(results[kind])
-    return results, failures
+    return {kind: results[kind] for kind in kinds if kind in results}, failures

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -145,6 +145,7 @@ def train_run(
     study_table: StudyTable | None = None,
     overwrite: bool = False,
     trim_unpaired_tail: bool = False,
+    announce: Callable[[str], None] | None = None,
 ) -> RunResult:
     """Train models on bags and write a run folder (models, metrics.json, report.md).
 
@@ -156,13 +157,15 @@ def train_run(
         kinds: model kinds to train (registry names), in the order to train and report them.
         out: run folder to write (created; files in it are overwritten).
         hyper: per kind, hyper-parameter overrides (registry names of the config fields).
-        max_seconds_per_model: wall-clock budget per model fit [s], or None for the models' own.
+        max_seconds_per_model: wall-clock budget per model fit [s] (the identification and the
+            diagnosis of the training part included), or None for the models' own.
         progress: show progress bars.
         device: 'auto' (CUDA when present), 'cpu' or 'cuda'.
         preprocess: preprocessing settings (default: ``PreprocessConfig()``), with ``target``.
         study_table: the study's Table 1 for the report (``evaluation.study``), if given.
         overwrite: replace a run already in ``out``; without it such a run is left intact.
         trim_unpaired_tail: drop a torn recording's last unpaired messages, with a warning.
+        announce: called with a line as each model is saved (a quiet run says how far it got).
 
     Raises:
         ConfigError: unknown kind or hyper-parameter, an unavailable device, or ``out`` holds
@@ -179,12 +182,7 @@ def train_run(
     # The study's networks are small (2x64, 2x128): intra-op threads cost more than they give.
     # Measured on a shared 2-core machine: a DeLaN step took 14 ms on one thread, 1.4 s on two.
     configure_torch(TRAIN_THREADS)
-    out = Path(out)
-    if (out / RUN_FILE).exists() and not overwrite:
-        raise ConfigError(
-            f'{out}: holds a training run already ({RUN_FILE}); choose another --out, or pass '
-            '--force to replace it'
-        )
+    out = _free_out(Path(out), overwrite)
     bags = [Path(b) for b in bags]
     # Bad bags are refused before anything is written.
     dataset = combine_datasets(
@@ -210,7 +208,9 @@ def train_run(
     )
     write_json(out / RUN_FILE, run)
 
-    results, failures = _fit_and_save(data, kinds, overrides, out, run, progress=progress)
+    results, failures = _fit_and_save(
+        data, kinds, overrides, out, run, progress=progress, announce=announce
+    )
     rows = segment_rows(dataset, 'test')
     table, predictions = evaluate_models(results, dataset, rows, scale, timing=True)
     save_models(
@@ -247,9 +247,19 @@ def train_run(
         machine=run['machine'],
         git_commit=run['git_commit'],
     )
-    _add_failures(metrics, report_path, failures)
+    _add_failures(metrics, report_path, failures, results)
     write_json(out / METRICS_FILE, metrics)
     return RunResult(out, dataset, results, metrics, report_path, failures)
+
+
+def _free_out(out: Path, overwrite: bool) -> Path:
+    """``out``, unless it holds a run that ``overwrite`` does not allow to replace."""
+    if (out / RUN_FILE).exists() and not overwrite:
+        raise ConfigError(
+            f'{out}: holds a training run already ({RUN_FILE}); choose another --out, or pass '
+            '--force to replace it'
+        )
+    return out
 
 
 def _clear_replaced_run(out: Path) -> None:
@@ -270,14 +280,31 @@ def _test_part_text(config: PreprocessConfig) -> str:
     return f'the test part (last {share} in time) of each training bag'
 
 
-def _add_failures(metrics: dict[str, Any], report: Path, failures: dict[str, str]) -> None:
-    """Name the models that failed in metrics.json's document and at the end of the report."""
+def _add_failures(
+    metrics: dict[str, Any],
+    report: Path,
+    failures: dict[str, str],
+    results: dict[str, ModelResult],
+) -> None:
+    """Name the models that failed, and the fits cut short, in metrics.json and the report."""
+    _add_cut_short(metrics, report, results)
     if not failures:
         return
     metrics['failed'] = failures
     with report.open('a', encoding='utf-8') as out:
         out.write('\n## Models that failed\n\n')
         out.writelines(f'- `{kind}`: {why}\n' for kind, why in failures.items())
+
+
+def _add_cut_short(metrics: dict[str, Any], report: Path, results: dict[str, ModelResult]) -> None:
+    """Name the fits their time budget cut short, and what it left out, in metrics and report."""
+    cut = {k: r.metrics['cut_short'] for k, r in results.items() if r.metrics.get('cut_short')}
+    if not cut:
+        return
+    metrics['cut_short'] = cut
+    with report.open('a', encoding='utf-8') as out:
+        out.write('\n## Fits cut short by their time budget\n\n')
+        out.writelines(f'- `{kind}`: {"; ".join(steps)}\n' for kind, steps in cut.items())
 
 
 def _fit_and_save(
@@ -288,6 +315,7 @@ def _fit_and_save(
     run: dict[str, Any],
     *,
     progress: bool,
+    announce: Callable[[str], None] | None = None,
 ) -> tuple[dict[str, ModelResult], dict[str, str]]:
     """Fit every kind, saving each as soon as it is fitted; run.json records the failures.
 
@@ -303,6 +331,13 @@ def _fit_and_save(
         save_model(result.model, result.folder, extra=extra)
         run['kinds'].append(result.kind)
         write_json(out / RUN_FILE, run)
+        if announce is not None:
+            cut = result.metrics.get('cut_short')
+            announce(
+                f'{result.kind}: fitted in {result.metrics["train_seconds"]:.0f} s, saved to '
+                f'{result.folder}'
+                + (f' (cut short by its budget: {"; ".join(cut)})' if cut else '')
+            )
 
     results, failures = fit_models(
         data, data.robot, kinds, overrides, out / MODELS_DIR, progress=progress,

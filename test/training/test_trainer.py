@@ -520,3 +520,37 @@ def test_a_shuffled_run_scores_its_drawn_test_samples_and_evaluate_gives_them_ba
     (out / 'run.json').write_text(json.dumps(document))
     with pytest.raises(CheckpointError, match='shuffled split could not be rebuilt'):
         evaluate_run(out, bags, mabi, tmp_path / 'eval2', progress=False)
+
+
+def test_kinds_are_fitted_cheapest_first_and_reported_in_the_order_given():
+    from id_learning.training.fitting import fit_order
+
+    assert fit_order(['lnn', 'mlp', 'rnea_effects', 'rnea_id', 'rnea_lq', 'custom']) == [
+        'rnea_lq',
+        'rnea_id',
+        'rnea_effects',
+        'mlp',
+        'lnn',
+        'custom',
+    ]
+
+
+def test_every_fit_keeps_the_budget_and_a_fit_cut_short_says_so(bags, mabi, tmp_path):
+    """The identification is bounded by --max-seconds-per-model like the networks: past it no
+    claim is judged, the final fit is linearised once, and the run's report names both."""
+    lines: list[str] = []
+    out = tmp_path / 'run'
+    run = train_run(
+        bags[:1], mabi, 'motor', ['mlp', 'rnea_id'], out, hyper=FAST_HYPER, progress=False,
+        device='cpu', max_seconds_per_model=0.01, announce=lines.append,
+    )  # fmt: skip
+    assert list(run.models) == ['mlp', 'rnea_id']
+    assert [line.split(':')[0] for line in lines] == ['rnea_id', 'mlp']
+    cut = json.loads((out / 'metrics.json').read_text())['cut_short']
+    assert 'the final fit (linearised once)' in cut['rnea_id']
+    assert any('held-out judging' in step for step in cut['rnea_id'])
+    assert 'cut short by its budget' in lines[0]
+    assert '## Fits cut short by their time budget' in (out / 'report.md').read_text()
+    physics = run.models['rnea_id'].model.physics_.report
+    assert physics['balancers'] == []
+    assert physics['confirmation']['claims'] == []
