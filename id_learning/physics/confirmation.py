@@ -22,12 +22,14 @@ import numpy as np
 from scipy import stats
 
 from id_learning.dataset.blocks import (
+    MIN_BLOCKS,
     block_gains,
     block_ids,
     block_length_s,
     holm,
     one_sided_p,
 )
+from id_learning.dataset.statistics import f_test, integrated_autocorrelation
 from id_learning.physics.balancer import BALANCER_TERMS
 from id_learning.physics.identification_problem import Problem
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
@@ -68,13 +70,15 @@ class Judgement:
     """A claim judged on the held-out blocks.
 
     Attributes:
-        p_value: one-sided p of 'no held-out gain', Holm-corrected over the claims; nan: too
-            few blocks to judge (the claim is then not confirmed).
+        p_value: one-sided p of 'no held-out gain', Holm-corrected over the claims.
         gain: mean gain over the blocks (per block, the share of each joint's mean square
             without the claim that it removes, summed over joints).
         n_blocks: held-out blocks.
         block_s: their length [s].
         confirmed: the gain is significant at the identification's level.
+        test: 'blocks' (a t test over the blocks' gains), or 'effective samples' where the
+            held-out part holds fewer than ``MIN_BLOCKS`` blocks (an F test of its residual
+            sums in independent samples: each joint's samples over its correlation time).
     """
 
     p_value: float
@@ -82,14 +86,16 @@ class Judgement:
     n_blocks: int
     block_s: float
     confirmed: bool
+    test: str = 'blocks'
 
-    def to_dict(self) -> dict[str, float | int | bool | None]:
+    def to_dict(self) -> dict[str, float | int | bool | str | None]:
         """JSON-ready, nan as None."""
         return {
             'p_value_holm': None if math.isnan(self.p_value) else self.p_value,
             'gain': self.gain,
             'blocks': self.n_blocks,
             'block_s': self.block_s,
+            'test': self.test,
             'confirmed': self.confirmed,
         }
 
@@ -200,10 +206,14 @@ def judge_claims(
     raw: dict[str, tuple[float, float, int]] = {}
     for claim in to_judge:
         without = solve(inner.pinned(claim.names), x, stribeck)
-        gains = block_gains(residual(held.pinned(claim.names), without), with_all, blocks)
-        total = gains.sum(axis=1)
-        raw[claim.label] = (one_sided_p(total), float(np.mean(total)), len(total))
+        worse = residual(held.pinned(claim.names), without)
+        total = block_gains(worse, with_all, blocks).sum(axis=1)
+        p = one_sided_p(total)
+        if math.isnan(p):
+            p = _effective_sample_p(worse, with_all, len(claim.names))
+        raw[claim.label] = (p, float(np.mean(total)), len(total))
     adjusted = holm({label: value[0] for label, value in raw.items()})
+    test = 'blocks' if len(np.unique(blocks)) >= MIN_BLOCKS else 'effective samples'
     return {
         label: Judgement(
             p_value=adjusted[label],
@@ -211,6 +221,24 @@ def judge_claims(
             n_blocks=count,
             block_s=block_s,
             confirmed=bool(adjusted[label] < significance),
+            test=test,
         )
         for label, (_, gain, count) in raw.items()
     }
+
+
+def _effective_sample_p(worse: np.ndarray, better: np.ndarray, parameters: int) -> float:
+    """The p of 'no held-out gain' in independent samples (too few blocks for a t test).
+
+    Each joint's residual sums are put in units of its independent samples (its samples over
+    the better model's correlation time, the better model's residual variance as the unit), and
+    an F test asks whether the worse model's excess could be chance.
+    """
+    n_eff = np.array(
+        [len(better) / integrated_autocorrelation(better[:, j]) for j in range(better.shape[1])]
+    )
+    power = np.mean(better**2, axis=0)
+    used = power > 0
+    large = float(np.sum(n_eff[used]))
+    small = float(np.sum(n_eff[used] * np.mean(worse[:, used] ** 2, axis=0) / power[used]))
+    return f_test(small, large, parameters, large, 0.0)[1]

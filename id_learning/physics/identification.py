@@ -45,7 +45,7 @@ from id_learning.physics.confirmation import (
     holdout_split,
     judge_claims,
 )
-from id_learning.physics.identification_problem import IdentificationConfig, Problem
+from id_learning.physics.identification_problem import PINNED_STD, IdentificationConfig, Problem
 from id_learning.physics.identification_search import choose_balancers, choose_stribeck
 from id_learning.physics.identified import IdentifiedPhysics
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
@@ -64,6 +64,8 @@ PRIOR_DOMINATED = 0.5
 def _solve(problem: Problem, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
     """Minimise |A x - b|^2 + |(x - mean) / std|^2 (priors) with every pseudo-inertia PSD.
 
+    Parameters held at their prior (``Layout.pin``) are constants here, not unknowns.
+
     Returns:
         (x, the posterior covariance of x (constraints inactive), the solver's status).
     """
@@ -72,40 +74,51 @@ def _solve(problem: Problem, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, 
     layout = problem.layout
     mean = np.asarray(layout.prior_mean)
     std = np.asarray(layout.prior_std)
-    has_prior = np.isfinite(std)
-    norms = np.linalg.norm(a, axis=0)
+    free = std != PINNED_STD
+    # The free unknowns' positions in u, by their position in x.
+    position = np.cumsum(free) - 1
+    has_prior = np.isfinite(std)[free]
+    norms = np.linalg.norm(a[:, free], axis=0)
     # Scaled unknowns u: x = mean + s u, s the prior std or the column's inverse norm.
-    s = np.where(has_prior, std, 1.0 / np.where(norms > 0, norms, 1.0))
-    a_s = a * s
+    s = np.where(has_prior, std[free], 1.0 / np.where(norms > 0, norms, 1.0))
+    a_s = a[:, free] * s
     residual = b - a @ mean
     q, r = linalg.qr(a_s, mode='economic')
     z = q.T @ residual
-    penalty = np.diag(has_prior.astype(float))
-    information = r.T @ r + penalty
+    information = r.T @ r + np.diag(has_prior.astype(float))
     # Unexcited columns without a prior (friction of a joint that never moves) stay at zero.
     information += np.diag(np.where(np.diag(information) > 0, 0.0, 1.0))
-    u = cp.Variable(len(layout))
+    u = cp.Variable(int(free.sum()))
     # A whisper of ridge fixes the scaled unknowns of columns that are zero on this recording.
-    objective = cp.sum_squares(r @ u - z) + cp.sum_squares(u[has_prior]) + 1e-9 * cp.sum_squares(u)
+    # The objective on the scale of its value at the prior mean (labels a model misses badly
+    # give 1e13 there, beyond a conic solver's tolerances); its minimiser is the same.
+    scale = 1.0 / max(1.0, float(z @ z) / max(len(z), 1))
+    objective = scale * (
+        cp.sum_squares(r @ u - z) + cp.sum_squares(u[has_prior]) + 1e-9 * cp.sum_squares(u)
+    )
     theta_block = layout.blocks['theta']
     basis = pseudo_inertia_basis()
     constraints = []
     for body in range((theta_block.stop - theta_block.start) // N_INERTIAL_PARAMETERS):
         index = np.arange(theta_block.start, theta_block.start + 10) + 10 * body
+        if not free[index].all():  # held at the URDF's values, which are physical
+            continue
         # J(theta) = J(mean) + sum_k s_k u_k B_k, scaled by the body's mass for conditioning.
         mass = max(abs(mean[index[0]]), 1e-3)
         fixed = np.tensordot(mean[index], basis, axes=1) / mass
-        terms = [u[k] * (s[k] / mass * basis[i]) for i, k in enumerate(index)]
+        terms = [u[position[k]] * (s[position[k]] / mass * basis[i]) for i, k in enumerate(index)]
         pseudo = fixed + sum(terms)
         constraints.append(0.5 * (pseudo + pseudo.T) >> 0)
     # A real drive has no negative rotor inertia and no friction that pushes.
     for name in ('rotor', *problem.laws):
         if name in layout.blocks:
-            rows = layout.blocks[name]
-            constraints.append(u[rows] >= -mean[rows] / s[rows])
+            rows = position[np.arange(layout.blocks[name].start, layout.blocks[name].stop)]
+            constraints.append(u[rows] >= -mean[layout.blocks[name]] / s[rows])
+    payload = np.zeros(0, dtype=int)
     if 'payload' in layout.blocks:
-        index = np.arange(layout.blocks['payload'].start, layout.blocks['payload'].stop)
-        terms = [u[k] * (s[k] * basis[i]) for i, k in enumerate(index)]
+        payload = np.arange(layout.blocks['payload'].start, layout.blocks['payload'].stop)
+    if payload.size and free[payload].all():
+        terms = [u[position[k]] * (s[position[k]] * basis[i]) for i, k in enumerate(payload)]
         pseudo = sum(terms)
         constraints.append(0.5 * (pseudo + pseudo.T) >> 0)
     constrained = cp.Problem(cp.Minimize(objective), constraints)
@@ -119,17 +132,25 @@ def _solve(problem: Problem, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, 
             f'{problem.dataset.source}: the constrained identification found no solution '
             f'(solver {problem.config.solver}: {status})'
         )
-    x = mean + s * np.asarray(u.value)
-    covariance = s[:, None] * np.linalg.inv(information) * s[None, :]
+    x = mean.copy()
+    x[free] = mean[free] + s * np.asarray(u.value)
+    covariance = np.zeros((len(layout), len(layout)))
+    covariance[np.ix_(free, free)] = s[:, None] * np.linalg.inv(information) * s[None, :]
     return x, covariance, status
 
 
 def _fit(
-    problem: Problem, x: np.ndarray, stribeck: np.ndarray, iterations: int | None = None
+    problem: Problem,
+    x: np.ndarray,
+    stribeck: np.ndarray,
+    iterations: int | None = None,
+    *,
+    grid: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, str, np.ndarray]:
     """Linearise and solve (``config.iterations`` times); the nonlinear settings chosen on the way.
 
     Every solve but the last reweighs the rows by what the fit leaves (``Problem.reweight``).
+    ``grid``: search the balancers' geometry on a grid first (else refine the one in use).
 
     Returns:
         (x, its covariance, the solver's status, the Stribeck velocities).
@@ -145,7 +166,7 @@ def _fit(
         if iteration < 2:
             if iteration == 0:
                 stribeck = choose_stribeck(problem, x, stribeck)
-            choose_balancers(problem, x, stribeck)
+            choose_balancers(problem, x, stribeck, grid=grid and iteration == 0)
     return x, covariance, status, stribeck
 
 
@@ -155,7 +176,12 @@ def _refit(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> np.ndarray:
 
 
 def _confirmed(
-    problem: Problem, x: np.ndarray, stribeck: np.ndarray, deadline: float | None
+    problem: Problem,
+    x: np.ndarray,
+    stribeck: np.ndarray,
+    deadline: float | None,
+    *,
+    grid: bool = True,
 ) -> tuple[Problem, np.ndarray, np.ndarray, dict[str, Any]]:
     """Judge the claims on the training part's held-out tail; the problem holding the confirmed.
 
@@ -168,7 +194,7 @@ def _confirmed(
     config = problem.config
     fit_rows, held_rows = holdout_split(problem)
     inner, held = problem.subset(fit_rows), problem.subset(held_rows)
-    x, covariance, _, stribeck = _fit(inner, x, stribeck)
+    x, covariance, _, stribeck = _fit(inner, x, stribeck, grid=grid)
     to_judge = claims(inner, body_departures(inner, x, covariance))
     if _past(deadline):
         to_judge, judged = [], {}
@@ -193,6 +219,31 @@ def _confirmed(
         'unjudged': [c.label for c in refused_unjudged],
     }
     return kept, kept.layout.transfer(x, inner.layout), stribeck, report
+
+
+def _unjudged_departures(
+    problem: Problem, x: np.ndarray, covariance: np.ndarray, confirmation: dict[str, Any]
+) -> bool:
+    """Whether a body of the fit leaves its prior's 95 % range with no held-out judgement."""
+    judged = {c['claim'] for c in confirmation['claims']}
+    pinned = set(problem.layout.pinned_names())
+    return any(
+        entry['departs']
+        and f'{entry["body"]} ({entry["joint"]})' not in judged
+        and f'body {k + 1} 0' not in pinned
+        for k, entry in enumerate(body_departures(problem, x, covariance))
+    )
+
+
+def _merged(first: dict[str, Any], second: dict[str, Any]) -> dict[str, Any]:
+    """The judgements of two rounds, the second's where both judged a claim."""
+    claims = {c['claim']: c for c in first['claims']} | {c['claim']: c for c in second['claims']}
+    return {
+        **second,
+        'rounds': 2,
+        'claims': list(claims.values()),
+        'unjudged': sorted(set(first['unjudged']) | set(second['unjudged'])),
+    }
 
 
 def _past(deadline: float | None) -> bool:
@@ -231,10 +282,20 @@ def identify(
     if _past(deadline):
         iterations = 1
         cut_short.append('the final fit (linearised once)')
-    x, covariance, status, stribeck = _fit(problem, x, stribeck, iterations)
+    # After the judging the balancers keep the geometry found on the fit part, refined.
+    x, covariance, status, stribeck = _fit(
+        problem, x, stribeck, iterations, grid=confirmation is None
+    )
+    if confirmation is not None and _unjudged_departures(problem, x, covariance, confirmation):
+        # A refused claim's torque went to bodies that stayed at their prior before: judge
+        # them (and the claims kept) again on the model as it now is.
+        if _past(deadline):
+            cut_short.append('the judging of bodies that departed in the final fit')
+        else:
+            problem, x, stribeck, again = _confirmed(problem, x, stribeck, deadline, grid=False)
+            confirmation = _merged(confirmation, again)
+            x, covariance, status, stribeck = _fit(problem, x, stribeck, grid=False)
     layout, blocks, n = problem.layout, problem.layout.blocks, problem.n
-    pinned = [layout.index[name] for name in layout.pinned_names()]
-    x[pinned] = np.asarray(layout.prior_mean)[pinned]
 
     def block(name: str) -> np.ndarray:
         return x[blocks[name]].copy() if name in blocks else np.zeros(n)

@@ -235,6 +235,9 @@ class Problem:
         self._balancer_rates: dict[tuple[int, float, float], np.ndarray] = {}
         self.balancer_basis: dict[int, np.ndarray] = {}
         self.balancer_columns: dict[int, np.ndarray] = {}
+        #: Filtered friction columns (N,) that do not change with the estimate, by (law, joint,
+        #: Stribeck velocity); the same for every subset of the rows.
+        self._filtered_friction: dict[tuple[str, int, float], np.ndarray] = {}
         for j in self.balancer_joints:
             self.set_geometry(j, float(np.median(config.balancer_ratios)), 0.0)
         self.layout = self._layout()
@@ -424,16 +427,47 @@ class Problem:
             out[self.balancer_joints] = values
         return out
 
-    def friction(self, x: np.ndarray, stribeck: np.ndarray) -> dict[str, np.ndarray]:
-        """Each friction law's filtered column (rows, n); the load from x's RNEA and balancer."""
-        tau_link = np.einsum('tjp,p->tj', self.regressor, x[self.rigid_block])
-        coefficients = self.balancer_matrix(x)
-        for j, basis in self.balancer_basis.items():
-            tau_link[:, j] += basis @ coefficients[j]
-        columns = friction_columns(
-            self.laws, self.v, tau_link, self.config.smoothing_velocity, stribeck
-        )
-        return {law: self._filter(column)[self.rows] for law, column in columns.items()}
+    def friction(
+        self, x: np.ndarray, stribeck: np.ndarray, laws: tuple[str, ...] | None = None
+    ) -> dict[str, np.ndarray]:
+        """Each friction law's filtered column (rows, n); the load from x's RNEA and balancer.
+
+        Only the load-dependent law changes with x, and a Stribeck column with its joint's
+        velocity: the others are filtered once (``_filtered_friction``, shared by subsets).
+        """
+        out = {}
+        for law in laws or self.laws:
+            if law == 'load_dependent':
+                tau_link = np.einsum('tjp,p->tj', self.regressor, x[self.rigid_block])
+                coefficients = self.balancer_matrix(x)
+                for j, basis in self.balancer_basis.items():
+                    tau_link[:, j] += basis @ coefficients[j]
+                (column,) = friction_columns(
+                    (law,), self.v, tau_link, self.config.smoothing_velocity, stribeck
+                ).values()
+                out[law] = self._filter(column)[self.rows]
+            elif law == 'stribeck':
+                out[law] = np.stack(
+                    [self._fixed_friction(law, j, float(stribeck[j])) for j in range(self.n)],
+                    axis=1,
+                )[self.rows]
+            else:
+                out[law] = np.stack(
+                    [self._fixed_friction(law, j, 0.0) for j in range(self.n)], axis=1
+                )[self.rows]
+        return out
+
+    def _fixed_friction(self, law: str, joint: int, velocity: float) -> np.ndarray:
+        """One joint's filtered column (N,) of a law that does not change with the estimate."""
+        key = (law, joint, velocity)
+        if key not in self._filtered_friction:
+            stribeck = np.full(self.n, velocity if velocity > 0 else 1.0)
+            (column,) = friction_columns(
+                (law,), self.v[:, joint : joint + 1], np.zeros((len(self.v), 1)),
+                self.config.smoothing_velocity, stribeck[joint : joint + 1],
+            ).values()  # fmt: skip
+            self._filtered_friction[key] = self._filter(column, joint)[:, 0]
+        return self._filtered_friction[key]
 
     def design(self, x: np.ndarray, stribeck: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The linearised, weighted system (A, b) around the estimate x."""

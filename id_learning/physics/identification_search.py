@@ -43,7 +43,7 @@ def choose_stribeck(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> np
         for vs in problem.config.stribeck_velocities:
             trial = stribeck.copy()
             trial[j] = vs
-            column = problem.friction(x, trial)['stribeck'][:, j]
+            column = problem.friction(x, trial, ('stribeck',))['stribeck'][:, j]
             design = a[j][:, columns].copy()
             design[:, columns.index(blocks['stribeck'].start + j)] = column * problem.row_weight[j]
             coefficients, *_ = np.linalg.lstsq(design, target, rcond=None)
@@ -145,7 +145,9 @@ _GEOMETRY_TOLERANCE = 1e-5
 RATIO_RANGE = (0.05, 0.98)
 
 
-def choose_balancers(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> None:
+def choose_balancers(
+    problem: Problem, x: np.ndarray, stribeck: np.ndarray, *, grid: bool = True
+) -> None:
     """Per balancer joint, the geometry whose refit leaves the least (regularised) misfit.
 
     Every parameter is refitted for each geometry (the priors included, the constraints left
@@ -154,25 +156,26 @@ def choose_balancers(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> N
     basis's analytic derivatives with the linear parameters projected out (variable projection,
     Kaufman's step) refines ratio and phase together: an encoder zero error shifts the phase by
     milliradians. The normal equations change in the joint's three balancer columns only.
+    Without ``grid`` the refinement starts from the geometry in use (a later linearisation).
     """
     layout, config = problem.layout, problem.config
     for j in problem.balancer_joints:
         equations = NormalEquations.of(*problem.design(x, stribeck), layout)
-        rows = slice(j * len(problem.rows), (j + 1) * len(problem.rows))
         first = layout.blocks['balancer'].start + problem.balancer_joints.index(j) * BALANCER_TERMS
         columns = np.arange(first, first + BALANCER_TERMS)
-        grid = [(r, p) for r in config.balancer_ratios for p in config.balancer_phases]
-        q = problem.q[:, j]
-        stacked = np.concatenate([balancer_basis(q, r, p) for r, p in grid], axis=1)
-        filtered = problem.kept_columns(stacked, j) * problem.row_weight[j]
-        misfits = [
-            equations.misfit_with(columns, rows, filtered[:, 3 * k : 3 * k + 3])
-            for k in range(len(grid))
-        ]
-        ratio, phase = _refine_geometry(
-            problem, equations, j, columns, grid[int(np.argmin(misfits))]
-        )
-        problem.set_geometry(j, ratio, phase)
+        start = problem.geometry[j]
+        if grid:
+            rows = slice(j * len(problem.rows), (j + 1) * len(problem.rows))
+            points = [(r, p) for r in config.balancer_ratios for p in config.balancer_phases]
+            q = problem.q[:, j]
+            stacked = np.concatenate([balancer_basis(q, r, p) for r, p in points], axis=1)
+            filtered = problem.kept_columns(stacked, j) * problem.row_weight[j]
+            misfits = [
+                equations.misfit_with(columns, rows, filtered[:, 3 * k : 3 * k + 3])
+                for k in range(len(points))
+            ]
+            start = points[int(np.argmin(misfits))]
+        problem.set_geometry(j, *_refine_geometry(problem, equations, j, columns, start))
 
 
 def _refine_geometry(

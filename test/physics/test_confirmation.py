@@ -18,6 +18,7 @@ from id_learning.physics.balancer import balancer_basis, balancer_basis_derivati
 from id_learning.physics.confirmation import HELD_OUT_FRACTION, holdout_split
 from id_learning.physics.identification import IdentificationConfig, identify
 from id_learning.physics.identification_problem import Problem
+from id_learning.physics.identified import friction_columns
 from id_learning.twin import simulate
 
 DURATION_S = 240.0
@@ -159,7 +160,14 @@ def test_a_fit_past_its_budget_confirms_nothing_and_says_so(mabi):
     result = simulate(twin_config(60.0, drives(gravity_spring=SPRING), seed=4))
     dataset = prepare_dataset(result.recording, mabi)
     physics = identify(dataset, mabi, SETTINGS, deadline=time.perf_counter())
-    assert len(physics.report['cut_short']) == 2
+    cut = physics.report['cut_short']
+    assert cut[:2] == [
+        'the held-out judging of the claims (none confirmed)',
+        'the final fit (linearised once)',
+    ]
+    # The refused balancer's torque went to the links: their departure is named as unjudged.
+    departed = any(body['departs'] for body in physics.report['bodies'])
+    assert ('the judging of bodies that departed in the final fit' in cut) == departed
     assert physics.report['confirmation']['claims'] == []
     assert 'balancer on joint_2' in physics.report['confirmation']['unjudged']
     assert physics.report['balancers'] == []
@@ -168,3 +176,26 @@ def test_a_fit_past_its_budget_confirms_nothing_and_says_so(mabi):
 def test_bad_significance_is_refused():
     with pytest.raises(ConfigError, match='significance'):
         IdentificationConfig(significance=0.0)
+
+
+def test_friction_columns_kept_across_fits_equal_columns_filtered_anew(plain, mabi):
+    """Viscous, Coulomb and Stribeck columns are filtered once and shared by row subsets."""
+    dataset, _ = plain
+    problem = Problem(dataset, mabi, IdentificationConfig())
+    x = np.asarray(problem.layout.prior_mean, dtype=float)
+    x = np.where(np.isfinite(x), x, 0.0)
+    stribeck = np.array([0.01, 0.02, 0.03, 0.05, 0.08, 0.03])
+    tau_link = np.einsum('tjp,p->tj', problem.regressor, x[problem.rigid_block])
+    reference = {
+        law: dataset.filter_like_labels(column)[problem.rows]
+        for law, column in friction_columns(
+            problem.laws, dataset.v, tau_link, SETTINGS.smoothing_velocity, stribeck
+        ).items()
+    }
+    keep = np.arange(0, len(problem.rows), 3)
+    for _ in range(2):  # the second call reads what the first kept
+        columns = problem.friction(x, stribeck)
+        subset = problem.subset(keep).friction(x, stribeck)
+        for law in problem.laws:
+            np.testing.assert_allclose(columns[law], reference[law], rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(subset[law], reference[law][keep], rtol=1e-12, atol=1e-12)
