@@ -343,9 +343,11 @@ def _fit_and_save(
         data, data.robot, kinds, overrides, out / MODELS_DIR, progress=progress,
         on_fitted=save_at_once,
     )  # fmt: skip
+    # Fitted cheapest first; listed, evaluated and reported in the order asked for.
+    run['kinds'] = [kind for kind in kinds if kind in run['kinds']]
     if failures:
         run['failed'] = failures
-        write_json(out / RUN_FILE, run)
+    write_json(out / RUN_FILE, run)
     if not results:
         bags = ', '.join(str(b['path']) for b in run['training_data']['bags'])
         raise TrainingError(
@@ -360,7 +362,9 @@ def _load_models(run_dir: Path, run: dict[str, Any], robot: RobotConfig) -> dict
     from id_learning.models.registry import load_model
 
     results: dict[str, ModelResult] = {}
-    for kind in run['kinds']:
+    # An interrupted run lists its models in the order they were fitted: report them as asked.
+    order = {kind: k for k, kind in enumerate(run.get('requested_kinds', run['kinds']))}
+    for kind in sorted(run['kinds'], key=lambda kind: order.get(kind, len(order))):
         folder = run_dir / MODELS_DIR / kind
         results[kind] = ModelResult(kind, load_model(folder, robot, kind), folder, {})
     return results
