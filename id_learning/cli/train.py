@@ -30,18 +30,23 @@ def metrics_table(metrics: dict[str, Any]) -> str:
     joints = metrics['joints']
     floor = metrics.get('label_noise_floor_nm')
     width = 24
+    # A column as wide as the longest joint name and a space (a Panda's are 12 characters).
+    cell = max(10, 1 + max(len(j) for j in joints))
 
     def row(label: str, values: Sequence[float], last: str = '') -> str:
-        return f'{label:<{width}}' + ''.join(f'{x:>10.3g}' for x in values) + last
+        return f'{label:<{width}}' + ''.join(f'{x:>{cell}.3g}' for x in values) + last
 
-    head = f'{"test RMSE through filter":<{width}}' + ''.join(f'{j:>10}' for j in joints)
+    head = f'{"test RMSE through filter":<{width}}' + ''.join(f'{j:>{cell}}' for j in joints)
     lines = [head + f'{"mean norm.":>12}']
     for kind, entry in metrics['models'].items():
         label = MODEL_LABELS.get(kind, kind)
         lines.append(row(label, entry['rmse_nm'], f'{entry["mean_rmse_normalised"]:>12.3g}'))
     if floor is not None:
         lines.append(row('label-noise floor', floor))
-        lines += ['', f'{"x label-noise floor":<{width}}' + ''.join(f'{j:>10}' for j in joints)]
+        lines += [
+            '',
+            f'{"x label-noise floor":<{width}}' + ''.join(f'{j:>{cell}}' for j in joints),
+        ]
         for kind, entry in metrics['models'].items():
             ratio = entry.get('rmse_through_filter_over_floor')
             if ratio is not None:
@@ -49,7 +54,7 @@ def metrics_table(metrics: dict[str, Any]) -> str:
     lines += [
         '',
         f'{"study way [N*m]":<{width}}'
-        + ''.join(f'{j:>10}' for j in joints)
+        + ''.join(f'{j:>{cell}}' for j in joints)
         + f'{"mean norm.":>12}',
     ]
     for kind, entry in metrics['models'].items():
