@@ -21,6 +21,18 @@ def twin_config(duration_s: float = 30.0, effects: dict | None = None, **overrid
     return replace(config, excitation=replace(config.excitation, duration_s=duration_s))
 
 
+#: The twin's default balancer (config/twin_default.yaml): arms 0.25 and 0.40 m on joint 2, so
+#: an arm ratio of 0.625, shortest upright.
+TWIN_SPRING = {
+    'enabled': True,
+    'joint': 'joint_2',
+    'arm_base_m': 0.25,
+    'arm_link_m': 0.40,
+    'phase_rad': 0.0,
+    'preload_n': 3000.0,
+    'stiffness_n_per_m': 25000.0,
+}
+
 #: Hyper-parameters of the short training runs in tests: an MLP fit of two epochs.
 FAST_HYPER = {'mlp': {'max_epochs': 2}}
 

@@ -286,25 +286,18 @@ def _add_failures(
     failures: dict[str, str],
     results: dict[str, ModelResult],
 ) -> None:
-    """Name the models that failed, and the fits cut short, in metrics.json and the report."""
-    _add_cut_short(metrics, report, results)
-    if not failures:
-        return
-    metrics['failed'] = failures
-    with report.open('a', encoding='utf-8') as out:
-        out.write('\n## Models that failed\n\n')
-        out.writelines(f'- `{kind}`: {why}\n' for kind, why in failures.items())
-
-
-def _add_cut_short(metrics: dict[str, Any], report: Path, results: dict[str, ModelResult]) -> None:
-    """Name the fits their time budget cut short, and what it left out, in metrics and report."""
+    """Name the fits their budget cut short and the models that failed, in metrics and report."""
     cut = {k: r.metrics['cut_short'] for k, r in results.items() if r.metrics.get('cut_short')}
-    if not cut:
-        return
-    metrics['cut_short'] = cut
-    with report.open('a', encoding='utf-8') as out:
-        out.write('\n## Fits cut short by their time budget\n\n')
-        out.writelines(f'- `{kind}`: {"; ".join(steps)}\n' for kind, steps in cut.items())
+    sections = (
+        ('cut_short', 'Fits cut short by their time budget', cut, '; '.join),
+        ('failed', 'Models that failed', failures, str),
+    )
+    for key, title, entries, text in sections:
+        if entries:
+            metrics[key] = entries
+            with report.open('a', encoding='utf-8') as out:
+                out.write(f'\n## {title}\n\n')
+                out.writelines(f'- `{kind}`: {text(why)}\n' for kind, why in entries.items())
 
 
 def _fit_and_save(

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from support import twin_config
+from support import TWIN_SPRING, twin_config
 
 from id_learning.diagnosis import DiagnosisConfig
 from id_learning.diagnosis.candidate_set import CandidateSet
@@ -21,6 +21,20 @@ FRICTION = {
 }
 
 
+def spring_candidates(recording, robot):
+    """The diagnosis's problem with a balancer candidate on joint 2 beside the friction ones."""
+    diagnosis = DiagnosisConfig(gravity_spring_joints=('joint_2',))
+    problem = ResidualProblem(as_datasets(recording, robot, diagnosis), robot, diagnosis)
+    candidates = CandidateSet(problem)
+    y = {part: problem.residual(part) for part in ('train', 'test')}
+    n_eff = {part: problem.n_effective(part) for part in ('train', 'test')}
+    friction = [label for label in candidates.testable if candidates.specs[label].name in FRICTION]
+    (spring,) = [
+        label for label in candidates.testable if candidates.specs[label].name == 'gravity_spring'
+    ]
+    return problem, candidates, y, n_eff, friction, spring
+
+
 def test_the_arm_ratio_stays_in_the_grid_when_the_data_pull_it_to_zero():
     """sin q and sin 2q are what the balancer's three columns tend to as the ratio goes to 0 (an
     ill-posed pair); a torque of that shape pulls the ratio down, and it stops at the grid's
@@ -34,17 +48,7 @@ def test_the_arm_ratio_stays_in_the_grid_when_the_data_pull_it_to_zero():
         twin.recording,
         current=twin.recording.current + current_from_motor_torque(extra, config.robot.drives),
     )
-    diagnosis = DiagnosisConfig(gravity_spring_joints=('joint_2',))
-    problem = ResidualProblem(
-        as_datasets(recording, config.robot, diagnosis), config.robot, diagnosis
-    )
-    candidates = CandidateSet(problem)
-    y = {part: problem.residual(part) for part in ('train', 'test')}
-    n_eff = {part: problem.n_effective(part) for part in ('train', 'test')}
-    friction = [label for label in candidates.testable if candidates.specs[label].name in FRICTION]
-    (spring,) = [
-        label for label in candidates.testable if candidates.specs[label].name == 'gravity_spring'
-    ]
+    _, candidates, y, n_eff, friction, spring = spring_candidates(recording, config.robot)
     refined = candidates.refine([*friction, spring], y, n_eff)
     settings = candidates.specs[refined[-1]].settings
     # The fit's best ratio on these data lies at 0.25; it must not run below the grid.
@@ -54,28 +58,10 @@ def test_the_arm_ratio_stays_in_the_grid_when_the_data_pull_it_to_zero():
 
 def test_a_real_balancer_geometry_is_found_by_the_grids():
     """The twin's balancer on joint 2 has arms 0.25 and 0.40 m (ratio 0.625), shortest upright."""
-    spring = {
-        'enabled': True,
-        'joint': 'joint_2',
-        'arm_base_m': 0.25,
-        'arm_link_m': 0.40,
-        'phase_rad': 0.0,
-        'preload_n': 3000.0,
-        'stiffness_n_per_m': 25000.0,
-    }
-    config = twin_config(120.0, {**FRICTION, 'gravity_spring': spring}, seed=13)
-    twin = simulate(config)
-    diagnosis = DiagnosisConfig(gravity_spring_joints=('joint_2',))
-    problem = ResidualProblem(
-        as_datasets(twin.recording, config.robot, diagnosis), config.robot, diagnosis
+    config = twin_config(120.0, {**FRICTION, 'gravity_spring': TWIN_SPRING}, seed=13)
+    problem, candidates, y, n_eff, friction, label = spring_candidates(
+        simulate(config).recording, config.robot
     )
-    candidates = CandidateSet(problem)
-    y = {part: problem.residual(part) for part in ('train', 'test')}
-    n_eff = {part: problem.n_effective(part) for part in ('train', 'test')}
-    friction = [label for label in candidates.testable if candidates.specs[label].name in FRICTION]
-    (label,) = [
-        label for label in candidates.testable if candidates.specs[label].name == 'gravity_spring'
-    ]
     spec = candidates.specs[label]
     others = {g: candidates.columns[g] for g in friction}
 

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from support import twin_config
+from support import TWIN_SPRING, twin_config
 
 from id_learning.dataset.preprocess import prepare_dataset
 from id_learning.errors import ConfigError
@@ -22,15 +22,7 @@ from id_learning.physics.identified import friction_columns
 from id_learning.twin import simulate
 
 DURATION_S = 240.0
-SPRING = {
-    'enabled': True,
-    'joint': 'joint_2',
-    'arm_base_m': 0.25,
-    'arm_link_m': 0.40,
-    'phase_rad': 0.0,
-    'preload_n': 3000.0,
-    'stiffness_n_per_m': 25000.0,
-}
+SPRING = TWIN_SPRING
 
 
 def drives(**extra):
