@@ -79,6 +79,8 @@ class Judgement:
         test: 'blocks' (a t test over the blocks' gains), or 'effective samples' where the
             held-out part holds fewer than ``MIN_BLOCKS`` blocks (an F test of its residual
             sums in independent samples: each joint's samples over its correlation time).
+        implausible: why a claim the held-out part supports is no such hardware (a balancer
+            that adds to gravity on average); empty when it is plausible.
     """
 
     p_value: float
@@ -87,6 +89,7 @@ class Judgement:
     block_s: float
     confirmed: bool
     test: str = 'blocks'
+    implausible: str = ''
 
     def to_dict(self) -> dict[str, float | int | bool | str | None]:
         """JSON-ready, nan as None."""
@@ -97,6 +100,7 @@ class Judgement:
             'block_s': self.block_s,
             'test': self.test,
             'confirmed': self.confirmed,
+            'implausible': self.implausible or None,
         }
 
 
@@ -214,17 +218,38 @@ def judge_claims(
         raw[claim.label] = (p, float(np.mean(total)), len(total))
     adjusted = holm({label: value[0] for label, value in raw.items()})
     test = 'blocks' if len(np.unique(blocks)) >= MIN_BLOCKS else 'effective samples'
+    why = {c.label: _implausible(inner, x, c) for c in to_judge}
     return {
         label: Judgement(
             p_value=adjusted[label],
             gain=gain,
             n_blocks=count,
             block_s=block_s,
-            confirmed=bool(adjusted[label] < significance),
+            confirmed=bool(adjusted[label] < significance) and not why[label],
             test=test,
+            implausible=why[label],
         )
         for label, (_, gain, count) in raw.items()
     }
+
+
+def _implausible(problem: Problem, x: np.ndarray, claim: Claim) -> str:
+    """Why a claim is no such hardware whatever the held-out gain; empty when plausible.
+
+    A balancer exists to carry a link's weight: over the recording its torque must take load
+    off gravity's (the URDF's gravity torque on its joint) on average. One that adds to it
+    stands in for something else the model lacks (a sensor's offset that turns with the joint,
+    a link's mass distribution), as on a Panda's third joint, whose 0.1 N*m 'balancer' beside
+    9 N*m of gravity the held-out part supported.
+    """
+    if claim.kind != 'balancer' or claim.joint is None:
+        return ''
+    j = claim.joint
+    torque = problem.balancer_basis[j] @ problem.balancer_matrix(x)[j]
+    gravity = problem.nominal_gravity[:, j]
+    if float(np.mean(torque * gravity)) < 0.0:
+        return ''
+    return 'its torque adds to gravity on average: no balancer carries weight that way'
 
 
 def _effective_sample_p(worse: np.ndarray, better: np.ndarray, parameters: int) -> float:

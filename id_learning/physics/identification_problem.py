@@ -8,6 +8,7 @@ current estimate (see ``physics.identification`` for the model and the method);
 from __future__ import annotations
 
 import copy
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -326,6 +327,11 @@ class Problem:
         basis = balancer_basis(self.q[:, joint], ratio, phase)
         self.balancer_basis[joint] = basis
         self.balancer_columns[joint] = self._filter(basis, joint)[self.rows]
+
+    @functools.cached_property
+    def nominal_gravity(self) -> np.ndarray:
+        """(N, n) the URDF's gravity torque along the recording [N*m]."""
+        return self.nominal.gravity(self.q)
 
     def kept_columns(self, x: np.ndarray, joint: int) -> np.ndarray:
         """Columns (N, k) of one joint as its label meets them, on the kept rows."""

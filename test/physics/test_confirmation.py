@@ -191,3 +191,21 @@ def test_friction_columns_kept_across_fits_equal_columns_filtered_anew(plain, ma
         for law in problem.laws:
             np.testing.assert_allclose(columns[law], reference[law], rtol=1e-12, atol=1e-12)
             np.testing.assert_allclose(subset[law], reference[law][keep], rtol=1e-12, atol=1e-12)
+
+
+def test_a_balancer_that_adds_to_gravity_is_implausible(plain, mabi):
+    """A balancer carries weight: its torque must take load off gravity's on average."""
+    from id_learning.physics.confirmation import Claim, _implausible
+
+    dataset, _ = plain
+    problem = Problem(dataset, mabi, IdentificationConfig(balancer='joint_2'))
+    (j,) = problem.balancer_joints
+    basis = problem.balancer_basis[j]
+    gravity = problem.nominal_gravity[:, j]
+    claim = Claim('balancer on joint_2', 'balancer', (), joint=j)
+    block = problem.layout.blocks['balancer']
+    x = np.where(np.isfinite(problem.layout.prior_mean), problem.layout.prior_mean, 0.0)
+    for sign, plausible in ((-1.0, True), (1.0, False)):
+        coefficients, *_ = np.linalg.lstsq(basis, sign * 0.3 * gravity, rcond=None)
+        x[block] = coefficients
+        assert (_implausible(problem, x, claim) == '') == plausible
