@@ -56,9 +56,10 @@ class DiagnosisConfig:
         min_retention: an effect is untestable when the filter keeps less than this share of
             its regressors' energy (its signature lies above the cut-off).
         min_effective_samples: refuse recordings with fewer effective samples per part.
-        max_seconds: the diagnosis's time budget [s] (None: none). Past it no further selection
-            step, resumption or special case starts; the result says what was cut short
-            (``DiagnosisResult.cut_short``); the held-out confirmation of springs still runs.
+        max_seconds: the diagnosis's time budget [s] (None: none). Past 60 % of it no further
+            selection step, resumption or special case starts, leaving the rest for what always
+            runs (the springs' held-out check, the refit, the intervals); the result says what
+            was cut short (``DiagnosisResult.cut_short``).
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)

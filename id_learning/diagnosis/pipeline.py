@@ -70,6 +70,8 @@ from id_learning.robot.config import RobotConfig
 from id_learning.threads import single_blas_thread
 
 _LOG = logging.getLogger(__name__)
+#: The share of a time budget in which the diagnosis's optional steps may start.
+_STEPS_SHARE = 0.6
 #: Times the selection resumes after its effects' settings are refined.
 _RESUMPTIONS = 2
 
@@ -205,10 +207,14 @@ def run_diagnosis(
 
 
 class _Budget:
-    """The diagnosis's time budget: whether a step may start, and what was cut short."""
+    """The diagnosis's time budget: whether a step may start, and what was cut short.
+
+    Steps start only within ``_STEPS_SHARE`` of the budget: the rest is left for what always
+    runs (the springs' held-out check, the final refit, the intervals and alias sets).
+    """
 
     def __init__(self, seconds: float | None) -> None:
-        self.deadline = None if seconds is None else time.perf_counter() + seconds
+        self.deadline = None if seconds is None else time.perf_counter() + _STEPS_SHARE * seconds
         self.skipped: list[str] = []
 
     def allows(self, step: str) -> bool:

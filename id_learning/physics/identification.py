@@ -57,6 +57,8 @@ __all__ = ['IdentificationConfig', 'identify']
 _LOG = logging.getLogger(__name__)
 #: Solver statuses whose solution is used.
 SOLVED = ('optimal', 'optimal_inaccurate')
+#: The share of a time budget in which the identification's optional steps may start.
+_STEPS_SHARE = 0.5
 #: A base parameter whose posterior std exceeds this share of its prior std stayed at the prior.
 PRIOR_DOMINATED = 0.5
 
@@ -260,14 +262,18 @@ def identify(
 ) -> IdentifiedPhysics:
     """Identify the rigid body and drives on the training part of ``dataset`` (module docstring).
 
-    ``deadline`` (``time.perf_counter()`` seconds): past it, no claim is judged (none is then
-    confirmed) and the final fit is linearised once; ``report['cut_short']`` names what was cut.
+    ``deadline`` (``time.perf_counter()`` seconds): past half the time to it, no claim is judged
+    (none is then confirmed) and the final fit is linearised once; ``report['cut_short']``
+    names what was cut.
 
     Raises:
         DatasetError: the training part is too short, or the solver finds no solution.
     """
     config = config or IdentificationConfig()
     start, cpu_start = time.perf_counter(), time.process_time()
+    # What follows the judging (the final fit) costs about what came before it: steps start
+    # only in the first half of the budget, so that the whole stays within it.
+    deadline = None if deadline is None else start + _STEPS_SHARE * (deadline - start)
     problem = Problem(dataset, robot, config)
     x = np.asarray(problem.layout.prior_mean, dtype=float)
     x = np.where(np.isfinite(x), x, 0.0)
