@@ -127,8 +127,10 @@ def run_diagnosis(
 
     selection = select()
     selected = candidates.refine(selection.selected, y, n_eff)
-    if candidates.whole_model(selected, y, n_eff) and budget.allows(
-        'the selection with the whole model'
+    # Asked first: the whole model's forms relabel the delay and torque-constant candidates,
+    # which only a new selection can then take up.
+    if budget.allows('the selection with the whole model') and candidates.whole_model(
+        selected, y, n_eff
     ):
         # Delay and torque-constant candidates now see the whole model: select again, then
         # give their columns the final effects.

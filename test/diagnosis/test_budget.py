@@ -28,3 +28,20 @@ def test_a_diagnosis_past_its_budget_selects_nothing_more_and_says_so(mabi):
 def test_a_budget_must_be_positive():
     with pytest.raises(ConfigError, match='max_seconds'):
         DiagnosisConfig(max_seconds=0.0)
+
+
+def test_a_diagnosis_cut_after_its_first_selection_still_assembles(mabi, monkeypatch):
+    """Every optional step after the first selection refused (as a budget that ran out there
+    does): the whole model's forms, which relabel candidates, must not be half applied."""
+    from id_learning.diagnosis import pipeline
+
+    def refuse(budget, step):
+        budget.skipped.append(step)
+        return False
+
+    monkeypatch.setattr(pipeline._Budget, 'allows', refuse)
+    twin = simulate(twin_config(120.0, seed=3))
+    result = run_diagnosis(twin.recording, mabi)
+    assert result.effects
+    assert 'the selection with the whole model' in result.cut_short
+    assert all('whole model' not in effect.spec.label for effect in result.effects)
