@@ -39,6 +39,7 @@ __all__ = [
     'Claim',
     'Judgement',
     'body_departures',
+    'body_label',
     'claims',
     'holdout_split',
     'judge_claims',
@@ -163,6 +164,11 @@ def body_departures(
     return out
 
 
+def body_label(entry: dict[str, object]) -> str:
+    """A body's claim label from its ``body_departures`` entry, e.g. 'body 2 (joint_2)'."""
+    return f'{entry["body"]} ({entry["joint"]})'
+
+
 def claims(problem: Problem, departures: list[dict[str, object]]) -> list[Claim]:
     """The balancers, the payload and the departing bodies of ``problem``, to be judged."""
     layout, joints = problem.layout, problem.robot.joints
@@ -175,7 +181,7 @@ def claims(problem: Problem, departures: list[dict[str, object]]) -> list[Claim]
     for body, entry in enumerate(departures):
         if entry['departs']:
             names = tuple(f'body {body + 1} {p}' for p in range(N_INERTIAL_PARAMETERS))
-            out.append(Claim(f'{entry["body"]} ({entry["joint"]})', 'body', names))
+            out.append(Claim(body_label(entry), 'body', names))
     pinned = set(layout.pinned_names())
     return [claim for claim in out if not set(claim.names) <= pinned]
 

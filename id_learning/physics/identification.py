@@ -41,6 +41,7 @@ from id_learning.physics.base_parameters import (
 from id_learning.physics.confirmation import (
     HELD_OUT_FRACTION,
     body_departures,
+    body_label,
     claims,
     holdout_split,
     judge_claims,
@@ -230,9 +231,7 @@ def _unjudged_departures(
     judged = {c['claim'] for c in confirmation['claims']}
     pinned = set(problem.layout.pinned_names())
     return any(
-        entry['departs']
-        and f'{entry["body"]} ({entry["joint"]})' not in judged
-        and f'body {k + 1} 0' not in pinned
+        entry['departs'] and body_label(entry) not in judged and f'body {k + 1} 0' not in pinned
         for k, entry in enumerate(body_departures(problem, x, covariance))
     )
 
@@ -352,7 +351,7 @@ def _bodies(
     pinned = set(problem.layout.pinned_names())
     out = []
     for k, entry in enumerate(body_departures(problem, x, covariance)):
-        label = f'{entry["body"]} ({entry["joint"]})'
+        label = body_label(entry)
         held = f'body {k + 1} 0' in pinned
         out.append({**entry, 'held_at_prior': held, 'held_out': judged.get(label)})
     return out
