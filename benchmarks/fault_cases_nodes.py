@@ -119,6 +119,10 @@ def _overload(fx: Fixtures, rate: float) -> Outcome:
         predictor = start('predictor', {
             'artifact': str(fx.artifact), 'input_topic': '/reference',
             'stale_after_cycles': 100000}, {})  # fmt: skip
+        # The play at 20x lasts a second or two: the listener must know the predictor's output
+        # before it starts (the replay waits only for the reference's subscribers).
+        if not _wait_until(lambda: listener.node.count_publishers('/tau_u') >= 1):
+            return Outcome('traceback', f'tau_u never appeared: {predictor.log()[-300:]}')
         replay = start('replay', {
             'bag': str(fx.bag), 'rate': rate, 'topics': ['/joint_states'],
             'publish_clock': False, 'wait_for_subscribers': 2}, {})  # fmt: skip
