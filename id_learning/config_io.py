@@ -1,7 +1,17 @@
-"""Strict YAML helpers shared by every config loader: unknown keys and bad values name the key."""
+"""Strict config helpers shared by every loader: YAML without duplicate keys, checked numbers.
+
+Every YAML file the package reads (robot, twin, import mapping, hyper-parameter and node
+parameter files) goes through ``load_yaml_mapping`` or ``parse_yaml``, which refuse a key given
+twice in one mapping (YAML's last-one-wins would drop the first silently). Numbers from configs
+go through ``finite_number`` or ``float_vector``: NaN and inf are refused with the key, the value
+and the allowed range, since NaN slips through comparisons such as ``x < 0``.
+"""
 
 from __future__ import annotations
 
+import math
+import re
+import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -11,28 +21,178 @@ import yaml
 
 from id_learning.errors import ConfigError
 
-__all__ = ['check_keys', 'float_vector', 'load_yaml_mapping', 'readonly']
+__all__ = [
+    'check_keys',
+    'describe_range',
+    'finite_number',
+    'float_vector',
+    'load_yaml_mapping',
+    'parse_yaml',
+    'range_problem',
+    'readonly',
+    'topic_name_problem',
+]
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A safe loader that refuses a key given twice in one mapping, naming both lines."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        """The mapping of ``node``; a key seen before raises, naming both lines."""
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == 'tag:yaml.org,2002:merge':
+                continue  # '<<' merges are YAML's own way of repeating keys on purpose
+            key = self.construct_object(key_node, deep=True)
+            line = key_node.start_mark.line + 1
+            try:
+                first = seen.get(key)
+            except TypeError:
+                continue  # an unhashable key: the base class refuses it
+            if first is not None:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f'duplicate key {key!r} at lines {first} and {line}', None
+                )
+            seen[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+# YAML 1.2 floats: PyYAML (YAML 1.1) reads 1e-3 and 5E+2 as strings, since 1.1 wants a dot.
+_UniqueKeyLoader.yaml_implicit_resolvers = {
+    key: list(resolvers) for key, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_UniqueKeyLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+        |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+        |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.VERBOSE,
+    ),
+    list('-+0123456789.'),
+)
+
+
+def parse_yaml(text: str, where: str) -> Any:
+    """Parse YAML text safely, refusing a key given twice in one mapping.
+
+    Args:
+        text: the YAML document.
+        where: the file (or option) named in errors.
+
+    Raises:
+        ConfigError: not valid YAML, or a duplicate key (names it and both lines).
+    """
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass: safe
+    except yaml.constructor.ConstructorError as err:
+        if err.problem and err.problem.startswith('duplicate key'):
+            raise ConfigError(f'{where}: {err.problem}; give each key once') from None
+        raise ConfigError(f'{where}: not valid YAML: {err}') from err
+    except yaml.YAMLError as err:
+        raise ConfigError(f'{where}: not valid YAML: {err}') from err
+    except RecursionError:
+        raise ConfigError(f'{where}: YAML nested too deeply to read') from None
 
 
 def load_yaml_mapping(path: Path) -> dict[str, Any]:
-    """Read a YAML file whose top level is a mapping.
+    """Read a YAML file whose top level is a mapping; a key given twice is refused.
 
     Raises:
-        ConfigError: the file is missing, is not valid YAML, or is not a mapping.
+        ConfigError: the file is missing, is not valid YAML, repeats a key (names the key and
+            both lines), or is not a mapping.
     """
     try:
         text = Path(path).read_text(encoding='utf-8')
-    except OSError as err:
-        raise ConfigError(f'{path}: cannot read config file: {err.strerror}') from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ConfigError(f'{path}: not valid YAML: {err}') from err
+    except (OSError, UnicodeDecodeError) as err:
+        reason = err.strerror if isinstance(err, OSError) else str(err)
+        raise ConfigError(f'{path}: cannot read config file: {reason}') from err
+    data = parse_yaml(text, str(path))
     if not isinstance(data, dict):
         raise ConfigError(
             f'{path}: expected a mapping at the top level, got {type(data).__name__}'
         )
     return data
+
+
+def _number_text(value: float) -> str:
+    """A range end for messages: whole numbers in full (4294967295), others as %g."""
+    if float(value).is_integer() and abs(value) < 1e19:
+        return str(int(value))
+    return f'{value:g}'
+
+
+def describe_range(
+    low: float | None, high: float | None, *, low_open: bool = False, high_open: bool = False
+) -> str:
+    """An allowed range in words for messages: 'in (0, 86400]', '>= 0', '' (unbounded)."""
+    if low is not None and high is not None:
+        left, right = '(' if low_open else '[', ')' if high_open else ']'
+        return f'in {left}{_number_text(low)}, {_number_text(high)}{right}'
+    if low is not None:
+        return f'{">" if low_open else ">="} {_number_text(low)}'
+    if high is not None:
+        return f'{"<" if high_open else "<="} {_number_text(high)}'
+    return ''
+
+
+def range_problem(
+    value: Any,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    integer: bool = False,
+) -> str | None:
+    """What is wrong with ``value`` as a finite number in a range, or None when it fits.
+
+    E.g. 'must be a finite number in (0, 86400]'; bool is no number, NaN and inf never fit.
+    """
+    allowed = describe_range(low, high, low_open=low_open, high_open=high_open)
+    kind = ' '.join(filter(None, ('an integer' if integer else 'a finite number', allowed)))
+    if isinstance(value, bool) or not isinstance(value, (int,) if integer else (int, float)):
+        return f'must be {kind}'
+    # An int compares exactly; one beyond the float range is no finite float.
+    finite = abs(value) <= sys.float_info.max if isinstance(value, int) else math.isfinite(value)
+    inside = finite and not (
+        (low is not None and (value <= low if low_open else value < low))
+        or (high is not None and (value >= high if high_open else value > high))
+    )
+    return None if inside else f'must be {kind}'
+
+
+def finite_number(
+    value: Any,
+    where: str,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    integer: bool = False,
+) -> float:
+    """A config number, finite and in range, as a float (an int where ``integer``).
+
+    Args:
+        value: the number read from a file or a parameter (bool is no number).
+        where: the file and key (or parameter) named in errors.
+        low, high: the allowed range's ends (None: unbounded); ``low_open`` and ``high_open``
+            leave an end out.
+        integer: the value must be an integer.
+
+    Raises:
+        ConfigError: not a number, NaN or inf, or out of range; names the key, the value and
+            the allowed range.
+    """
+    problem = range_problem(
+        value, low=low, high=high, low_open=low_open, high_open=high_open, integer=integer
+    )
+    if problem:
+        raise ConfigError(f'{where}: {problem}, got {value!r}')
+    return int(value) if integer else float(value)
 
 
 def check_keys(
@@ -91,3 +251,52 @@ def float_vector(
             relation = '>' if exclusive_minimum else '>='
             raise ConfigError(f'{where}: every value must be {relation} {minimum}, got {value!r}')
     return readonly(array)
+
+
+#: The characters of a ROS 2 topic name as written, and of one fully expanded.
+_TOPIC_CHARACTERS = re.compile(r'[A-Za-z0-9_/~{}]*')
+_FULL_TOPIC = re.compile(r'(/[A-Za-z_][A-Za-z0-9_]*)+')
+_SUBSTITUTION = re.compile(r'\{([^{}]*)\}')
+_SUBSTITUTIONS = {'node': 'node', 'ns': '/ns', 'namespace': '/ns'}
+#: rmw's limit on a fully qualified topic name (RMW_TOPIC_MAX_NAME_LENGTH).
+TOPIC_MAX_LENGTH = 247
+
+
+def topic_name_problem(name: object) -> str | None:
+    """Why ``name`` is no valid ROS 2 topic name, or None when it is one.
+
+    The rules of ``rcl_validate_topic_name``, then those of ``rmw_validate_full_topic_name`` on
+    the name expanded for a node ``node`` in a namespace ``/ns`` (``~``, ``{node}``, ``{ns}``
+    substituted): what rclpy checks when a node creates a publisher or subscription, here
+    without importing ROS (the core reads topic names from configs).
+    ``test/ros/test_topic_names.py`` holds the two equal.
+    """
+    if not isinstance(name, str):
+        return f'a topic name is a string, got {name!r}'
+    if not name:
+        return 'a topic name must not be empty'
+    if not _TOPIC_CHARACTERS.fullmatch(name):
+        return "a topic name holds only letters, digits, '_', '/', '~', '{' and '}'"
+    if name.endswith('/'):
+        return "a topic name must not end with '/'"
+    if '~' in name[1:]:
+        return "'~' may only be a topic name's first character"
+    if name.startswith('~') and len(name) > 2 and name[1] != '/':  # rcl lets '~x' pass
+        return "'~' must be followed by '/'"
+    if '{' in _SUBSTITUTION.sub('', name) or '}' in _SUBSTITUTION.sub('', name):
+        return "a topic name's curly braces must be balanced"
+    for substitution in _SUBSTITUTION.findall(name):
+        if substitution not in _SUBSTITUTIONS:
+            return (
+                f'unknown substitution {{{substitution}}}; known: {{node}}, {{ns}}, {{namespace}}'
+            )
+    expanded = '/ns/node' + name[1:] if name.startswith('~') else name
+    expanded = _SUBSTITUTION.sub(lambda found: _SUBSTITUTIONS[found.group(1)], expanded)
+    expanded = expanded if expanded.startswith('/') else f'/ns/{expanded}'
+    if '//' in expanded:
+        return "a topic name must not hold '//'"
+    if not _FULL_TOPIC.fullmatch(expanded):
+        return 'a topic name token (between slashes) must not start with a digit'
+    if len(expanded) > TOPIC_MAX_LENGTH:
+        return f'a topic name is at most {TOPIC_MAX_LENGTH} characters long'
+    return None

@@ -8,7 +8,8 @@ Nothing heavy is imported at module level, so that ``--help`` stays fast.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from id_learning.cli.paths import default_robot_config
@@ -20,8 +21,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     'PREPROCESSING_CHOICES',
+    'SEED_MAX',
     'comma_names',
+    'finite',
     'hyper_parameters',
+    'integer',
     'load_robot',
     'model_kinds',
     'positive_float',
@@ -33,6 +37,8 @@ __all__ = [
 #: ``--preprocessing`` values (``dataset.preprocess.PREPROCESS_MODES``; not imported here, so
 #: that ``--help`` stays fast).
 PREPROCESSING_CHOICES = ('through_filter', 'study')
+#: The largest seed numpy's and Optuna's generators take (a 32-bit unsigned integer).
+SEED_MAX = 2**32 - 1
 
 
 def robot_option(
@@ -75,7 +81,7 @@ def split_option(p: argparse.ArgumentParser) -> None:
         'the bags stay whole in time either way',
     )
     p.add_argument(
-        '--split-seed', type=int, default=0, help='seeds the draw of a shuffled split (default 0)'
+        '--split-seed', type=seed, default=0, help='seeds the draw of a shuffled split (default 0)'
     )
 
 
@@ -107,12 +113,59 @@ def study_table(args: argparse.Namespace, robot: RobotConfig) -> StudyTable | No
     return None if not path else load_study_table(path, robot.n_joints)
 
 
-def positive_float(text: str) -> float:
-    """An argparse type: a float > 0."""
-    value = float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
-    return value
+def finite(
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+) -> Callable[[str], float]:
+    """An argparse type: a finite float in a range (NaN and inf refused).
+
+    argparse names the option in its refusal: ``argument --duration: must be a finite number
+    in (0, 86400], got nan``.
+    """
+
+    def parse(text: str) -> float:
+        from id_learning.config_io import range_problem
+
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+        bounds = {'low': low, 'high': high, 'low_open': low_open, 'high_open': high_open}
+        problem = range_problem(value, **bounds)  # type: ignore[arg-type]
+        if problem:
+            raise argparse.ArgumentTypeError(f'{problem}, got {text}')
+        return value
+
+    parse.__name__ = 'number'  # argparse's fallback message: "invalid number value"
+    return parse
+
+
+def integer(low: int | None = None, high: int | None = None) -> Callable[[str], int]:
+    """An argparse type: an integer in [low, high]."""
+
+    def parse(text: str) -> int:
+        from id_learning.config_io import range_problem
+
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
+        problem = range_problem(value, low=low, high=high, integer=True)
+        if problem:
+            raise argparse.ArgumentTypeError(f'{problem}, got {text}')
+        return value
+
+    parse.__name__ = 'integer'
+    return parse
+
+
+#: An argparse type: a finite float > 0 (a budget, a duration).
+positive_float = finite(0.0, low_open=True)
+#: An argparse type: a seed of numpy's and Optuna's generators.
+seed = integer(0, SEED_MAX)
 
 
 def load_robot(args: argparse.Namespace):
@@ -157,13 +210,33 @@ def model_kinds(text: str) -> list[str]:
     return kinds
 
 
+def _finite_values(value: Any, where: str) -> Any:
+    """``value`` with every number in it checked finite (a NaN learning rate is refused here).
+
+    Raises:
+        ConfigError: a NaN or inf, naming ``where``.
+    """
+    from id_learning.errors import ConfigError
+
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f'{where}: must be a finite number, got {value!r}')
+    if isinstance(value, list):
+        for index, item in enumerate(value):
+            _finite_values(item, f'{where}[{index}]')
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _finite_values(item, f'{where}.{key}')
+    return value
+
+
 def hyper_parameters(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
     """Per-kind hyper-parameters from KIND.KEY=VALUE items (VALUE read as YAML: 3, 1e-3, tanh).
 
     Raises:
-        ConfigError: an item is not of that form.
+        ConfigError: an item is not of that form, or its value is no finite number where it is
+            a number.
     """
-    import yaml
+    from id_learning.config_io import parse_yaml
 
     hyper: dict[str, dict[str, Any]] = {}
     for item in items or ():
@@ -171,10 +244,8 @@ def hyper_parameters(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
         kind, dot, key = name.partition('.')
         if not (sep and dot and kind and key):
             raise ConfigError(f'--hyper {item!r}: expected KIND.KEY=VALUE, e.g. mlp.max_epochs=50')
-        try:
-            hyper.setdefault(kind, {})[key] = yaml.safe_load(value)
-        except yaml.YAMLError as err:
-            raise ConfigError(f'--hyper {item!r}: cannot read the value: {err}') from err
+        where = f'--hyper {name}'
+        hyper.setdefault(kind, {})[key] = _finite_values(parse_yaml(value, where), where)
     return hyper
 
 
@@ -182,19 +253,19 @@ def hyper_file(path: str | None) -> dict[str, dict[str, Any]]:
     """Per-kind hyper-parameters from a YAML file {kind: {key: value}} (a sweep's best.yaml).
 
     Raises:
-        ConfigError: the file is unreadable or not of that form.
+        ConfigError: the file is unreadable, repeats a key, holds a NaN or inf, or is not of
+            that form.
     """
-    import yaml
+    from pathlib import Path
+
+    from id_learning.config_io import load_yaml_mapping
 
     if not path:
         return {}
-    try:
-        with open(path, encoding='utf-8') as stream:
-            data = yaml.safe_load(stream)
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'--hyper-file {path}: cannot read it: {err}') from err
-    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+    data = load_yaml_mapping(Path(path))
+    if not all(isinstance(v, dict) for v in data.values()):
         raise ConfigError(f'--hyper-file {path}: expected a mapping kind -> {{key: value}}')
+    _finite_values(data, f'--hyper-file {path}')
     return {str(kind): dict(values) for kind, values in data.items()}
 
 

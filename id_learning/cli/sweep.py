@@ -11,7 +11,10 @@ from pathlib import Path
 
 from id_learning.cli import options
 
-__all__ = ['add_sweep_command', 'cmd_sweep']
+__all__ = ['MAX_TRIALS', 'add_sweep_command', 'cmd_sweep']
+
+#: The most trials one worker runs (start more workers on the same study for more).
+MAX_TRIALS = 100_000
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -39,6 +42,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         seed=args.seed,
         trim_unpaired_tail=args.trim_unpaired_tail,
+        storage_timeout_s=args.storage_timeout,
     )
     print(
         f'study {result.study_name} ({result.storage}): {result.finished} finished trials; '
@@ -61,11 +65,24 @@ def add_sweep_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     options.preprocessing_option(p)
     options.split_option(p)
     p.add_argument('--model', required=True, help='the model kind to sweep, e.g. mlp')
-    p.add_argument('--trials', type=int, default=20, help='trials this worker runs (20)')
+    p.add_argument(
+        '--trials',
+        type=options.integer(1, MAX_TRIALS),
+        default=20,
+        help=f'trials this worker runs (20; at most {MAX_TRIALS})',
+    )
     p.add_argument(
         '--storage',
         help='Optuna storage URL shared by the workers (default: sqlite:///OUT/sweep.db; '
         'postgresql+psycopg://user@host/db for several machines)',
+    )
+    p.add_argument(
+        '--storage-timeout',
+        type=options.finite(0.0, 3600.0, low_open=True),
+        default=10.0,
+        metavar='SECONDS',
+        help='wait at most this long for a locked SQLite file or an unreachable server before '
+        'giving up (10)',
     )
     p.add_argument('--study-name', help='the study (default: KIND-TARGET)')
     p.add_argument('--out', required=True, help='folder for best.yaml, plots and the SQLite db')
@@ -74,7 +91,7 @@ def add_sweep_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
         type=options.positive_float,
         help='wall-clock budget of each network fit [s]',
     )
-    p.add_argument('--seed', type=int, help="the sampler's seed (default: random)")
+    p.add_argument('--seed', type=options.seed, help="the sampler's seed (default: random)")
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     options.trim_option(p)
     p.set_defaults(func=cmd_sweep)

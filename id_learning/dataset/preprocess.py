@@ -26,6 +26,7 @@ from typing import Any, Literal, Self
 
 import numpy as np
 
+from id_learning.config_io import finite_number
 from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.recording import Recording
 from id_learning.dataset.signals import differentiate, lowpass
@@ -111,6 +112,11 @@ class PreprocessConfig:
             raise ConfigError(f'split must be one of {SPLITS}, got {self.split!r}')
         if not isinstance(self.split_seed, int) or self.split_seed < 0:
             raise ConfigError(f'split_seed must be an integer >= 0, got {self.split_seed!r}')
+        finite_number(self.min_filter_periods, 'min_filter_periods', low=0.0, low_open=True)
+        for key in ('cutoff_hz', 'input_smoothing_hz'):
+            values = getattr(self, key)
+            for index, value in enumerate(values if values is not None else ()):
+                finite_number(value, f'{key}[{index}] [Hz]', low=0.0, low_open=True)
 
 
 def minimum_duration_s(cutoff_hz: np.ndarray, config: PreprocessConfig) -> float:
@@ -417,6 +423,25 @@ def target_torque(recording: Recording, robot: RobotConfig, target: Target) -> n
     return recording.joint_torque
 
 
+def _below_nyquist(cutoff_hz: np.ndarray, key: str, robot: RobotConfig) -> None:
+    """Refuse a cut-off at or above the Nyquist frequency of the robot's IPO period.
+
+    A digital low-pass cannot cut at or above half the sample rate (scipy refuses its design).
+
+    Raises:
+        ConfigError: names the key, the joint, the cut-off, the Nyquist frequency and the period.
+    """
+    nyquist = 0.5 / robot.ipo_period_s
+    above = np.flatnonzero(~(np.asarray(cutoff_hz, dtype=float) < nyquist))
+    if above.size:
+        joint = int(above[0])
+        raise ConfigError(
+            f'{key}: {float(cutoff_hz[joint]):g} Hz for {robot.joints[joint]} is at or above '
+            f'the Nyquist frequency {nyquist:g} Hz of the {robot.ipo_period_s * 1e3:g} ms IPO '
+            'period (ipo_period_s); give a cut-off below it'
+        )
+
+
 def prepare_dataset(
     recording: Recording,
     robot: RobotConfig,
@@ -443,6 +468,7 @@ def prepare_dataset(
     )
     if cutoff.shape != (robot.n_joints,):
         raise ConfigError(f'cutoff_hz needs {robot.n_joints} values, got {cutoff.tolist()}')
+    _below_nyquist(cutoff, 'cutoff_hz', robot)
     needed = minimum_duration_s(cutoff, config)
     if recording.duration_s < needed:
         slowest = robot.joints[int(np.argmin(cutoff))]
@@ -463,6 +489,7 @@ def prepare_dataset(
         raise ConfigError(
             f'input_smoothing_hz needs {robot.n_joints} values, got {smoothing.tolist()}'
         )
+    _below_nyquist(smoothing, 'input_smoothing_hz', robot)
     controller_inputs = InputDefinition.controller(smoothing, config.filter_order)
     controller = controller_inputs.motion(regular.position, regular.velocity, period)
     study = InputDefinition.study(cutoff, config.filter_order).motion(

@@ -105,10 +105,11 @@ def load_model(folder: Path, robot: RobotConfig, kind: str | None = None) -> Inv
     if found not in MODEL_KINDS:
         raise CheckpointError(f'{folder}: unknown model kind {found!r}')
     retired = ('kind', *RETIRED_HYPERPARAMETERS.get(found, ()))
+    hyper = metadata.get('hyperparameters')
+    if not isinstance(hyper, dict):
+        raise CheckpointError(f'{folder}: model.json has no hyperparameters object, got {hyper!r}')
     try:
-        config = make_config(
-            found, **{k: v for k, v in metadata['hyperparameters'].items() if k not in retired}
-        )
+        config = make_config(found, **{k: v for k, v in hyper.items() if k not in retired})
     except (ConfigError, TypeError) as err:
         raise CheckpointError(f'{folder}: hyper-parameters do not fit {found}: {err}') from err
     model = MODEL_KINDS[found][1](config, robot)

@@ -1,30 +1,36 @@
 """The nodes' parameters: one frozen dataclass per node, declared to ROS from its fields.
 
-Each field carries its ROS description (with units), whether it is read-only at runtime, and its
-allowed values; ``__post_init__`` checks ranges and names the key. A node declares every field
-(``declare_parameters``), reads one validated snapshot (``read_snapshot``) and, for the fields
-that may change at runtime, validates a change by building a new snapshot before accepting it.
+Each field is a ``param`` (``nodes.param_schema``): its ROS description (with units), whether it
+is read-only at runtime, and what it may hold (``choices``, a ``low``/``high`` range of finite
+numbers, or a ``topic`` name). ``__post_init__`` checks the schema and the rules that tie fields
+together, naming the key and the value. A node declares every field (``declare_parameters``),
+reads one validated snapshot (``read_snapshot``; errors name the node) and, for the fields that
+may change at runtime, validates a change by building a new snapshot before accepting it.
+
+A new parameter is one field, e.g. ``slew_limit: float = param(0.0, 'What it does [unit];
+0 = off.', low=0.0, read_only=False)``: its checks come from the schema; ``__post_init__``
+gains a line only for a rule between fields.
 
 ``config/nodes.yaml`` holds all three nodes' parameters in the ROS 2 parameter-file format;
 ``load_node_config`` reads it without ROS (and rejects unknown keys), for tests and tools.
-
-This module imports rclpy only inside the functions that talk to a node.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar, get_type_hints
 
-from id_learning.config_io import load_yaml_mapping
 from id_learning.errors import ConfigError
-
-if TYPE_CHECKING:
-    from rclpy.node import Node
+from id_learning.nodes.param_schema import (
+    check_schema,
+    config_from_mapping,
+    declare_parameters,
+    load_node_config,
+    param,
+    read_snapshot,
+    validate_change,
+)
 
 __all__ = [
     'EXECUTORS',
@@ -43,39 +49,9 @@ PACKAGE = 'id_learning'
 DEFAULT_ROBOT_CONFIG = 'mabi_max100.yaml'
 EXECUTORS = ('single_threaded', 'events')
 JOINT_STATE = 'sensor_msgs/msg/JointState'
-_T = TypeVar('_T')
-
-
-def param(
-    default: Any,
-    description: str,
-    *,
-    read_only: bool = True,
-    choices: tuple[str, ...] | None = None,
-) -> Any:
-    """A dataclass field with the metadata of a ROS parameter."""
-    if choices:
-        description = f'{description} One of {list(choices)}.'
-    return field(
-        default=default,
-        metadata={'description': description, 'read_only': read_only, 'choices': choices},
-    )
-
-
-def _check_choices(config: object) -> None:
-    for item in dataclasses.fields(config):  # type: ignore[arg-type]
-        choices = item.metadata.get('choices')
-        value = getattr(config, item.name)
-        if choices and value not in choices:
-            raise ConfigError(f'{item.name} must be one of {list(choices)}, got {value!r}')
-
-
-def _positive(config: object, *names: str, allow_zero: bool = False) -> None:
-    for name in names:
-        value = getattr(config, name)
-        if value < 0 or (value == 0 and not allow_zero):
-            relation = '>= 0 (0 = off)' if allow_zero else '> 0'
-            raise ConfigError(f'{name} must be {relation}, got {value!r}')
+#: The deepest queue a node keeps [messages], and the most threads it starts.
+MAX_QUEUE_DEPTH = 1_000_000
+MAX_THREADS = 256
 
 
 # -- the three nodes ------------------------------------------------------------------------------
@@ -90,7 +66,7 @@ class RecorderConfig:
     )
     overwrite: bool = param(False, 'Replace an existing bag folder at output.')
     topics: tuple[str, ...] = param(
-        ('/joint_states', '/motor_currents'), 'Topics to record (the bag contract).'
+        ('/joint_states', '/motor_currents'), 'Topics to record (the bag contract).', topic=True
     )
     msg_types: tuple[str, ...] = param(
         (JOINT_STATE, JOINT_STATE), 'Message type of each topic, as pkg/msg/Type.'
@@ -105,23 +81,37 @@ class RecorderConfig:
         1000,
         'Subscription queue depth [messages] (KEEP_LAST): 8 s at 125 Hz, 0.5 s at 2 kHz of '
         'writer stalls absorbed.',
+        low=1,
+        high=MAX_QUEUE_DEPTH,
     )
     flush_period_s: float = param(
         0.25,
         'Period of the flush that ends the MCAP chunk and pushes it to the file [s]; bounds what '
         'a SIGKILL can lose. At most 0.5 s.',
+        low=0.0,
+        high=0.5,
+        low_open=True,
     )
     chunk_kib: int = param(
-        512, 'MCAP chunk size [KiB] at which a chunk is closed between flushes.'
+        512,
+        'MCAP chunk size [KiB] at which a chunk is closed between flushes.',
+        low=1,
+        high=1_048_576,
     )
     split_duration_s: float = param(
-        0.0, 'Start a new .mcap file after this much log time [s]; 0 = no split by duration.'
+        0.0,
+        'Start a new .mcap file after this much log time [s]; 0 = no split by duration.',
+        low=0.0,
     )
     split_size_mib: float = param(
-        0.0, 'Start a new .mcap file at this file size [MiB]; 0 = no split by size.'
+        0.0, 'Start a new .mcap file at this file size [MiB]; 0 = no split by size.', low=0.0
     )
     diagnostics_period_s: float = param(
-        1.0, 'Period of the counts published on /diagnostics [s].', read_only=False
+        1.0,
+        'Period of the counts published on /diagnostics [s].',
+        read_only=False,
+        low=0.0,
+        low_open=True,
     )
     executor: str = param(
         'single_threaded', 'rclpy executor that runs the callbacks.', choices=EXECUTORS
@@ -129,7 +119,7 @@ class RecorderConfig:
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
-        _check_choices(self)
+        check_schema(self)
         if not self.topics or len(self.topics) != len(self.msg_types):
             raise ConfigError(
                 f'topics and msg_types need one entry per topic, got {list(self.topics)} and '
@@ -140,10 +130,6 @@ class RecorderConfig:
         for msg_type in self.msg_types:
             if msg_type.count('/') != 2:
                 raise ConfigError(f'msg_types: expected pkg/msg/Type, got {msg_type!r}')
-        _positive(self, 'qos_depth', 'chunk_kib', 'diagnostics_period_s')
-        if not 0 < self.flush_period_s <= 0.5:
-            raise ConfigError(f'flush_period_s must be in (0, 0.5] s, got {self.flush_period_s}')
-        _positive(self, 'split_duration_s', 'split_size_mib', allow_zero=True)
 
     def bag_path(self, now: datetime.datetime | None = None) -> Path:
         """The bag folder to write."""
@@ -161,16 +147,25 @@ class ReplayConfig:
     topics: tuple[str, ...] = param(
         ('/joint_states', '/motor_currents'),
         'Topics of the bag to publish, each on its own name with its original bytes.',
+        topic=True,
     )
     robot_config: str = param(
         '',
         'Robot config YAML (joints, IPO period, label and input cut-offs). Empty: the '
         'package config/mabi_max100.yaml.',
     )
-    rate: float = param(1.0, 'Playback speed factor [-]: 2.0 plays twice as fast.')
+    rate: float = param(
+        1.0,
+        'Playback speed factor [-]: 2.0 plays twice as fast.',
+        low=0.0,
+        high=100.0,
+        low_open=True,
+    )
     loop: bool = param(False, 'Start again from the start offset at the end.')
-    start_offset_s: float = param(0.0, 'Skip this much of the bag from its first sample [s].')
-    duration_s: float = param(0.0, 'Play this much of the bag [s]; 0 = to the end.')
+    start_offset_s: float = param(
+        0.0, 'Skip this much of the bag from its first sample [s].', low=0.0
+    )
+    duration_s: float = param(0.0, 'Play this much of the bag [s]; 0 = to the end.', low=0.0)
     publish_clock: bool = param(
         True, 'Publish /clock with each cycle stamp (for use_sim_time nodes).'
     )
@@ -185,9 +180,11 @@ class ReplayConfig:
         'point (q, v, a); joint_state = sensor_msgs/JointState with q and v; none = off.',
         choices=('trajectory', 'joint_state', 'none'),
     )
-    reference_topic: str = param('reference', 'Topic of the reference.')
+    reference_topic: str = param('reference', 'Topic of the reference.', topic=True)
     reference_source: str = param(
-        '/joint_states', 'Bag topic (sensor_msgs/JointState) the reference is built from.'
+        '/joint_states',
+        'Bag topic (sensor_msgs/JointState) the reference is built from.',
+        topic=True,
     )
     reference_inputs: str = param(
         'controller',
@@ -201,20 +198,32 @@ class ReplayConfig:
         0.0,
         'Velocity smoothing of the controller reference [Hz] (zero-phase Butterworth); '
         '0 = the robot config input_smoothing_hz.',
+        low=0.0,
     )
-    qos_depth: int = param(100, 'Publisher queue depth [messages] (KEEP_LAST).')
+    qos_depth: int = param(
+        100, 'Publisher queue depth [messages] (KEEP_LAST).', low=1, high=MAX_QUEUE_DEPTH
+    )
     wait_for_subscribers: int = param(
         0,
         'Before playing, wait until the published topics (bag topics, reference and /clock) '
         'have at least this many subscriptions in all, e.g. 3 for a recorder of two topics and '
         'one predictor, plus one per use_sim_time node (0 = start at once).',
+        low=0,
+        high=10_000,
     )
     wait_timeout_s: float = param(
-        30.0, 'Give up waiting for subscribers after this long and play anyway [s].'
+        30.0,
+        'Give up waiting for subscribers after this long and play anyway [s].',
+        low=0.0,
+        low_open=True,
     )
     exit_when_done: bool = param(True, 'Shut the node down after the last cycle (unless loop).')
     diagnostics_period_s: float = param(
-        1.0, 'Period of the timing report on /diagnostics [s].', read_only=False
+        1.0,
+        'Period of the timing report on /diagnostics [s].',
+        read_only=False,
+        low=0.0,
+        low_open=True,
     )
     executor: str = param(
         'single_threaded', 'rclpy executor that runs the callbacks.', choices=EXECUTORS
@@ -222,20 +231,9 @@ class ReplayConfig:
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
-        _check_choices(self)
         if not self.bag:
             raise ConfigError('bag is required: the bag folder to play')
-        if not 0 < self.rate <= 100:
-            raise ConfigError(f'rate must be in (0, 100], got {self.rate}')
-        _positive(
-            self,
-            'start_offset_s',
-            'duration_s',
-            'wait_for_subscribers',
-            'reference_smoothing_hz',
-            allow_zero=True,
-        )
-        _positive(self, 'qos_depth', 'wait_timeout_s', 'diagnostics_period_s')
+        check_schema(self)
         if not self.topics and self.reference_mode == 'none':
             raise ConfigError('nothing to publish: topics is empty and reference_mode is none')
 
@@ -257,19 +255,24 @@ class PredictorNodeConfig:
         'accelerations estimated causally).',
         choices=('trajectory', 'joint_state'),
     )
-    input_topic: str = param('reference', 'Topic of the reference.')
+    input_topic: str = param('reference', 'Topic of the reference.', topic=True)
     input_depth: int = param(
-        10, 'Reference queue depth [messages] (KEEP_LAST); a few cycles suffice.'
+        10,
+        'Reference queue depth [messages] (KEEP_LAST); a few cycles suffice.',
+        low=1,
+        high=MAX_QUEUE_DEPTH,
     )
     output_topic: str = param(
         'tau_u',
         'sensor_msgs/JointState output: names in the artifact order, effort = tau_u [N*m, '
         'joint side], stamp = the input stamp.',
+        topic=True,
     )
     command_topic: str = param(
         '',
         'Also publish tau_u [N*m] as std_msgs/Float64MultiArray here (ros2_control forward '
         'command controller, e.g. /feed_forward_controller/commands); empty = off.',
+        topic=True,
     )
     zero_command_on_stale: bool = param(
         True,
@@ -280,28 +283,68 @@ class PredictorNodeConfig:
         5,
         'The reference is stale after this many IPO cycles without a valid sample [cycles]: '
         'the node stops publishing and says so; history is reset when it resumes.',
+        low=1,
+        high=10**9,
     )
     max_age_s: float = param(
-        0.0,
-        'Reject samples whose stamp is older than this against the node clock [s]; 0 = off. '
-        'Needs a shared time base (PTP, or use_sim_time with the replay /clock).',
+        0.1,
+        'Reject a sample that arrives later than this, or whose stamp leaps further ahead, '
+        "against the stream's own time base [s] (no shared clock needed); 0 = off.",
         read_only=False,
+        low=0.0,
+        high=3600.0,
+    )
+    resync_after: int = param(
+        5,
+        'Rejections for time in a row after which the next sample starts a new time base, '
+        'with one warning: a clock step on the sender never locks the stream out [samples].',
+        read_only=False,
+        low=1,
+        high=10**6,
+    )
+    rearm_samples: int = param(
+        2,
+        'Consistent samples after one that fails the kinematic consistency gate before the '
+        'model serves again; the hold output meanwhile [samples].',
+        read_only=False,
+        low=0,
+        high=10**6,
+    )
+    consistency_scale: float = param(
+        1.0,
+        'Multiple of the kinematic consistency tolerances (1 = as derived from the limits '
+        'and the IPO period) [-].',
+        read_only=False,
+        low=1e-3,
+        high=1e3,
+    )
+    torque_rise_s: float = param(
+        0.05,
+        'Slew limit: tau_u changes by at most the torque limit per this time [s].',
+        read_only=False,
+        low=1e-4,
+        high=60.0,
     )
     acceleration_cutoff_hz: float = param(
         0.0,
         'First-order low-pass of the causal acceleration estimate (backward difference of '
         'velocity) [Hz]; 0 = raw difference. Only for references without accelerations.',
+        low=0.0,
     )
     torque_limit_scale: float = param(
         1.0,
         'Clamp tau_u to this share of the robot torque limits [-], in (0, 1].',
         read_only=False,
+        low=0.0,
+        high=1.0,
+        low_open=True,
     )
     range_margin: float = param(
         0.1,
         'Margin beyond the training range, as a share of its half range on each side [-]: '
         'out_of_range acts beyond it; fallback blends the physics prior in across it.',
         read_only=False,
+        low=0.0,
     )
     out_of_range: str = param(
         'auto',
@@ -327,15 +370,22 @@ class PredictorNodeConfig:
         choices=('off', 'rls', 'rls_inertia'),
     )
     adaptation_time_constant_s: float = param(
-        60.0, 'Memory of the adaptation (its forgetting factor) [s].'
+        60.0,
+        'Memory of the adaptation (its forgetting factor) [s]; at least 0.1 s (ten IPO periods '
+        'and more).',
+        low=0.1,
     )
     measured_topic: str = param(
         '/motor_currents',
         'sensor_msgs/JointState whose effort holds the measured motor currents [A], stamped '
         'like the reference they answer: what adaptation learns from.',
+        topic=True,
     )
     torch_threads: int = param(
-        1, 'torch intra-op and inter-op threads, and numpy OpenBLAS threads [threads].'
+        1,
+        'torch intra-op and inter-op threads, and numpy OpenBLAS threads [threads].',
+        low=1,
+        high=MAX_THREADS,
     )
     inference: str = param(
         'numpy',
@@ -345,19 +395,31 @@ class PredictorNodeConfig:
         choices=('numpy', 'torch'),
     )
     log_throttle_s: float = param(
-        1.0, 'Minimum interval between repeated warnings and errors [s].', read_only=False
+        1.0,
+        'Minimum interval between repeated warnings and errors [s].',
+        read_only=False,
+        low=0.0,
+        low_open=True,
     )
     stale_log_period_s: float = param(
         60.0,
         'A stale reference is logged once when it goes stale, then every this many seconds '
         'while it lasts (it is on /diagnostics throughout); 0 = once [s].',
         read_only=False,
+        low=0.0,
     )
     latency_window: int = param(
-        4096, 'Samples kept for the latency statistics on /diagnostics [samples].'
+        4096,
+        'Samples kept for the latency statistics on /diagnostics [samples].',
+        low=1,
+        high=10**7,
     )
     diagnostics_period_s: float = param(
-        1.0, 'Period of the report on /diagnostics [s].', read_only=False
+        1.0,
+        'Period of the report on /diagnostics [s].',
+        read_only=False,
+        low=0.0,
+        low_open=True,
     )
     executor: str = param(
         'events',
@@ -369,36 +431,9 @@ class PredictorNodeConfig:
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
-        _check_choices(self)
         if not self.artifact:
             raise ConfigError('artifact is required: the model artifact folder')
-        _positive(
-            self,
-            'input_depth',
-            'stale_after_cycles',
-            'torch_threads',
-            'log_throttle_s',
-            'latency_window',
-            'diagnostics_period_s',
-            'adaptation_time_constant_s',
-        )
-        if self.adaptation_time_constant_s < 0.1:
-            raise ConfigError(
-                'adaptation_time_constant_s must be at least 0.1 s (ten IPO periods and more), '
-                f'got {self.adaptation_time_constant_s}'
-            )
-        _positive(
-            self,
-            'max_age_s',
-            'acceleration_cutoff_hz',
-            'range_margin',
-            'stale_log_period_s',
-            allow_zero=True,
-        )
-        if not 0 < self.torque_limit_scale <= 1:
-            raise ConfigError(
-                f'torque_limit_scale must be in (0, 1], got {self.torque_limit_scale}'
-            )
+        check_schema(self)
 
 
 # -- files ----------------------------------------------------------------------------------------
@@ -428,115 +463,3 @@ def resolve_robot_config(value: str) -> Path:
         f'robot_config is empty and the default {DEFAULT_ROBOT_CONFIG} was not found in '
         f'{[str(p) for p in candidates]}; set robot_config'
     )
-
-
-def _field_types(cls: type) -> dict[str, Any]:
-    return get_type_hints(cls)
-
-
-def _coerce(name: str, kind: Any, value: Any) -> Any:
-    """A parameter value as the dataclass field's type, or ConfigError."""
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if kind == tuple[str, ...]:
-        if isinstance(value, (list, tuple)) and all(isinstance(item, str) for item in value):
-            return tuple(value)
-    elif isinstance(value, kind) and not (kind is int and isinstance(value, bool)):
-        return value
-    raise ConfigError(f'{name}: expected {getattr(kind, "__name__", kind)}, got {value!r}')
-
-
-def config_from_mapping(cls: type[_T], values: Mapping[str, Any], where: str) -> _T:
-    """Build a node config from parameter values; unknown keys and wrong types name the key.
-
-    Raises:
-        ConfigError: unknown key, wrong type or a value out of range.
-    """
-    types = _field_types(cls)
-    unknown = sorted(set(values) - set(types))
-    if unknown:
-        raise ConfigError(f'{where}: unknown parameter(s) {unknown}; known: {sorted(types)}')
-    try:
-        return cls(**{name: _coerce(name, types[name], value) for name, value in values.items()})
-    except ConfigError as err:
-        raise ConfigError(f'{where}: {err}') from None
-
-
-def load_node_config(path: Path | str, node: str, cls: type[_T]) -> _T:
-    """Read one node's ``ros__parameters`` from a ROS 2 parameter file.
-
-    Raises:
-        ConfigError: the file or the node's section is missing or invalid.
-    """
-    path = Path(path)
-    data = load_yaml_mapping(path)
-    section = data.get(node) or data.get(f'/{node}') or data.get('/**')
-    if not isinstance(section, Mapping) or not isinstance(section.get('ros__parameters'), Mapping):
-        raise ConfigError(f'{path}: no {node}: ros__parameters: section')
-    values = dict(section['ros__parameters'])
-    values = {key: value for key, value in values.items() if key != 'use_sim_time'}
-    return config_from_mapping(cls, values, f'{path}: {node}')
-
-
-# -- ROS ----------------------------------------------------------------------------------------
-def declare_parameters(node: Node, cls: type) -> None:
-    """Declare every field of a node config as a parameter with its description and default."""
-    from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-
-    types = _field_types(cls)
-    ros_types = {
-        bool: ParameterType.PARAMETER_BOOL,
-        int: ParameterType.PARAMETER_INTEGER,
-        float: ParameterType.PARAMETER_DOUBLE,
-        str: ParameterType.PARAMETER_STRING,
-        tuple[str, ...]: ParameterType.PARAMETER_STRING_ARRAY,
-    }
-    for item in dataclasses.fields(cls):
-        kind = types[item.name]
-        default = item.default
-        descriptor = ParameterDescriptor(
-            name=item.name,
-            type=ros_types[kind],
-            description=item.metadata['description'],
-            read_only=item.metadata['read_only'],
-            # A YAML '1' for a float parameter is an integer: accept it and convert on reading.
-            dynamic_typing=kind is float,
-        )
-        if item.metadata.get('choices'):
-            descriptor.additional_constraints = f'one of {list(item.metadata["choices"])}'
-        node.declare_parameter(
-            item.name, list(default) if isinstance(default, tuple) else default, descriptor
-        )
-
-
-def read_snapshot(node: Node, cls: type[_T]) -> _T:
-    """Read every declared field of a node config into one validated snapshot.
-
-    Raises:
-        ConfigError: a value has the wrong type or is out of range (names the parameter).
-    """
-    values = {
-        item.name: node.get_parameter(item.name).value
-        for item in dataclasses.fields(cls)  # type: ignore[arg-type]
-    }
-    return config_from_mapping(cls, values, f'node {node.get_name()}')
-
-
-def validate_change(current: _T, changes: Mapping[str, Any]) -> tuple[_T | None, str]:
-    """A new snapshot with ``changes`` applied, or None and the reason to reject them."""
-    types = _field_types(type(current))
-    metadata = {item.name: item.metadata for item in dataclasses.fields(current)}  # type: ignore[arg-type]
-    updates = {}
-    for name, value in changes.items():
-        if name not in metadata:
-            continue  # not ours (use_sim_time and the like)
-        if metadata[name]['read_only']:
-            return None, f'{name} is read-only at runtime'
-        try:
-            updates[name] = _coerce(name, types[name], value)
-        except ConfigError as err:
-            return None, str(err)
-    try:
-        return dataclasses.replace(current, **updates), ''  # type: ignore[type-var]
-    except ConfigError as err:
-        return None, str(err)

@@ -14,12 +14,14 @@ from id_learning.robot.drives import (
     motor_torque_from_current,
     rotor_inertia_torque,
 )
+from id_learning.robot.urdf_inertials import check_urdf_inertials
 
 __all__ = [
     'DriveConfig',
     'JointLimits',
     'RobotConfig',
     'TopicConfig',
+    'check_urdf_inertials',
     'current_from_motor_torque',
     'load_robot_config',
     'motor_torque_from_current',

@@ -17,8 +17,15 @@ from typing import Any
 
 import numpy as np
 
-from id_learning.config_io import check_keys, float_vector, load_yaml_mapping
+from id_learning.config_io import (
+    check_keys,
+    float_vector,
+    load_yaml_mapping,
+    range_problem,
+    topic_name_problem,
+)
 from id_learning.errors import ConfigError
+from id_learning.robot.urdf_inertials import check_urdf_inertials
 
 __all__ = [
     'DriveConfig',
@@ -193,6 +200,7 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
 
     Raises:
         ConfigError: a key is unknown or missing, or a value is out of range (names key and value).
+        RobotModelError: a URDF link no rigid body can be (``check_urdf_inertials``).
     """
     check_keys(
         data,
@@ -223,24 +231,36 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
     cutoff, smoothing = _cutoffs(data, n, float(period), where)
 
     locked = data.get('locked_joints') or {}
-    if not isinstance(locked, dict) or not all(
-        isinstance(value, (int, float)) for value in locked.values()
-    ):
+    if not isinstance(locked, dict):
         raise ConfigError(f'{where}: locked_joints: expected a mapping joint name -> position')
+    for joint, value in locked.items():
+        if range_problem(value):
+            raise ConfigError(
+                f'{where}: locked_joints: expected a mapping joint name -> position [rad or m], '
+                f'a finite number; {joint}: {value!r}'
+            )
     overlap = sorted(set(locked) & set(joints))
     if overlap:
         raise ConfigError(f'{where}: locked_joints {overlap} are also listed in joints')
 
     topics_data = data.get('topics') or {}
+    if not isinstance(topics_data, dict):
+        raise ConfigError(f'{where}: topics: expected a mapping, got {topics_data!r}')
     check_keys(topics_data, ('joint_states', 'motor_currents'), f'{where}: topics')
+    for key, topic in topics_data.items():
+        problem = topic_name_problem(topic)
+        if problem:
+            raise ConfigError(f'{where}: topics.{key}: {topic!r} is no ROS topic name: {problem}')
     topics = TopicConfig(**topics_data)
 
     name = data['name']
     if not isinstance(name, str) or not name:
         raise ConfigError(f'{where}: name must be a non-empty string')
+    urdf_path = resolve_urdf(str(data['urdf']), base_dir, where)
+    check_urdf_inertials(urdf_path)
     return RobotConfig(
         name=name,
-        urdf_path=resolve_urdf(str(data['urdf']), base_dir, where),
+        urdf_path=urdf_path,
         joints=tuple(joints),
         drives=drive,
         limits=limits,

@@ -13,6 +13,7 @@ share one study.
 from __future__ import annotations
 
 import logging
+import math
 import time
 import warnings
 from collections.abc import Sequence
@@ -23,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
+from id_learning.config_io import finite_number
 from id_learning.dataset.preprocess import PreprocessConfig, Target
 from id_learning.errors import ConfigError
 from id_learning.models.data import TrainingData
@@ -41,6 +43,9 @@ _LOG = logging.getLogger(__name__)
 
 #: Tries to create or join a study while other workers create it too.
 STORAGE_ATTEMPTS = 10
+#: How long a worker waits for a busy (locked SQLite) or unreachable (PostgreSQL) storage [s],
+#: per connection and for the retries of opening it together.
+STORAGE_TIMEOUT_S = 10.0
 # PostgreSQL's duplicate_table, duplicate_object and duplicate_schema: a schema race lost.
 _DUPLICATE_SQLSTATES = frozenset({'42P07', '42710', '42P06'})
 #: A hyper-parameter's range: ('log', low, high), ('int', low, high) or ('choice', options).
@@ -160,23 +165,36 @@ def run_sweep(
     progress: bool = True,
     seed: int | None = None,
     trim_unpaired_tail: bool = False,
+    storage_timeout_s: float = STORAGE_TIMEOUT_S,
 ) -> SweepResult:
     """Run ``trials`` trials of one kind into a (possibly shared) study; write DIR/best.yaml.
 
+    ``storage_timeout_s`` bounds the wait for a locked or unreachable storage, when opening it
+    and at each later access.
+
     Raises:
-        ConfigError: unknown or unsweepable kind, trials < 1, or an unusable storage.
+        ConfigError: unknown or unsweepable kind, trials < 1, a bad timeout or budget, or an
+            unusable, locked or unreachable storage (names it).
         DatasetError, BagError: a bag is unusable.
     """
     import optuna
+    from sqlalchemy.exc import SQLAlchemyError
 
     space = _check_kind(kind)
-    if trials < 1:
+    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
         raise ConfigError(f'sweep: --trials must be >= 1, got {trials}')
+    finite_number(storage_timeout_s, 'sweep: storage timeout [s]', low=0, high=3600, low_open=True)
+    if max_seconds_per_trial is not None:
+        finite_number(
+            max_seconds_per_trial, 'sweep: --max-seconds-per-trial', low=0, low_open=True
+        )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     storage = storage or f'sqlite:///{(out / "sweep.db").resolve()}'
     study_name = study_name or f'{kind}-{target}'
     config = PreprocessConfig(target=target) if preprocess is None else preprocess
+    # The storage first: a locked or unreachable one is refused before the bags are read.
+    study = _open_study(storage, study_name, seed, storage_timeout_s)
     datasets = load_datasets(
         [Path(b) for b in bags],
         robot,
@@ -186,7 +204,6 @@ def run_sweep(
     )
     data = TrainingData(combine_datasets(datasets), robot)
     configure_torch(1)
-    study = _open_study(storage, study_name, seed)
     names = {f.name for f in fields(make_model(kind, robot).config)}
 
     def objective(trial: optuna.Trial) -> float:
@@ -210,8 +227,11 @@ def run_sweep(
         return validation_error(model, data)
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study.optimize(objective, n_trials=trials, show_progress_bar=progress)
-    complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    try:
+        study.optimize(objective, n_trials=trials, show_progress_bar=progress)
+        complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    except SQLAlchemyError as err:  # locked or gone after it was opened
+        raise ConfigError(f'sweep: the storage {storage!r} failed: {_reason(err)}') from err
     if not complete:
         raise ConfigError(f'sweep: no trial of study {study_name!r} completed')
     best = study.best_trial
@@ -236,8 +256,30 @@ def run_sweep(
     )
 
 
-def _open_study(storage: str, study_name: str, seed: int | None) -> optuna.Study:
+def _engine_options(storage: str, timeout_s: float) -> dict[str, Any]:
+    """SQLAlchemy engine options that bound the wait for a busy or unreachable storage."""
+    if storage.startswith('sqlite'):
+        # Wait for a busy database (several local workers), but not for ever.
+        return {'connect_args': {'timeout': timeout_s}}
+    if storage.startswith('postgresql'):
+        # libpq's connect_timeout is whole seconds (at least 2 are honoured).
+        return {'connect_args': {'connect_timeout': max(2, math.ceil(timeout_s))}}
+    return {}
+
+
+def _reason(err: Exception) -> str:
+    """The driver's one-line reason behind a SQLAlchemy error (without its SQL and links)."""
+    text = str(getattr(err, 'orig', None) or err)
+    return text.strip().splitlines()[0] if text.strip() else type(err).__name__
+
+
+def _open_study(
+    storage: str, study_name: str, seed: int | None, timeout_s: float = STORAGE_TIMEOUT_S
+) -> optuna.Study:
     """Create or join the study; workers starting together race to create the schema.
+
+    A lost race is retried until ``timeout_s`` has passed; a storage still locked or
+    unreachable then is refused.
 
     Raises:
         ConfigError: the storage cannot be opened (names the URL and the reason).
@@ -245,8 +287,8 @@ def _open_study(storage: str, study_name: str, seed: int | None) -> optuna.Study
     import optuna
     from sqlalchemy.exc import SQLAlchemyError
 
-    # SQLite: wait for a busy database instead of failing at once (several local workers).
-    engine = {'connect_args': {'timeout': 60}} if storage.startswith('sqlite') else {}
+    engine = _engine_options(storage, timeout_s)
+    deadline = time.monotonic() + timeout_s
     last: Exception | None = None
     for attempt in range(STORAGE_ATTEMPTS):
         try:
@@ -260,8 +302,12 @@ def _open_study(storage: str, study_name: str, seed: int | None) -> optuna.Study
             )
         except SQLAlchemyError as err:
             if not lost_schema_race(err):
-                raise ConfigError(f'sweep: cannot open the storage {storage!r}: {err}') from err
+                raise ConfigError(
+                    f'sweep: cannot open the storage {storage!r}: {_reason(err)}'
+                ) from err
             last = err
+            if time.monotonic() >= deadline:
+                break
             time.sleep(0.2 * (attempt + 1))
         except (
             ValueError,
@@ -269,7 +315,11 @@ def _open_study(storage: str, study_name: str, seed: int | None) -> optuna.Study
             optuna.exceptions.StorageInternalError,
         ) as err:
             raise ConfigError(f'sweep: cannot open the storage {storage!r}: {err}') from err
-    raise ConfigError(f'sweep: cannot open the storage {storage!r}: {last}')
+    reason = _reason(last) if last is not None else 'no answer'
+    raise ConfigError(
+        f'sweep: cannot open the storage {storage!r} within {timeout_s:g} s ({reason}): another '
+        'process may hold it locked, or the server is unreachable'
+    )
 
 
 def lost_schema_race(err: Exception) -> bool:

@@ -21,13 +21,14 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from id_learning.config_io import check_keys, float_vector, load_yaml_mapping
+from id_learning.config_io import check_keys, finite_number, float_vector, load_yaml_mapping
 from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
 from id_learning.robot.config import RobotConfig, load_robot_config
 from id_learning.robot.drives import current_from_motor_torque
+from id_learning.twin.bounds import check_duration, check_excitation
 from id_learning.twin.effects import (
     CoggingEffect,
     CoulombFriction,
@@ -152,6 +153,9 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
     check_keys(
         excitation_data, list(ExcitationConfig.__dataclass_fields__), f'{where}: excitation'
     )
+    excitation_data = check_excitation(
+        excitation_data, robot.ipo_period_s, n, f'{where}: excitation'
+    )
     if 'home' in excitation_data and excitation_data['home'] is not None:
         excitation_data = {
             **excitation_data,
@@ -209,15 +213,9 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
             f'{where}: robot_seed must be a non-negative integer or null (= seed), '
             f'got {robot_seed!r}'
         )
-    if not isinstance(start, int) or start < 0:
-        raise ConfigError(f'{where}: start_time_ns must be a non-negative integer, got {start!r}')
-    shift_start = data.get('shift_start_s', 0.0)
-    if (
-        not isinstance(shift_start, (int, float))
-        or isinstance(shift_start, bool)
-        or shift_start < 0
-    ):
-        raise ConfigError(f'{where}: shift_start_s must be a number >= 0 [s], got {shift_start!r}')
+    # Stamps are int64 nanoseconds: 2**62 ns (year 2116) leaves room for any duration.
+    start = int(finite_number(start, f'{where}: start_time_ns', low=0, high=2**62, integer=True))
+    shift_start = finite_number(data.get('shift_start_s', 0.0), f'{where}: shift_start_s', low=0)
     sensors = data.get('joint_torque_sensors', False)
     if not isinstance(sensors, bool):
         raise ConfigError(f'{where}: joint_torque_sensors must be true or false')
@@ -327,10 +325,14 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     """Simulate an excitation run of the twin.
 
     Raises:
-        ConfigError: the excitation leaves the joint limits, or the true motor torque exceeds the
-            config's torque limits (names joint and time).
+        ConfigError: a duration beyond the twin's bounds (``twin.bounds``), the excitation leaves
+            the joint limits, or the true motor torque exceeds the config's torque limits
+            (names joint and time).
     """
     robot, effects = config.robot, config.effects
+    check_duration(
+        config.excitation.duration_s, robot.ipo_period_s, robot.n_joints, 'excitation.duration_s'
+    )
     excitation_rng, _, noise_rng, sensor_rng = random_streams(config.seed)
     # The robot's hidden parameters come from their own seed, drawn as ``seed`` would draw them:
     # one robot, many recordings; robot_seed = seed reproduces the one-seed bags.

@@ -1,0 +1,78 @@
+"""URDF links no rigid body can be are refused where the robot config names the URDF."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from id_learning.errors import RobotModelError
+from id_learning.robot import check_urdf_inertials, load_robot_config
+
+REPO = Path(__file__).resolve().parents[2]
+URDF = REPO / 'urdf/mabi_max100.urdf'
+#: link_3 of the shipped URDF: 150 kg.
+LINK_3 = 'ixx="4.9964" ixy="0" ixz="-1.0061333" iyy="7.07" iyz="0" izz="5.6256"'
+
+
+def _edited(tmp_path: Path, old: str, new: str) -> Path:
+    text = URDF.read_text()
+    assert text.count(old) == 1
+    path = tmp_path / 'arm.urdf'
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize(
+    ('inertia', 'message'),
+    [
+        ('ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"', r'mass 150 kg .*\(all zero\)'),
+        ('ixx="0" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', r'\(not positive definite\)'),
+        ('ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"', 'triangle inequality'),
+        ('ixx="nan" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', 'must be finite'),
+    ],
+    ids=['all-zero', 'rod', 'triangle', 'nan'],
+)
+def test_a_link_with_mass_and_an_impossible_inertia_is_refused_naming_link_and_file(
+    tmp_path: Path, inertia: str, message: str
+) -> None:
+    path = _edited(tmp_path, LINK_3, inertia)
+    with pytest.raises(RobotModelError, match=rf'link link_3: .*{message}') as err:
+        check_urdf_inertials(path)
+    assert str(path) in str(err.value)
+
+
+def test_a_massless_frame_may_have_no_inertia_but_not_an_inertia_without_mass(
+    tmp_path: Path,
+) -> None:
+    frame = _edited(tmp_path, '<mass value="150"/>', '<mass value="0"/>')
+    with pytest.raises(RobotModelError, match='link link_3: a massless link with inertia'):
+        check_urdf_inertials(frame)
+    zero = 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"'
+    frame.write_text(frame.read_text().replace(LINK_3, zero))
+    check_urdf_inertials(frame)  # a frame: no mass, no inertia
+
+
+@pytest.mark.parametrize('name', ['mabi_max100', 'ur5', 'panda'])
+def test_the_shipped_robots_urdfs_pass(name: str) -> None:
+    robot = load_robot_config(REPO / 'config' / f'{name}.yaml')
+    check_urdf_inertials(robot.urdf_path)
+
+
+def test_loading_a_robot_config_checks_its_urdf(tmp_path: Path, write_config) -> None:
+    urdf = _edited(tmp_path, LINK_3, 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
+    config = write_config('mabi_max100', set={'urdf': str(urdf)})
+    with pytest.raises(RobotModelError, match='link link_3: mass 150 kg') as err:
+        load_robot_config(config)
+    assert str(urdf) in str(err.value)
+
+
+def test_a_locked_joint_position_and_a_topic_name_are_checked(write_config) -> None:
+    from id_learning.errors import ConfigError
+
+    nan = write_config('panda', set={'locked_joints': {'panda_finger_joint1': float('nan')}})
+    with pytest.raises(ConfigError, match=r'locked_joints: .*panda_finger_joint1: nan'):
+        load_robot_config(nan)
+    topic = write_config('mabi_max100', set={'topics': {'motor_currents': '/motor currents'}})
+    with pytest.raises(ConfigError, match=r"topics\.motor_currents: '/motor currents' is no ROS"):
+        load_robot_config(topic)
