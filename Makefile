@@ -23,7 +23,7 @@ $(VENV)/.ready: tools/bootstrap_venv.sh requirements.txt pyproject.toml setup.py
 	touch $@
 
 demo: venv
-	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(DEMO_BAG) --out $(DEMO_OUT) \
+	source tools/env.sh $(VENV) && $(PY) -m id_learning.cli demo --bag $(DEMO_BAG) --out $(DEMO_OUT) --force \
 		$(if $(STUDY_TABLE),--study-table $(STUDY_TABLE))
 
 # pytest exits 5 when it collects no test: make treats that as the failure it is.

@@ -3,15 +3,25 @@
 Messages are stored as serialized CDR bytes, as they came (no re-serialization). MCAP chunks are
 zstd-compressed; a small chunk size bounds what a crash can lose, since everything up to the last
 finished chunk is on disk.
+
+What reached the file: MCAP keeps a message in the chunk in progress until the chunk is full or
+flushed. The file is written unbuffered (``os.write``), so once a chunk is handed over without
+error its messages are in the file, and ``id-learning bag recover`` gives them back whatever
+happens next. ``on_disk`` counts those messages per topic. A write that fails (disk full, a file
+size limit) stops the writer for good: the messages of the chunk in progress are lost, nothing
+more is appended after the torn chunk, and every further call raises ``BagError`` naming the bag
+and the OS's reason.
 """
 
 from __future__ import annotations
 
+import os
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import BinaryIO, Self
+from typing import Any, Self, TypeVar
 
 import yaml
 from mcap.writer import CompressionType
@@ -24,6 +34,40 @@ __all__ = ['BagWriter', 'write_metadata']
 
 ROSBAG2_VERSION = 9
 DEFAULT_CHUNK_BYTES = 1 << 20
+
+_T = TypeVar('_T')
+
+
+class _DirectFile:
+    """A file written with ``os.write``, no buffer: what ``write`` took is in the file.
+
+    MCAP's writer wraps a raw stream in a ``BufferedWriter``; this is not one, so it takes it as
+    the stream itself.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.name = str(path)
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._position = 0
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        view = memoryview(data).cast('B')
+        while view:
+            written = os.write(self._fd, view)
+            self._position += written
+            view = view[written:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self._position
+
+    def flush(self) -> None:
+        """Nothing is buffered here."""
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            fd, self._fd = self._fd, -1
+            os.close(fd)
 
 
 @dataclass
@@ -130,9 +174,14 @@ class BagWriter:
         self.custom_data = dict(custom_data or {})
         self._topics: dict[str, _Topic] = {}
         self._files: list[_FileStats] = []
-        self._stream: BinaryIO | None = None
+        self._stream: _DirectFile | None = None
         self._mcap: McapWriter | None = None
         self._schemas: dict[str, int] = {}
+        #: Per topic, messages in the file (handed over in a finished chunk without error).
+        self.on_disk: dict[str, int] = {}
+        self._pending: dict[str, int] = {}
+        #: The failed write that stopped the writer, or None.
+        self.failure: BagError | None = None
 
     # -- life cycle -------------------------------------------------------------------------------
     def open(self) -> Self:
@@ -163,9 +212,10 @@ class BagWriter:
     def _start_file(self) -> None:
         name = f'{self.path.name}_{len(self._files)}.mcap'
         self._files.append(_FileStats(path=name))
-        self._stream = (self.path / name).open('wb')
+        self._stream = _DirectFile(self.path / name)
+        stream: Any = self._stream  # a file-like object, as MCAP's writer takes it
         self._mcap = McapWriter(
-            self._stream,
+            stream,
             chunk_size=self.chunk_bytes,
             compression=CompressionType.ZSTD,
         )
@@ -182,25 +232,72 @@ class BagWriter:
         self._stream = None
 
     def close(self) -> None:
-        """Finish the MCAP file(s) and write ``metadata.yaml``."""
+        """Finish the MCAP file(s) and write ``metadata.yaml``.
+
+        A writer stopped by a failed write only closes its file: the bag is left for
+        ``id-learning bag recover``.
+
+        Raises:
+            BagError: finishing the file or writing ``metadata.yaml`` failed (the OS's reason).
+        """
+        if self.failure is not None:
+            if self._stream is not None:
+                self._stream.close()
+            self._mcap = self._stream = None
+            return
         if self._mcap is None:
             return
-        self._finish_file()
-        write_metadata(
-            self.path,
-            [(t.name, t.msgtype, t.type_hash, t.count) for t in self._topics.values()],
-            [(f.path, f.first_ns or 0, f.last_ns or 0, f.count) for f in self._files],
-            self.custom_data,
+        self._guarded(self._finish_file)
+        self._confirm()
+        self._guarded(
+            lambda: write_metadata(
+                self.path,
+                [(t.name, t.msgtype, t.type_hash, t.count) for t in self._topics.values()],
+                [(f.path, f.first_ns or 0, f.last_ns or 0, f.count) for f in self._files],
+                self.custom_data,
+            )
         )
 
     def flush(self) -> None:
         """Finish the chunk in progress and push everything written so far to the file.
 
         After a flush the messages survive the process being killed (a recovery rebuilds the
-        index). Each flush ends a compressed chunk, so flushing often costs compression ratio.
+        index) and count in ``on_disk``. Each flush ends a compressed chunk, so flushing often
+        costs compression ratio.
+
+        Raises:
+            BagError: the write failed; the writer is stopped (see the module docstring).
         """
         if self._mcap is not None:
-            self._mcap.flush()
+            mcap = self._mcap
+            self._guarded(mcap.flush)
+            self._confirm()
+
+    def _confirm(self) -> None:
+        """The messages of the chunks handed over are in the file."""
+        for topic, count in self._pending.items():
+            self.on_disk[topic] = self.on_disk.get(topic, 0) + count
+        self._pending = dict.fromkeys(self._pending, 0)
+
+    def _guarded(self, step: Callable[[], _T]) -> _T:
+        """Run a step that writes; a failure stops the writer and raises ``BagError``."""
+        if self.failure is not None:
+            raise self.failure
+        try:
+            return step()
+        except (OSError, ValueError) as err:
+            reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+            lost = sum(self._pending.values())
+            self.failure = BagError(
+                f'{self.path}: writing failed: {reason}; nothing more is written: the '
+                f'{sum(self.on_disk.values())} message(s) already in the file are kept '
+                f'(id-learning bag recover), the {lost} of the chunk being written did not all '
+                'reach it'
+            )
+            if self._stream is not None:
+                self._stream.close()
+            self._mcap = self._stream = None
+            raise self.failure from err
 
     # -- topics and messages ----------------------------------------------------------------------
     def _register(self, topic: str, msgtype: str) -> int:
@@ -227,7 +324,17 @@ class BagWriter:
         self._topics[topic] = _Topic(topic, msgtype, type_hash, self._register(topic, msgtype))
 
     def write(self, topic: str, log_time_ns: int, data: bytes | memoryview) -> None:
-        """Append one serialized message; log_time_ns is the time it was received [ns]."""
+        """Append one serialized message; log_time_ns is the time it was received [ns].
+
+        The message is in the file (``on_disk``) once its chunk is: when the chunk is full, on
+        ``flush`` or on ``close``.
+
+        Raises:
+            BagError: the writer is not open, the topic was not declared, or a write failed
+                (now or before: the writer is stopped).
+        """
+        if self.failure is not None:
+            raise self.failure
         if self._mcap is None:
             raise BagError(f'{self.path}: writer is not open')
         entry = self._topics.get(topic)
@@ -235,16 +342,24 @@ class BagWriter:
             raise BagError(f'{self.path}: topic {topic} was not declared with add_topic')
         current = self._files[-1]
         if self._should_split(current, log_time_ns):
-            self._finish_file()
-            self._start_file()
+            self._guarded(self._split)
+            self._confirm()
             current = self._files[-1]
-        self._mcap.add_message(
-            channel_id=entry.channel_id,
-            log_time=log_time_ns,
-            publish_time=log_time_ns,
-            data=bytes(data),
-            sequence=entry.count,
+        self._pending[topic] = self._pending.get(topic, 0) + 1
+        assert self._mcap is not None
+        assert self._stream is not None
+        mcap, before = self._mcap, self._stream.tell()
+        self._guarded(
+            lambda: mcap.add_message(
+                channel_id=entry.channel_id,
+                log_time=log_time_ns,
+                publish_time=log_time_ns,
+                data=bytes(data),
+                sequence=entry.count,
+            )
         )
+        if self._stream.tell() != before:  # a full chunk, this message in it, was written
+            self._confirm()
         entry.count += 1
         current.count += 1
         current.first_ns = (
@@ -253,6 +368,10 @@ class BagWriter:
         current.last_ns = (
             log_time_ns if current.last_ns is None else max(current.last_ns, log_time_ns)
         )
+
+    def _split(self) -> None:
+        self._finish_file()
+        self._start_file()
 
     def _should_split(self, current: _FileStats, log_time_ns: int) -> bool:
         if current.count == 0:

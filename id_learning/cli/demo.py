@@ -31,15 +31,28 @@ DEMO_SECONDS_PER_MODEL = 60.0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """The main job on a bag: load, preprocess, summarise with plots."""
+    """The main job on a bag: load, preprocess, summarise with plots, diagnose, train, check.
+
+    OUT is written whole or not at all: into OUT.partial, renamed when complete
+    (``id_learning.outputs``); --force replaces an earlier demo there.
+    """
+    from id_learning.outputs import result_folder
+
+    robot = options.load_robot(args)
+    bag = Path(args.bag or default_bag())
+    with result_folder(Path(args.out), command='demo', force=args.force, inputs=[bag]) as folder:
+        _demo_into(args, robot, bag, folder)
+    return 0
+
+
+def _demo_into(args: argparse.Namespace, robot: Any, bag: Path, folder: Any) -> None:
+    """The demo's steps, written into ``folder.work``; paths are shown as they will be."""
     from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
     from id_learning.dataset.recording import load_recording
     from id_learning.evaluation.data_summary import write_summary
     from id_learning.twin import GROUND_TRUTH_ARRAYS, GROUND_TRUTH_JSON
 
-    robot = options.load_robot(args)
-    bag = Path(args.bag or default_bag())
-    out = Path(args.out)
+    out, shown = folder.work, folder.out
     print(f'loading {bag} ...', flush=True)
     recording = load_recording(bag, robot, require_current=args.target == 'motor', progress=True)
     if len(recording.segment_starts) > 1:
@@ -60,13 +73,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
     summary = write_summary(dataset, robot, out, ground_truth=ground_truth, tau_clean=tau_clean)
     print(
         f'{summary.n_samples} samples, {summary.duration_s:.0f} s; '
-        f'summary written to {out / "summary.md"}',
+        f'summary written to {shown / "summary.md"}',
         flush=True,
     )
     if not args.skip_diagnosis:
-        _demo_diagnosis(bag, robot, preprocess, recording, out / 'diagnosis')
+        _demo_diagnosis(
+            bag, robot, preprocess, recording, out / 'diagnosis', shown=shown / 'diagnosis'
+        )
     if args.skip_training:
-        return 0
+        return
     from id_learning.training import train_run
 
     kinds = options.model_kinds(args.models)
@@ -76,6 +91,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         flush=True,
     )
     physics = max(args.train_seconds, DEMO_PHYSICS_SECONDS)
+    folder.keep = True  # from here on it holds fitted models
     run = train_run(
         [bag],
         robot,
@@ -87,20 +103,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
         device=args.device,
         preprocess=preprocess,
         study_table=options.study_table(args, robot),
-        overwrite=True,  # the demo's own folder: each run replaces the last
     )
     print(metrics_table(run.metrics))
-    print(f'report: {run.report}', flush=True)
+    print(f'report: {shown / "run" / "report.md"}', flush=True)
     for kind, why in run.failures.items():
         print(f'{kind} failed (the other models go on): {why}', flush=True)
     if args.closed_loop_seconds > 0:
-        _demo_closed_loop(args, robot, run, out)
+        _demo_closed_loop(args, robot, run, out, shown)
     if args.online_seconds > 0:
         _demo_online_check(args, bag, run, out)
-    return 0
 
 
-def _demo_closed_loop(args: argparse.Namespace, robot: Any, run: Any, out: Path) -> None:
+def _demo_closed_loop(
+    args: argparse.Namespace, robot: Any, run: Any, out: Path, shown: Path
+) -> None:
     """Track the test motion on the twin with each model as feed-forward.
 
     A bag of a real robot (no twin config beside it) skips this step.
@@ -115,17 +131,30 @@ def _demo_closed_loop(args: argparse.Namespace, robot: Any, run: Any, out: Path)
     )
     try:
         result = closed_loop_run(
-            run.out, robot, out / 'closed_loop', duration_s=args.closed_loop_seconds
+            run.out,
+            robot,
+            out / 'closed_loop',
+            duration_s=args.closed_loop_seconds,
+            run_name=shown / 'run',
         )
     except ConfigError as err:
         print(f'closed loop not run: {err}', flush=True)
         return
     print(result.summary())
-    print(f'closed loop: {result.json_path}; plot: {result.plot_path}', flush=True)
+    print(
+        f'closed loop: {shown / "closed_loop" / result.json_path.name}; plot: '
+        f'{shown / "closed_loop" / result.plot_path.name}',
+        flush=True,
+    )
 
 
-def _demo_diagnosis(bag: Path, robot: Any, preprocess: Any, recording: Any, out: Path) -> None:
-    """Diagnose the loaded bag into ``out``; a bag it cannot diagnose only skips this step."""
+def _demo_diagnosis(
+    bag: Path, robot: Any, preprocess: Any, recording: Any, out: Path, *, shown: Path
+) -> None:
+    """Diagnose the loaded bag into ``out``; a bag it cannot diagnose only skips this step.
+
+    ``shown``: where ``out`` will be once the demo is complete (for the paths printed).
+    """
     from id_learning.diagnosis.report import render_summary
 
     try:
@@ -136,13 +165,14 @@ def _demo_diagnosis(bag: Path, robot: Any, preprocess: Any, recording: Any, out:
             out,
             progress=False,
             recordings=[recording],
+            final=shown,
         )
     except DatasetError as err:  # e.g. too short: the rest of the demo still runs
         print(f'diagnosis not run: {err}', flush=True)
     else:
         print(render_summary(result))
         print(
-            f'diagnosis report: {out / "report.md"}; waterfall plot: {out / "waterfall.png"}',
+            f'diagnosis report: {shown / "report.md"}; waterfall plot: {shown / "waterfall.png"}',
             flush=True,
         )
 
@@ -179,6 +209,11 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     )
     p.add_argument('--bag', help='bag folder (default: the shipped bags/default)')
     p.add_argument('--out', default='out/demo', help='output folder (the run goes to OUT/run)')
+    p.add_argument(
+        '--force',
+        action='store_true',
+        help='replace an earlier demo (or an interrupted one) in OUT',
+    )
     options.target_option(p)
     options.preprocessing_option(p)
     p.add_argument(

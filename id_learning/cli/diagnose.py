@@ -26,25 +26,61 @@ def diagnose_bags(
     progress: bool = True,
     recordings: Sequence[Any] | None = None,
     trim_unpaired_tail: bool = False,
+    force: bool = False,
+    final: Path | None = None,
 ) -> Any:
     """Diagnose bags; write report.md, effects.json, figures and the rnea_effects model to ``out``.
 
     ``preprocess``: the ``PreprocessConfig`` (target and mode). ``recordings``: the bags already
-    loaded (same order), to skip reading them again.
+    loaded (same order), to skip reading them again. ``out`` is written whole or not at all
+    (``id_learning.outputs``); ``force`` replaces an earlier result there. ``final``: where
+    ``out`` will be in the end, when it is written inside another command's partial folder
+    (the model names its effects.json by it).
 
     Returns:
         the ``DiagnosisResult``.
-    """
-    from id_learning.dataset.recording import load_recording
-    from id_learning.diagnosis import DiagnosisConfig, diagnose
-    from id_learning.models.effects import RneaEffectsModel
-    from id_learning.models.registry import save_model
 
-    target = preprocess.target
+    Raises:
+        OutputError: ``out`` is refused, or a write failed.
+    """
+    from id_learning.diagnosis import DiagnosisConfig
+    from id_learning.outputs import result_folder
+
     settings: dict[str, Any] = {'preprocess': preprocess}
     if effects:
         settings['effects'] = tuple(effects)
-    config = DiagnosisConfig(**settings)
+    config = DiagnosisConfig(**settings)  # bad settings are refused before anything is written
+    with result_folder(out, command='diagnose', force=force, inputs=bags) as folder:
+        return _diagnose_into(
+            folder.work,
+            final or folder.out,
+            bags,
+            robot,
+            config,
+            progress=progress,
+            recordings=recordings,
+            trim_unpaired_tail=trim_unpaired_tail,
+        )
+
+
+def _diagnose_into(
+    work: Path,
+    out: Path,
+    bags: Sequence[Path],
+    robot: Any,
+    config: Any,
+    *,
+    progress: bool,
+    recordings: Sequence[Any] | None,
+    trim_unpaired_tail: bool,
+) -> Any:
+    """``diagnose_bags``'s work: written into ``work``, which becomes ``out``."""
+    from id_learning.dataset.recording import load_recording
+    from id_learning.diagnosis import diagnose
+    from id_learning.models.effects import RneaEffectsModel
+    from id_learning.models.registry import save_model
+
+    target = config.preprocess.target
     if recordings is None:
         recordings = []
         for bag in bags:
@@ -60,11 +96,11 @@ def diagnose_bags(
             )
     print('diagnosing: nominal model vs measurements, forward selection of named effects ...',
           flush=True)  # fmt: skip
-    result = diagnose(recordings, robot, config, out_dir=out)
+    result = diagnose(recordings, robot, config, out_dir=work)
     model = RneaEffectsModel.from_augmented(
         result.augmented_model, source=str(out / 'effects.json')
     )
-    save_model(model, out / 'model', extra={'diagnosis': {'sources': result.sources}})
+    save_model(model, work / 'model', extra={'diagnosis': {'sources': result.sources}})
     return result
 
 
@@ -82,6 +118,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         effects=options.comma_names(args.effects) if args.effects else None,
         progress=not args.quiet,
         trim_unpaired_tail=args.trim_unpaired_tail,
+        force=args.force,
     )
     print(render_summary(result))
     print(
@@ -108,6 +145,9 @@ def add_diagnose_command(sub: argparse._SubParsersAction[argparse.ArgumentParser
         help='comma-separated candidate effects to try (default: the whole library)',
     )
     p.add_argument('--quiet', action='store_true', help='no progress bars')
+    p.add_argument(
+        '--force', action='store_true', help='replace a result already in --out (never a bag)'
+    )
     options.trim_option(p)
     options.robot_option(p)
     p.set_defaults(func=cmd_diagnose)

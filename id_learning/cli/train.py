@@ -113,7 +113,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     run_dir = Path(args.run)
     robot = _run_robot(args, run_dir)
     result = evaluate_run(
-        run_dir, [Path(b) for b in args.bag], robot, Path(args.out), progress=not args.quiet
+        run_dir,
+        [Path(b) for b in args.bag],
+        robot,
+        Path(args.out),
+        progress=not args.quiet,
+        force=args.force,
     )
     print(metrics_table(result.metrics))
     print(f'metrics: {result.out / "metrics.json"}; report: {result.report}')
@@ -144,6 +149,7 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         kinds=options.model_kinds(args.models) if args.models else None,
         progress=not args.quiet,
+        force=args.force,
     )
     print(result.summary())
     print(f'closed loop: {result.json_path}; plot: {result.plot_path}')
@@ -201,7 +207,11 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
         help='hyper-parameter override, e.g. mlp.max_epochs=50 (repeatable)',
     )
     p.add_argument('--quiet', action='store_true', help='no progress bars')
-    p.add_argument('--force', action='store_true', help='replace a run already in --out')
+    p.add_argument(
+        '--force',
+        action='store_true',
+        help='replace a result already in --out, or an interrupted run in OUT.partial',
+    )
     options.trim_option(p)
 
 
@@ -219,6 +229,7 @@ def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument('--out', required=True, help='folder for metrics.json, report.md and figures')
     options.robot_option(p, 'robot config YAML (default: the one the run was trained with)')
     p.add_argument('--quiet', action='store_true', help='no progress bars')
+    _force_option(p)
     p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser(
@@ -237,4 +248,15 @@ def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument('--models', help="comma-separated kinds (default: all of the run's)")
     options.robot_option(p, 'robot config YAML (default: the one the run was trained with)')
     p.add_argument('--quiet', action='store_true', help='no progress bars')
+    _force_option(p)
     p.set_defaults(func=cmd_closed_loop)
+
+
+def _force_option(p: argparse.ArgumentParser) -> None:
+    """--force of a command writing a result folder (never replaces its input)."""
+    p.add_argument(
+        '--force',
+        action='store_true',
+        help='replace a result already in --out (never the run read, nor a folder that is not '
+        'an id_learning result)',
+    )

@@ -56,6 +56,7 @@ from id_learning.evaluation.report_tables import (
 from id_learning.evaluation.scoring import score_model
 from id_learning.evaluation.study import StudyTable
 from id_learning.models.base import InverseDynamicsModel
+from id_learning.outputs import write_text_atomic
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
@@ -232,5 +233,5 @@ def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, A
         *_figures_section(figures),
     ]
     path = out / 'report.md'
-    path.write_text('\n'.join(lines), encoding='utf-8')
+    write_text_atomic(path, '\n'.join(lines))  # whole or absent, even on a full disk
     return path, [f.to_dict() for f in findings]

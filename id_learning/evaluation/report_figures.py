@@ -45,6 +45,21 @@ def _pyplot() -> Any:
     return plt
 
 
+def _save(fig: Any, path: Path) -> None:
+    """Save and close ``fig``; a write that fails (disk full) leaves no partial PNG at ``path``.
+
+    Raises:
+        OSError: the write failed (the OS's reason).
+    """
+    try:
+        fig.savefig(path, dpi=110)
+    except OSError:
+        Path(path).unlink(missing_ok=True)
+        raise
+    finally:
+        _pyplot().close(fig)
+
+
 def _colours(kinds: list[str]) -> dict[str, Any]:
     order = list(MODEL_LABELS)
     plt = _pyplot()
@@ -77,8 +92,7 @@ def plot_rmse(joints: tuple[str, ...], errors: dict[str, np.ndarray], path: Path
     ax.set_title('Test RMSE per joint and model (lower is better)')
     ax.grid(axis='y', alpha=0.3)
     ax.legend(ncol=min(len(kinds), 7), fontsize=8, loc='upper left')
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def plot_boxes(joints: tuple[str, ...], abs_errors: dict[str, np.ndarray], path: Path) -> None:
@@ -115,8 +129,7 @@ def plot_boxes(joints: tuple[str, ...], abs_errors: dict[str, np.ndarray], path:
         ax.set_ylabel('|error| [N·m]')
         ax.grid(axis='y', alpha=0.3)
     fig.suptitle('Absolute test errors per joint and model (box: quartiles, whiskers: 5-95 %)')
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def plot_dissipative(
@@ -175,8 +188,7 @@ def plot_dissipative(
         f'{joint}: torque beyond the nominal rigid body (RNEA, URDF parameters) on a test '
         'stretch: measured vs each model'
     )
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def plot_shares(
@@ -206,8 +218,7 @@ def plot_shares(
         ax.set_title(title, fontsize=10)
         ax.legend(fontsize=8, loc='upper center', bbox_to_anchor=(0.5, -0.09), ncol=3)
     fig.suptitle('Where the label torque comes from, per joint')
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def torque_splits(

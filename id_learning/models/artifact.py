@@ -9,10 +9,14 @@ weights match ``weights_sha256`` and the whole of model.json (that hash included
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import logging
 import math
+import os
+import re
+import shutil
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -24,6 +28,7 @@ from safetensors.numpy import load_file, save_file
 from id_learning import __version__
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import CheckpointError
+from id_learning.outputs import replace_folder
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
@@ -36,6 +41,7 @@ __all__ = [
     'artifact_target',
     'document_digest',
     'read_artifact',
+    'read_metadata',
     'robot_fingerprint',
     'write_artifact',
 ]
@@ -84,10 +90,43 @@ def write_artifact(
     tensors: dict[str, np.ndarray],
     metadata: dict[str, Any],
 ) -> Path:
-    """Write ``weights.safetensors`` and ``model.json`` into ``folder``."""
-    folder.mkdir(parents=True, exist_ok=True)
+    """Write ``weights.safetensors`` and ``model.json`` into ``folder``, whole or not at all.
+
+    Both files are written into a hidden sibling that is then renamed to ``folder`` (an artifact
+    already there is replaced the same way): a reader never meets half an artifact, and a write
+    that fails (disk full) leaves none.
+
+    Raises:
+        OSError: a write failed (the hidden sibling is removed).
+    """
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = folder.with_name(f'.{folder.name}.tmp-{os.getpid()}')
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    try:
+        _write_files(tmp, kind, robot, tensors, metadata)
+        replace_folder(tmp, folder)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return folder
+
+
+def _write_files(
+    folder: Path,
+    kind: str,
+    robot: RobotConfig,
+    tensors: dict[str, np.ndarray],
+    metadata: dict[str, Any],
+) -> None:
+    """The two files of an artifact, into ``folder``."""
     contiguous = {name: np.ascontiguousarray(value) for name, value in tensors.items()}
-    save_file(contiguous, str(folder / WEIGHTS_FILE))
+    try:
+        save_file(contiguous, str(folder / WEIGHTS_FILE))
+    except SafetensorError as err:  # a failed write, as '... I/O error: ... (os error 28)'
+        found = re.search(r'os error (\d+)', str(err))
+        code = int(found.group(1)) if found else errno.EIO
+        raise OSError(code, os.strerror(code), str(folder / WEIGHTS_FILE)) from err
     document = {
         'format': ARTIFACT_FORMAT,
         'kind': kind,
@@ -101,7 +140,6 @@ def write_artifact(
     }
     document[ARTIFACT_HASH] = document_digest(document)
     (folder / METADATA_FILE).write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
-    return folder
 
 
 #: model.json's key for the hash of its own contents (which include the weights' hash).
@@ -153,6 +191,59 @@ def _check_robot(saved: dict[str, Any], robot: RobotConfig, folder: Path) -> Non
             raise CheckpointError(f'{folder}: drive parameter {key} differs from the robot config')
 
 
+#: The largest model.json read [bytes]; real ones hold a few hundred kB (histories included).
+MAX_METADATA_BYTES = 64 * 2**20
+#: The deepest nesting of objects and lists in a model.json read; real ones nest 8 deep.
+MAX_METADATA_DEPTH = 64
+
+
+def _nesting_depth(value: Any) -> int:
+    """How deep objects and lists nest in ``value`` (iteratively: no recursion limit)."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, (dict, list)):
+            deepest = max(deepest, depth)
+            children = item.values() if isinstance(item, dict) else item
+            stack.extend((child, depth + 1) for child in children)
+    return deepest
+
+
+def read_metadata(meta_path: Path) -> dict[str, Any]:
+    """Read a model.json into a mapping, bounded in size and nesting.
+
+    Raises:
+        CheckpointError: the file is unreadable, larger than ``MAX_METADATA_BYTES``, not valid
+            JSON, nested deeper than ``MAX_METADATA_DEPTH``, or not a JSON object; names it.
+    """
+    meta_path = Path(meta_path)
+    try:
+        size = meta_path.stat().st_size
+        if size > MAX_METADATA_BYTES:
+            raise CheckpointError(
+                f'{meta_path}: {size} bytes, more than a model.json holds '
+                f'({MAX_METADATA_BYTES} at most)'
+            )
+        text = meta_path.read_text(encoding='utf-8')
+    except (OSError, UnicodeDecodeError) as err:
+        raise CheckpointError(f'{meta_path}: cannot read it: {err}') from err
+    try:
+        metadata = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise CheckpointError(f'{meta_path}: not valid JSON: {err}') from err
+    except RecursionError:
+        metadata = None  # nested beyond the parser's stack: refused below by its depth
+    depth = MAX_METADATA_DEPTH + 1 if metadata is None else _nesting_depth(metadata)
+    if depth > MAX_METADATA_DEPTH:
+        raise CheckpointError(
+            f'{meta_path}: nested deeper than a model.json ({MAX_METADATA_DEPTH} levels at '
+            'most); the file is corrupt or not a model artifact'
+        )
+    if not isinstance(metadata, dict):
+        raise CheckpointError(f'{meta_path}: format is not {ARTIFACT_FORMAT!r} (not an object)')
+    return metadata
+
+
 def read_artifact(
     folder: Path, robot: RobotConfig, kind: str | None = None
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -169,11 +260,8 @@ def read_artifact(
         raise CheckpointError(
             f'{folder}: not a model artifact (needs {METADATA_FILE} and {WEIGHTS_FILE})'
         )
-    try:
-        metadata = json.loads(meta_path.read_text(encoding='utf-8'))
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise CheckpointError(f'{meta_path}: not valid JSON: {err}') from err
-    if not isinstance(metadata, dict) or metadata.get('format') != ARTIFACT_FORMAT:
+    metadata = read_metadata(meta_path)
+    if metadata.get('format') != ARTIFACT_FORMAT:
         raise CheckpointError(f'{meta_path}: format is not {ARTIFACT_FORMAT!r}')
     if kind is not None and metadata.get('kind') != kind:
         raise CheckpointError(f'{folder}: holds a {metadata.get("kind")!r} model, not {kind!r}')

@@ -54,6 +54,7 @@ from id_learning.nodes.online_check_plan import load_setup, plan_excerpt
 from id_learning.nodes.online_check_result import OnlineCheckError, OnlineCheckResult
 from id_learning.nodes.online_check_ros import node_processes, replay_and_collect, start_predictor
 from id_learning.nodes.online_check_scoring import score
+from id_learning.training.run_folder import MODELS_DIR, refuse_incomplete_run
 
 __all__ = ['OnlineCheckError', 'OnlineCheckResult', 'has_ros', 'online_check']
 
@@ -87,7 +88,8 @@ def online_check(
         The measured result; ``summary()`` gives the text.
 
     Raises:
-        CheckpointError: the artifact is invalid or not for this robot.
+        CheckpointError: the artifact is invalid or not for this robot, or it belongs to a run
+            that is incomplete (a ``train`` killed or still running).
         BagError, DatasetError: the bag is unusable or the excerpt is too short.
         OnlineCheckError: rclpy is missing, a node failed to start or finish (with the tail of
             its log), or no tau_u came back.
@@ -102,6 +104,8 @@ def online_check(
     if not seconds > 0:
         raise ConfigError(f'seconds must be > 0, got {seconds}')
     domain = _domain(domain_id)
+    if Path(artifact).parent.name == MODELS_DIR:  # a model of a run: the run must be complete
+        refuse_incomplete_run(Path(artifact).parent.parent)
     notes: list[str] = []
     setup = load_setup(Path(bag), Path(robot_config_path), Path(artifact), notes)
     namespace = f'/online_check_{os.getpid()}'

@@ -11,11 +11,17 @@ MCAP chunk in progress and pushes it to the file. After a SIGKILL the bag lacks 
 ``id-learning bag recover PATH`` rebuilds it. On a clean shutdown (SIGINT, SIGTERM) the bag is
 finished with ``metadata.yaml`` and the counts are logged.
 
-Counts, per topic and in total: received (callbacks run), written (in the bag), dropped (lost on
-the way -- gaps in the publisher's sequence numbers while a topic has one publisher, which
+Counts, per topic and in total: received (callbacks run), written (in the bag file: in a chunk
+handed to the OS, see ``bag.writer``; it trails received by up to one flush period), dropped (lost
+on the way -- gaps in the publisher's sequence numbers while a topic has one publisher, which
 include messages a full subscription queue overwrote; with the events executor, the middleware's
-message-lost events -- or not written because the writer failed). They are published on
-/diagnostics every ``diagnostics_period_s``.
+message-lost events) and lost (received, but never in the file because a write failed). They are
+published on /diagnostics every ``diagnostics_period_s``.
+
+A write that fails (disk full, a file size limit) ends the recording: one error names the bag and
+the OS's reason, nothing more is written, the final summary gives per topic the messages
+received, written and lost, and the process exits with status 1. Every message counted written is
+in the file and comes back with ``id-learning bag recover``.
 
 A publisher of another message type on a recorded topic cannot be matched (nothing of it reaches
 the bag): the recorder looks at the topics' publishers on every diagnostics period, warns once per
@@ -62,11 +68,13 @@ DRAIN_LIMIT = 256
 
 @dataclass
 class TopicCounts:
-    """Messages of one topic: received by the callback, written to the bag, dropped."""
+    """Messages of one topic: received, written (in the file), dropped on the way, lost."""
 
     received: int = 0
     written: int = 0
     dropped: int = 0
+    #: Received but never in the file: a write failed.
+    lost: int = 0
 
 
 class Recorder(Node):
@@ -95,6 +103,8 @@ class Recorder(Node):
         ).open()
         self.counts = {topic: TopicCounts() for topic in config.topics}
         self.flushes = 0
+        #: The failed write that ended the recording, or None.
+        self.failure: BagError | None = None
         self._is_closed = False
         qos = qos or sensor_qos(config.qos_depth, config.reliability)
         # rclpy's executors pass message info (the publisher's sequence number) to a
@@ -137,17 +147,28 @@ class Recorder(Node):
     # -- callbacks --------------------------------------------------------------------------------
     def _on_message(self, topic: str, data: bytes, log_time_ns: int = 0) -> None:
         log_time_ns = log_time_ns or self.get_clock().now().nanoseconds
-        counts = self.counts[topic]
-        counts.received += 1
+        self.counts[topic].received += 1
+        if self.failure is not None:  # the recording has ended: counted as lost
+            return
         try:
             self.writer.write(topic, log_time_ns, data)
-        except (BagError, OSError, ValueError) as err:
-            counts.dropped += 1
-            self.get_logger().error(
-                f'{topic}: message not written to {self.path}: {err}', throttle_duration_sec=1.0
-            )
-            return
-        counts.written += 1
+        except BagError as err:
+            self._stop(err)
+
+    def _stop(self, err: BagError) -> None:
+        """End the recording after a failed write: one error, then the node finishes."""
+        if self.failure is None:
+            self.failure = err
+            self.get_logger().error(f'recording stopped: {err}')
+            self.done.set_result(None)
+        self._count_written()
+
+    def _count_written(self) -> None:
+        """Take the writer's count of what is in the file; after a failure the rest is lost."""
+        for topic, counts in self.counts.items():
+            counts.written = self.writer.on_disk.get(topic, 0)
+            if self.failure is not None or self._is_closed:
+                counts.lost = counts.received - counts.written
 
     def _on_message_info(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
         self._receive(topic, data, info)
@@ -195,14 +216,15 @@ class Recorder(Node):
         self._uses_system_time = not _ros_time_is_active(self)
         for topic in self._is_single_publisher:
             self._is_single_publisher[topic] = self.count_publishers(topic) == 1
+        if self.failure is not None:
+            return
         try:
             self.writer.flush()
-        except (OSError, ValueError) as err:
-            self.get_logger().error(
-                f'flush of {self.path} failed: {err}', throttle_duration_sec=1.0
-            )
+        except BagError as err:
+            self._stop(err)
             return
         self.flushes += 1
+        self._count_written()
 
     def _on_set_parameters(self, parameters: Sequence[Any]) -> SetParametersResult:
         changed, reason = validate_change(self.config, {p.name: p.value for p in parameters})
@@ -220,6 +242,7 @@ class Recorder(Node):
             received=sum(c.received for c in self.counts.values()),
             written=sum(c.written for c in self.counts.values()),
             dropped=sum(c.dropped for c in self.counts.values()),
+            lost=sum(c.lost for c in self.counts.values()),
         )
 
     def check_publisher_types(self) -> None:
@@ -242,12 +265,16 @@ class Recorder(Node):
             'received': total.received,
             'written': total.written,
             'dropped': total.dropped,
+            'lost': total.lost,
             'flushes': self.flushes,
         }
+        if self.failure is not None:
+            values['failure'] = str(self.failure)
         for topic, counts in self.counts.items():
             values[f'{topic} received'] = counts.received
             values[f'{topic} written'] = counts.written
             values[f'{topic} dropped'] = counts.dropped
+            values[f'{topic} lost'] = counts.lost
             if self.wrong_types[topic]:
                 values[f'{topic} wrong type'] = ', '.join(sorted(self.wrong_types[topic]))
         return values
@@ -256,12 +283,15 @@ class Recorder(Node):
         self.check_publisher_types()
         total = self.totals()
         wrong = [topic for topic, types in self.wrong_types.items() if types]
-        level = 'warn' if total.dropped or wrong else 'ok'
+        level = 'error' if self.failure else 'warn' if total.dropped or wrong else 'ok'
         message = (
             f'{total.written} written, {total.dropped} dropped'
             if total.received
             else 'waiting for messages'
         )
+        if self.failure is not None:
+            message = f'recording stopped, a write failed; {message}, {total.lost} lost'
+
         if wrong:
             message += f'; a publisher of another type on {", ".join(wrong)}'
         self._diagnostics.publish(
@@ -284,20 +314,28 @@ class Recorder(Node):
         self._is_closed = True
         try:
             self.writer.close()
-        except (OSError, ValueError) as err:
-            self.get_logger().error(
-                f'closing {self.path} failed: {err}; run id-learning bag recover'
-            )
+        except BagError as err:
+            self._stop(err)
+        self._count_written()
         total = self.totals()
         lines = [
             f'recorded to {Path(self.path).resolve()}: received {total.received}, written '
-            f'{total.written}, dropped {total.dropped}'
+            f'{total.written}, dropped {total.dropped}, lost {total.lost}'
         ]
         lines += [
-            f'  {topic}: received {c.received}, written {c.written}, dropped {c.dropped}'
+            f'  {topic}: received {c.received}, written {c.written}, dropped {c.dropped}, '
+            f'lost {c.lost}'
             for topic, c in self.counts.items()
         ]
-        self.get_logger().info('\n'.join(lines))
+        if self.failure is not None:
+            lines.append(
+                f'a write failed: the {total.written} message(s) written are in the file, the '
+                f'{total.lost} lost are not; id-learning bag recover {self.path} gives back the '
+                'written ones'
+            )
+            self.get_logger().error('\n'.join(lines))
+        else:
+            self.get_logger().info('\n'.join(lines))
 
 
 def _ros_time_is_active(node: Node) -> bool:
@@ -307,14 +345,25 @@ def _ros_time_is_active(node: Node) -> bool:
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Run the recorder until SIGINT/SIGTERM; returns the exit status."""
-    return run_node(
-        Recorder,
+    """Run the recorder until SIGINT/SIGTERM or a failed write; returns the exit status.
+
+    Returns:
+        0; 1 when a write failed (the recording ended early); 2 when it could not start.
+    """
+    made: list[Recorder] = []
+
+    def make() -> Recorder:
+        made.append(Recorder())
+        return made[-1]
+
+    status = run_node(
+        make,
         lambda node: node.config.executor,  # type: ignore[attr-defined]
         args,
         name='recorder',
         config_class=RecorderConfig,
     )
+    return 1 if status == 0 and made and made[0].failure is not None else status
 
 
 if __name__ == '__main__':

@@ -27,6 +27,7 @@ from id_learning.evaluation.closed_loop import (
     reference_gains,
 )
 from id_learning.models.registry import load_model
+from id_learning.outputs import check_output, result_folder
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import load_datasets, preprocess_from_dict, segment_rows
 from id_learning.training.run_folder import MODELS_DIR, read_run
@@ -86,17 +87,25 @@ def closed_loop_run(
     duration_s: float = 60.0,
     kinds: Sequence[str] | None = None,
     progress: bool = True,
+    force: bool = False,
+    run_name: Path | None = None,
 ) -> ClosedLoopResult:
     """Track the run's test motion on the twin with each model's feed-forward; write the results.
 
+    ``out`` is written whole or not at all (``id_learning.outputs``); ``force`` replaces an
+    earlier result there, never the run itself. ``run_name``: the run's path as closed_loop.json
+    records it, where ``run_dir`` is read inside another command's partial folder (the demo's).
+
     Raises:
-        CheckpointError: the run or a model does not fit the robot.
+        CheckpointError: the run is incomplete, or it or a model does not fit the robot.
         ConfigError: no twin config, one of another robot, or a model the run lacks.
+        OutputError: ``out`` is refused, or a write failed.
     """
     run_dir, out = Path(run_dir), Path(out)
     if not duration_s > 0:
         raise ConfigError(f'duration must be positive [s], got {duration_s}')
     run = read_run(run_dir)
+    check_output(out, force=force, inputs=[run_dir])  # refused before the loop is run
     if run.get('robot', {}).get('joints') != list(robot.joints):
         raise CheckpointError(f'{run_dir}: the run is not for robot {robot.name}')
     bag = Path(run['training_data']['bags'][0]['path'])
@@ -141,7 +150,7 @@ def closed_loop_run(
     )
     best, ratio = improvement(runs, kinds)
     document = {
-        'run': str(run_dir),
+        'run': str(run_name or run_dir),
         'twin_config': str(twin_path),
         'reference': {
             'bag': str(bag),
@@ -170,11 +179,15 @@ def closed_loop_run(
         'best_model': best,
         'improvement_best': ratio.tolist(),
     }
-    out.mkdir(parents=True, exist_ok=True)
-    json_path = out / CLOSED_LOOP_JSON
-    json_path.write_text(json.dumps(document, indent=2), encoding='utf-8')
-    plot_path = _plot(runs, best, robot, out / CLOSED_LOOP_PNG)
-    return ClosedLoopResult(runs, best, ratio, document, json_path, plot_path)
+    with result_folder(out, command='closed-loop', force=force, inputs=[run_dir]) as folder:
+        (folder.work / CLOSED_LOOP_JSON).write_text(
+            json.dumps(document, indent=2), encoding='utf-8'
+        )
+        _plot(runs, best, robot, folder.work / CLOSED_LOOP_PNG)
+    out = folder.out
+    return ClosedLoopResult(
+        runs, best, ratio, document, out / CLOSED_LOOP_JSON, out / CLOSED_LOOP_PNG
+    )
 
 
 def _plot(runs: dict[str, Tracking], best: str, robot: RobotConfig, path: Path) -> Path:
@@ -195,6 +208,8 @@ def _plot(runs: dict[str, Tracking], best: str, robot: RobotConfig, path: Path) 
     np.atleast_1d(axes)[-1].set_xlabel('time [s]')
     fig.suptitle("Tracking error in the twin's loop (reference minus true position)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=110)
+    finally:
+        plt.close(fig)
     return path

@@ -20,6 +20,7 @@ import torch
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler
 from id_learning.errors import CheckpointError
 from id_learning.models.artifact import _git_commit, robot_fingerprint
+from id_learning.outputs import incomplete_reason, partial_path, write_text_atomic
 from id_learning.robot.config import RobotConfig
 from id_learning.training.fitting import ModelResult
 from id_learning.training.measure import metric_notes
@@ -34,6 +35,7 @@ __all__ = [
     'machine_info',
     'metrics_document',
     'read_run',
+    'refuse_incomplete_run',
     'run_document',
     'save_models',
     'write_json',
@@ -60,16 +62,64 @@ def machine_info() -> dict[str, Any]:
 
 
 def write_json(path: Path, document: dict[str, Any]) -> None:
-    """Write ``document`` as indented JSON with a final newline."""
-    path.write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
+    """Write ``document`` as indented JSON with a final newline, whole or not at all."""
+    write_text_atomic(path, json.dumps(document, indent=1) + '\n')
+
+
+def _models_held(run_dir: Path, document: dict[str, Any] | None) -> str:
+    """'holds 2 of 7 models' of a run folder, from its run.json, else from its models/."""
+    requested = (document or {}).get('requested_kinds')
+    saved = (document or {}).get('kinds')
+    if not isinstance(saved, list):
+        folder = run_dir / MODELS_DIR
+        saved = (
+            [p for p in folder.iterdir() if (p / 'model.json').is_file()]
+            if folder.is_dir()
+            else []
+        )
+    of = f' of {len(requested)}' if isinstance(requested, list) else ''
+    return f'it holds {len(saved)}{of} model(s)'
+
+
+def _read_document(path: Path) -> dict[str, Any] | None:
+    try:
+        document = json.loads(path.read_text(encoding='utf-8'))
+    except (OSError, ValueError):
+        return None
+    return document if isinstance(document, dict) else None
+
+
+def refuse_incomplete_run(run_dir: Path) -> None:
+    """Refuse a run folder a ``train`` did not finish (killed, failed, or still running).
+
+    Incomplete: ``<run>.partial`` (or ``<run>`` absent while that exists), the incomplete marker,
+    or a run.json whose status says so (or, written before the status, without metrics.json).
+
+    Raises:
+        CheckpointError: names the folder, what it holds, and that a new train replaces it.
+    """
+    run_dir = Path(run_dir)
+    reason = incomplete_reason(run_dir)
+    holder = partial_path(run_dir) if not run_dir.exists() else run_dir
+    document = _read_document(holder / RUN_FILE)
+    if reason is None and document is not None and document.get('format') == RUN_FORMAT:
+        status = document.get('status')
+        if status == 'incomplete' or (status is None and not (holder / METRICS_FILE).is_file()):
+            reason = f'{run_dir}: an incomplete training run ({RUN_FILE} says so)'
+    if reason is not None:
+        raise CheckpointError(
+            f'{reason}; {_models_held(holder, document)}, and part of a run would pass for the '
+            'whole: a new train with --force replaces it'
+        )
 
 
 def read_run(run_dir: Path) -> dict[str, Any]:
-    """Read a run folder's run.json.
+    """Read a complete run folder's run.json.
 
     Raises:
-        CheckpointError: missing, not JSON, or not a run document.
+        CheckpointError: missing, not JSON, not a run document, or an incomplete run.
     """
+    refuse_incomplete_run(run_dir)
     path = Path(run_dir) / RUN_FILE
     if not path.is_file():
         raise CheckpointError(f'{run_dir}: not a training run folder (no {RUN_FILE})')
@@ -95,6 +145,8 @@ def run_document(
     """run.json: how the run was made (robot, kinds, device, preprocessing, scaler, data)."""
     return {
         'format': RUN_FORMAT,
+        # 'complete' once every model is scored and the report written (``train_run``).
+        'status': 'incomplete',
         'created_unix_s': time.time(),
         'git_commit': _git_commit(),
         'robot': robot_fingerprint(robot),

@@ -23,7 +23,6 @@ the report) and ``training.run_folder`` (the files). Their public names are re-e
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -32,12 +31,13 @@ from typing import Any
 import numpy as np
 
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, Target
-from id_learning.errors import CheckpointError, ConfigError, TrainingError
+from id_learning.errors import CheckpointError, TrainingError
 from id_learning.evaluation.study import StudyTable
 from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import configure_torch
 from id_learning.models.registry import save_model
+from id_learning.outputs import ResultFolder, result_folder
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import (
     bag_sha256,
@@ -155,7 +155,8 @@ def train_run(
         robot: the robot the bags were recorded on.
         target: 'motor' (tau_u from currents) or 'joint' (measured joint torque).
         kinds: model kinds to train (registry names), in the order to train and report them.
-        out: run folder to write (created; files in it are overwritten).
+        out: run folder to write: written into ``<out>.partial`` (each model as soon as it is
+            fitted) and renamed to ``out`` when complete (``id_learning.outputs``).
         hyper: per kind, hyper-parameter overrides (registry names of the config fields).
         max_seconds_per_model: wall-clock budget per model fit [s] (the identification and the
             diagnosis of the training part included), or None for the models' own.
@@ -163,13 +164,16 @@ def train_run(
         device: 'auto' (CUDA when present), 'cpu' or 'cuda'.
         preprocess: preprocessing settings (default: ``PreprocessConfig()``), with ``target``.
         study_table: the study's Table 1 for the report (``evaluation.study``), if given.
-        overwrite: replace a run already in ``out``; without it such a run is left intact.
+        overwrite: replace a result already in ``out`` (or an interrupted run beside it);
+            without it such a result is left intact. Never replaces an input or a folder that
+            is not an id_learning result.
         trim_unpaired_tail: drop a torn recording's last unpaired messages, with a warning.
         announce: called with a line as each model is saved (a quiet run says how far it got).
 
     Raises:
-        ConfigError: unknown kind or hyper-parameter, an unavailable device, or ``out`` holds
-            a run and ``overwrite`` is not set.
+        ConfigError: unknown kind or hyper-parameter, or an unavailable device.
+        OutputError: ``out`` is refused (holds a result and ``overwrite`` is not set, another
+            process writes it, not a folder, ...), or a write failed (path and OS reason).
         DatasetError, BagError: a bag is unusable.
         TrainingError: no model could be fitted. A model that fails while others fit is
             reported in ``RunResult.failures``, run.json, metrics.json and the report instead.
@@ -182,16 +186,51 @@ def train_run(
     # The study's networks are small (2x64, 2x128): intra-op threads cost more than they give.
     # Measured on a shared 2-core machine: a DeLaN step took 14 ms on one thread, 1.4 s on two.
     configure_torch(TRAIN_THREADS)
-    out = _free_out(Path(out), overwrite)
     bags = [Path(b) for b in bags]
-    # Bad bags are refused before anything is written.
-    dataset = combine_datasets(
-        load_datasets(
-            bags, robot, config, progress=progress, trim_unpaired_tail=trim_unpaired_tail
+    # Written into OUT.partial, renamed to OUT when complete (``id_learning.outputs``).
+    with result_folder(Path(out), command='train', force=overwrite, inputs=bags) as folder:
+        # Bad bags are refused before anything but the partial folder is written.
+        dataset = combine_datasets(
+            load_datasets(
+                bags, robot, config, progress=progress, trim_unpaired_tail=trim_unpaired_tail
+            )
         )
-    )
-    if overwrite:
-        _clear_replaced_run(out)
+        results, failures, metrics = _write_run(
+            folder,
+            bags,
+            dataset,
+            robot=robot,
+            kinds=kinds,
+            overrides=overrides,
+            config=config,
+            device=resolved_device,
+            max_seconds_per_model=max_seconds_per_model,
+            study_table=study_table,
+            progress=progress,
+            announce=announce,
+        )
+    out = folder.out
+    moved = {k: replace(r, folder=out / MODELS_DIR / k) for k, r in results.items()}
+    return RunResult(out, dataset, moved, metrics, out / REPORT_FILE, failures)
+
+
+def _write_run(
+    folder: ResultFolder,
+    bags: list[Path],
+    dataset: Dataset,
+    *,
+    robot: RobotConfig,
+    kinds: list[str],
+    overrides: dict[str, dict[str, Any]],
+    config: PreprocessConfig,
+    device: str,
+    max_seconds_per_model: float | None,
+    study_table: StudyTable | None,
+    progress: bool,
+    announce: Callable[[str], None] | None,
+) -> tuple[dict[str, ModelResult], dict[str, str], dict[str, Any]]:
+    """Fit, save, score and report into ``folder.work``; (results, failures, metrics)."""
+    out = folder.work
     (out / MODELS_DIR).mkdir(parents=True, exist_ok=True)
     data = TrainingData(dataset, robot)
     scale = dataset.target_scaler.scale()
@@ -200,7 +239,7 @@ def train_run(
     run = run_document(
         robot=robot,
         kinds=kinds,
-        device=resolved_device,
+        device=device,
         max_seconds_per_model=max_seconds_per_model,
         preprocessing=preprocessing,
         target_scaler=dataset.target_scaler,
@@ -209,7 +248,7 @@ def train_run(
     write_json(out / RUN_FILE, run)
 
     results, failures = _fit_and_save(
-        data, kinds, overrides, out, run, progress=progress, announce=announce
+        data, kinds, overrides, folder, run, progress=progress, announce=announce
     )
     rows = segment_rows(dataset, 'test')
     table, predictions = evaluate_models(results, dataset, rows, scale, timing=True)
@@ -222,7 +261,7 @@ def train_run(
     )
     evaluated_on = _test_part_text(config)
     report_path, findings = write_run_report(
-        title=f'Training run: {len(results)} models, {target} torque labels',
+        title=f'Training run: {len(results)} models, {config.target} torque labels',
         out=out,
         dataset=dataset,
         robot=robot,
@@ -235,7 +274,7 @@ def train_run(
     )
     metrics = metrics_document(
         'training',
-        target=target,
+        target=config.target,
         robot=robot,
         dataset=dataset,
         evaluated_on=evaluated_on,
@@ -249,24 +288,9 @@ def train_run(
     )
     _add_failures(metrics, report_path, failures, results)
     write_json(out / METRICS_FILE, metrics)
-    return RunResult(out, dataset, results, metrics, report_path, failures)
-
-
-def _free_out(out: Path, overwrite: bool) -> Path:
-    """``out``, unless it holds a run that ``overwrite`` does not allow to replace."""
-    if (out / RUN_FILE).exists() and not overwrite:
-        raise ConfigError(
-            f'{out}: holds a training run already ({RUN_FILE}); choose another --out, or pass '
-            '--force to replace it'
-        )
-    return out
-
-
-def _clear_replaced_run(out: Path) -> None:
-    """Remove a replaced run's models and documents: none may pass for the new run's."""
-    shutil.rmtree(out / MODELS_DIR, ignore_errors=True)
-    for name in (RUN_FILE, METRICS_FILE, REPORT_FILE):
-        (out / name).unlink(missing_ok=True)
+    run['status'] = 'complete'
+    write_json(out / RUN_FILE, run)
+    return results, failures, metrics
 
 
 def _test_part_text(config: PreprocessConfig) -> str:
@@ -304,7 +328,7 @@ def _fit_and_save(
     data: TrainingData,
     kinds: list[str],
     overrides: dict[str, dict[str, Any]],
-    out: Path,
+    folder: ResultFolder,
     run: dict[str, Any],
     *,
     progress: bool,
@@ -312,16 +336,21 @@ def _fit_and_save(
 ) -> tuple[dict[str, ModelResult], dict[str, str]]:
     """Fit every kind, saving each as soon as it is fitted; run.json records the failures.
 
+    Each model is saved (atomically) into the partial folder as soon as it is fitted, where a
+    user sees it at once; from then on a failure keeps the partial folder with what it holds.
+
     Raises:
         TrainingError: no kind could be fitted.
     """
+    out = folder.work
     extra = {key: run[key] for key in ('preprocessing', 'target_scaler', 'training_data')}
-    # run.json lists the models saved so far: an interrupted run evaluates with what it has.
+    # run.json lists the models saved so far: an interrupted run says how far it got.
     run['requested_kinds'], run['kinds'] = list(kinds), []
     write_json(out / RUN_FILE, run)
 
     def save_at_once(result: ModelResult) -> None:  # metrics are added once all are scored
         save_model(result.model, result.folder, extra=extra)
+        folder.keep = True
         run['kinds'].append(result.kind)
         write_json(out / RUN_FILE, run)
         if announce is not None:
@@ -409,6 +438,7 @@ def evaluate_run(
     out: Path,
     *,
     progress: bool = True,
+    force: bool = False,
 ) -> EvaluationResult:
     """Evaluate every model of a run on other recordings; write metrics.json and report.md.
 
@@ -418,12 +448,18 @@ def evaluate_run(
     saw; a bag that was one of the run's training bags (same SHA-256) contributes only its test
     part, because its training part is not new data.
 
+    ``out`` is written whole or not at all (``id_learning.outputs``); ``force`` replaces an
+    earlier result there, but never the evaluated run or a bag.
+
     Raises:
-        CheckpointError: the run or a model does not match ``robot`` (load_model verifies
-            robot name, joints and order, URDF hash, drives, units and weight hashes).
+        CheckpointError: the run is incomplete, or it or a model does not match ``robot``
+            (load_model verifies robot name, joints and order, URDF hash, drives, units and
+            weight hashes).
+        OutputError: ``out`` is refused, or a write failed.
         DatasetError, BagError: a bag is unusable.
     """
     run_dir, out = Path(run_dir), Path(out)
+    bags = [Path(b) for b in bags]
     run = read_run(run_dir)
     fingerprint = robot_fingerprint(robot)
     if run.get('robot', {}).get('joints') != fingerprint['joints']:
@@ -431,21 +467,35 @@ def evaluate_run(
             f'{run_dir}: run joints {run.get("robot", {}).get("joints")} do not match robot '
             f'{robot.name} joints {fingerprint["joints"]}'
         )
+    with result_folder(out, command='evaluate', force=force, inputs=[run_dir, *bags]) as folder:
+        metrics, results, dataset = _evaluate_into(folder.work, run_dir, run, bags, robot,
+                                                   progress=progress)  # fmt: skip
+    return EvaluationResult(folder.out, dataset, results, metrics, folder.out / REPORT_FILE)
+
+
+def _evaluate_into(
+    out: Path,
+    run_dir: Path,
+    run: dict[str, Any],
+    bags: list[Path],
+    robot: RobotConfig,
+    *,
+    progress: bool,
+) -> tuple[dict[str, Any], dict[str, ModelResult], Dataset]:
+    """``evaluate_run``'s work, written into ``out``; (metrics, models, evaluated data)."""
     config = preprocess_from_dict(run['preprocessing'])
     configure_torch(TRAIN_THREADS)
     results = _load_models(run_dir, run, robot)
-    bags = [Path(b) for b in bags]
     datasets = load_datasets(bags, robot, config, progress=progress)
     seen, parts = _unseen_parts(bags, datasets, run)
     target_scaler = MinMaxScaler.from_dict(run['target_scaler'])
     dataset = concatenate_for_evaluation(datasets, seen, target_scaler)
     rows = segment_rows(dataset, 'test')
     scale = target_scaler.scale()
-    out.mkdir(parents=True, exist_ok=True)
     table, predictions = evaluate_models(results, dataset, rows, scale, timing=True)
     _add_training_numbers(results)
     evaluated_on = '; '.join(parts)
-    report_path, findings = write_run_report(
+    _, findings = write_run_report(
         title=f'Evaluation of run {run_dir} on new recordings',
         out=out,
         dataset=dataset,
@@ -472,4 +522,4 @@ def evaluate_run(
         git_commit=_git_commit(),
     )
     write_json(out / METRICS_FILE, metrics)
-    return EvaluationResult(out, dataset, results, metrics, report_path)
+    return metrics, results, dataset
