@@ -35,7 +35,9 @@ import tempfile
 from collections import Counter
 from pathlib import Path
 
+from fault_cases_inputs import input_cases
 from fault_cases_nodes import node_cases
+from fault_cases_outputs import output_cases
 from fault_cases_recordings import bag_cases, import_cases, replay_and_recover_cases
 from fault_cases_settings import (
     artifact_cases,
@@ -44,6 +46,7 @@ from fault_cases_settings import (
     other_door_cases,
     predictor_cases,
 )
+from fault_cases_streams import stream_cases
 from fault_kit import KINDS, Case, Fixtures, Outcome, build_fixtures, cli, raises
 
 __all__ = ['all_cases', 'build_fixtures', 'cli', 'raises', 'run_cases', 'summary']
@@ -53,7 +56,8 @@ __all__ = ['all_cases', 'build_fixtures', 'cli', 'raises', 'run_cases', 'summary
 def all_cases(fx: Fixtures) -> list[Case]:
     cases: list[Case] = []
     makers = (bag_cases, cli_cases, artifact_cases, predictor_cases, replay_and_recover_cases,
-              import_cases, config_cases, other_door_cases, node_cases)  # fmt: skip
+              import_cases, config_cases, other_door_cases, stream_cases, input_cases,
+              output_cases, node_cases)  # fmt: skip
     for make in makers:
         cases += list(make(fx))
     return cases

@@ -29,6 +29,7 @@ from id_learning.bag import (
     encode_joint_state,
     read_joint_states,
 )
+from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.plausibility import (
     check_efforts,
     check_finite,
@@ -251,6 +252,9 @@ def load_recording(
         )
     check_limits(
         robot.joints, states.stamps_ns, position, velocity, limits=robot.limits, where=where_js
+    )
+    KinematicConsistency(robot.joints, robot.limits, robot.ipo_period_s).check(
+        states.stamps_ns, position, velocity, where=where_js, starts=starts
     )
 
     current = None

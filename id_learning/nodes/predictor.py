@@ -102,6 +102,9 @@ __all__ = ['Predictor', 'guard_config', 'main']
 TROUBLES = (
     'rejected',
     'clamped',
+    'slew-limited',
+    'held',
+    'resynchronised',
     'out of range',
     'with the physics prior',
     'cycles skipped',
@@ -116,6 +119,10 @@ def guard_config(config: PredictorNodeConfig, robot: RobotConfig) -> GuardConfig
         period_s=robot.ipo_period_s,
         stale_after_cycles=config.stale_after_cycles,
         max_age_s=config.max_age_s,
+        resync_after=config.resync_after,
+        rearm_samples=config.rearm_samples,
+        consistency_scale=config.consistency_scale,
+        torque_rise_s=config.torque_rise_s,
         acceleration_cutoff_hz=config.acceleration_cutoff_hz,
         torque_limit_scale=config.torque_limit_scale,
         range_margin=config.range_margin,
@@ -273,12 +280,15 @@ class Predictor(Node):
         receive_ns = time.monotonic_ns()
         try:
             sample = self._convert(msg)
-            clock_ns = (
-                self.get_clock().now().nanoseconds if self.core.config.max_age_s > 0 else None
-            )
-            result = self.core.step(sample, receive_ns, clock_ns)
-            if result.tau is None:
+            result = self.core.step(sample, receive_ns)
+            if result.reject is not None:
                 self._log_reject(result)
+            if result.resynced:
+                self.get_logger().warning(
+                    f"the reference's time base changed ({result.detail}): resynchronised at "
+                    f'stamp {result.stamp_ns} ns ({self.core.counters.resyncs} so far)'
+                )
+            if result.tau is None:
                 return
             tau = result.tau
             self._tau_u.publish(self._tau_u_bytes.serialize(result.stamp_ns, tau))
@@ -295,6 +305,7 @@ class Predictor(Node):
                 result.resumed_after_stale
                 or result.is_out_of_range
                 or result.is_clamped
+                or result.is_slew_limited
                 or result.physics_share > 0
             ):
                 self._log_result(result)
@@ -336,8 +347,12 @@ class Predictor(Node):
 
     def _log_reject(self, result: StepResult) -> None:
         throttle = self.config.log_throttle_s
-        text = f'sample at {result.stamp_ns} ns rejected ({result.reject.value}): {result.detail}'
-        if result.reject == Reject.OUT_OF_RANGE:
+        held = ', hold output published' if result.is_held else ''
+        text = (
+            f'sample at {result.stamp_ns} ns: no model torque ({result.reject.value}{held}): '
+            f'{result.detail}'
+        )
+        if result.reject in (Reject.OUT_OF_RANGE, Reject.REARMING):
             self.get_logger().warning(text, throttle_duration_sec=throttle)
         else:
             self.get_logger().error(text, throttle_duration_sec=throttle)
@@ -355,6 +370,11 @@ class Predictor(Node):
             self.get_logger().warning(
                 f'tau_u clamped to the torque limits ({self.core.counters.clamped_samples} '
                 'samples so far)',
+                throttle_duration_sec=throttle,
+            )
+        if result.is_slew_limited:
+            self.get_logger().warning(
+                f'tau_u slew-limited ({self.core.counters.slew_limited_samples} samples so far)',
                 throttle_duration_sec=throttle,
             )
 
@@ -411,13 +431,17 @@ class Predictor(Node):
             'adaptation': self.config.adaptation,
             'input_rate_hz': rate,
             'received': counters.received,
-            'published': counters.predicted,
+            'published': counters.published,
+            'model_torques': counters.predicted,
+            'held_samples': counters.held_samples,
             'rejected': counters.rejected,
         }
         values.update({f'rejected_{reason.value}': counters.rejects[reason] for reason in Reject})
         values.update(
             {
                 'clamped_samples': counters.clamped_samples,
+                'slew_limited_samples': counters.slew_limited_samples,
+                'resyncs': counters.resyncs,
                 'out_of_range_samples': counters.out_of_range,
                 'out_of_range_action': self.core.out_of_range_action,
                 'fallback_samples': counters.fallback_samples,
@@ -448,6 +472,12 @@ class Predictor(Node):
                 for name, count in zip(self.names, counters.clamped_per_joint, strict=True)
             }
         )
+        values.update(
+            {
+                f'slew_limited_{name}': int(count)
+                for name, count in zip(self.names, counters.slew_limited_per_joint, strict=True)
+            }
+        )
         return values
 
     def _publish_diagnostics(self) -> None:
@@ -456,6 +486,9 @@ class Predictor(Node):
         troubles = (
             counters.rejected,
             counters.clamped_samples,
+            counters.slew_limited_samples,
+            counters.held_samples,
+            counters.resyncs,
             counters.out_of_range,
             counters.fallback_samples,
             counters.skipped_cycles,
@@ -473,7 +506,7 @@ class Predictor(Node):
             level = 'warn'
             message = f'since the last report: {", ".join(grew)}'
         else:
-            level, message = 'ok', f'{counters.predicted} published'
+            level, message = 'ok', f'{counters.published} published'
         self._diagnostics.publish(
             serialize_exact(
                 diagnostic_array(
@@ -505,10 +538,11 @@ class Predictor(Node):
         counters = self.core.counters
         latency = self.latency_s.summary()
         self.get_logger().info(
-            f'{counters.received} samples received, {counters.predicted} published, '
-            f'{counters.rejected} rejected '
+            f'{counters.received} samples received, {counters.published} published '
+            f'({counters.held_samples} held), {counters.rejected} without a model torque '
             f'{ {r.value: c for r, c in counters.rejects.items() if c} }, '
-            f'{counters.clamped_samples} clamped, {counters.out_of_range} out of range, '
+            f'{counters.clamped_samples} clamped, {counters.slew_limited_samples} slew-limited, '
+            f'{counters.resyncs} time base resyncs, {counters.out_of_range} out of range, '
             f'{counters.fallback_samples} with the physics prior, '
             f'{counters.stale_episodes} stale episodes, {counters.skipped_cycles} cycles skipped, '
             f'{self.late_samples} late; receive-to-publish latency median '

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -23,9 +24,18 @@ class GuardConfig:
             this many periods (receive time), or when consecutive stamps are further apart. A
             stale reference ends the feed-forward (nothing is published); a jump in the stamps
             resets the history (acceleration estimate, LSTM window) for when it resumes.
-        max_age_s: reject a sample whose stamp is older than this, compared with the caller's
-            clock [s]; 0 turns the check off. Only meaningful when the stamps and the clock share
-            a time base (PTP-synchronised controller, or use_sim_time with the replay's /clock).
+        max_age_s: reject a sample that arrives later than this, or whose stamp leaps further
+            ahead, against the stream's time base [s] (``predictor.stamps``: no shared clock
+            needed); 0 turns both checks off (the stamps' order is still checked).
+        resync_after: rejections for time in a row (order, age, future) after which the next
+            sample starts a new time base, with one warning: a sender's clock step never locks
+            the stream out.
+        rearm_samples: after a sample that fails the kinematic consistency gate
+            (``dataset.consistency``), this many consistent samples
+            pass before the model's torque is served again (the hold output meanwhile).
+        consistency_scale: a multiple of the consistency gate's tolerances (1: as derived).
+        torque_rise_s: the published torque changes by at most the torque limit per this time
+            [s] (``predictor.output``).
         acceleration_cutoff_hz: first-order low-pass of the causal acceleration estimate [Hz];
             0 for the raw backward difference. Used only when the reference carries no
             accelerations.
@@ -40,33 +50,47 @@ class GuardConfig:
 
     period_s: float = 0.008
     stale_after_cycles: int = 5
-    max_age_s: float = 0.0
+    max_age_s: float = 0.1
+    resync_after: int = 5
+    rearm_samples: int = 2
+    consistency_scale: float = 1.0
+    torque_rise_s: float = 0.05
     acceleration_cutoff_hz: float = 0.0
     torque_limit_scale: float = 1.0
     range_margin: float = 0.1
     out_of_range: OutOfRangeAction = 'auto'
 
     def __post_init__(self) -> None:
-        """Check ranges, naming the key and the allowed values."""
-        if not 1e-5 <= self.period_s <= 1.0:
-            raise ConfigError(f'period_s must be in [1e-5, 1] s, got {self.period_s}')
-        if not isinstance(self.stale_after_cycles, int) or self.stale_after_cycles < 1:
+        """Check ranges, naming the key, the value and the allowed values."""
+        period = self.period_s
+        nyquist = 0.5 / period if _finite(period) and period > 0 else math.inf
+        bounds: tuple[tuple[str, float, float, float], ...] = (
+            ('period_s', period, 1e-5, 1.0),
+            ('max_age_s', self.max_age_s, 0.0, 3600.0),
+            ('consistency_scale', self.consistency_scale, 1e-3, 1e3),
+            ('torque_rise_s', self.torque_rise_s, 1e-4, 60.0),
+            ('torque_limit_scale', self.torque_limit_scale, 1e-6, 1.0),
+            ('range_margin', self.range_margin, 0.0, 1e3),
+            ('acceleration_cutoff_hz', self.acceleration_cutoff_hz, 0.0, nyquist),
+        )
+        for name, value, low, high in bounds:
+            if not (_finite(value) and low <= value <= high):
+                raise ConfigError(
+                    f'{name} must be a finite value in [{low:g}, {high:g}], got {value!r}'
+                )
+        if self.acceleration_cutoff_hz >= nyquist:
             raise ConfigError(
-                f'stale_after_cycles must be an integer >= 1, got {self.stale_after_cycles!r}'
+                f'acceleration_cutoff_hz {self.acceleration_cutoff_hz:g} Hz must be below the '
+                f'Nyquist frequency {nyquist:g} Hz of period_s {period:g} s (0 = off)'
             )
-        if self.max_age_s < 0:
-            raise ConfigError(f'max_age_s must be >= 0 s (0 = off), got {self.max_age_s}')
-        if self.acceleration_cutoff_hz < 0:
-            raise ConfigError(
-                f'acceleration_cutoff_hz must be >= 0 Hz (0 = off), got '
-                f'{self.acceleration_cutoff_hz}'
-            )
-        if not 0.0 < self.torque_limit_scale <= 1.0:
-            raise ConfigError(
-                f'torque_limit_scale must be in (0, 1], got {self.torque_limit_scale}'
-            )
-        if self.range_margin < 0:
-            raise ConfigError(f'range_margin must be >= 0, got {self.range_margin}')
+        counts = (
+            ('stale_after_cycles', self.stale_after_cycles, 1),
+            ('resync_after', self.resync_after, 1),
+            ('rearm_samples', self.rearm_samples, 0),
+        )
+        for name, count, low in counts:
+            if isinstance(count, bool) or not isinstance(count, int) or not low <= count <= 10**6:
+                raise ConfigError(f'{name} must be an integer in [{low}, 1000000], got {count!r}')
         if self.out_of_range not in OUT_OF_RANGE_ACTIONS:
             raise ConfigError(
                 f'out_of_range must be one of {OUT_OF_RANGE_ACTIONS}, got {self.out_of_range!r}'
@@ -76,3 +100,8 @@ class GuardConfig:
     def stale_after_ns(self) -> int:
         """The stale threshold [ns]."""
         return round(self.stale_after_cycles * self.period_s * 1e9)
+
+
+def _finite(value: object) -> bool:
+    """A real number (not a bool) that is finite."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)

@@ -1,22 +1,30 @@
 """FeedForwardPredictor: one reference sample in, one guarded feed-forward torque tau_u out.
 
-Guards, in the order they run (the first that fails decides; nothing is returned then):
+Guards, in the order they run (the first that fails decides):
 
-1. joints: the sample's names must be the model's joints (any order: columns are reordered by
-   name), with one value per joint in q and v (and a, when given);
-2. finite: no NaN or Inf in q, v or a;
-3. age (optional): not older than ``max_age_s`` against the caller's clock;
-4. stamp: strictly newer than the last accepted sample;
+1. joints, shapes, finite values (``predictor.guards``);
+2. time (``predictor.stamps``): the stamp after the last accepted one, neither later nor further
+   ahead than ``max_age_s`` against the stream's time base; ``resync_after`` such rejections in a
+   row start a new time base (with one warning), so no stamp locks the stream out;
+3. plausible: a state an arm of these limits can be in (``dataset.plausibility.SampleGate``);
+4. consistent: the sample follows from the ones before it (``dataset.consistency``); one that
+   does not yields no model torque, nor do the ``rearm_samples`` consistent ones after it (or
+   after a new time base): they get the hold output instead;
 5. range: inside the training range widened by ``range_margin``; 'fallback' blends in the
    physics prior's torque across the margin and publishes it alone beyond
    (``predictor.fallback``), 'warn' counts and predicts, 'reject' drops the sample;
-6. output: a non-finite prediction is dropped; a finite one is clamped to the torque limits.
+6. output (``predictor.output``): a non-finite prediction is dropped; a finite one is clamped to
+   the torque limits and slew-limited. The hold output is the last published torque slewed
+   towards the physics prior's torque at rest at the last pose served, while the reference is
+   not stale.
 
-A rejected sample leaves the history untouched. A gap of more than ``stale_after_cycles``
+A refused sample (1-3) leaves the history untouched. A gap of more than ``stale_after_cycles``
 periods between accepted samples, in stamps or in receive time, marks a stale episode. A gap in
 the stamps (a hole in the trajectory) also resets the history: the acceleration estimate starts
 again and the LSTM window is refilled with the first new sample, as the offline ``predict`` pads
-a run. Samples that arrive late but with contiguous stamps keep the history.
+a run. Samples that arrive late but with contiguous stamps keep the history. After any bad
+sample, a valid stream is served again within ``resync_after + rearm_samples + 1`` samples plus
+the consistency window (``dataset.consistency.WINDOW_S``) when the bad sample lies inside it.
 
 Inference (``inference``): 'numpy' (default) evaluates the model's float64 numpy path
 (``sample_predictor``, or the LSTM's ``sequence_predictor``), built once from the fitted weights;
@@ -28,15 +36,16 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 import torch
 
+from id_learning.dataset.consistency import ConsistencyStream, KinematicConsistency
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import SampleGate
 from id_learning.errors import ConfigError
@@ -50,9 +59,12 @@ from id_learning.predictor.fallback import (
     is_network,
     physics_fallback,
 )
+from id_learning.predictor.guards import SampleCheck
 from id_learning.predictor.outcome import PredictorCounters, Reject, StepResult
+from id_learning.predictor.output import OutputStage
 from id_learning.predictor.ranges import TrainingRange, training_range
 from id_learning.predictor.sample import ReferenceSample
+from id_learning.predictor.stamps import StampClock
 from id_learning.predictor.timing import RollingStats
 from id_learning.robot.config import JointLimits, RobotConfig
 
@@ -68,8 +80,6 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 
 INFERENCE_BACKENDS = ('numpy', 'torch')
-#: The column order of a sender whose joint order is the model's (no reordering).
-_IDENTITY = np.arange(0)
 InferenceBackend = Literal['numpy', 'torch']
 
 
@@ -86,7 +96,9 @@ class FeedForwardPredictor:
         inference: 'numpy' (the model's float64 one-sample path) or 'torch' (its predict).
         limits: the robot's joint limits in the model's joint order: a sample no arm of them can
             be in (``dataset.plausibility.SampleGate``) gives no torque (``Reject.IMPOSSIBLE``),
-            whatever the training range and ``out_of_range`` say. None: no such gate.
+            whatever the training range and ``out_of_range`` say, and one that does not follow
+            from the samples before it (``dataset.consistency``) gives no model torque. None:
+            neither gate.
         fallback: the physics prior for ``out_of_range`` 'fallback' (and 'auto' on a network);
             None: 'auto' warns instead.
 
@@ -132,10 +144,19 @@ class FeedForwardPredictor:
         self.out_of_range_action = self._action(self.config)
         self.counters = PredictorCounters(n)
         self._gate = None if limits is None else SampleGate(self.joint_names, limits)
+        self._limits = limits
+        self._consistency = self._consistency_stream(self.config)
+        self._check = SampleCheck(self.joint_names)
+        self._clock = StampClock(self.config.max_age_s, self.config.resync_after)
+        self.output = self._output_stage(self.config)
+        #: Consistent samples since the last inconsistent one, up to rearm_samples (armed at
+        #: start and after a hole: there is nothing to doubt the stream yet).
+        self._armed = self.config.rearm_samples
+        self._served_q: np.ndarray | None = None
+        self._served_receive_ns: int | None = None
+        self._hold_target: np.ndarray | None = None
         self.compute_s = RollingStats(compute_stats)
         self._n = n
-        self._index = {name: k for k, name in enumerate(self.joint_names)}
-        self._orders: dict[tuple[str, ...], np.ndarray | None] = {}
         self._estimator = CausalAccelerationEstimator(self.config.acceleration_cutoff_hz)
         self.is_sequence_model = bool(getattr(model, 'is_sequence_model', False))
         self.sequence_length = int(getattr(model, 'sequence_length', 0) or 0)
@@ -153,13 +174,25 @@ class FeedForwardPredictor:
             if inference == 'numpy' and not self.is_sequence_model
             else self._predict_torch
         )
-        self._last_stamp_ns: int | None = None
         self._last_receive_ns: int | None = None
         self._is_stale = False
         #: The artifact's input definitions (``from_artifact``): what the model is served on and
         #: what it was fitted on; None where unknown.
         self.inputs: InputDefinition | None = None
         self.fitting_inputs: InputDefinition | None = None
+
+    def _consistency_stream(self, config: GuardConfig) -> ConsistencyStream | None:
+        limits = self._limits
+        if limits is None:
+            return None
+        gate = KinematicConsistency(
+            self.joint_names, limits, config.period_s, config.consistency_scale
+        )
+        return ConsistencyStream(gate)
+
+    def _output_stage(self, config: GuardConfig) -> OutputStage:
+        slew = self._robot_limit / config.torque_rise_s
+        return OutputStage(self.torque_limit, slew, config.period_s, config.stale_after_ns * 1e-9)
 
     def _action(self, config: GuardConfig) -> str:
         """The out-of-range action ``config`` asks for, 'auto' resolved."""
@@ -245,7 +278,8 @@ class FeedForwardPredictor:
     def update_config(self, config: GuardConfig) -> None:
         """Apply new guard settings to the running stream (limits, margins, age, cut-off).
 
-        The history is kept; a new acceleration cut-off applies from the next sample.
+        The history is kept (the consistency gate's starts again); a new acceleration cut-off
+        applies from the next sample.
         """
         self.out_of_range_action = self._action(config)
         self.config = config
@@ -256,21 +290,40 @@ class FeedForwardPredictor:
             else self._training_range.widened(config.range_margin)
         )
         self._estimator.cutoff_hz = config.acceleration_cutoff_hz
+        self._clock.max_age_ns = round(config.max_age_s * 1e9)
+        self._clock.resync_after = config.resync_after
+        last = self.output.last
+        self.output = self._output_stage(config)
+        self.output.last = last
+        if self._consistency is not None:
+            self._consistency = self._consistency_stream(config)
 
     # -- state ------------------------------------------------------------------------------------
+    @property
+    def recovery_samples(self) -> int:
+        """After any bad sample, a valid stream is served again from at most its this-many-th."""
+        window = 0 if self._consistency is None else self._consistency.gate.window
+        return self.config.resync_after + window + self.config.rearm_samples + 1
+
     @property
     def is_stale(self) -> bool:
         """The reference is stale: no valid sample for more than the threshold."""
         return self._is_stale
 
     def reset(self) -> None:
-        """Forget the history (acceleration estimate, LSTM window, last stamp)."""
+        """Forget the history (acceleration estimate, LSTM window, consistency, last stamp)."""
+        self._forget_motion()
+        if self._consistency is not None:
+            self._consistency.reset()
+        self._clock.last_stamp_ns = None
+        self.counters.history_resets += 1
+
+    def _forget_motion(self) -> None:
+        """The acceleration estimate and the LSTM window start again."""
         self._estimator.reset()
         self._window = None
         if self._sequence is not None:
             self._sequence.reset()
-        self._last_stamp_ns = None
-        self.counters.history_resets += 1
 
     def check_stale(self, now_ns: int) -> bool:
         """Update the stale flag at time ``now_ns`` (same clock as step's receive_ns).
@@ -290,89 +343,9 @@ class FeedForwardPredictor:
         return None if self._last_receive_ns is None else now_ns - self._last_receive_ns
 
     # -- the step ---------------------------------------------------------------------------------
-    def _order(self, names: tuple[str, ...]) -> np.ndarray | None:
-        order = self._orders.get(names)
-        if order is None and names not in self._orders:
-            if names == self.joint_names:
-                order = _IDENTITY
-            elif len(names) == self._n and set(names) == set(self.joint_names):
-                order = np.array([names.index(name) for name in self.joint_names])
-            if len(self._orders) < 64:  # a bounded cache: a bad sender cannot grow it forever
-                self._orders[names] = order
-        return order
-
     def _reject(self, sample: ReferenceSample, reason: Reject, detail: str) -> StepResult:
         self.counters.rejects[reason] += 1
         return StepResult(sample.stamp_ns, None, reason, detail)
-
-    def _validate(
-        self, sample: ReferenceSample, clock_ns: int | None
-    ) -> tuple[np.ndarray, ...] | StepResult:
-        names = tuple(sample.names)
-        if len(names) != self._n:
-            return self._reject(
-                sample,
-                Reject.JOINT_COUNT,
-                f'{len(names)} joints {list(names)}, the model has {self._n}: '
-                f'{list(self.joint_names)}',
-            )
-        order = self._order(names)
-        if order is None:
-            missing = [name for name in self.joint_names if name not in names]
-            extra = [name for name in names if name not in self._index]
-            return self._reject(
-                sample,
-                Reject.JOINT_NAMES,
-                f'joint names {list(names)} do not match the model '
-                f'{list(self.joint_names)} (missing {missing}, unexpected {extra})',
-            )
-        arrays = [sample.q, sample.v] + ([] if sample.a is None else [sample.a])
-        for label, values in zip(('q', 'v', 'a'), arrays, strict=False):
-            if np.shape(values) != (self._n,):
-                return self._reject(
-                    sample,
-                    Reject.SHAPE,
-                    f'{label} has {np.size(values)} values for {self._n} joints',
-                )
-        if order is _IDENTITY:  # the sender's order is the model's: no copy needed
-            q, v = np.asarray(sample.q, float), np.asarray(sample.v, float)
-            a = None if sample.a is None else np.asarray(sample.a, float)
-        else:
-            q, v = np.asarray(sample.q, float)[order], np.asarray(sample.v, float)[order]
-            a = None if sample.a is None else np.asarray(sample.a, float)[order]
-        # One test of all values first (a sum is finite only if every term is); the
-        # per-quantity search runs only when it fails.
-        total = np.add.reduce(q) + np.add.reduce(v) + (0.0 if a is None else np.add.reduce(a))
-        if not math.isfinite(total):
-            checks: tuple[tuple[str, np.ndarray | None], ...] = (('q', q), ('v', v), ('a', a))
-            for label, checked in checks:
-                if checked is not None and not np.isfinite(checked).all():
-                    j = int(np.argmax(~np.isfinite(checked)))
-                    return self._reject(
-                        sample,
-                        Reject.NON_FINITE,
-                        f'{label} of {self.joint_names[j]} is {checked[j]}',
-                    )
-        if self.config.max_age_s > 0 and clock_ns is not None:
-            age_ns = clock_ns - sample.stamp_ns
-            if age_ns > self.config.max_age_s * 1e9:
-                return self._reject(
-                    sample,
-                    Reject.TOO_OLD,
-                    f'stamp is {age_ns * 1e-6:.1f} ms old (max_age_s {self.config.max_age_s:g} s)',
-                )
-        if self._last_stamp_ns is not None and sample.stamp_ns <= self._last_stamp_ns:
-            return self._reject(
-                sample,
-                Reject.STAMP_ORDER,
-                f'stamp {sample.stamp_ns} ns is not after the last accepted '
-                f'{self._last_stamp_ns} ns',
-            )
-        if self._gate is not None:
-            violation = self._gate.violation(q, v, a)
-            if violation is not None:
-                return self._reject(sample, Reject.IMPOSSIBLE, violation)
-        return (q, v) if a is None else (q, v, a)
 
     def step(
         self, sample: ReferenceSample, receive_ns: int, clock_ns: int | None = None
@@ -381,27 +354,69 @@ class FeedForwardPredictor:
 
         Args:
             sample: the reference sample as received.
-            receive_ns: when it arrived, on a monotonic clock [ns] (stale detection).
-            clock_ns: the current time in the stamps' time base [ns], for the age check; None
-                skips it.
+            receive_ns: when it arrived, on a monotonic clock [ns] (stale detection, and the
+                time base's clock when ``clock_ns`` is None).
+            clock_ns: the current time on another clock for the time base [ns] (the ROS clock,
+                e.g. a replay's /clock); None: ``receive_ns``.
 
         Returns:
-            The torque in the model's joint order, or the reason there is none.
+            The torque to publish in the model's joint order, or the reason there is none.
         """
         counters = self.counters
         counters.received += 1
-        checked = self._validate(sample, clock_ns)
-        if isinstance(checked, StepResult):
-            return checked
-        config = self.config
-        stale_after_ns = config.stale_after_ns
+        checked = self._check(sample)
+        if isinstance(checked[0], Reject):
+            return self._reject(sample, checked[0], str(checked[1]))
+        q, v, given_a = checked
+        now_ns = receive_ns if clock_ns is None else clock_ns
+        clock = self._clock
+        refused = clock.judge(sample.stamp_ns, now_ns)
+        resynced = refused is not None and clock.should_resync()
+        if refused is not None and not resynced:
+            return self._reject(sample, *refused)
+        if self._gate is not None:
+            violation = self._gate.violation(q, v, given_a)
+            if violation is not None:
+                return self._reject(sample, Reject.IMPOSSIBLE, violation)
+        if resynced:
+            assert refused is not None
+            self.reset()
+            clock.resync(sample.stamp_ns, now_ns)
+            counters.resyncs += 1
+            self._armed = 0  # nothing to compare the first sample of a new time base with
+        resumed = self._follow(sample.stamp_ns, receive_ns, now_ns)
+        stream = self._consistency
+        if stream is not None:
+            inconsistency = stream.check(sample.stamp_ns, q, v, given_a)
+            stream.push(sample.stamp_ns, q, v, given_a)
+            if inconsistency is not None:
+                self._armed = 0
+                self._forget_motion()
+                return self._held(
+                    sample, receive_ns, Reject.INCONSISTENT, inconsistency.describe()
+                )
+        a = given_a if given_a is not None else self._estimator.update(sample.stamp_ns, v)
+        if stream is not None and self._armed < self.config.rearm_samples:
+            self._armed += 1
+            self._push_window(q, v, a)  # the motion happened: keep the history continuous
+            return self._held(sample, receive_ns, Reject.REARMING,
+                              f'consistent sample {self._armed} of {self.config.rearm_samples} '
+                              'before the model serves again')  # fmt: skip
+        result = self._serve(sample, receive_ns, (q, v, a), resumed=resumed, resynced=resynced)
+        if resynced and refused is not None:  # say what the old time base refused
+            return replace(result, detail=f'{refused[1]}; {result.detail or "served"}')
+        return result
 
-        # Silence in arrival ends a stale episode; only a hole in the stamps breaks the
-        # trajectory, so only that resets the history (late but contiguous samples keep it).
-        stamp_gap = (
-            self._last_stamp_ns is not None
-            and sample.stamp_ns - self._last_stamp_ns > stale_after_ns
-        )
+    def _follow(self, stamp_ns: int, receive_ns: int, now_ns: int) -> bool:
+        """Take an accepted sample into the time base; whether it ends a stale episode.
+
+        Silence in arrival ends a stale episode; only a hole in the stamps breaks the
+        trajectory, so only that resets the history (late but contiguous samples keep it).
+        """
+        counters = self.counters
+        stale_after_ns = self.config.stale_after_ns
+        last_stamp = self._clock.last_stamp_ns
+        stamp_gap = last_stamp is not None and stamp_ns - last_stamp > stale_after_ns
         receive_gap = (
             self._last_receive_ns is not None
             and receive_ns - self._last_receive_ns > stale_after_ns
@@ -411,16 +426,53 @@ class FeedForwardPredictor:
         resumed = self._is_stale or stamp_gap or receive_gap
         if stamp_gap:
             self.reset()
-        elif self._last_stamp_ns is not None:
-            step = (sample.stamp_ns - self._last_stamp_ns) * 1e-9 / config.period_s
+        elif last_stamp is not None:
+            step = (stamp_ns - last_stamp) * 1e-9 / self.config.period_s
             counters.skipped_cycles += max(round(step) - 1, 0)
         self._is_stale = False
-        self._last_stamp_ns = sample.stamp_ns
+        self._clock.accept(stamp_ns, now_ns)
         self._last_receive_ns = receive_ns
+        return resumed
 
+    def _held(
+        self, sample: ReferenceSample, receive_ns: int, reason: Reject, detail: str
+    ) -> StepResult:
+        """No model torque: the hold output while the last served sample is recent enough."""
+        self.counters.rejects[reason] += 1
+        served = self._served_receive_ns
+        tau = None
+        if served is not None and receive_ns - served <= self.config.stale_after_ns:
+            if self._hold_target is None and self._served_q is not None:
+                self._hold_target = self._rest_torque(self._served_q)
+            tau = self.output.hold(self._hold_target, sample.stamp_ns)
+        if tau is not None:
+            self.counters.held_samples += 1
+        return StepResult(sample.stamp_ns, tau, reason, detail, is_held=tau is not None)
+
+    def _rest_torque(self, q: np.ndarray) -> np.ndarray | None:
+        """The physics prior's torque at rest at ``q`` (None where there is none to ask)."""
+        zeros = np.zeros(self._n)
+        if self.fallback is not None:
+            tau = self.fallback.predict_one(q, zeros, zeros)
+        elif not self.is_sequence_model:
+            tau = self._predict_one(q, zeros, zeros)
+        else:
+            return None
+        return tau if np.isfinite(tau).all() else None
+
+    def _serve(
+        self,
+        sample: ReferenceSample,
+        receive_ns: int,
+        state: tuple[np.ndarray, np.ndarray, np.ndarray],
+        *,
+        resumed: bool,
+        resynced: bool,
+    ) -> StepResult:
+        """The model's torque for a sample that passed every gate, clamped and slew-limited."""
+        counters = self.counters
+        q, v, a = state
         start = time.perf_counter()
-        q, v = checked[0], checked[1]
-        a = checked[2] if len(checked) == 3 else self._estimator.update(sample.stamp_ns, v)
         if self.out_of_range_action == 'fallback':
             tau, share, detail = self._predict_or_fall_back(q, v, a)
             out_of_range = share >= 1.0
@@ -446,18 +498,23 @@ class FeedForwardPredictor:
             return self._reject(
                 sample, Reject.NON_FINITE_OUTPUT, f'model returned non-finite torque {tau}'
             )
-        over = np.abs(tau) > self.torque_limit
-        is_clamped = bool(over.any())
+        tau, over, slewed = self.output.serve(tau, sample.stamp_ns)
+        is_clamped, is_slewed = bool(over.any()), bool(slewed.any())
         if is_clamped:
-            tau = np.clip(tau, -self.torque_limit, self.torque_limit)
             counters.clamped_samples += 1
             counters.clamped_per_joint += over
+        if is_slewed:
+            counters.slew_limited_samples += 1
+            counters.slew_limited_per_joint += slewed
         counters.predicted += 1
+        self._served_q, self._served_receive_ns, self._hold_target = q, receive_ns, None
         return StepResult(
             sample.stamp_ns,
             tau,
             detail=detail,
             is_clamped=is_clamped,
+            is_slew_limited=is_slewed,
+            resynced=resynced,
             is_out_of_range=out_of_range,
             resumed_after_stale=resumed,
             physics_share=share,

@@ -99,8 +99,11 @@ def test_example_mapping_round_trips_a_deg_ms_trace_to_si_through_the_bag(
     rng = np.random.default_rng(RNG_SEED)
     n = 40
     lower, upper = robot.limits.position_lower, robot.limits.position_upper
-    q_deg = np.degrees(rng.uniform(0.9 * lower, 0.9 * upper, (n, 6)))  # a pose the arm can take
-    v_deg_s = rng.uniform(-60.0, 60.0, (n, 6))
+    # One motion the arm can make: poses inside the limits, velocities their derivative.
+    centre = np.degrees(rng.uniform(0.5 * lower, 0.5 * upper, 6))
+    phase = 2.0 * np.pi * 1.5 * 0.008 * np.arange(n)[:, None] + rng.uniform(0, 6.28, 6)
+    q_deg = centre + 10.0 * np.sin(phase)
+    v_deg_s = 10.0 * 2.0 * np.pi * 1.5 * np.cos(phase)
     i_a = rng.uniform(-5.0, 5.0, (n, 6))
     time_ms = 1234.5 + 8.0 * np.arange(n)
     header = ['time_ms']
@@ -168,10 +171,11 @@ def test_npz_with_2d_arrays_round_trips_torque_and_current_to_si(
 ) -> None:
     rng = np.random.default_rng(RNG_SEED)
     n = 30
+    phase = 2.0 * 0.008 * np.arange(n)[:, None] + rng.uniform(0, 6.28, 6)  # one motion
     arrays = {
         't': 100.0 + 0.008 * np.arange(n),
-        'q': rng.uniform(-1.0, 1.0, (n, 6)),
-        'qd_rpm': rng.uniform(-10.0, 10.0, (n, 6)),
+        'q': 0.2 * np.sin(phase),
+        'qd_rpm': 0.4 * np.cos(phase) * 60 / (2 * np.pi),
         'i_ma': rng.uniform(-4000.0, 4000.0, (n, 6)),
         'tau_knm': rng.uniform(-0.5, 0.5, (n, 6)),  # within the MABI torque limits
         'meta': np.array([1.0, 2.0]),  # unused arrays of other lengths are ignored

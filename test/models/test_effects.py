@@ -17,7 +17,7 @@ from id_learning.models.data import DiagnosedEffects, TrainingData
 from id_learning.models.registry import load_model, make_model, save_model
 from id_learning.physics import AugmentedModel
 from id_learning.physics.rigid_body import RigidBodyDynamics
-from id_learning.predictor import FeedForwardPredictor, ReferenceSample
+from id_learning.predictor import FeedForwardPredictor, GuardConfig, ReferenceSample
 from id_learning.robot import load_robot_config
 from id_learning.twin import simulate
 
@@ -142,15 +142,18 @@ def test_unusable_effects_files_are_refused_by_name(effects_file, hidden_viscous
 def test_the_feed_forward_predictor_serves_the_diagnosed_model(fitted, hidden_viscous, tmp_path):
     robot = hidden_viscous[0]
     folder = save_model(fitted, tmp_path / 'effects')
-    predictor = FeedForwardPredictor.from_artifact(folder, robot)
+    # Random states, each its own history (a second apart) and no slew limit to speak of:
+    # the model's torque itself is what is checked here.
+    config = GuardConfig(period_s=robot.ipo_period_s, torque_rise_s=1e-4)
+    predictor = FeedForwardPredictor.from_artifact(folder, robot, config)
     # it warns outside the (q, v, a) range of the training part, not of the joint limits
     assert predictor.range is not None
     assert predictor.range.source == 'training range (input_scaler)'
     q, v, a = states(robot.n_joints, seed=4)
     q *= 0.2  # inside the joint limits the predictor guards
     for k in range(len(q)):
-        sample = ReferenceSample(8_000_000 * (k + 1), robot.joints, q[k], v[k], a[k])
-        result = predictor.step(sample, receive_ns=8_000_000 * (k + 1))
+        sample = ReferenceSample(10**9 * (k + 1), robot.joints, q[k], v[k], a[k])
+        result = predictor.step(sample, receive_ns=10**9 * (k + 1))
         assert result.reject is None, result.detail
         expected = np.clip(
             fitted.predict(q[k], v[k], a[k])[0], *predictor.torque_limit * [[-1], [1]]

@@ -104,7 +104,10 @@ def test_numpy_and_torch_inference_give_the_same_torque_across_a_history_reset(
             tiny_artifacts[kind], mabi, inference=inference
         )
         results = [
-            predictor.step(ReferenceSample(int(stamps[k]), JOINTS, q[k], v[k], a[k]), receive(k))
+            predictor.step(
+                ReferenceSample(int(stamps[k]), JOINTS, q[k], v[k], a[k]),
+                receive(k) + int(stamps[k] - stamps[0]) - k * PERIOD_NS,  # silent in the hole
+            )
             for k in range(len(stamps))
         ]
         assert predictor.counters.history_resets == 1
@@ -254,18 +257,50 @@ def test_cycles_the_stamps_jump_over_are_counted_as_skipped(linear):
     assert linear.counters.history_resets == 1
 
 
-def test_predictor_rejects_samples_older_than_max_age(mabi):
+def test_a_sample_later_than_max_age_against_its_time_base_is_too_old(mabi):
     predictor = FeedForwardPredictor(
         LinearModel(mabi), mabi.limits.torque, GuardConfig(max_age_s=0.1)
     )
-    fresh = sample(0)
-    assert predictor.step(fresh, receive(0), clock_ns=fresh.stamp_ns + 50_000_000).tau is not None
-    old = sample(1)
-    result = predictor.step(old, receive(1), clock_ns=old.stamp_ns + 150_000_000)
+    # The stamps are an hour off this clock: the time base learns the offset, no shared clock.
+    hour = 3600 * 10**9
+    assert predictor.step(sample(0), receive(0) + hour).tau is not None
+    result = predictor.step(sample(1), receive(1) + hour + 150_000_000)
     assert result.reject is Reject.TOO_OLD
-    assert '150.0 ms old' in result.detail
-    # Without a clock the age is not checked.
-    assert predictor.step(sample(2), receive(2)).tau is not None
+    assert '150.0 ms later' in result.detail
+    assert predictor.step(sample(2), receive(2) + hour + 50_000_000).tau is not None
+    # On the caller's clock (a ROS clock) rather than the receive time.
+    clocked = FeedForwardPredictor(LinearModel(mabi), mabi.limits.torque, GuardConfig())
+    for k, late in ((0, 0), (1, 0), (2, 200_000_000)):
+        stamp = sample(k).stamp_ns
+        result = clocked.step(sample(k), receive(0), clock_ns=stamp + 2_000_000 + late)
+    assert result.reject is Reject.TOO_OLD
+
+
+def test_a_stamp_far_ahead_is_refused_and_never_locks_the_stream_out(mabi):
+    predictor = FeedForwardPredictor(LinearModel(mabi), mabi.limits.torque, GuardConfig())
+    assert predictor.step(sample(0), receive(0)).tau is not None
+    hour = 3600 * 10**9
+    ahead = predictor.step(sample(1, stamp_ns=sample(1).stamp_ns + hour), receive(1))
+    assert ahead.reject is Reject.FUTURE_STAMP
+    assert all(predictor.step(sample(k), receive(k)).tau is not None for k in range(2, 20))
+    assert predictor.counters.resyncs == 0
+
+
+def test_a_clock_step_on_the_sender_resynchronises_after_resync_after_rejections(mabi):
+    config = GuardConfig(resync_after=5)
+    predictor = FeedForwardPredictor(LinearModel(mabi), mabi.limits.torque, config)
+    for k in range(10):
+        assert predictor.step(sample(k), receive(k)).tau is not None
+    back = -3600 * 10**9  # the sender's clock steps an hour back, for good
+    results = [
+        predictor.step(sample(k, stamp_ns=sample(k).stamp_ns + back), receive(k))
+        for k in range(10, 30)
+    ]
+    assert [r.reject for r in results[:4]] == [Reject.STAMP_ORDER] * 4
+    assert results[4].resynced
+    assert results[4].tau is not None
+    assert all(r.tau is not None for r in results[4:])
+    assert predictor.counters.resyncs == 1
 
 
 def test_predictor_clamps_to_the_torque_limits_and_counts_per_joint(mabi):
@@ -292,7 +327,9 @@ def test_predictor_never_returns_a_non_finite_torque(linear):
     assert linear.counters.predicted == 0
 
 
-def test_predictor_goes_stale_once_per_episode_and_resumes(linear):
+def test_predictor_goes_stale_once_per_episode_and_resumes(mabi):
+    # max_age_s off: the samples below are far later than their time base would allow.
+    linear = FeedForwardPredictor(LinearModel(mabi), mabi.limits.torque, GuardConfig(max_age_s=0))
     threshold = linear.config.stale_after_ns
     assert not linear.check_stale(receive(0))  # nothing received yet: waiting, not stale
     linear.step(sample(0), receive(0))
@@ -317,7 +354,10 @@ def test_predictor_goes_stale_once_per_episode_and_resumes(linear):
 
 def test_late_samples_with_contiguous_stamps_keep_the_lstm_window(tiny_artifacts, mabi):
     stamps, q, v, a = reference_run(40)
-    predictor = FeedForwardPredictor.from_artifact(tiny_artifacts['lstm'], mabi)
+    # max_age_s off: a stall of 400 ms would otherwise be too old.
+    predictor = FeedForwardPredictor.from_artifact(
+        tiny_artifacts['lstm'], mabi, GuardConfig(max_age_s=0)
+    )
     outputs = []
     for k in range(40):
         late = 10 * predictor.config.stale_after_ns if k >= 20 else 0  # a stall in delivery

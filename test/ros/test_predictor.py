@@ -169,6 +169,9 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
             'input_depth': 100,
             'stale_after_cycles': 25,
             'max_age_s': 0.5,
+            # The stamps are send times, not the motion's (q, v, a at 8 ms steps): the
+            # consistency gate (test_stream_properties.py) is not what this test checks.
+            'consistency_scale': 1000.0,
             'diagnostics_period_s': 0.1,
             'log_throttle_s': 0.2,
             'command_topic': '/ff/commands',
@@ -323,6 +326,7 @@ def test_far_outside_its_envelope_a_network_publishes_the_physics_torque_and_cou
             'input_topic': '/reference',
             'input_depth': 100,
             'stale_after_cycles': 500,
+            'max_age_s': 0.0,  # the samples below are sent at once, their stamps 10 s apart
             'diagnostics_period_s': 0.1,
         },
     )
@@ -332,7 +336,9 @@ def test_far_outside_its_envelope_a_network_publishes_the_physics_torque_and_cou
     _, q, v, a = reference_run(6)
     far_v = v.copy()
     far_v[2:4, 1] = high[1] + 0.5 * (high[1] - low[1])  # joint_2 a half range faster
-    stamps = [1_000_000_000 + 8_000_000 * k for k in range(6)]
+    # Each sample a history of its own (a hole between them): the speed-up of joint_2 below is
+    # no motion, and within one history the consistency gate would hold it.
+    stamps = [1_000_000_000 + 10_000_000_000 * k for k in range(6)]
     for k in range(6):
         msg = JointTrajectory(joint_names=list(mabi.joints))
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamps[k], 1_000_000_000)

@@ -1,0 +1,85 @@
+"""The sender's time base as the predictor sees it: age, future stamps, order, resynchronisation.
+
+A reference's stamps are the sender's clock; the predictor's clock is another one (its receive
+time, or the ROS clock where the caller passes one). Their offset, ``receive - stamp``, is the
+transport delay plus the difference of the clocks. The time base keeps its smallest recent value,
+
+    offset_k = min(receive_k - stamp_k, offset_(k-1) + DRIFT * (stamp_k - stamp_(k-1))),
+
+so a sample's lateness ``receive - stamp - offset`` is how much longer than the quickest delivery
+it took, whatever the clocks' difference (no shared time base needed); ``DRIFT`` lets the offset
+follow a sender's clock running up to 1 % slow. With ``max_age_s`` > 0, a sample later than
+``max_age_s`` is too old and one whose stamp leaps more than ``max_age_s`` ahead of the time base
+is a future stamp; any sample not after the last accepted is out of order. A time base that no
+longer holds (the sender's clock stepped, a replay restarted) never locks the stream out: after
+``resync_after`` such rejections in a row the next sample starts a new time base.
+"""
+
+from __future__ import annotations
+
+from id_learning.predictor.outcome import Reject
+
+__all__ = ['DRIFT', 'StampClock']
+
+#: How fast the offset may grow between a sender's clock and ours (share of the stamps' advance).
+DRIFT = 0.01
+
+
+class StampClock:
+    """The time base of one reference stream.
+
+    Args:
+        max_age_s: the largest lateness, and the largest leap ahead, accepted [s]; 0: neither
+            is checked (the order still is).
+        resync_after: rejections for time in a row after which a sample starts a new time base.
+    """
+
+    def __init__(self, max_age_s: float, resync_after: int) -> None:
+        self.max_age_ns = round(max_age_s * 1e9)
+        self.resync_after = resync_after
+        self.offset_ns: int | None = None
+        self.last_stamp_ns: int | None = None
+        #: Rejections for time since the last accepted sample.
+        self.rejections = 0
+
+    def judge(self, stamp_ns: int, now_ns: int) -> tuple[Reject, str] | None:
+        """Why this sample's stamp is refused, or None (nothing changes here)."""
+        if self.offset_ns is not None and self.max_age_ns > 0:
+            late_ns = now_ns - stamp_ns - self.offset_ns
+            if late_ns > self.max_age_ns:
+                return Reject.TOO_OLD, (
+                    f'stamp arrived {late_ns * 1e-6:.1f} ms later than its time base says '
+                    f'(max_age_s {self.max_age_ns * 1e-9:g} s)'
+                )
+            if late_ns < -self.max_age_ns:
+                return Reject.FUTURE_STAMP, (
+                    f'stamp is {-late_ns * 1e-6:.1f} ms ahead of its time base '
+                    f'(max_age_s {self.max_age_ns * 1e-9:g} s)'
+                )
+        last = self.last_stamp_ns
+        if last is not None and stamp_ns <= last:
+            return Reject.STAMP_ORDER, (
+                f'stamp {stamp_ns} ns is not after the last accepted {last} ns'
+            )
+        return None
+
+    def should_resync(self) -> bool:
+        """Count one rejection for time; True when it is one too many (resynchronise)."""
+        self.rejections += 1
+        return self.rejections >= self.resync_after
+
+    def accept(self, stamp_ns: int, now_ns: int) -> None:
+        """Take this sample into the time base."""
+        offset = now_ns - stamp_ns
+        if self.offset_ns is not None and self.last_stamp_ns is not None:
+            drifted = self.offset_ns + round(DRIFT * max(stamp_ns - self.last_stamp_ns, 0))
+            offset = min(offset, drifted)
+        self.offset_ns = offset
+        self.last_stamp_ns = stamp_ns
+        self.rejections = 0
+
+    def resync(self, stamp_ns: int, now_ns: int) -> None:
+        """Start a new time base at this sample."""
+        self.offset_ns = None
+        self.last_stamp_ns = None
+        self.accept(stamp_ns, now_ns)

@@ -1,0 +1,200 @@
+"""The predictor core's invariants over generated streams (hypothesis): whatever it is fed.
+
+Streams are a smooth, valid motion broken by generated faults: position jumps, alternating
+poses, a still position with a velocity, velocities flipping sign, NaN, stamps far ahead, back,
+repeated, floods (no time between arrivals) and silences. Invariants, each against an
+independent reference:
+
+- never a non-finite torque, never one beyond the (scaled) torque limits;
+- never a change between published torques faster than the slew limit (``predictor.output``);
+- never a model torque from a sample whose pair with the sample before it fails the consistency
+  gate (``dataset.consistency``, evaluated here on the pair alone);
+- no lock-out: a valid stream after any of the above is served again within the stated bound.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from id_learning.dataset.consistency import KinematicConsistency
+from id_learning.models.base import InverseDynamicsModel
+from id_learning.predictor import FeedForwardPredictor, GuardConfig, ReferenceSample, Reject
+
+PERIOD_NS = 8_000_000
+FAULTS = ('valid', 'jump', 'alternate', 'still', 'flip', 'nan', 'ahead', 'back', 'repeat',
+          'flood', 'silence')  # fmt: skip
+
+
+class SteepModel(InverseDynamicsModel):
+    """A torque that spans the limits across the joint range: jumps in q are jumps in tau."""
+
+    kind: ClassVar[str] = 'steep'
+
+    def __init__(self, robot) -> None:
+        self.robot = robot
+        self.scale = 0.9 * robot.limits.torque
+
+    def fit(self, data, *, progress=False):
+        return self
+
+    def predict(self, q, v, a):
+        return self.scale * np.sin(2.0 * np.asarray(q)) + 50.0 * np.asarray(v) + np.asarray(a)
+
+    def state(self):
+        return {}
+
+    def load_state(self, tensors, fitted):
+        pass
+
+
+def motion(k: int, phase: float, n: int = 6) -> tuple[np.ndarray, ...]:
+    """A valid motion at sample k: q = 0.3 sin(2 t + phase) per joint (v, a consistent)."""
+    t = k * PERIOD_NS * 1e-9
+    angle = 2.0 * t + phase + np.arange(n)
+    return 0.3 * np.sin(angle), 0.6 * np.cos(angle), -1.2 * np.sin(angle)
+
+
+def fed(faults: list[str], phase: float, start_k: int = 0):
+    """(sample, receive time) pairs of a stream with ``faults`` per sample."""
+    stream = []
+    receive = 5 * 10**9
+    for i, fault in enumerate(faults):
+        k = start_k + i
+        q, v, a = motion(k, phase)
+        stamp = 10**9 + k * PERIOD_NS
+        receive += PERIOD_NS
+        if fault == 'jump':
+            q = q + 1.0
+        elif fault == 'alternate':
+            q = q + (0.8 if i % 2 else 0.0)
+        elif fault == 'still':
+            q = motion(start_k, phase)[0]
+            v = np.full(6, 1.3)
+        elif fault == 'flip':
+            v = np.full(6, 1.3 if i % 2 else -1.3)
+        elif fault == 'nan':
+            q = q.copy()
+            q[i % 6] = np.nan
+        elif fault == 'ahead':
+            stamp += 3600 * 10**9
+        elif fault == 'back':
+            stamp -= 3600 * 10**9
+        elif fault == 'repeat':
+            stamp = 10**9 + max(k - 1, 0) * PERIOD_NS
+        elif fault == 'flood':
+            receive -= PERIOD_NS - 1000
+        elif fault == 'silence':
+            receive += 20 * PERIOD_NS
+        stream.append((ReferenceSample(stamp, tuple(f'joint_{j}' for j in range(1, 7)),
+                                       q, v, a), receive))  # fmt: skip
+    return stream
+
+
+def predictor_for(mabi) -> FeedForwardPredictor:
+    joints = tuple(mabi.joints)
+    return FeedForwardPredictor(SteepModel(mabi), mabi.limits.torque, GuardConfig(),
+                                limits=mabi.limits.take(range(len(joints))))  # fmt: skip
+
+
+faults_strategy = st.lists(
+    st.sampled_from(FAULTS).flatmap(lambda f: st.lists(st.just(f), min_size=1, max_size=6)),
+    min_size=1,
+    max_size=12,
+).map(lambda runs: [f for run in runs for f in run])
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(faults=faults_strategy, phase=st.floats(0.0, 6.28))
+def test_whatever_the_stream_the_output_is_finite_bounded_slew_limited_and_gated(
+    mabi, faults, phase
+):
+    predictor = predictor_for(mabi)
+    config = predictor.config
+    slew = mabi.limits.torque / config.torque_rise_s
+    gate = KinematicConsistency(tuple(mabi.joints), mabi.limits, config.period_s)
+    last_tau, last_stamp = None, None
+    previous = None  # the last sample taken into the history (passed joints, finite, time)
+    for sample, receive in fed(faults, phase):
+        result = predictor.step(sample, receive)
+        taken = result.reject in (None, Reject.INCONSISTENT, Reject.REARMING)
+        if result.reject is None and previous is not None:
+            dt = sample.stamp_ns - previous.stamp_ns
+            if 0 < dt <= config.stale_after_ns:  # a pair the gate compares
+                pair = gate.failing(np.array([previous.stamp_ns, sample.stamp_ns]),
+                                    np.array([previous.q, sample.q]),
+                                    np.array([previous.v, sample.v]),
+                                    np.array([previous.a, sample.a]))  # fmt: skip
+                assert not pair[1], 'a model torque from a sample that fails the gate'
+        if taken:
+            previous = sample
+        if result.tau is None:
+            continue
+        tau = result.tau
+        assert np.isfinite(tau).all()
+        assert (np.abs(tau) <= mabi.limits.torque * config.torque_limit_scale + 1e-9).all()
+        if last_tau is not None:
+            interval = min(max(sample.stamp_ns - last_stamp, PERIOD_NS), config.stale_after_ns)
+            assert (np.abs(tau - last_tau) <= slew * interval * 1e-9 * (1 + 1e-9) + 1e-9).all()
+        assert result.reject is None or result.is_held
+        last_tau, last_stamp = tau, sample.stamp_ns
+
+
+@settings(
+    max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(faults=faults_strategy, phase=st.floats(0.0, 6.28), new_phase=st.floats(0.0, 6.28),
+       shift=st.sampled_from([0, 50, -3600 * 125, 3600 * 125]))  # fmt: skip
+def test_after_any_fault_a_valid_stream_is_served_again_within_the_stated_bound(
+    mabi, faults, phase, new_phase, shift
+):
+    predictor = predictor_for(mabi)
+    for sample, receive in fed(faults, phase):
+        predictor.step(sample, receive)
+    # A valid motion from another pose, its stamps anywhere (an hour back or ahead included).
+    bound = predictor.recovery_samples
+    tail = fed(['valid'] * (bound + 10), new_phase, start_k=len(faults) + 30 + shift)
+    offset = len(faults) * PERIOD_NS + 10**9  # receive times go on after the faults'
+    results = [predictor.step(sample, receive + offset) for sample, receive in tail]
+    assert all(r.reject is None and r.tau is not None for r in results[bound:]), [
+        r.reject for r in results
+    ]
+
+
+def test_the_stated_bound_is_what_the_docs_say(mabi):
+    # resync_after 5 + a 50 ms window of 7 IPO cycles + rearm_samples 2 + 1
+    assert predictor_for(mabi).recovery_samples == 15
+
+
+@pytest.mark.parametrize('fault', ['alternate', 'still', 'flip'])
+def test_an_impossible_succession_gets_no_model_torque_but_the_hold_output(mabi, fault):
+    predictor = predictor_for(mabi)
+    stream = fed(['valid'] * 20 + [fault] * 20, 0.3)
+    results = [predictor.step(sample, receive) for sample, receive in stream]
+    assert all(r.reject is None for r in results[:20])
+    bad = results[21:]  # the first of 'alternate' is the valid pose
+    assert all(r.reject is Reject.INCONSISTENT for r in bad)
+    held = [r for r in results[20:] if r.is_held]
+    assert held
+    assert predictor.counters.held_samples == len(held)
+    # Held while the last served sample is at most the stale threshold old, then nothing.
+    stale = predictor.config.stale_after_cycles
+    assert all(r.tau is None for r in results[20 + stale + 1 :])
+
+
+def test_a_jump_to_another_motion_is_held_then_served_once_consistent(mabi):
+    predictor = predictor_for(mabi)
+    results = [predictor.step(sample, receive)
+               for sample, receive in fed(['valid'] * 20 + ['jump'] * 30, 0.3)]  # fmt: skip
+    assert results[20].reject is Reject.INCONSISTENT
+    assert results[20].is_held
+    window = predictor.recovery_samples - predictor.config.resync_after - 1
+    served_again = 20 + window
+    assert all(r.reject is not None for r in results[20:served_again])
+    assert all(r.reject is None for r in results[served_again:])
