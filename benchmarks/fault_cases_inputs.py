@@ -223,12 +223,6 @@ def _urdf_cases(fx: Fixtures) -> Iterator[Case]:
     faults = {
         'all-zero inertia under 150 kg': ('zero',
             'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"', ('link_3', 'all zero', 'arm.urdf')),
-        'inertia of a rod (not positive definite)': ('rod',
-            'ixx="0" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"',
-            ('link_3', 'not positive definite', 'arm.urdf')),
-        'inertia against the triangle inequality': ('triangle',
-            'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"',
-            ('link_3', 'triangle inequality', 'arm.urdf')),
     }  # fmt: skip
     for name, (tag, inertia, words) in faults.items():
 
@@ -238,6 +232,23 @@ def _urdf_cases(fx: Fixtures) -> Iterator[Case]:
             return _train(fx, f'urdf_{t}', '--robot', str(path), expect=w)
 
         yield Case(f'urdf {name}', 'train', urdf)
+    bent = {
+        'inertia of a rod': ('rod', 'ixx="0" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', 'thin rod'),
+        'inertia against the triangle inequality': (
+            'triangle', 'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"', 'triangle inequality'),
+    }  # fmt: skip
+    for name, (tag, inertia, said) in bent.items():
+
+        def warned(t: str = tag, i: str = inertia, w: str = said) -> Outcome:
+            from id_learning.robot import check_urdf_inertials
+
+            path = _robot_file(fx, f'urdf_{t}', urdf=text.replace(LINK_3_INERTIA, i))
+            lines = check_urdf_inertials(path.parent / 'arm.urdf')
+            if any('link_3' in line and w in line for line in lines):
+                return Outcome('handled', lines[0][-300:])  # said, the robot still loads
+            return Outcome('silently_accepted', f'nothing said: {lines}')
+
+        yield Case(f'urdf {name}', 'robot config', warned)
 
 
 # -- bounded sizes and waits ----------------------------------------------------------------------

@@ -15,8 +15,9 @@ import pinocchio as pin
 
 from id_learning.errors import RobotModelError
 from id_learning.robot.config import RobotConfig
+from id_learning.robot.urdf_inertials import check_urdf_inertials
 
-__all__ = ['RigidBodyDynamics', 'build_pinocchio_model', 'check_link_inertias']
+__all__ = ['RigidBodyDynamics', 'build_pinocchio_model']
 
 N_INERTIAL_PARAMETERS = 10  # m, m*c (3), inertia at the joint frame (6): pinocchio's order
 
@@ -27,7 +28,7 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
     Raises:
         RobotModelError: the URDF cannot be parsed, or its movable joints differ from the config.
     """
-    check_link_inertias(config.urdf_path)
+    check_urdf_inertials(config.urdf_path)
     try:
         renamed = _unique_frame_names(config.urdf_path)
         full = (
@@ -132,50 +133,6 @@ def _unique_frame_names(urdf: Path | str) -> str | None:
             names.add(renamed)
             changed = True
     return ElementTree.tostring(root, encoding='unicode') if changed else None
-
-
-def check_link_inertias(urdf: Path | str, tolerance: float = 1e-9) -> None:
-    """Refuse a URDF link whose mass or inertia no rigid body can have, naming the link.
-
-    A link's ``<inertial>`` needs a finite mass >= 0 (0 only with zero inertia: a massless
-    frame) and an inertia matrix about its centre of mass that is symmetric positive
-    semidefinite with principal moments obeying the triangle inequality (I1 + I2 >= I3).
-
-    Raises:
-        RobotModelError: names the file, the link and what is wrong.
-    """
-    try:
-        root = ElementTree.parse(urdf).getroot()
-    except (OSError, ElementTree.ParseError) as err:
-        raise RobotModelError(f'{urdf}: cannot read the URDF: {err}') from err
-    for link in root.iter('link'):
-        inertial = link.find('inertial')
-        if inertial is None:
-            continue
-        name = link.get('name', '?')
-        mass_element, tensor = inertial.find('mass'), inertial.find('inertia')
-        try:
-            mass = float(mass_element.get('value', 'nan')) if mass_element is not None else 0.0
-            keys = ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')
-            values = {k: float(tensor.get(k, 0.0)) if tensor is not None else 0.0 for k in keys}
-        except ValueError as err:
-            raise RobotModelError(f'{urdf}: link {name}: unreadable inertial: {err}') from err
-        inertia = np.array([
-            [values['ixx'], values['ixy'], values['ixz']],
-            [values['ixy'], values['iyy'], values['iyz']],
-            [values['ixz'], values['iyz'], values['izz']],
-        ])  # fmt: skip
-        if not (np.isfinite(mass) and mass >= 0 and np.isfinite(inertia).all()):
-            raise RobotModelError(f'{urdf}: link {name}: mass {mass} kg must be finite and >= 0')
-        moments = np.linalg.eigvalsh(inertia)
-        scale = tolerance * max(float(np.abs(moments).max()), 1e-12)
-        if mass == 0 and np.abs(moments).max() > 0:
-            raise RobotModelError(f'{urdf}: link {name}: a massless link with inertia {moments}')
-        if moments[0] < -scale or moments[0] + moments[1] < moments[2] - scale:
-            raise RobotModelError(
-                f'{urdf}: link {name}: principal moments {np.round(moments, 6).tolist()} kg*m^2 '
-                'are not those of a rigid body (each >= 0, I1 + I2 >= I3)'
-            )
 
 
 def _check_limits_against_urdf(model: pin.Model, config: RobotConfig) -> None:

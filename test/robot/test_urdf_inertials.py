@@ -27,13 +27,16 @@ def _edited(tmp_path: Path, old: str, new: str) -> Path:
     ('inertia', 'message'),
     [
         ('ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"', r'mass 150 kg .*\(all zero\)'),
-        ('ixx="0" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', r'\(not positive definite\)'),
-        ('ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"', 'triangle inequality'),
+        ('ixx="-1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', r'\(not positive semi-definite\)'),
         ('ixx="nan" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', 'must be finite'),
+        (
+            'ixx="4.9964" ixy="0" ixz="-1.0061333" iyy="-7.07" iyz="0" izz="5.6256"',
+            r'\(not positive semi-definite\)',
+        ),
     ],
-    ids=['all-zero', 'rod', 'triangle', 'nan'],
+    ids=['all-zero', 'negative', 'nan', 'negative-moment'],
 )
-def test_a_link_with_mass_and_an_impossible_inertia_is_refused_naming_link_and_file(
+def test_a_heavy_link_with_an_impossible_inertia_is_refused_naming_link_and_file(
     tmp_path: Path, inertia: str, message: str
 ) -> None:
     path = _edited(tmp_path, LINK_3, inertia)
@@ -42,15 +45,30 @@ def test_a_link_with_mass_and_an_impossible_inertia_is_refused_naming_link_and_f
     assert str(path) in str(err.value)
 
 
-def test_a_massless_frame_may_have_no_inertia_but_not_an_inertia_without_mass(
-    tmp_path: Path,
+@pytest.mark.parametrize(
+    ('old', 'new', 'said'),
+    [
+        (LINK_3, 'ixx="0" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', 'a thin rod'),
+        (LINK_3, 'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"', 'triangle inequality'),
+        ('<mass value="150"/>', '<mass value="0"/>', 'a massless link with inertia'),
+    ],
+    ids=['rod', 'triangle', 'massless'],
+)
+def test_an_inertia_that_bends_the_rules_without_harm_is_said_not_refused(
+    tmp_path: Path, old: str, new: str, said: str, caplog
 ) -> None:
-    frame = _edited(tmp_path, '<mass value="150"/>', '<mass value="0"/>')
-    with pytest.raises(RobotModelError, match='link link_3: a massless link with inertia'):
-        check_urdf_inertials(frame)
+    path = _edited(tmp_path, old, new)
+    assert any(said in line for line in check_urdf_inertials(path))
+    assert said in caplog.text
+
+
+def test_a_light_link_with_a_zero_inertia_is_said_not_refused(tmp_path: Path) -> None:
     zero = 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"'
-    frame.write_text(frame.read_text().replace(LINK_3, zero))
-    check_urdf_inertials(frame)  # a frame: no mass, no inertia
+    light = _edited(tmp_path, '<mass value="150"/>', '<mass value="0.0001"/>')
+    light.write_text(light.read_text().replace(LINK_3, zero))
+    said = check_urdf_inertials(light)
+    assert len(said) == 1
+    assert 'link_3: mass 0.0001 kg' in said[0]
 
 
 @pytest.mark.parametrize('name', ['mabi_max100', 'ur5', 'panda'])
@@ -76,3 +94,27 @@ def test_a_locked_joint_position_and_a_topic_name_are_checked(write_config) -> N
     topic = write_config('mabi_max100', set={'topics': {'motor_currents': '/motor currents'}})
     with pytest.raises(ConfigError, match=r"topics\.motor_currents: '/motor currents' is no ROS"):
         load_robot_config(topic)
+
+
+def test_a_negative_mass_is_refused(tmp_path: Path) -> None:
+    path = _edited(tmp_path, '<mass value="150"/>', '<mass value="-150"/>')
+    with pytest.raises(RobotModelError, match='link link_3: mass -150 kg'):
+        check_urdf_inertials(path)
+
+
+def test_building_the_dynamics_checks_the_urdf_too(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from id_learning.physics.rigid_body import build_pinocchio_model
+
+    robot = load_robot_config(REPO / 'config/mabi_max100.yaml')
+    zero = _edited(tmp_path, LINK_3, 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
+    with pytest.raises(RobotModelError, match='link link_3: mass 150 kg'):
+        build_pinocchio_model(replace(robot, urdf_path=zero))
+
+
+def test_a_massless_frame_with_no_inertia_is_fine(tmp_path: Path) -> None:
+    frame = _edited(tmp_path, '<mass value="150"/>', '<mass value="0"/>')
+    zero = 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"'
+    frame.write_text(frame.read_text().replace(LINK_3, zero))
+    assert check_urdf_inertials(frame) == []  # a frame: no mass, no inertia
