@@ -29,6 +29,7 @@ from typing import Literal
 
 import numpy as np
 
+from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.import_mapping import (
     QUANTITIES,
     ColumnSpec,
@@ -522,6 +523,11 @@ def import_logs(
     )
     if robot is not None:
         _check_efforts(recording, robot, where)
+        # ... nor a motion that contradicts itself (the gate train and replay apply).
+        KinematicConsistency(recording.joints, robot.limits, robot.ipo_period_s).check(
+            recording.stamps_ns, recording.position, recording.velocity, where=where,
+            starts=recording.segment_starts,
+        )  # fmt: skip
     write_recording(recording, out, topics=robot.topics if robot else None, overwrite=overwrite)
     reports = [report for _, report in read]
     for report in reports:

@@ -23,6 +23,7 @@ import numpy as np
 from rosbags.serde import SerdeError
 
 from id_learning.bag import JOINT_STATE, JointStateSeries, bag_info, decode_joint_state, iter_raw
+from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.inspect_plot import plot_report
 from id_learning.dataset.inspect_report import (
     FIELDS,
@@ -204,6 +205,39 @@ class _JointStateTopic:
         )
 
 
+def _contradictions(series: JointStateSeries, robot: RobotConfig | None) -> tuple[int, str | None]:
+    """(samples failing the consistency gate, the first described) of the robot's joints.
+
+    Only where the topic names exactly the robot's joints with positions and velocities; rows
+    with a non-finite value, and stamps that do not increase, start a new segment (they are
+    reported on their own).
+    """
+    q, v = series.position, series.velocity
+    if robot is None or q is None or v is None or set(series.names) != set(robot.joints):
+        return 0, None
+    if len(series.names) != len(robot.joints) or len(q) < 2:
+        return 0, None
+    order = [series.names.index(name) for name in robot.joints]
+    stamps = np.asarray(series.stamps_ns, dtype=np.int64)
+    q, v = q[:, order], v[:, order]
+    bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(v).all(axis=1))
+    bad[1:] |= np.diff(stamps) <= 0
+    gate = KinematicConsistency(robot.joints, robot.limits, robot.ipo_period_s)
+    breaks = np.flatnonzero(
+        bad | np.r_[False, np.diff(stamps) > GAP_PERIODS * robot.ipo_period_s * 1e9]
+    )
+    starts = tuple(sorted({0, *breaks.tolist(), *(breaks + 1).tolist()} - {len(stamps)}))
+    clean_q, clean_v = np.where(bad[:, None], 0.0, q), np.where(bad[:, None], 0.0, v)
+    failing = gate.failing(stamps, clean_q, clean_v, starts=starts) & ~bad
+    if not failing.any():
+        return 0, None
+    k = int(np.argmax(failing))
+    begin = max(start for start in starts if start <= k)  # explained within its segment
+    part = slice(begin, None)
+    worst = gate.explain(k - begin, stamps[part], clean_q[part], clean_v[part], None)
+    return int(failing.sum()), f'sample {k} (stamp {int(stamps[k])} ns): {worst.describe()}'
+
+
 def _iso_utc(stamp_ns: int) -> str:
     seconds, rest = divmod(stamp_ns, NS_PER_S)
     moment = datetime.fromtimestamp(seconds, UTC).replace(microsecond=rest // 1000)
@@ -297,6 +331,7 @@ def inspect_bag(
                 'header',
             )
             series[name] = acc.series()
+            contradictions, first = _contradictions(series[name], robot)
             reports.append(
                 TopicReport(
                     name=name,
@@ -307,6 +342,8 @@ def inspect_bag(
                     undecodable=acc.undecodable,
                     inconsistent=acc.inconsistent,
                     first_inconsistent=acc.first_inconsistent,
+                    contradictions=contradictions,
+                    first_contradiction=first,
                 )
             )
         else:

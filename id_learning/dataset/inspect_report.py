@@ -135,6 +135,9 @@ class TopicReport:
         inconsistent: messages whose joint names or array lengths differ from the first message;
             they count in the timing but not in the joint statistics.
         first_inconsistent: sample index of the first such message, or None.
+        contradictions: samples whose positions, velocities and the samples before them do not
+            describe one motion (``dataset.consistency``; with a robot, finite samples only).
+        first_contradiction: the first of them, described (sample, joint, mismatch), or None.
     """
 
     name: str
@@ -145,6 +148,8 @@ class TopicReport:
     undecodable: int = 0
     inconsistent: int = 0
     first_inconsistent: int | None = None
+    contradictions: int = 0
+    first_contradiction: str | None = None
 
 
 @dataclass(frozen=True)
@@ -273,6 +278,11 @@ def _topic_problems(topic: TopicReport) -> list[str]:
         lines.append(
             f'{topic.name}: {topic.inconsistent} message(s) change joint names or array lengths, '
             f'the first at sample {topic.first_inconsistent}'
+        )
+    if topic.contradictions:
+        lines.append(
+            f'{topic.name}: {topic.contradictions} sample(s) do not follow from the ones before '
+            f'them (train and replay refuse them), the first: {topic.first_contradiction}'
         )
     for joint in topic.joints:
         for key in FIELDS:

@@ -480,13 +480,13 @@ def test_joints_are_reordered_to_the_robot_order(tmp_path: Path, robot: RobotCon
     )
     assert [joint.name for joint in mapping.joints] != list(robot.joints)
     n = 8
-    # joint_k's position is k / 10 + row / 100, its velocity -k / 10: each value tells its joint
-    # (and every pose and speed is one the arm can have).
+    # joint_k moves at k / 10 rad/s from k / 10 rad: each value tells its joint (and the rows
+    # are one motion the arm can make).
     number = {name: 0.1 * float(name.removeprefix('joint_')) for name in robot.joints}
     header = [f'q_{name}' for name in reversed_joints] + [f'v_{name}' for name in reversed_joints]
     rows = [
-        [number[name] + k / 100 for name in reversed_joints]
-        + [-number[name] for name in reversed_joints]
+        [number[name] * (1 + 0.008 * k) for name in reversed_joints]
+        + [number[name] for name in reversed_joints]
         for k in range(n)
     ]
     csv = write_csv(tmp_path / 'log.csv', header, rows)
@@ -498,10 +498,10 @@ def test_joints_are_reordered_to_the_robot_order(tmp_path: Path, robot: RobotCon
     assert states.position is not None
     assert states.velocity is not None
     expected_position = np.array(
-        [[number[name] + k / 100 for name in robot.joints] for k in range(n)]
+        [[number[name] * (1 + 0.008 * k) for name in robot.joints] for k in range(n)]
     )
     np.testing.assert_allclose(states.position, expected_position, rtol=1e-12, atol=0)
-    np.testing.assert_array_equal(states.velocity[0], [-number[name] for name in robot.joints])
+    np.testing.assert_array_equal(states.velocity[0], [number[name] for name in robot.joints])
 
 
 def test_joint_names_other_than_the_robots_are_refused_listing_both(
@@ -602,6 +602,17 @@ def test_a_current_no_drive_can_carry_is_refused_at_import(tmp_path: Path, robot
     assert not (tmp_path / 'bag').exists()
 
 
+def positions_and_velocities(robot: RobotConfig) -> ImportMapping:
+    """A mapping of columns q_<joint> [rad] and v_<joint> [rad/s] for every robot joint."""
+    return ImportMapping(
+        period_s=robot.ipo_period_s,
+        joints=tuple(
+            JointColumns(name, ColumnSpec(f'q_{name}', 'rad'), ColumnSpec(f'v_{name}', 'rad/s'))
+            for name in robot.joints
+        ),
+    )
+
+
 @pytest.mark.parametrize(
     ('scale', 'message'),
     [
@@ -613,13 +624,7 @@ def test_a_current_no_drive_can_carry_is_refused_at_import(tmp_path: Path, robot
 def test_motion_no_arm_can_have_is_refused_and_nothing_is_written(
     tmp_path: Path, robot: RobotConfig, scale: float, message: str
 ) -> None:
-    mapping = ImportMapping(
-        period_s=robot.ipo_period_s,
-        joints=tuple(
-            JointColumns(name, ColumnSpec(f'q_{name}', 'rad'), ColumnSpec(f'v_{name}', 'rad/s'))
-            for name in robot.joints
-        ),
-    )
+    mapping = positions_and_velocities(robot)
     n = 40
     swing = np.linspace(-1.2, 1.2, n)[:, None] * np.ones(6)  # rad, inside every joint's limits
     rows = np.hstack([swing * scale, np.zeros((n, 6))]).tolist()
@@ -628,3 +633,16 @@ def test_motion_no_arm_can_have_is_refused_and_nothing_is_written(
     with pytest.raises(DatasetError, match=message):
         import_log(csv, mapping, tmp_path / 'bag', robot=robot, velocity_from_position=False)
     assert not (tmp_path / 'bag').exists()
+
+
+def test_a_log_whose_positions_jump_is_refused_at_import_naming_the_sample(
+    tmp_path: Path, robot: RobotConfig
+) -> None:
+    mapping = positions_and_velocities(robot)
+    header = [f'q_{name}' for name in robot.joints] + [f'v_{name}' for name in robot.joints]
+    rows = [[0.1 + (0.5 if k >= 12 and j == 4 else 0.0) for j in range(6)] + [0.0] * 6
+            for k in range(30)]  # fmt: skip
+    csv = write_csv(tmp_path / 'log.csv', header, rows)
+    with pytest.raises(DatasetError, match=r'log\.csv: sample 12 .* position of joint_5'):
+        import_log(csv, mapping, tmp_path / 'bag', robot=robot, velocity_from_position=False)
+    assert not (tmp_path / 'bag').exists()  # nothing written

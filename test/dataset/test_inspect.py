@@ -326,3 +326,22 @@ def test_joint_torques_without_motor_currents_are_no_problem_but_positions_alone
     assert len(missing) == (0 if with_effort else 1)
     text = render_report(report)
     assert ('labels for --target joint' in text) is with_effort
+
+
+def test_samples_whose_motion_contradicts_itself_are_counted_and_named(
+    tmp_path: Path, robot: RobotConfig
+) -> None:
+    recording = make_recording(robot, regular_stamps(300))
+    position = recording.position.copy()
+    position[150, 2] += 0.8  # one pose off the motion: a spike
+    bag = write_recording(
+        Recording(**{**vars(recording), 'position': position}), tmp_path / 'bag', robot.topics
+    )
+    topic = inspect_bag(bag, robot).topic(robot.topics.joint_states)
+    assert topic.contradictions >= 2  # the spike and the way back
+    assert topic.first_contradiction is not None
+    assert topic.first_contradiction.startswith('sample 150 ')
+    assert 'position of joint_3 changed by 0.79' in topic.first_contradiction
+    assert any('do not follow from the ones before' in p for p in inspect_bag(bag, robot).problems)
+    clean = write_recording(recording, tmp_path / 'clean', robot.topics)
+    assert inspect_bag(clean, robot).topic(robot.topics.joint_states).contradictions == 0

@@ -210,3 +210,28 @@ def test_an_unpaired_tail_from_a_torn_recording_is_refused_or_trimmed_on_request
     assert trimmed.n_samples == 298
     np.testing.assert_array_equal(trimmed.current, recording.current[:298])
     assert load_recording(path, mabi).n_samples == 300
+
+
+@pytest.mark.parametrize(
+    ('change', 'message'),
+    [
+        ('jump', r'sample 250 .* position of joint_2 changed by 0\.99\d* rad in 8 ms'),
+        ('still', r'sample 25\d .* joint_4 changed by'),
+        ('flip', r'velocity of joint_6 changed by'),
+    ],
+)  # fmt: skip
+def test_a_recording_whose_motion_contradicts_itself_is_refused_naming_it(
+    tmp_path, mabi, change, message
+):
+    recording = sine_recording(500)
+    position, velocity = recording.position.copy(), recording.velocity.copy()
+    if change == 'jump':
+        position[250:, 1] += 1.0
+    elif change == 'still':
+        position[250:, 3] = position[250, 3]
+        velocity[250:, 3] = 1.3
+    else:
+        velocity[250::2, 5] += 1.3
+    bad = broken(recording, position=position, velocity=velocity)
+    with pytest.raises(DatasetError, match=message):
+        load_recording(write_contract_bag(tmp_path / 'bag', bad), mabi)
