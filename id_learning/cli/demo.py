@@ -232,13 +232,13 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument('--skip-diagnosis', action='store_true', help='do not run the diagnosis')
     p.add_argument(
         '--online-seconds',
-        type=float,
+        type=options.finite(0.0, 86400.0),
         default=30.0,
         help='seconds of the test part replayed through the predictor node (0: skip)',
     )
     p.add_argument(
         '--closed-loop-seconds',
-        type=float,
+        type=options.finite(0.0, 86400.0),
         default=60.0,
         help="seconds of the test part tracked in the twin's closed loop (0: skip)",
     )

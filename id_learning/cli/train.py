@@ -243,7 +243,10 @@ def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
         help="twin config of the plant (default: the twin_config.yaml beside the run's bag)",
     )
     p.add_argument(
-        '--duration', type=float, default=60.0, help='seconds of the test part to track (60)'
+        '--duration',
+        type=options.finite(0.0, 86400.0, low_open=True),
+        default=60.0,
+        help='seconds of the test part to track (60)',
     )
     p.add_argument('--models', help="comma-separated kinds (default: all of the run's)")
     options.robot_option(p, 'robot config YAML (default: the one the run was trained with)')

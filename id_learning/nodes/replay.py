@@ -175,6 +175,12 @@ def _reference_bytes(
         order = [robot.joints.index(name) for name in names]
         if config.reference_inputs == 'study':
             inputs = InputDefinition.study(robot.lowpass_cutoff_hz[order])
+        elif config.reference_smoothing_hz >= 0.5 / robot.ipo_period_s:
+            raise ConfigError(
+                f'reference_smoothing_hz {config.reference_smoothing_hz:g} Hz must be below the '
+                f'Nyquist frequency {0.5 / robot.ipo_period_s:g} Hz of the IPO period '
+                f'{robot.ipo_period_s:g} s (0: the robot config\'s input_smoothing_hz)'
+            )
         elif config.reference_smoothing_hz > 0:
             inputs = InputDefinition.controller(np.full(len(names), config.reference_smoothing_hz))
         else:
@@ -222,7 +228,7 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     Raises:
         BagError: the bag is unreadable, lacks a topic, or a message has no header stamp with
             ``timing: stamp``.
-        ConfigError: the span is empty.
+        ConfigError: the span is empty, or reference_smoothing_hz is not below Nyquist.
     """
     path = Path(config.bag)
     info = bag_info(path)

@@ -145,3 +145,17 @@ def test_a_plan_refuses_a_reference_whose_accelerations_no_arm_reaches(tmp_path,
     build_plan(
         ReplayConfig(bag=str(broken), reference_inputs='recorded', reference_mode='none'), mabi
     )
+
+
+def test_a_smoothing_cut_off_at_nyquist_is_refused_naming_both(bag, mabi):
+    with pytest.raises(ConfigError, match=r'reference_smoothing_hz 62\.5 Hz .* Nyquist .* 62\.5'):
+        build_plan(ReplayConfig(bag=str(bag), reference_smoothing_hz=62.5), mabi)
+
+
+def test_a_recording_whose_positions_jump_is_not_played(tmp_path, mabi):
+    recording = sine_recording(200)
+    position = recording.position.copy()
+    position[120:, 2] += 0.5  # a jump no velocity explains
+    broken = write_recording(replace(recording, position=position), tmp_path / 'jump')
+    with pytest.raises(BagError, match=r'sample 120 .* joint_3 .* nothing is played'):
+        build_plan(ReplayConfig(bag=str(broken)), mabi)
