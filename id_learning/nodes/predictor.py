@@ -63,7 +63,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
-from id_learning.errors import ConfigError
+from id_learning.errors import CheckpointError, ConfigError
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     diagnostic_array,
@@ -250,6 +250,17 @@ class Predictor(Node):
             self.get_logger().warning(
                 f'fallback_artifact ignored: a {self.core.model.kind} model is physics itself'
             )
+        artifact = Path(self.config.artifact)
+        if artifact.parent.name == 'models':  # a model of a run: say when the run is not whole
+            from id_learning.training.run_folder import refuse_incomplete_run
+
+            try:
+                refuse_incomplete_run(artifact.parent.parent)
+            except CheckpointError as err:
+                self.get_logger().warning(
+                    f'the model is complete but its run is not: {err}; its report and the '
+                    'physics prior beside it may be missing'
+                )
         if self.core.fitting_inputs is None or self.core.fitting_inputs.name == 'study':
             self.get_logger().warning(
                 "the model was fitted on inputs low-passed like the labels (the study's "
