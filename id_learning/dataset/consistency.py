@@ -44,7 +44,7 @@ import numpy as np
 
 from id_learning.dataset.plausibility import ACCELERATION_FACTOR
 from id_learning.errors import DatasetError
-from id_learning.robot.config import JointLimits
+from id_learning.robot.config import JointLimits, RobotConfig
 
 __all__ = [
     'FLOOR_SHARE',
@@ -127,6 +127,15 @@ class KinematicConsistency:
         self.stale_s = scale * STALE_S
         self.floor_q = scale * FLOOR_SHARE * velocity * period_s
         self.floor_v = scale * FLOOR_SHARE * velocity
+
+    @classmethod
+    def for_robot(
+        cls, robot: RobotConfig, joints: tuple[str, ...] | None = None
+    ) -> KinematicConsistency:
+        """The gate of a robot (its ``consistency_scale``), for ``joints`` in any order."""
+        names = robot.joints if joints is None else joints
+        limits = robot.limits.take([robot.joints.index(name) for name in names])
+        return cls(tuple(names), limits, robot.ipo_period_s, robot.consistency_scale)
 
     def position_terms(
         self, span_s: Any, steps: Any, dq: np.ndarray, integral: np.ndarray, v_ends: np.ndarray
@@ -278,7 +287,9 @@ class KinematicConsistency:
             f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns) does not follow from '
             f'the samples before it: {worst.describe()}; {count} such sample(s) in all. '
             'Positions, velocities and accelerations must describe one motion (a jump, a '
-            'swapped or rescaled column, or a velocity of another signal does not)'
+            'swapped or rescaled column, or a velocity of another signal does not); if the '
+            "robot's recorded velocities lag or are filtered, raise consistency_scale in its "
+            'robot config'
         )
 
 

@@ -524,7 +524,7 @@ def import_logs(
     if robot is not None:
         _check_efforts(recording, robot, where)
         # ... nor a motion that contradicts itself (the gate train and replay apply).
-        KinematicConsistency(recording.joints, robot.limits, robot.ipo_period_s).check(
+        KinematicConsistency.for_robot(robot, recording.joints).check(
             recording.stamps_ns, recording.position, recording.velocity, where=where,
             starts=recording.segment_starts,
         )  # fmt: skip

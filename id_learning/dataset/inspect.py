@@ -222,7 +222,7 @@ def _contradictions(series: JointStateSeries, robot: RobotConfig | None) -> tupl
     q, v = q[:, order], v[:, order]
     bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(v).all(axis=1))
     bad[1:] |= np.diff(stamps) <= 0
-    gate = KinematicConsistency(robot.joints, robot.limits, robot.ipo_period_s)
+    gate = KinematicConsistency.for_robot(robot)
     breaks = np.flatnonzero(
         bad | np.r_[False, np.diff(stamps) > GAP_PERIODS * robot.ipo_period_s * 1e9]
     )

@@ -253,7 +253,7 @@ def load_recording(
     check_limits(
         robot.joints, states.stamps_ns, position, velocity, limits=robot.limits, where=where_js
     )
-    KinematicConsistency(robot.joints, robot.limits, robot.ipo_period_s).check(
+    KinematicConsistency.for_robot(robot).check(
         states.stamps_ns, position, velocity, where=where_js, starts=starts
     )
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import datetime
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 from id_learning.errors import ConfigError
 from id_learning.nodes.param_schema import (
@@ -31,6 +32,8 @@ from id_learning.nodes.param_schema import (
     read_snapshot,
     validate_change,
 )
+from id_learning.predictor.config import GuardConfig, OutOfRangeAction
+from id_learning.robot.config import RobotConfig
 
 __all__ = [
     'EXECUTORS',
@@ -39,6 +42,7 @@ __all__ = [
     'ReplayConfig',
     'config_from_mapping',
     'declare_parameters',
+    'guard_config',
     'load_node_config',
     'read_snapshot',
     'resolve_robot_config',
@@ -312,8 +316,8 @@ class PredictorNodeConfig:
     )
     consistency_scale: float = param(
         1.0,
-        'Multiple of the kinematic consistency tolerances (1 = as derived from the limits '
-        'and the IPO period) [-].',
+        'Multiple of the kinematic consistency tolerances, on top of the robot config '
+        'consistency_scale (1 = as derived from the limits and the IPO period) [-].',
         read_only=False,
         low=1e-3,
         high=1e3,
@@ -462,4 +466,21 @@ def resolve_robot_config(value: str) -> Path:
     raise ConfigError(
         f'robot_config is empty and the default {DEFAULT_ROBOT_CONFIG} was not found in '
         f'{[str(p) for p in candidates]}; set robot_config'
+    )
+
+
+def guard_config(config: PredictorNodeConfig, robot: RobotConfig) -> GuardConfig:
+    """The core's guard settings from the node parameters and the robot's IPO period."""
+    return GuardConfig(
+        period_s=robot.ipo_period_s,
+        stale_after_cycles=config.stale_after_cycles,
+        max_age_s=config.max_age_s,
+        resync_after=config.resync_after,
+        rearm_samples=config.rearm_samples,
+        consistency_scale=config.consistency_scale * robot.consistency_scale,
+        torque_rise_s=config.torque_rise_s,
+        acceleration_cutoff_hz=config.acceleration_cutoff_hz,
+        torque_limit_scale=config.torque_limit_scale,
+        range_margin=config.range_margin,
+        out_of_range=cast(OutOfRangeAction, config.out_of_range),  # checked by the schema
     )

@@ -78,6 +78,7 @@ from id_learning.nodes.msg_conversions import (
 from id_learning.nodes.params import (
     PredictorNodeConfig,
     declare_parameters,
+    guard_config,
     read_snapshot,
     resolve_robot_config,
     validate_change,
@@ -86,7 +87,6 @@ from id_learning.nodes.qos import DIAGNOSTICS_QOS, TORQUE_QOS, reference_qos
 from id_learning.nodes.runtime import run_node
 from id_learning.predictor import (
     FeedForwardPredictor,
-    GuardConfig,
     ReferenceSample,
     Reject,
     RollingStats,
@@ -96,7 +96,7 @@ from id_learning.predictor import (
 from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
 from id_learning.robot.config import RobotConfig, load_robot_config
 
-__all__ = ['Predictor', 'guard_config', 'main']
+__all__ = ['Predictor', 'main']
 
 #: What turns the diagnostics level to warn while it grows (the counts of report_values).
 TROUBLES = (
@@ -111,23 +111,6 @@ TROUBLES = (
     'late',
 )
 NODE_NAME = 'predictor'
-
-
-def guard_config(config: PredictorNodeConfig, robot: RobotConfig) -> GuardConfig:
-    """The core's guard settings from the node parameters and the robot's IPO period."""
-    return GuardConfig(
-        period_s=robot.ipo_period_s,
-        stale_after_cycles=config.stale_after_cycles,
-        max_age_s=config.max_age_s,
-        resync_after=config.resync_after,
-        rearm_samples=config.rearm_samples,
-        consistency_scale=config.consistency_scale,
-        torque_rise_s=config.torque_rise_s,
-        acceleration_cutoff_hz=config.acceleration_cutoff_hz,
-        torque_limit_scale=config.torque_limit_scale,
-        range_margin=config.range_margin,
-        out_of_range=config.out_of_range,
-    )
 
 
 class Predictor(Node):
@@ -235,6 +218,11 @@ class Predictor(Node):
             + '; '
             + (self.core.inputs.describe() if self.core.inputs else 'inputs not recorded')
         )
+        self._warn_about_setup()
+
+    def _warn_about_setup(self) -> None:
+        """Say once, at start, what in the artifact's setup will cost accuracy."""
+        config = self.config
         fallback = self.core.fallback
         if (
             self.core.out_of_range_action == 'fallback'

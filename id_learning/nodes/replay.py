@@ -179,7 +179,7 @@ def _reference_bytes(
             raise ConfigError(
                 f'reference_smoothing_hz {config.reference_smoothing_hz:g} Hz must be below the '
                 f'Nyquist frequency {0.5 / robot.ipo_period_s:g} Hz of the IPO period '
-                f'{robot.ipo_period_s:g} s (0: the robot config\'s input_smoothing_hz)'
+                f"{robot.ipo_period_s:g} s (0: the robot config's input_smoothing_hz)"
             )
         elif config.reference_smoothing_hz > 0:
             inputs = InputDefinition.controller(np.full(len(names), config.reference_smoothing_hz))
@@ -197,7 +197,7 @@ def _reference_bytes(
                 tuple(names), reference.stamps_ns, reference.a, limits=limits, where=where
             )
             # Recorded positions and velocities must describe one motion (the predictor's gate).
-            KinematicConsistency(tuple(names), limits, robot.ipo_period_s).check(
+            KinematicConsistency.for_robot(robot, tuple(names)).check(
                 stamps, q, v, where=where, starts=_gaps(stamps, robot.ipo_period_s)
             )
         except DatasetError as err:

@@ -230,7 +230,9 @@ class FeedForwardPredictor:
         from id_learning.models.artifact import METADATA_FILE, artifact_inputs, artifact_target
         from id_learning.models.registry import load_model
 
-        config = config or GuardConfig(period_s=robot.ipo_period_s)
+        config = config or GuardConfig(
+            period_s=robot.ipo_period_s, consistency_scale=robot.consistency_scale
+        )
         model = load_model(Path(folder), robot)
         metadata = json.loads((Path(folder) / METADATA_FILE).read_text(encoding='utf-8'))
         predictor = cls(

@@ -19,6 +19,7 @@ import numpy as np
 
 from id_learning.config_io import (
     check_keys,
+    finite_number,
     float_vector,
     load_yaml_mapping,
     range_problem,
@@ -110,6 +111,9 @@ class RobotConfig:
             well above the motion's band and the label cut-offs, so the inputs keep the motion
             as it happened (accelerations are differentiated from the smoothed velocity).
         payload_frame: URDF frame at which a payload is attached.
+        consistency_scale: a multiple of the kinematic consistency gate's tolerances
+            (``dataset.consistency``) for this robot's signals: 1 as derived from the limits
+            and the IPO period; more for a robot whose recorded velocities lag or are filtered.
         topics: topic names of the bag contract.
         source: the YAML file this was read from, if any.
     """
@@ -126,6 +130,7 @@ class RobotConfig:
     locked_joints: dict[str, float] = field(default_factory=dict)
     topics: TopicConfig = field(default_factory=TopicConfig)
     source: Path | None = None
+    consistency_scale: float = 1.0
 
     @property
     def n_joints(self) -> int:
@@ -191,6 +196,7 @@ _TOP_KEYS = (
     'input_smoothing_hz',
     'payload_frame',
     'topics',
+    'consistency_scale',
 )
 _LIMIT_KEYS = ('position_lower', 'position_upper', 'velocity', 'acceleration', 'torque')
 
@@ -270,6 +276,9 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         payload_frame=str(data['payload_frame']),
         locked_joints={key: float(value) for key, value in locked.items()},
         topics=topics,
+        consistency_scale=finite_number(
+            data.get('consistency_scale', 1.0), f'{where}: consistency_scale', low=1e-3, high=1e3
+        ),
     )
 
 

@@ -99,3 +99,13 @@ def test_the_stream_gate_agrees_with_the_batch_gate_sample_by_sample(mabi, jump_
         online.append(stream.check(int(stamps[k]), q[k], v[k], a_k) is not None)
         stream.push(int(stamps[k]), q[k], v[k], a_k)
     np.testing.assert_array_equal(np.array(online), batch)
+
+
+def test_a_robot_config_widens_the_gate_for_its_signals(mabi):
+    from dataclasses import replace
+
+    stamps, q, v, _ = sine(60, 0.5, 2.0)
+    scaled = 3.0 * v  # a velocity signal three times its positions' (another gear ratio)
+    assert KinematicConsistency.for_robot(mabi).first_failure(stamps, q, scaled) is not None
+    wide = replace(mabi, consistency_scale=2.5)
+    assert KinematicConsistency.for_robot(wide).first_failure(stamps, q, scaled) is None
