@@ -125,12 +125,18 @@ LOG_ROWS = 100
 
 
 def log_values() -> dict[str, np.ndarray]:
-    """Time [ms], positions [deg], velocities [deg/s] and currents [A] of a seeded log."""
+    """Time [ms], positions [deg], velocities [deg/s] and currents [A] of a seeded log.
+
+    One motion: 40 deg swings (inside every joint's limits) at random phases, the velocities
+    their derivative.
+    """
     rng = np.random.default_rng(17)
+    omega = 2.0 * np.pi * 0.25  # rad/s: at most 63 deg/s
+    phase = omega * 0.008 * np.arange(LOG_ROWS)[:, None] + rng.uniform(0.0, 2 * np.pi, 6)
     return {
         't_ms': 5000.0 + 8.0 * np.arange(LOG_ROWS),
-        'q_deg': rng.uniform(-45.0, 45.0, (LOG_ROWS, 6)),  # inside every joint's limits
-        'v_deg_s': rng.uniform(-30.0, 30.0, (LOG_ROWS, 6)),
+        'q_deg': 40.0 * np.sin(phase),
+        'v_deg_s': 40.0 * omega * np.cos(phase),
         'i_a': rng.uniform(-5.0, 5.0, (LOG_ROWS, 6)),
     }
 

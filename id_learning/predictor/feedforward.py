@@ -19,12 +19,10 @@ Guards, in the order they run (the first that fails decides):
    not stale.
 
 A refused sample (1-3) leaves the history untouched. A gap of more than ``stale_after_cycles``
-periods between accepted samples, in stamps or in receive time, marks a stale episode. A gap in
-the stamps (a hole in the trajectory) also resets the history: the acceleration estimate starts
-again and the LSTM window is refilled with the first new sample, as the offline ``predict`` pads
-a run. Samples that arrive late but with contiguous stamps keep the history. After any bad
-sample, a valid stream is served again within ``resync_after + rearm_samples + 1`` samples plus
-the consistency window (``dataset.consistency.WINDOW_S``) when the bad sample lies inside it.
+periods between accepted samples, in stamps or in receive time, marks a stale episode; a gap in
+the stamps (a hole) also resets the history (acceleration estimate, LSTM window refilled with the
+first new sample, as the offline ``predict`` pads a run). After any bad sample a valid stream is
+served again from its ``recovery_samples``-th sample at the latest.
 
 Inference (``inference``): 'numpy' (default) evaluates the model's float64 numpy path
 (``sample_predictor``, or the LSTM's ``sequence_predictor``), built once from the fitted weights;
@@ -35,7 +33,6 @@ one sample. 'torch' calls the model's own ``predict`` (``predict_window`` for th
 from __future__ import annotations
 
 import json
-import logging
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -77,7 +74,6 @@ __all__ = [
     'StepResult',
 ]
 
-_LOG = logging.getLogger(__name__)
 
 INFERENCE_BACKENDS = ('numpy', 'torch')
 InferenceBackend = Literal['numpy', 'torch']
@@ -370,6 +366,10 @@ class FeedForwardPredictor:
         if isinstance(checked[0], Reject):
             return self._reject(sample, checked[0], str(checked[1]))
         q, v, given_a = checked
+        config = self.config
+        counters.skipped_cycles += self._clock.skipped(
+            sample.stamp_ns, config.stale_after_ns, config.period_s
+        )
         now_ns = receive_ns if clock_ns is None else clock_ns
         clock = self._clock
         refused = clock.judge(sample.stamp_ns, now_ns)
@@ -428,9 +428,6 @@ class FeedForwardPredictor:
         resumed = self._is_stale or stamp_gap or receive_gap
         if stamp_gap:
             self.reset()
-        elif last_stamp is not None:
-            step = (stamp_ns - last_stamp) * 1e-9 / self.config.period_s
-            counters.skipped_cycles += max(round(step) - 1, 0)
         self._is_stale = False
         self._clock.accept(stamp_ns, now_ns)
         self._last_receive_ns = receive_ns

@@ -7,10 +7,12 @@ transport delay plus the difference of the clocks. The time base keeps its small
     offset_k = min(receive_k - stamp_k, offset_(k-1) + DRIFT * (stamp_k - stamp_(k-1))),
 
 so a sample's lateness ``receive - stamp - offset`` is how much longer than the quickest delivery
-it took, whatever the clocks' difference (no shared time base needed); ``DRIFT`` lets the offset
-follow a sender's clock running up to 1 % slow. With ``max_age_s`` > 0, a sample later than
-``max_age_s`` is too old and one whose stamp leaps more than ``max_age_s`` ahead of the time base
-is a future stamp; any sample not after the last accepted is out of order. A time base that no
+it took, whatever the clocks' difference (no shared time base needed). ``DRIFT`` lets the offset
+grow by up to the stamps' own advance: a sender whose stamps run at half this clock's rate or
+faster (a replay at ``rate`` 0.5) is followed, while a delivery that stalls by more than
+``max_age_s`` beyond that is caught. With ``max_age_s`` > 0, such a sample is too old and one whose
+stamp leaps more than ``max_age_s`` ahead of the time base is a future stamp (a slower sender
+needs ``max_age_s`` 0); any sample not after the last accepted is out of order. A time base that no
 longer holds (the sender's clock stepped, a replay restarted) never locks the stream out: after
 ``resync_after`` such rejections in a row the next sample starts a new time base.
 """
@@ -22,7 +24,7 @@ from id_learning.predictor.outcome import Reject
 __all__ = ['DRIFT', 'StampClock']
 
 #: How fast the offset may grow between a sender's clock and ours (share of the stamps' advance).
-DRIFT = 0.01
+DRIFT = 1.0
 
 
 class StampClock:
@@ -41,6 +43,22 @@ class StampClock:
         self.last_stamp_ns: int | None = None
         #: Rejections for time since the last accepted sample.
         self.rejections = 0
+        #: The newest stamp seen, refused or not [ns].
+        self.newest_ns: int | None = None
+
+    def skipped(self, stamp_ns: int, stale_after_ns: int, period_s: float) -> int:
+        """IPO cycles skipped since the newest stamp seen (refused samples are seen).
+
+        Counted within the stale threshold only: what a queue overwrote or the sender never
+        sent; a longer gap is a hole, counted as a stale episode.
+        """
+        newest = self.newest_ns
+        if newest is not None and stamp_ns <= newest:
+            return 0
+        self.newest_ns = stamp_ns
+        if newest is None or stamp_ns - newest > stale_after_ns:
+            return 0
+        return max(round((stamp_ns - newest) * 1e-9 / period_s) - 1, 0)
 
     def judge(self, stamp_ns: int, now_ns: int) -> tuple[Reject, str] | None:
         """Why this sample's stamp is refused, or None (nothing changes here)."""
@@ -82,4 +100,5 @@ class StampClock:
         """Start a new time base at this sample."""
         self.offset_ns = None
         self.last_stamp_ns = None
+        self.newest_ns = stamp_ns
         self.accept(stamp_ns, now_ns)

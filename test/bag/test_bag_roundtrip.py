@@ -17,7 +17,7 @@ def test_recording_round_trips_bit_exact_through_a_bag(tmp_path, mabi):
     noisy = Recording(
         base.joints,
         base.stamps_ns,
-        base.position + rng.standard_normal(base.position.shape) * 1e-3,
+        base.position + rng.standard_normal(base.position.shape) * 1e-5,  # an encoder's noise
         base.velocity,
         base.current,
         joint_torque=rng.standard_normal(base.position.shape) * 100,

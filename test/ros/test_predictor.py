@@ -295,7 +295,7 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
     assert [c for c in commands if any(c)] == [list(m.effort) for m in published]
     assert predictor.stop() == 0
     log = predictor.log()
-    assert 'rejected (non_finite)' in log
+    assert 'no model torque (non_finite)' in log
     # Stale: at most one warning per episode (the slow repeat is a minute away; an episode the
     # next sample ends before the watchdog runs is counted, not logged), resumed silently.
     episodes = int(re.search(r'(\d+) stale episodes', log).group(1))
