@@ -16,6 +16,7 @@ This module imports rclpy only inside the functions that talk to a node.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from collections.abc import Mapping
 from dataclasses import field
 from pathlib import Path
@@ -119,7 +120,7 @@ def check_schema(config: object) -> None:
             if problem:
                 raise ConfigError(f'{item.name}: {problem}, got {value!r}')
         if item.metadata.get('topic'):
-            for name in value if isinstance(value, tuple) else (value,) if value else ():
+            for name in value if isinstance(value, tuple | list) else (value,) if value else ():
                 problem = topic_name_problem(name)
                 if problem:
                     raise ConfigError(f'{item.name}: {name!r} is no ROS topic name: {problem}')
@@ -183,6 +184,7 @@ def load_node_config(path: Path | str, node: str, cls: type[_T]) -> _T:
 def declare_parameters(node: Node, cls: type) -> None:
     """Declare every field of a node config as a parameter with its description and default."""
     from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
     types = _field_types(cls)
     ros_types = {
@@ -204,9 +206,57 @@ def declare_parameters(node: Node, cls: type) -> None:
             dynamic_typing=kind is float,
         )
         descriptor.additional_constraints = constraints(item)
-        node.declare_parameter(
-            item.name, list(default) if isinstance(default, tuple) else default, descriptor
-        )
+        try:
+            node.declare_parameter(
+                item.name, list(default) if isinstance(default, tuple) else default, descriptor
+            )
+        except (InvalidParameterTypeException, InvalidParameterValueException) as err:
+            given = getattr(node, '_parameter_overrides', {}).get(item.name)
+            value = given.value if given is not None else '?'
+            raise ConfigError(
+                f'node {node.get_name()}: {item.name}: {value!r} is no {kind_name(kind)} '
+                f'({item.metadata["description"]})'
+            ) from err
+    refuse_unknown(node, cls)
+
+
+def kind_name(kind: object) -> str:
+    """How a parameter's type reads in a message."""
+    names = {bool: 'boolean', int: 'integer', float: 'number', str: 'string'}
+    return names.get(kind, 'list of strings')  # type: ignore[call-overload]
+
+
+#: Parameters every rclpy node takes besides its own.
+_ROS_PARAMETERS = ('use_sim_time', 'start_type_description_service')
+
+
+def refuse_unknown(node: Node, cls: type) -> None:
+    """Refuse a parameter given to the node that it does not have, naming the closest one.
+
+    rclpy keeps an undeclared override without a word: a misspelt name would be ignored.
+
+    Raises:
+        ConfigError: names every unknown parameter.
+    """
+    known = {item.name for item in dataclasses.fields(cls)}
+    given = getattr(node, '_parameter_overrides', {})
+    unknown = sorted(
+        name
+        for name in given
+        if name not in known
+        and name not in _ROS_PARAMETERS
+        and not name.startswith('qos_overrides.')
+    )
+    if not unknown:
+        return
+    hints = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, sorted(known), n=1)
+        hints.append(f'{name} (did you mean {close[0]}?)' if close else name)
+    raise ConfigError(
+        f'node {node.get_name()}: unknown parameter(s) {", ".join(hints)}; its parameters: '
+        f'{", ".join(sorted(known))}'
+    )
 
 
 def read_snapshot(node: Node, cls: type[_T]) -> _T:

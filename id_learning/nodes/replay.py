@@ -128,8 +128,16 @@ def _gaps(stamps_ns: np.ndarray, period_s: float) -> tuple[int, ...]:
     return (0, *(int(k) for k in after))
 
 
-def _stamp_ns(data: bytes, msgtype: str) -> int | None:
-    msg = typestore().deserialize_cdr(data, msgtype)
+def _stamp_ns(data: bytes, msgtype: str, where: str) -> int | None:
+    """The header stamp of one message [ns], None when its type has no header.
+
+    Raises:
+        BagError: the bytes are no message of the topic's type (names ``where``).
+    """
+    try:
+        msg = typestore().deserialize_cdr(data, msgtype)
+    except Exception as err:  # rosbags raises SerdeError and others on foreign bytes
+        raise BagError(f'{where}: not a valid {msgtype} ({type(err).__name__}: {err})') from err
     header = getattr(msg, 'header', None)
     if header is None:
         return None
@@ -144,7 +152,15 @@ def _reference_bytes(
     The reference is computed over all ``states`` (the span plus padding, so that the zero-phase
     filter's edge transients fall outside the span) and serialized where ``keep`` is set.
     """
-    decoded = [decode_joint_state(data) for data in states]
+    decoded = []
+    for k, data in enumerate(states):
+        try:
+            decoded.append(decode_joint_state(data))
+        except Exception as err:  # foreign bytes: SerdeError and others
+            raise BagError(
+                f'{config.bag}: {config.reference_source} message {k} of the replayed span is '
+                f'not a valid JointState ({type(err).__name__}: {err})'
+            ) from err
     if len(decoded) < 3:
         raise BagError(
             f'{config.bag}: {config.reference_source} has {len(decoded)} messages in the '
@@ -248,14 +264,16 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     states: list[tuple[int, bytes]] = []  # (key, bytes) of the source, span plus padding
     start = stop = None
     log_to_key = 0
+    counts: dict[str, int] = {}  # messages of each topic read so far (for messages)
     for topic, log_ns, data in iter_raw(path, needed):
+        counts[topic] = counts.get(topic, -1) + 1
         # Stamps and log (receive) times of a recording differ by milliseconds: skip what lies
         # more than a second before the span without decoding it.
         if start is not None and log_ns + log_to_key < start - pad - NS_PER_S:
             continue
         key = log_ns
         if config.timing == 'stamp':
-            stamp = _stamp_ns(data, types[topic])
+            stamp = _stamp_ns(data, types[topic], f'{path}: {topic} message {counts[topic]}')
             if stamp is None:
                 raise BagError(
                     f'{path}: {topic} ({types[topic]}) has no header stamp; use timing:=log_time'

@@ -142,10 +142,14 @@ def run_node(
     if config_class is not None and wants_help(args):
         print_usage(name, config_class)
         return 0
-    rclpy.init(
-        args=None if args is None else list(args),
-        signal_handler_options=SignalHandlerOptions.NO,
-    )
+    try:
+        rclpy.init(
+            args=None if args is None else list(args),
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+    except RuntimeError as err:  # rclpy's RCLError: an unreadable --params-file, bad --ros-args
+        print(f'error: {name or "node"}: ROS 2 could not start it: {err}', file=sys.stderr)
+        return 2
     stop = _StopOnSignal()
     node: ClosableNode | None = None
     status = 0

@@ -60,7 +60,15 @@ class SampleCheck:
         arrays = [sample.q, sample.v] + ([] if sample.a is None else [sample.a])
         for label, values in zip(('q', 'v', 'a'), arrays, strict=False):
             if np.shape(values) != (self._n,):
-                return Reject.SHAPE, f'{label} has {np.size(values)} values for {self._n} joints'
+                return Reject.SHAPE, (
+                    f'{label} has shape {np.shape(values)}, expected ({self._n},): one value per '
+                    'joint'
+                )
+            kind = np.asarray(values).dtype.kind
+            if kind not in 'iuf':  # complex, bool, text or objects: no joint value
+                return Reject.SHAPE, (
+                    f'{label} holds {np.asarray(values).dtype} values, expected real numbers'
+                )
         if order is _IDENTITY:  # the sender's order is the model's: no copy needed
             q, v = np.asarray(sample.q, float), np.asarray(sample.v, float)
             a = None if sample.a is None else np.asarray(sample.a, float)

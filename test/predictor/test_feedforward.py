@@ -490,3 +490,18 @@ def test_update_config_applies_new_limits_to_the_running_stream(linear, mabi):
 def test_guard_config_rejects_bad_values_naming_the_key(overrides, key):
     with pytest.raises(ConfigError, match=key):
         GuardConfig(**overrides)
+
+
+@pytest.mark.parametrize(
+    ('change', 'said'),
+    [
+        ({'q': np.zeros((6, 1))}, 'q has shape (6, 1), expected (6,)'),
+        ({'v': np.zeros(6, dtype=complex)}, 'v holds complex128 values, expected real numbers'),
+        ({'a': np.array(['0'] * 6)}, 'a holds <U1 values'),
+    ],
+)
+def test_a_sample_of_the_wrong_shape_or_type_is_refused_saying_which(linear, change, said):
+    fields = {'q': np.zeros(6), 'v': np.zeros(6), 'a': np.zeros(6), **change}
+    result = linear.step(ReferenceSample(PERIOD_NS, JOINTS, **fields), receive(0))
+    assert result.reject is Reject.SHAPE
+    assert said in result.detail

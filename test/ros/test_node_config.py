@@ -143,6 +143,9 @@ def test_runtime_changes_are_validated_with_a_reason():
         ('replay', [], 'bag is required'),
         ('predictor', ['-p', 'artifact:=/nonexistent/model'], 'not a model artifact'),
         ('recorder', ['-p', 'flush_period_s:=2.0'], 'flush_period_s'),
+        ('predictor', ['-p', 'input_depth:=ten'], "input_depth: 'ten' is no integer"),
+        ('replay', ['-p', 'rat:=2.0'], 'unknown parameter(s) rat (did you mean rate?)'),
+        ('recorder', ['--params-file', 'absent.yaml'], "Couldn't parse params file"),
     ],
 )
 def test_a_node_with_bad_parameters_exits_with_status_2_and_says_why(

@@ -159,3 +159,24 @@ def test_a_recording_whose_positions_jump_is_not_played(tmp_path, mabi):
     broken = write_recording(replace(recording, position=position), tmp_path / 'jump')
     with pytest.raises(BagError, match=r'sample 120 .* joint_3 .* nothing is played'):
         build_plan(ReplayConfig(bag=str(broken)), mabi)
+
+
+@pytest.mark.parametrize('where', ['reference', 'stamp'])
+def test_bytes_that_are_no_message_of_their_type_are_named_not_a_traceback(tmp_path, mabi, where):
+    from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state
+
+    recording = sine_recording(60)
+    with BagWriter(tmp_path / 'bag') as writer:
+        writer.add_topic('/joint_states', JOINT_STATE)
+        writer.add_topic('/note', 'std_msgs/msg/String')
+        for k, stamp in enumerate(recording.stamps_ns.tolist()):
+            data = encode_joint_state(
+                stamp, recording.joints, recording.position[k], recording.velocity[k], []
+            )
+            writer.write('/joint_states', stamp, b'\x00\x01\xff\xff\xff\xff' if k == 30 else data)
+            writer.write('/note', stamp, data)  # JointState bytes under a String type
+    topics = ['/joint_states'] if where == 'reference' else ['/joint_states', '/note']
+    config = ReplayConfig(bag=str(tmp_path / 'bag'), topics=topics)
+    message = 'not a valid' if where == 'reference' else r'/note message 0: not a valid'
+    with pytest.raises(BagError, match=message):
+        build_plan(config, mabi)
