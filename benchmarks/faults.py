@@ -16,7 +16,8 @@ core. Each case is classified:
 - ``traceback``: an exception the door did not turn into a message;
 - ``data_lost``: a recovery that kept less than it should (less than 40 % of a bag cut at half).
 
-Prints a table, then one JSON line with ``cases``, ``clear_error``, ``handled``,
+Writes docs/results/faults.json and .md (per door and in all; not with --only). Prints one
+JSON line with ``cases``, ``clear_error``, ``handled``,
 ``silently_accepted``, ``traceback``, ``data_lost`` and the cases that are not clear errors or
 handled. Doors: train, evaluate, diagnose, sweep, import, inspect, simulate, bag recover, the
 robot and twin configs and the URDF, the replay's plan, the predictor's core, and the nodes as
@@ -35,6 +36,7 @@ import tempfile
 from collections import Counter
 from pathlib import Path
 
+from common import write_results
 from fault_cases_inputs import input_cases
 from fault_cases_nodes import node_cases
 from fault_cases_outputs import output_cases
@@ -102,7 +104,29 @@ def main() -> int:
         results = run_cases(cases)
     document = summary(results)
     print(json.dumps(document))
+    if not args.only:  # the whole suite: its figures go to docs/results/faults.*
+        write_results('faults', {**document, 'per_door': per_door(results)}, _table(results))
     return 0
+
+
+def per_door(results: list[tuple[Case, Outcome]]) -> dict[str, dict[str, int]]:
+    """Outcome counts per door."""
+    counts: dict[str, Counter[str]] = {}
+    for case, outcome in results:
+        counts.setdefault(case.door, Counter())[outcome.kind] += 1
+    return {door: {kind: c.get(kind, 0) for kind in KINDS} for door, c in sorted(counts.items())}
+
+
+def _table(results: list[tuple[Case, Outcome]]) -> list[str]:
+    lines = ['| door | cases | ' + ' | '.join(KINDS) + ' |', '|---|' + '---:|' * (len(KINDS) + 1)]
+    doors = per_door(results)
+    for door, counts in doors.items():
+        lines.append(f'| {door} | {sum(counts.values())} | '
+                     + ' | '.join(str(counts[k]) for k in KINDS) + ' |')  # fmt: skip
+    total = Counter(outcome.kind for _, outcome in results)
+    lines.append(f'| **all** | **{len(results)}** | '
+                 + ' | '.join(f'**{total.get(k, 0)}**' for k in KINDS) + ' |')  # fmt: skip
+    return lines
 
 
 if __name__ == '__main__':
