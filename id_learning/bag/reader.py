@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import logging
 import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -15,7 +17,7 @@ from rosbags.rosbag2.errors import ReaderError
 from tqdm import tqdm
 
 from id_learning.bag.messages import JOINT_STATE, decode_joint_state, typestore
-from id_learning.errors import BagError, DatasetError
+from id_learning.errors import BagError, ConfigError, DatasetError
 
 __all__ = [
     'BagInfo',
@@ -23,10 +25,15 @@ __all__ = [
     'TopicInfo',
     'bag_custom_data',
     'bag_info',
+    'check_distinct',
     'iter_messages',
     'iter_raw',
     'read_joint_states',
 ]
+
+_LOG = logging.getLogger(__name__)
+#: Bags whose unlisted storage files were already warned about (one warning per bag).
+_WARNED_UNLISTED: set[tuple[Path, tuple[str, ...]]] = set()
 
 RECOVER_HINT = 'if the recording was interrupted, `id-learning bag recover PATH` rebuilds it'
 
@@ -78,7 +85,109 @@ def _open(path: Path) -> Reader:
         reader.open()
     except (ReaderError, struct.error, EOFError, ValueError, OSError) as err:
         raise BagError(f'{path}: cannot open bag: {err}; {RECOVER_HINT}') from err
+    _warn_unlisted(path, reader)
     return reader
+
+
+def _warn_unlisted(path: Path, reader: Reader) -> None:
+    """Warn once per bag about storage files in its folder that metadata.yaml does not list.
+
+    rosbags reads only the listed files: an extra ``bag_1.mcap`` (a second recording copied in,
+    a split the metadata lost) is silently left out of the data, which the user should know.
+    """
+    listed = {Path(name).name for name in getattr(reader, 'paths', ())} or {
+        Path(str(item)).name for item in _listed_files(path)
+    }
+    extra = tuple(
+        sorted(
+            p.name
+            for p in path.iterdir()
+            if p.suffix in {'.mcap', '.db3'} and p.name not in listed
+        )
+    )
+    key = (path.resolve(), extra)
+    if extra and key not in _WARNED_UNLISTED:
+        _WARNED_UNLISTED.add(key)
+        _LOG.warning(
+            '%s: %s not listed in metadata.yaml and not read (listed: %s); move it out or '
+            'record it as a bag of its own',
+            path,
+            ', '.join(extra),
+            ', '.join(sorted(listed)) or 'none',
+        )
+
+
+def _listed_files(path: Path) -> list[str]:
+    """The storage files metadata.yaml lists (``relative_file_paths``)."""
+    try:
+        meta = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
+        return [str(p) for p in meta['rosbag2_bagfile_information']['relative_file_paths']]
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        return []
+
+
+def _data_files(path: Path) -> list[Path]:
+    """A log file itself, or a bag folder's data: metadata.yaml and its storage files.
+
+    Files the twin writes beside a bag (ground truth, its config copy) are no part of the data.
+    """
+    if path.is_file():
+        return [path]
+    return sorted(
+        p
+        for p in path.iterdir()
+        if p.is_file() and (p.name == 'metadata.yaml' or p.suffix in {'.mcap', '.db3'})
+    )
+
+
+def _content_key(path: Path) -> tuple[int, str]:
+    """Size and SHA-256 of a file, or of a bag folder's data (names and bytes, in name order)."""
+    files = _data_files(path)
+    digest = hashlib.sha256()
+    size = 0
+    for file in files:
+        digest.update(file.relative_to(path).as_posix().encode() if file != path else b'')
+        with file.open('rb') as stream:
+            for block in iter(lambda: stream.read(1 << 20), b''):
+                digest.update(block)
+                size += len(block)
+    return size, digest.hexdigest()
+
+
+def check_distinct(paths: Sequence[Path | str], what: str) -> list[Path]:
+    """``paths`` as Paths, refused when one file or bag is given twice.
+
+    Twice means the same resolved path, or the same bytes under another name (a copy): either
+    would weigh one recording double in training, evaluation or an import. Contents are hashed
+    only for inputs of equal total size, so distinct inputs cost a ``stat`` each.
+
+    Raises:
+        ConfigError: names both spellings of the input given twice and ``what`` (e.g. --bag).
+    """
+    out = [Path(p) for p in paths]
+    seen: dict[Path, Path] = {}
+    for path in out:
+        key = path.resolve()
+        if key in seen:
+            raise ConfigError(
+                f'{what}: {path} is given twice ({seen[key]} and {path}); give it once'
+            )
+        seen[key] = path
+    by_size: dict[int, list[Path]] = {}
+    for path in out:
+        if path.exists():
+            by_size.setdefault(sum(f.stat().st_size for f in _data_files(path)), []).append(path)
+    for group in (g for g in by_size.values() if len(g) > 1):
+        hashes: dict[tuple[int, str], Path] = {}
+        for path in group:
+            key2 = _content_key(path)
+            if key2 in hashes:
+                raise ConfigError(
+                    f'{what}: {path} holds the same data as {hashes[key2]} (identical content); '
+                    'give each recording once'
+                )
+            hashes[key2] = path
+    return out
 
 
 def bag_info(path: Path | str) -> BagInfo:

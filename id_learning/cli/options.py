@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from id_learning.cli.paths import default_robot_config
@@ -22,7 +23,9 @@ if TYPE_CHECKING:
 __all__ = [
     'PREPROCESSING_CHOICES',
     'SEED_MAX',
+    'bag_paths',
     'comma_names',
+    'effect_names',
     'finite',
     'hyper_parameters',
     'integer',
@@ -233,8 +236,9 @@ def hyper_parameters(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
     """Per-kind hyper-parameters from KIND.KEY=VALUE items (VALUE read as YAML: 3, 1e-3, tanh).
 
     Raises:
-        ConfigError: an item is not of that form, or its value is no finite number where it is
-            a number.
+        ConfigError: an item is not of that form, repeats a KIND.KEY (naming both values), or its
+            value is no finite number where it is a number. Types and ranges are checked where
+            the config is made (``models.hyper_schema``).
     """
     from id_learning.config_io import parse_yaml
 
@@ -245,7 +249,13 @@ def hyper_parameters(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
         if not (sep and dot and kind and key):
             raise ConfigError(f'--hyper {item!r}: expected KIND.KEY=VALUE, e.g. mlp.max_epochs=50')
         where = f'--hyper {name}'
-        hyper.setdefault(kind, {})[key] = _finite_values(parse_yaml(value, where), where)
+        parsed = _finite_values(parse_yaml(value, where), where)
+        given = hyper.setdefault(kind, {})
+        if key in given:
+            raise ConfigError(
+                f'--hyper {name} given twice ({given[key]!r} and {parsed!r}); give it once'
+            )
+        given[key] = parsed
     return hyper
 
 
@@ -267,6 +277,34 @@ def hyper_file(path: str | None) -> dict[str, dict[str, Any]]:
         raise ConfigError(f'--hyper-file {path}: expected a mapping kind -> {{key: value}}')
     _finite_values(data, f'--hyper-file {path}')
     return {str(kind): dict(values) for kind, values in data.items()}
+
+
+def effect_names(text: str | None, option: str = '--effects') -> list[str] | None:
+    """The effects of a comma list; None when the option is absent (the whole library).
+
+    Raises:
+        ConfigError: the option is given but names nothing ('' or ','): an empty selection is
+            refused rather than read as the default set.
+    """
+    if text is None:
+        return None
+    names = comma_names(text)
+    if not names:
+        raise ConfigError(
+            f'{option} {text!r}: names no effect; name some, or leave it out for all'
+        )
+    return names
+
+
+def bag_paths(items: Sequence[str] | None, option: str = '--bag') -> list[Path]:
+    """The bags of a repeatable option as Paths, each given once (``bag.reader.check_distinct``).
+
+    Raises:
+        ConfigError: one bag given twice (same folder, or a copy with identical bytes).
+    """
+    from id_learning.bag.reader import check_distinct
+
+    return check_distinct(list(items or ()), option)
 
 
 def comma_names(text: str) -> list[str]:

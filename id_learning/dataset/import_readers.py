@@ -107,13 +107,14 @@ def _read_csv(source: Path, mapping: ImportMapping) -> LogTable:
         raise DatasetError(f'{source}: no data rows')
     header = names[0] if names else []
     _check_unique_names(header, source)
+    line_numbers = np.array([number for number, _ in numbered[first_data:]])
+    _check_no_extra_cells(header or data_rows[0], data_rows, line_numbers, source)
     width = max(len(header), *(len(row) for row in data_rows))
     cells = np.array([row + [''] * (width - len(row)) for row in data_rows], dtype=object)
     keys: Sequence[str | int] = header or range(width)
     columns: dict[str | int, np.ndarray] = {
         key: cells[:, j] for j, key in enumerate(keys) if key != ''
     }
-    line_numbers = np.array([number for number, _ in numbered[first_data:]])
     return LogTable(source, columns, line_numbers)
 
 
@@ -148,6 +149,30 @@ def is_float(text: str) -> bool:
 
 def _looks_like_header(row: Sequence[str]) -> bool:
     return any(cell and not is_float(cell) for cell in row)
+
+
+def _check_no_extra_cells(
+    reference: Sequence[str], rows: Sequence[Sequence[str]], lines: np.ndarray, source: Path
+) -> None:
+    """Refuse rows with more non-empty cells than the header (or the first data row) has.
+
+    A short row is named through its empty cells; a long one would otherwise pass unseen, yet an
+    extra cell means a merged or shifted row whose values may sit under the wrong columns.
+    Trailing empty cells (a delimiter at the end of each line) are no data and pass.
+
+    Raises:
+        DatasetError: names the file, the first such line, its cell count and how many rows.
+    """
+    width = len(reference)
+    long = [k for k, row in enumerate(rows) if len(row) > width and any(row[width:])]
+    if long:
+        first = rows[long[0]]
+        raise DatasetError(
+            f'{source}: line {int(lines[long[0]])} has {len(first)} cells, '
+            f'{len(first) - width} more than the {width} of the '
+            f'{"header" if reference is not rows[0] else "first data row"}; {len(long)} row(s) '
+            'are affected. Fix the log (a merged or shifted row?)'
+        )
 
 
 def _check_unique_names(names: list[str], source: Path) -> None:

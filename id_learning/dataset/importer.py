@@ -29,6 +29,7 @@ from typing import Literal
 
 import numpy as np
 
+from id_learning.bag.reader import check_distinct
 from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.import_mapping import (
     QUANTITIES,
@@ -319,6 +320,7 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
 
     Raises:
         DatasetError: a source does not exist, or a folder holds no log file.
+        ConfigError: one log given twice (same file, or identical bytes), naming it.
     """
     files: list[Path] = []
     for source in map(Path, sources):
@@ -337,7 +339,7 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
             raise DatasetError(f'{source}: no such log file or folder')
     if not files:
         raise DatasetError('no log file given')
-    return files
+    return check_distinct(files, 'import')  # one log twice would be two segments of one motion
 
 
 def _grid(

@@ -363,6 +363,7 @@ def inspect_bag(
         topics=tuple(reports),
         contract=_contract(robot.topics if robot else TopicConfig(), msgtypes, decoded),
         series=series,
+        robot_joints=robot.joints if robot else (),
     )
     _LOG.debug('%s: %d messages on %d topics inspected', path, report.message_count, len(names))
     return report

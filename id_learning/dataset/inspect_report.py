@@ -200,6 +200,8 @@ class BagReport:
         contract: the contract topics check.
         series: the stacked samples of each JointState topic (consistent messages only), kept
             for ``plot_report``.
+        robot_joints: the joints of the robot checked against (empty without one): the
+            contract topics must name exactly these, or limits cannot be checked.
     """
 
     path: Path
@@ -213,6 +215,7 @@ class BagReport:
     topics: tuple[TopicReport, ...]
     contract: ContractReport
     series: Mapping[str, JointStateSeries] = field(default_factory=dict, repr=False)
+    robot_joints: tuple[str, ...] = ()
 
     def topic(self, name: str) -> TopicReport:
         """Return the report of one topic.
@@ -243,12 +246,33 @@ class BagReport:
                 f'contract: {contract.motor_currents} stamps differ from {contract.joint_states} '
                 f'from sample {contract.first_mismatch} on'
             )
+        lines += self._joint_mismatches()
         if contract.names_match is False:
             lines.append(
                 f'contract: {contract.motor_currents} and {contract.joint_states} name '
                 'different joints'
             )
         return tuple(lines)
+
+    def _joint_mismatches(self) -> list[str]:
+        """A contract topic whose joints are not the robot's: training would refuse the bag."""
+        if not self.robot_joints:
+            return []
+        lines = []
+        wanted = set(self.robot_joints)
+        contract_topics = (self.contract.joint_states, self.contract.motor_currents)
+        for topic in self.topics:
+            names = [joint.name for joint in topic.joints]
+            if topic.name not in contract_topics or not names or set(names) == wanted:
+                continue
+            unknown = [name for name in names if name not in wanted]
+            missing = [name for name in self.robot_joints if name not in names]
+            lines.append(
+                f'{topic.name}: joints do not match {self.robot_name} '
+                f"(not the robot's: {unknown}; missing: {missing}); limits were not checked "
+                f'for {unknown or "the missing joints"}'
+            )
+        return lines
 
 
 def _topic_problems(topic: TopicReport) -> list[str]:

@@ -89,6 +89,11 @@ class DiagnosisConfig:
 
     def __post_init__(self) -> None:
         """Check names and ranges, naming the key."""
+        if not self.effects:  # an empty selection is no request for the default set
+            raise ConfigError(
+                f'diagnosis.effects: empty; name at least one of {list(EFFECT_NAMES)}, or leave '
+                'it out for all'
+            )
         unknown = sorted(set(self.effects) - set(EFFECT_NAMES))
         if unknown:
             raise ConfigError(

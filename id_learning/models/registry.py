@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +15,7 @@ from id_learning.models.effects import (
     RneaEffectsMlpModel,
     RneaEffectsModel,
 )
+from id_learning.models.hyper_schema import check_hyper
 from id_learning.models.identified import (
     RneaIdConfig,
     RneaIdMlpConfig,
@@ -62,18 +62,13 @@ def make_config(kind: str, **overrides: Any) -> ModelConfig:
     """The default config of a model kind, with overrides.
 
     Raises:
-        ConfigError: unknown kind (lists the known ones) or unknown hyper-parameter.
+        ConfigError: unknown kind (lists the known ones), or a hyper-parameter unknown, of the
+            wrong type or out of range (``hyper_schema.check_hyper``).
     """
     if kind not in MODEL_KINDS:
         raise ConfigError(f'unknown model kind {kind!r}; known kinds: {sorted(MODEL_KINDS)}')
     config_class = MODEL_KINDS[kind][0]
-    names = {item.name for item in fields(config_class)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ConfigError(
-            f'{kind}: unknown hyper-parameter(s) {unknown}; known: {sorted(names - {"kind"})}'
-        )
-    return config_class(**{**overrides, 'kind': kind})
+    return config_class(**{**check_hyper(kind, config_class, overrides), 'kind': kind})
 
 
 def make_model(kind: str, robot: RobotConfig, **overrides: Any) -> InverseDynamicsModel:

@@ -23,7 +23,13 @@ import numpy as np
 from id_learning.errors import ConfigError
 from id_learning.robot.config import JointLimits
 
-__all__ = ['ExcitationConfig', 'ExcitationTrajectory', 'FourierSegment', 'design_excitation']
+__all__ = [
+    'ExcitationConfig',
+    'ExcitationTrajectory',
+    'FourierSegment',
+    'check_bandwidth',
+    'design_excitation',
+]
 
 CHECK_OVERSAMPLING = 8  # dense-grid points per IPO sample for the limit check
 DESIGN_MARGIN = 1e-4  # relative margin kept from each limit when scaling a segment
@@ -74,6 +80,55 @@ class ExcitationConfig:
     def period_s(self) -> float:
         """Period of one Fourier segment [s]."""
         return 1.0 / self.base_frequency_hz
+
+    @property
+    def segment_count(self) -> int:
+        """Whole segments (rest + period) that fit ``duration_s`` after the final rest; >= 1."""
+        return max(1, int((self.duration_s - self.rest_s) // (self.period_s + self.rest_s)))
+
+    @property
+    def actual_duration_s(self) -> float:
+        """The length the trajectory has [s]: ``duration_s`` rounded to whole segments."""
+        return self.segment_count * (self.period_s + self.rest_s) + self.rest_s
+
+    def duration_note(self, period_s: float) -> str | None:
+        """A line saying that ``duration_s`` was rounded, or None when it is kept (to a sample).
+
+        A segment must end at rest at the home pose, so it cannot be cut short: the length is a
+        whole number of segments, which the user asking for 5 s should be told.
+        """
+        actual = self.actual_duration_s
+        if abs(actual - self.duration_s) <= period_s:
+            return None
+        return (
+            f'excitation.duration_s {self.duration_s:g} s became {actual:g} s: '
+            f'{self.segment_count} whole segment(s) of {self.period_s:g} s '
+            f'(1 / base_frequency_hz) with {self.rest_s:g} s rests'
+        )
+
+
+def check_bandwidth(base_frequency_hz: float, harmonics: int, period_s: float, where: str) -> None:
+    """Refuse an excitation whose highest harmonic is at or above the recording's Nyquist.
+
+    The motion is recorded at the IPO period: content at or above 1 / (2 period) aliases into
+    lower frequencies, so the recorded q, v, a (and the accelerations differentiated from them)
+    no longer describe the motion the torques answer. The limit check on the dense grid cannot
+    see that. Harmonics above the labels' low-pass cut-off are not refused: through the filter
+    the model's torque is filtered like the labels, so they cost information but mislead nothing.
+
+    Raises:
+        ConfigError: names the highest frequency, the Nyquist frequency and the largest
+            base_frequency_hz allowed.
+    """
+    nyquist = 0.5 / period_s
+    top = base_frequency_hz * harmonics
+    if not top < nyquist:
+        raise ConfigError(
+            f'{where}: base_frequency_hz {base_frequency_hz:g} Hz x {harmonics} harmonic(s) = '
+            f'{top:g} Hz is at or above the Nyquist frequency {nyquist:g} Hz of the '
+            f'{period_s * 1e3:g} ms IPO period (the recording would alias it); use '
+            f'base_frequency_hz < {nyquist / harmonics:g} Hz'
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,7 +266,9 @@ def design_excitation(
         rng: random generator (seeded by the caller).
 
     Raises:
-        ConfigError: the home pose is outside the limits, or a limit is violated on the check grid.
+        ConfigError: the home pose is outside the limits, a harmonic at or above the Nyquist
+            frequency of ``period_s`` (``check_bandwidth``), or a limit is violated on the
+            check grid.
     """
     lower, upper = limits.position_lower, limits.position_upper
     n = len(lower)
@@ -220,9 +277,8 @@ def design_excitation(
         raise ConfigError(
             f'excitation.home {home.tolist()} must lie strictly inside the position limits'
         )
+    check_bandwidth(config.base_frequency_hz, config.harmonics, period_s, 'excitation')
     omega = 2.0 * math.pi * config.base_frequency_hz
-    slot = config.period_s + config.rest_s
-    n_segments = max(1, int((config.duration_s - config.rest_s) // slot))
     grid = np.linspace(
         0.0, config.period_s, int(config.period_s / period_s * CHECK_OVERSAMPLING) + 1
     )
@@ -239,7 +295,7 @@ def design_excitation(
             acc_max=config.acceleration_fraction * limits.acceleration,
             grid=grid,
         )
-        for _ in range(n_segments)
+        for _ in range(config.segment_count)
     )
     trajectory = ExcitationTrajectory(segments, home, config.period_s, config.rest_s)
     check_limits(trajectory, limits, period_s / CHECK_OVERSAMPLING)

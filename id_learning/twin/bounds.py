@@ -16,6 +16,7 @@ from typing import Any
 
 from id_learning.config_io import finite_number
 from id_learning.errors import ConfigError
+from id_learning.record.excitation import ExcitationConfig, check_bandwidth
 
 __all__ = [
     'BYTES_PER_SAMPLE_JOINT',
@@ -99,8 +100,9 @@ def check_excitation(
     """The excitation section with each number checked finite and in range (home aside).
 
     Raises:
-        ConfigError: names the key (``where.key``), the value and the allowed range; a
-            duration beyond what ``check_duration`` allows.
+        ConfigError: names the key (``where.key``), the value and the allowed range; harmonics
+            at or above the IPO period's Nyquist frequency (``check_bandwidth``); a duration
+            beyond what ``check_duration`` allows.
     """
     checked = dict(data)
     for key, (low, high, low_open, integer) in _EXCITATION_RANGES.items():
@@ -108,6 +110,13 @@ def check_excitation(
             checked[key] = finite_number(
                 data[key], f'{where}.{key}', low=low, high=high, low_open=low_open, integer=integer
             )
+    defaults = ExcitationConfig()
+    check_bandwidth(
+        checked.get('base_frequency_hz', defaults.base_frequency_hz),
+        checked.get('harmonics', defaults.harmonics),
+        period_s,
+        where,
+    )
     if 'duration_s' in data:
         checked['duration_s'] = check_duration(
             data['duration_s'], period_s, n_joints, f'{where}.duration_s'

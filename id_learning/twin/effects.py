@@ -223,6 +223,12 @@ class TorqueConstantScale(Effect):
     scale: np.ndarray = field(default_factory=lambda: np.ones(0))
 
 
+#: The longest signal delay a twin simulates [s]: 12.5 cycles of an 8 ms IPO. Real drive-bus
+#: and current-filter latencies are a few milliseconds; the identification's first-order delay
+#: term tau(t - d) ~ tau - d dtau/dt stays accurate only while d is small against the motion.
+MAX_SIGNAL_DELAY_S = 0.1
+
+
 @dataclass(frozen=True, eq=False)
 class SignalDelay(Effect):
     """Currents lag the positions by ``delay_s`` [s] (drive bus and filter latency)."""
@@ -360,6 +366,13 @@ def _parse_effect(cls: type[Effect], data: dict[str, Any], n: int, where: str) -
     ):
         if hasattr(effect, key) and getattr(effect, key) < 0:
             raise ConfigError(f'{where}.{key}: must be >= 0, got {getattr(effect, key)}')
+    delay = getattr(effect, 'delay_s', 0.0)
+    if delay > MAX_SIGNAL_DELAY_S:
+        raise ConfigError(
+            f'{where}.delay_s: must be <= {MAX_SIGNAL_DELAY_S:g} s, got {delay:g}: a drive bus '
+            'and current filter lag by milliseconds, and the identification models the delay '
+            'to first order, which holds only for lags far below the motion time scale'
+        )
     return effect
 
 

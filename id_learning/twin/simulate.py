@@ -340,6 +340,8 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     trajectory: ExcitationTrajectory = design_excitation(
         config.excitation, robot.limits, robot.ipo_period_s, excitation_rng
     )
+    if note := config.excitation.duration_note(robot.ipo_period_s):
+        _LOG.warning('%s', note)  # the rounding is said, not silent (see duration_note)
     n_samples = round(trajectory.duration_s / robot.ipo_period_s) + 1
     t = np.arange(n_samples) * robot.ipo_period_s
     q, v, a = trajectory.evaluate(t)

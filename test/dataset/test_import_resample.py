@@ -353,7 +353,8 @@ def test_a_shuffled_split_draws_each_segment_of_a_bag_on_its_own(
     folder = tmp_path / 'logs'
     folder.mkdir()
     for k in range(2):
-        write_log(folder / f'run_{k}.csv', np.arange(0.0, 12.0, 0.008), robot)
+        # Two runs of their own (the same log twice is refused): the second starts later.
+        write_log(folder / f'run_{k}.csv', np.arange(0.0, 12.0, 0.008) + k, robot)
     import_logs([folder], mapping_for(robot), tmp_path / 'bag', robot=robot)
     config = PreprocessConfig(target='motor', cutoff_hz=(2.0,) * 6, split='shuffled')
     first, second = load_datasets([tmp_path / 'bag'], robot, config, progress=False)
