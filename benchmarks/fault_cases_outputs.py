@@ -155,9 +155,185 @@ def output_cases(fx: Fixtures) -> Iterator[Case]:
     yield Case('output a regular file', 'train', regular_file)
     yield Case('output a folder that is not a result, with --force', 'diagnose', not_ours)
     yield Case('two trains on one output', 'train', second_writer)
+    yield from _kind_cases(fx)
     if fx.run_dir is None:
         return
     yield from _run_cases(fx)
+
+
+def _kind_cases(fx: Fixtures) -> Iterator[Case]:
+    """--force replaces only its own kind, never an input; output paths checked before work.
+
+    The results written over are stand-ins (their documents only): every case is refused before
+    any work, so none trains, simulates or reads a bag.
+    """
+    bag, twin = str(fx.bag), 'config/twin_default.yaml'
+
+    def stand_in(name: str, *documents: str) -> Path:
+        folder = fx.path(name)
+        shutil.rmtree(folder, ignore_errors=True)
+        folder.mkdir()
+        for document in documents:
+            (folder / document).write_text('{}')
+        return folder
+
+    def over(
+        name: str,
+        documents: tuple[str, ...],
+        argv: Callable[[Path], list[str]],
+        words: tuple[str, ...],
+    ) -> Callable[[], Outcome]:
+        def case() -> Outcome:
+            folder = stand_in(name, *documents)
+            before = _tree(folder)
+            return _unchanged(cli(argv(folder), expect=(name, *words)), folder, before)
+
+        return case
+
+    run, diagnosis = ('run.json', 'metrics.json'), ('effects.json',)
+    only = 'replaces only'
+    commands: dict[str, Callable[[Path], list[str]]] = {
+        'demo': lambda out: [
+            'demo',
+            '--bag',
+            bag,
+            '--out',
+            str(out),
+            '--skip-training',
+            '--force',
+        ],
+        'diagnose': lambda out: ['diagnose', '--bag', bag, '--out', str(out), '--force'],
+        'simulate': lambda out: ['simulate', '--config', twin, '--out', str(out), '--force'],
+        'import': lambda out: [
+            'import',
+            str(fx.bag / 'metadata.yaml'),
+            '--mapping',
+            'config/import_example.yaml',
+            '--out',
+            str(out),
+            '--force',
+        ],
+        'sweep': lambda out: ['sweep', '--bag', bag, '--model', 'mlp', '--out', str(out)],
+    }
+    for command, argv in commands.items():
+        yield Case(
+            f'{command} over a train run',
+            command,
+            over(f'kind_{command}_over_run', run, argv, ('train run', only)),
+        )
+    train = lambda out: ['train', '--bag', bag, '--out', str(out), '--force']  # noqa: E731
+    yield Case(
+        'train over a diagnosis, with --force',
+        'train',
+        over('kind_train_over_diagnosis', diagnosis, train, ('diagnosis', only)),
+    )
+
+    def import_over_inputs() -> Outcome:
+        folder = stand_in('kind_import_inputs', 'm.yaml')
+        (folder / 'log.csv').write_text('t\n0\n')
+        before = _tree(folder)
+        argv = [
+            'import',
+            str(folder / 'log.csv'),
+            '--mapping',
+            str(folder / 'm.yaml'),
+            '--out',
+            str(folder),
+            '--force',
+        ]
+        return _unchanged(cli(argv, expect=('kind_import_inputs', 'input')), folder, before)
+
+    def train_inside_its_bag() -> Outcome:
+        out = fx.bag / 'sub'
+        outcome = cli(['train', '--bag', bag, '--out', str(out)], expect=('lies inside', 'input'))
+        return outcome if not out.exists() else Outcome('data_lost', f'wrote into {fx.bag}')
+
+    def plot_over(target: Callable[[], Path], words: tuple[str, ...]) -> Callable[[], Outcome]:
+        def case() -> Outcome:
+            path = target()
+            folder = path if path.is_dir() else path.parent
+            ours = fx.root in folder.parents  # what may change is only looked at under ours
+            before = _tree(folder) if ours else {}
+            argv = ['inspect', str(fx.path('kind_no_bag')), '--plot', str(path), '--force']
+            outcome = cli(argv, expect=words)  # the bag does not exist: checked first
+            return _unchanged(outcome, folder, before) if ours else outcome
+
+        return case
+
+    def afile() -> Path:
+        path = fx.path('kind_a_file')
+        path.write_text('mine')
+        return path
+
+    def over_file(argv: Callable[[Path], list[str]]) -> Outcome:
+        path = afile()
+        outcome = cli(argv(path), expect=('a file',))
+        return outcome if path.read_text() == 'mine' else Outcome('data_lost', 'file replaced')
+
+    yield Case(
+        'import into the folder holding its inputs, with --force', 'import', import_over_inputs
+    )
+    yield Case('train into a folder inside its bag', 'train', train_inside_its_bag)
+    yield Case(
+        "inspect --plot over a run's metrics.json",
+        'inspect',
+        plot_over(
+            lambda: stand_in('kind_plot_run', *run) / 'metrics.json',
+            ('metrics.json', 'not a file type'),
+        ),
+    )
+    yield Case(
+        'inspect --plot into a folder',
+        'inspect',
+        plot_over(lambda: stand_in('kind_plot_dir.png'), ('is a folder',)),
+    )
+    yield Case(
+        'inspect --plot under /proc',
+        'inspect',
+        plot_over(lambda: Path('/proc/x.png'), ('/proc', 'cannot write')),
+    )
+    for command in ('simulate', 'import'):
+        argv = commands[command]
+        yield Case(
+            f'{command} --out a regular file, with --force',
+            command,
+            lambda argv=argv: over_file(argv),
+        )
+    yield Case(
+        'simulate --out under /proc',
+        'simulate',
+        lambda: cli(commands['simulate'](Path('/proc/x')), expect=('/proc', 'cannot')),
+    )
+    yield Case(
+        'recorder over a train run, overwrite:=true',
+        'recorder',
+        lambda: _recorder_over(stand_in('kind_recorder_run', *run)),
+    )
+
+
+def _recorder_over(run: Path) -> Outcome:
+    """A recorder whose output is a train run: refused at start, exit 2, the run untouched."""
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return Outcome('handled', 'skipped: rclpy is not installed')
+    import subprocess
+    import sys
+
+    before = _tree(run)
+    done = subprocess.run(
+        [sys.executable, '-m', 'id_learning.nodes.recorder', '--ros-args', '-p',
+         f'output:={run}', '-p', 'overwrite:=true'],
+        capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    said = done.stdout + done.stderr
+    if done.returncode == 0:
+        return Outcome('silently_accepted', said[-400:])
+    if 'Traceback' in said:
+        return Outcome('traceback', said[-400:])
+    words = ('train run', 'replaces only a bag')
+    kind = 'clear_error' if all(word in said for word in words) else 'silently_accepted'
+    return _unchanged(Outcome(kind, said[-400:]), run, before)
 
 
 def _run_cases(fx: Fixtures) -> Iterator[Case]:

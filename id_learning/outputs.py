@@ -10,8 +10,11 @@ Every command that writes a result folder (``train``, ``evaluate``, ``closed-loo
   it is;
 - when complete, the marker is removed and ``<out>.partial`` renamed to ``<out>``. An existing
   result there is replaced only with ``force``, and then atomically: moved aside, the new one
-  renamed in, the old one removed. A folder that is the input of the command, or that holds
-  anything other than an id_learning result, is never replaced.
+  renamed in, the old one removed. Only a result of the same kind (``folder_holds``) or an
+  empty folder is replaced; never an input of the command, nor a folder holding or inside one.
+
+Bags (``check_bag_output``), sweep folders (``check_kind``) and single files such as plots
+(``check_file_output``) pass the same rule before any work starts.
 
 A failure while writing (disk full, a file size limit, no permission) raises ``OutputError``
 naming the path and the operating system's reason; nothing is left under ``<out>``, and the
@@ -29,6 +32,7 @@ import logging
 import os
 import platform
 import shutil
+import tempfile
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -38,13 +42,20 @@ from typing import Any
 from id_learning.errors import ConfigError
 
 __all__ = [
+    'COMMAND_KINDS',
     'INCOMPLETE_FILE',
+    'KINDS',
     'LOCK_SUFFIX',
     'PARTIAL_SUFFIX',
-    'RESULT_FILES',
+    'Holding',
     'OutputError',
     'ResultFolder',
+    'check_bag_output',
+    'check_file_output',
+    'check_kind',
     'check_output',
+    'check_target',
+    'folder_holds',
     'incomplete_reason',
     'os_reason',
     'partial_path',
@@ -61,16 +72,38 @@ LOCK_SUFFIX = '.lock'
 REPLACED_SUFFIX = '.replaced'
 INCOMPLETE_FILE = 'incomplete.json'
 INCOMPLETE_FORMAT = 'id_learning.incomplete/1'
-#: The documents that mark a folder as an id_learning result, with what they say it is: only
-#: such a folder is ever replaced.
-RESULT_FILES = {
-    'run.json': 'a training run',
-    'metrics.json': 'an evaluation',
-    'closed_loop.json': 'a closed-loop result',
-    'effects.json': 'a diagnosis',
-    'summary.md': 'a demo',
-    INCOMPLETE_FILE: 'an incomplete result',
+#: The kinds of output, with how messages name them.
+KINDS = {
+    'run': 'a train run',
+    'evaluation': 'an evaluation',
+    'closed-loop': 'a closed-loop result',
+    'diagnosis': 'a diagnosis',
+    'demo': 'a demo',
+    'bag': 'a bag',
+    'sweep': 'a sweep',
 }
+#: The document saying a folder holds a result of a kind; first match wins (a run has metrics).
+RESULT_KINDS = {
+    'run.json': 'run',
+    'summary.md': 'demo',
+    'closed_loop.json': 'closed-loop',
+    'effects.json': 'diagnosis',
+    'metrics.json': 'evaluation',
+    INCOMPLETE_FILE: 'run',
+}
+#: The kind each result-writing command writes.
+COMMAND_KINDS = {
+    'train': 'run',
+    'evaluate': 'evaluation',
+    'closed-loop': 'closed-loop',
+    'diagnose': 'diagnosis',
+    'demo': 'demo',
+}
+#: What a bag folder may hold besides its .mcap files: the twin's ground truth and config.
+BAG_EXTRAS = frozenset({'metadata.yaml', 'ground_truth.json', 'ground_truth.npz',
+                        'twin_config.yaml'})  # fmt: skip
+#: What a sweep folder holds (``training.sweep``): the study, the best settings, the plots.
+SWEEP_FILES = frozenset({'best.yaml', 'optimisation_history.png', 'parameter_importances.png'})
 
 
 class OutputError(ConfigError):
@@ -185,67 +218,243 @@ def incomplete_reason(folder: Path) -> str | None:
     return None
 
 
-def _holds(folder: Path) -> str | None:
-    """What kind of id_learning result ``folder`` holds; None when it is empty.
+@dataclass(frozen=True)
+class Holding:
+    """What a folder holds, as its files say: what a command may replace is its own kind.
 
-    Raises:
-        OutputError: it holds something else (never replaced, even with --force).
+    Attributes:
+        kind: a key of ``KINDS``, ``'empty'``, ``'torn bag'`` (for ``bag recover``) or
+            ``'foreign'``.
+        evidence: the file(s) that say so, for messages.
     """
-    names = {entry.name for entry in folder.iterdir()}
-    if not names:
-        return None
-    found = [f'{what} already ({name})' for name, what in RESULT_FILES.items() if name in names]
-    if not found:
-        shown = ', '.join(sorted(names)[:3]) + (', ...' if len(names) > 3 else '')
-        raise OutputError(
-            f'{folder}: holds files that are not an id_learning result ({shown}); it is never '
-            'replaced, not even with --force: choose another --out'
-        )
-    return found[0]
+
+    kind: str
+    evidence: str = ''
+
+    def describe(self) -> str:
+        """'a train run (run.json)', 'files that are not ... (a, b)': for one-line messages."""
+        if self.kind == 'empty':
+            return 'nothing'
+        if self.kind == 'torn bag':
+            return f'a torn bag ({self.evidence} without metadata.yaml; bag recover rebuilds it)'
+        if self.kind == 'foreign':
+            return f'files that are not an id_learning result or a bag ({self.evidence})'
+        return f'{KINDS[self.kind]} ({self.evidence})'
 
 
-def check_output(
-    out: Path, *, force: bool = False, inputs: Sequence[Path] = (), is_locked: bool = False
-) -> Path:
-    """Refuse an ``out`` that cannot or must not be written; returns the folder to write.
+def _shown(names: Sequence[str]) -> str:  # the first three, for one-line messages
+    return ', '.join(sorted(names)[:3]) + (', ...' if len(names) > 3 else '')
 
-    A symbolic link to a folder stands for that folder. ``is_locked``: the caller holds the lock,
-    so a partial folder there is left by a writer that is gone, whatever its marker says (before
-    the lock, a writer still running is left for the lock to name).
+
+def _marker_kind(folder: Path) -> str:
+    """The kind an incomplete marker's command writes ('run' for an unknown command)."""
+    command = (_marker(folder) or {}).get('command')
+    return COMMAND_KINDS.get(command, 'run') if isinstance(command, str) else 'run'
+
+
+def folder_holds(folder: Path) -> Holding:
+    """What ``folder`` holds by its files: a result of one kind, a bag, a sweep, or else.
 
     Raises:
-        OutputError: ``out`` is a dangling link or not a folder; it is (or holds) an input of
-            the command; it holds a result and ``force`` is not set; it holds something that is
-            not a result; an interrupted result is beside it and ``force`` is not set.
+        OSError: ``folder`` cannot be listed.
+    """
+    names = [entry.name for entry in Path(folder).iterdir()]
+    if not names:
+        return Holding('empty')
+    for name, kind in RESULT_KINDS.items():
+        if name in names:
+            return Holding(_marker_kind(folder) if name == INCOMPLETE_FILE else kind, name)
+    mcap = [name for name in names if name.endswith(('.mcap', '.mcap.damaged'))]
+    others = [name for name in names if name not in mcap and name not in BAG_EXTRAS]
+    if mcap and not others:
+        if 'metadata.yaml' in names:
+            return Holding('bag', f'metadata.yaml, {_shown(mcap)}')
+        return Holding('torn bag', _shown(mcap))
+    sweep = [name for name in names if name in SWEEP_FILES or name.startswith('sweep.db')]
+    if len(sweep) == len(names) and {'sweep.db', 'best.yaml'} & set(names):
+        return Holding('sweep', _shown(sweep))
+    return Holding('foreign', _shown(others or names))
+
+
+def _refuse_any_but_results(folder: Path, force: bool) -> None:
+    """Without a kind to match: any result is replaced with ``force``, nothing else ever."""
+    held = folder_holds(folder)
+    if held.kind == 'empty':
+        return
+    if held.kind not in COMMAND_KINDS.values():
+        raise OutputError(
+            f'{folder}: holds {held.describe()}; it is never replaced, not even with '
+            '--force: choose another --out'
+        )
+    if not force:
+        raise OutputError(
+            f'{folder}: holds {KINDS[held.kind]} already ({held.evidence}); choose another '
+            '--out, or pass --force to replace it'
+        )
+
+
+def _probe_parent(out: Path) -> None:
+    """Refuse an ``out`` whose parent cannot be created or written (the OS's reason)."""
+    parent = out.parent
+    while not parent.exists():
+        if parent.is_symlink() or parent == parent.parent:
+            break
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise OutputError(f'{out}: {parent} is a file, not a folder; choose another path')
+    try:
+        fd, probe = tempfile.mkstemp(prefix='.id_learning-probe-', dir=parent)
+    except OSError as err:
+        raise OutputError(f'{out}: cannot write in {parent}: {os_reason(err)}') from err
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _refuse_inputs(out: Path, inputs: Sequence[Path]) -> None:
+    """Refuse an ``out`` that is, holds or lies inside an input of the command."""
+    resolved = out.resolve()
+    for given in inputs:
+        source = Path(given).resolve()
+        if source == resolved:
+            where = 'is'
+        elif resolved in source.parents:
+            where = f'holds {source},'
+        elif source in resolved.parents:
+            where = f'lies inside {source},'
+        else:
+            continue
+        raise OutputError(
+            f'{out}: {where} an input of this command; it is never replaced or written into, '
+            'not even with --force: choose another --out'
+        )
+
+
+def check_target(out: Path, *, inputs: Sequence[Path] = (), folder: bool = True) -> Path:
+    """What every output path passes before any work: returns the path to write.
+
+    Raises:
+        OutputError: a dangling link; a file where a folder is expected (``folder``) or the
+            reverse; ``out`` is, holds or lies inside an input; its parent cannot be written.
     """
     out = Path(out)
     if out.is_symlink():
         if not out.exists():
             raise OutputError(
                 f'{out}: is a symbolic link to {os.readlink(out)}, which does not exist; '
-                'point --out at a folder'
+                'point it at a folder'
             )
         out = out.resolve()
-    if out.exists() and not out.is_dir():
-        raise OutputError(f'{out}: exists and is not a folder; point --out at a folder')
-    resolved = out.resolve()
-    for given in inputs:
-        source = Path(given).resolve()
-        if source == resolved or resolved in source.parents:
-            what = 'is' if source == resolved else f'holds {source},'
-            raise OutputError(
-                f'{out}: {what} an input of this command; it is never replaced, not even with '
-                '--force: choose another --out'
-            )
-    if out.is_dir():
+    if folder and out.exists() and not out.is_dir():
+        raise OutputError(f'{out}: exists and is not a folder but a file; name a folder to write')
+    if not folder and out.is_dir():
+        raise OutputError(f'{out}: is a folder; name a file to write')
+    _refuse_inputs(out, inputs)
+    _probe_parent(out)
+    return out
+
+
+def check_kind(out: Path, kind: str, *, force: bool, flag: str = '--force') -> None:
+    """Refuse a folder ``out`` that holds something ``force`` may not replace.
+
+    Only an empty folder, or (with ``force``) one of the same ``kind``, is written; a sweep
+    folder is added to, so for ``kind='sweep'`` a sweep is taken without ``force``.
+
+    Raises:
+        OutputError: names ``out``, what it holds and what ``flag`` replaces.
+    """
+    if not out.is_dir():
+        return
+    try:
+        held = folder_holds(out)
+    except OSError as err:
+        raise OutputError(f'{out}: {os_reason(err)}') from err
+    if held.kind == 'empty' or (held.kind == kind and (force or kind == 'sweep')):
+        return
+    if held.kind == kind:
+        raise OutputError(
+            f'{out}: holds {KINDS[kind]} already ({held.evidence}); choose another path, or '
+            f'pass {flag} to replace it'
+        )
+    raise OutputError(
+        f'{out}: holds {held.describe()}; {flag} replaces only {KINDS[kind]}: choose another path'
+    )
+
+
+def check_bag_output(
+    out: Path, *, overwrite: bool = False, inputs: Sequence[Path] = (), flag: str = '--force'
+) -> Path:
+    """Refuse a bag folder that cannot or must not be written; returns the folder to write.
+
+    A bag replaces only a bag (``metadata.yaml`` and ``.mcap`` files, nothing foreign) or an
+    empty folder, and only with ``overwrite`` (``flag`` names it in messages).
+
+    Raises:
+        OutputError: as ``check_target`` and ``check_kind`` say.
+    """
+    out = check_target(out, inputs=inputs)
+    check_kind(out, 'bag', force=overwrite, flag=flag)
+    return out
+
+
+def check_file_output(
+    out: Path,
+    *,
+    force: bool = False,
+    inputs: Sequence[Path] = (),
+    suffixes: Sequence[str] = (),
+) -> Path:
+    """Refuse a file that cannot or must not be written; returns the file to write.
+
+    ``suffixes``: the ones accepted (lower case, with the dot), when given. An existing file is
+    replaced only with ``force``; never one inside a result folder or a bag (another command's).
+    """
+    out = check_target(Path(out), inputs=inputs, folder=False)
+    if suffixes and out.suffix.lower() not in suffixes:
+        raise OutputError(
+            f'{out}: not a file type that can be written here; use one of {", ".join(suffixes)}'
+        )
+    if out.parent.is_dir():
         try:
-            held = _holds(out)
+            held = folder_holds(out.parent)
         except OSError as err:
-            raise OutputError(f'{out}: {os_reason(err)}') from err
-        if held is not None and not force:
+            raise OutputError(f'{out.parent}: {os_reason(err)}') from err
+        if held.kind not in ('empty', 'foreign'):
             raise OutputError(
-                f'{out}: holds {held}; choose another --out, or pass --force to replace it'
+                f'{out}: {out.parent} holds {held.describe()}; write the file elsewhere'
             )
+    if out.exists() and not force:
+        raise OutputError(f'{out}: exists; choose another path, or pass --force to replace it')
+    return out
+
+
+def check_output(
+    out: Path,
+    *,
+    force: bool = False,
+    inputs: Sequence[Path] = (),
+    is_locked: bool = False,
+    kind: str | None = None,
+) -> Path:
+    """Refuse an ``out`` that cannot or must not be written; returns the folder to write.
+
+    A symbolic link to a folder stands for that folder. ``kind``: the kind of result written
+    (a key of ``KINDS``): ``force`` replaces only that kind; None: any result. ``is_locked``:
+    the caller holds the lock, so a partial folder there is left by a writer that is gone,
+    whatever its marker says (before the lock, a writer still running is left for the lock to
+    name).
+
+    Raises:
+        OutputError: as ``check_target`` and ``check_kind`` say; or an interrupted result is
+            beside it and ``force`` is not set.
+    """
+    out = check_target(out, inputs=inputs)
+    try:
+        if kind is not None:
+            check_kind(out, kind, force=force)
+        elif out.is_dir():
+            _refuse_any_but_results(out, force)
+    except OSError as err:
+        raise OutputError(f'{out}: {os_reason(err)}') from err
     partial = partial_path(out)
     if partial.exists() and not force:
         marker = _marker(partial) if partial.is_dir() else None
@@ -319,7 +528,7 @@ def _start(out: Path, command: str) -> Path:
     if work.is_symlink() or work.is_file():
         work.unlink()
     elif work.exists():
-        _holds(work)  # never remove what is not ours
+        _refuse_any_but_results(work, force=True)  # never remove what is not ours
         shutil.rmtree(work)
     work.mkdir()
     marker = {
@@ -358,14 +567,16 @@ def result_folder(
     Args:
         out: the result folder (``--out``); its parent folders are created.
         command: the command writing it, for the incomplete marker and messages.
-        force: replace an existing result (never an input, never what is not a result).
-        inputs: folders and files the command reads; ``out`` may not be or hold one.
+        force: replace an existing result of the kind ``command`` writes (``COMMAND_KINDS``;
+            any result for another command), never an input, never what is not a result.
+        inputs: folders and files the command reads; ``out`` may not be, hold or lie in one.
 
     Raises:
         OutputError: ``out`` is refused (``check_output``), another process writes it, or a
             write failed (the path and the OS's reason).
     """
-    out = check_output(out, force=force, inputs=inputs)
+    kind = COMMAND_KINDS.get(command)
+    out = check_output(out, force=force, inputs=inputs, kind=kind)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -373,7 +584,7 @@ def result_folder(
             f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
         ) from err
     with _locked(out):
-        out = check_output(out, force=force, inputs=inputs, is_locked=True)  # again, now ours
+        out = check_output(out, force=force, inputs=inputs, is_locked=True, kind=kind)  # ours
         folder = ResultFolder(out, partial_path(out))
         try:
             folder.work = _start(out, command)

@@ -29,6 +29,7 @@ from mcap.writer import Writer as McapWriter
 
 from id_learning.bag.messages import message_definition
 from id_learning.errors import BagError
+from id_learning.outputs import check_bag_output, os_reason
 
 __all__ = ['BagWriter', 'write_metadata']
 
@@ -161,13 +162,16 @@ class BagWriter:
         split_duration_ns: int | None = None,
         split_bytes: int | None = None,
         custom_data: dict[str, str] | None = None,
+        flag: str = '--force',
     ) -> None:
         """Prepare a bag folder; nothing is written before ``open()``.
 
         ``custom_data``: string entries written to ``metadata.yaml``'s ``custom_data``.
+        ``flag``: how messages name ``overwrite`` (``overwrite:=true`` for the recorder).
         """
         self.path = Path(path)
         self.overwrite = overwrite
+        self.flag = flag
         self.chunk_bytes = chunk_bytes
         self.split_duration_ns = split_duration_ns
         self.split_bytes = split_bytes
@@ -187,14 +191,20 @@ class BagWriter:
     def open(self) -> Self:
         """Create the folder and the first MCAP file.
 
+        An existing folder is written only when empty, or replaced when it holds a bag and
+        ``overwrite`` is set (``outputs.check_bag_output``): never another command's result.
+
         Raises:
-            BagError: the folder exists and overwrite is False.
+            OutputError: the folder is refused (one line naming it and what it holds).
+            BagError: creating it failed (the OS's reason).
         """
-        if self.path.exists():
-            if not self.overwrite:
-                raise BagError(f'{self.path}: bag folder already exists (pass overwrite/--force)')
-            shutil.rmtree(self.path)
-        self.path.mkdir(parents=True)
+        self.path = check_bag_output(self.path, overwrite=self.overwrite, flag=self.flag)
+        try:
+            if self.path.is_dir() and any(self.path.iterdir()):
+                shutil.rmtree(self.path)  # a bag, and overwrite is set
+            self.path.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise BagError(f'{self.path}: {os_reason(err)} (creating the bag folder)') from err
         self._start_file()
         return self
 

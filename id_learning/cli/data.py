@@ -22,7 +22,10 @@ __all__ = [
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run the digital twin and write a bag with its ground truth."""
+    from id_learning.outputs import check_bag_output
     from id_learning.twin import load_twin_config, simulate, write_twin_output
+
+    check_bag_output(Path(args.out), overwrite=args.force, inputs=[Path(args.config)])
 
     overrides = {}
     if args.seed is not None:
@@ -53,10 +56,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_import(args: argparse.Namespace) -> int:
     """Convert CSV/NPZ logs (files or folders) into one bag of the bag contract."""
     from id_learning.dataset.importer import import_logs, load_import_mapping
+    from id_learning.outputs import check_bag_output
 
+    sources = [Path(source) for source in args.source]
+    inputs = [*sources, Path(args.mapping), *([Path(args.robot)] if args.robot else [])]
+    check_bag_output(Path(args.out), overwrite=args.force, inputs=inputs)  # before any work
     robot = options.load_robot(args)
     reports = import_logs(
-        [Path(source) for source in args.source],
+        sources,
         load_import_mapping(args.mapping),
         Path(args.out),
         robot=robot,
@@ -75,6 +82,13 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     """Print topics, counts, rates, jitter, gaps and ranges of a bag."""
     from id_learning.dataset.inspect import inspect_bag, plot_report, render_report
 
+    if args.plot:  # refused before the bag is read
+        from id_learning.dataset.inspect_plot import image_suffixes
+        from id_learning.outputs import check_file_output
+
+        check_file_output(
+            Path(args.plot), force=args.force, inputs=[Path(args.bag)], suffixes=image_suffixes()
+        )
     robot = options.load_robot(args) if args.robot else None
     report = inspect_bag(Path(args.bag), robot=robot)
     print(render_report(report))
@@ -117,7 +131,9 @@ def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument(
         '--joint-torque-sensors', action='store_true', help='record joint torques in effort'
     )
-    p.add_argument('--force', action='store_true', help='overwrite an existing bag folder')
+    p.add_argument(
+        '--force', action='store_true', help='replace a bag already at --out (only a bag)'
+    )
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=cmd_simulate)
 
@@ -136,13 +152,18 @@ def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
         'robot config YAML (default: MABI MAX 100): joint names and limits are checked against '
         'it; its IPO period and topics are used',
     )
-    p.add_argument('--force', action='store_true', help='overwrite an existing bag folder')
+    p.add_argument(
+        '--force', action='store_true', help='replace a bag already at --out (only a bag)'
+    )
     p.set_defaults(func=cmd_import)
 
     p = sub.add_parser('inspect', help='topics, counts, rate, jitter, gaps and ranges of a bag')
     p.add_argument('bag', help='bag folder')
     options.robot_option(p, 'robot config: check ranges against its limits')
-    p.add_argument('--plot', help='write a PNG overview to this path')
+    p.add_argument(
+        '--plot', help='write an overview plot to this path (.png, .pdf, .svg, ...: by suffix)'
+    )
+    p.add_argument('--force', action='store_true', help='replace an existing --plot file')
     p.set_defaults(func=cmd_inspect)
 
     p = sub.add_parser('bag', help='bag maintenance')

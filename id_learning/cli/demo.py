@@ -39,6 +39,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from id_learning.outputs import result_folder
 
     robot = options.load_robot(args)
+    options.model_kinds(args.models)  # unknown kinds refused even with --skip-training
     bag = Path(args.bag or default_bag())
     with result_folder(Path(args.out), command='demo', force=args.force, inputs=[bag]) as folder:
         _demo_into(args, robot, bag, folder)

@@ -111,11 +111,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     result = diagnose_bags(
-        [Path(b) for b in args.bag],
+        options.bag_paths(args.bag),
         options.load_robot(args),
         PreprocessConfig(target=args.target, mode=args.preprocessing),
         out,
-        effects=options.comma_names(args.effects) if args.effects else None,
+        effects=options.effect_names(args.effects),
         progress=not args.quiet,
         trim_unpaired_tail=args.trim_unpaired_tail,
         force=args.force,

@@ -24,7 +24,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     robot = options.load_robot(args)
     result = run_sweep(
-        [Path(b) for b in args.bag],
+        options.bag_paths(args.bag),
         robot,
         args.target,
         args.model,

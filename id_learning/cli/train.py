@@ -76,7 +76,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     robot = options.load_robot(args)
     run = train_run(
-        [Path(b) for b in args.bag],
+        options.bag_paths(args.bag),
         robot,
         args.target,
         options.model_kinds(args.models),
@@ -114,7 +114,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     robot = _run_robot(args, run_dir)
     result = evaluate_run(
         run_dir,
-        [Path(b) for b in args.bag],
+        options.bag_paths(args.bag),
         robot,
         Path(args.out),
         progress=not args.quiet,

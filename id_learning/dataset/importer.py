@@ -493,7 +493,8 @@ def import_logs(
             for implausible or beyond-limits values, stamps
             backwards, repeated or (under 'snap') off the grid, no segment long enough, or files
             on different grids.
-        BagError: ``out`` exists and ``overwrite`` is False.
+        OutputError: ``out`` is refused (``outputs.check_bag_output``: not a bag, or a bag
+            without ``overwrite``, or an input).
     """
     out = Path(out)
     start_ns = DEFAULT_START_NS if start_ns is None else start_ns

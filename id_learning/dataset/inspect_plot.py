@@ -1,4 +1,4 @@
-"""Plot the JointState samples of an ``inspect_bag`` report (or of a recording) to a PNG.
+"""Plot the JointState samples of an ``inspect_bag`` report (or of a recording) to an image.
 
 Apart from the analysis so that matplotlib is needed, and imported, only when a plot is asked for.
 """
@@ -13,7 +13,14 @@ from id_learning.dataset.inspect_report import FIELDS, BagReport
 from id_learning.dataset.recording import Recording
 from id_learning.errors import ConfigError
 
-__all__ = ['plot_report']
+__all__ = ['image_suffixes', 'plot_report']
+
+
+def image_suffixes() -> tuple[str, ...]:
+    """The file suffixes matplotlib's Agg canvas writes ('.png', '.pdf', '.svg', ...)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    return tuple(sorted(f'.{name}' for name in FigureCanvasAgg.get_supported_filetypes()))
 
 
 def _envelope(t: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
@@ -90,7 +97,8 @@ def plot_report(
     Args:
         report: from ``inspect_bag``; its JointState samples are plotted unless a recording is
             given.
-        out_png: the image to write; parent folders are created.
+        out_png: the image to write, in the format its suffix names (``image_suffixes``);
+            parent folders are created.
         recording: plot these samples instead (e.g. a loaded and filtered recording).
         max_points: upper bound on points per line.
 
@@ -98,13 +106,17 @@ def plot_report(
         out_png.
 
     Raises:
-        ConfigError: max_points is below 2.
+        ConfigError: max_points is below 2, or the suffix is not an image format.
     """
     from matplotlib.figure import Figure
 
     if max_points < 2:
         raise ConfigError(f'max_points must be at least 2, got {max_points}')
     out_png = Path(out_png)
+    if out_png.suffix.lower() not in image_suffixes():
+        raise ConfigError(
+            f'{out_png}: not an image suffix; use one of {", ".join(image_suffixes())}'
+        )
     rows = _rows_from_recording(recording) if recording is not None else _rows_from_report(report)
     firsts = [int(stamps[0]) for _, _, stamps, _, _ in rows if len(stamps)]
     origin = min(firsts) if firsts else report.start_ns
@@ -125,5 +137,5 @@ def plot_report(
     robot = f', robot {report.robot_name}' if report.robot_name else ''
     figure.suptitle(f'{report.path}: {report.start_iso}, {report.duration_s:.1f} s{robot}')
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(out_png, dpi=100, format='png')
+    figure.savefig(out_png, dpi=100, format=out_png.suffix[1:].lower())
     return out_png

@@ -68,7 +68,7 @@ class RecorderConfig:
         'Bag folder to write (rosbag2, MCAP storage). Empty: recordings/<UTC date-time> in '
         'the working directory.',
     )
-    overwrite: bool = param(False, 'Replace an existing bag folder at output.')
+    overwrite: bool = param(False, 'Replace a bag at output (only a bag: nothing else).')
     topics: tuple[str, ...] = param(
         ('/joint_states', '/motor_currents'), 'Topics to record (the bag contract).', topic=True
     )

@@ -87,7 +87,13 @@ class Recorder(Node):
     """
 
     def __init__(self, qos: QoSProfile | None = None, **kwargs: Any) -> None:
-        """Declare parameters, open the bag and subscribe."""
+        """Declare parameters, open the bag and subscribe.
+
+        Raises:
+            OutputError: ``output`` is refused before anything is recorded (a file, another
+                command's result, a parent that cannot be written; ``outputs.check_bag_output``):
+                ``main`` logs the line and exits with status 2.
+        """
         super().__init__(NODE_NAME, **kwargs)
         declare_parameters(self, RecorderConfig)
         self.config = read_snapshot(self, RecorderConfig)
@@ -97,6 +103,7 @@ class Recorder(Node):
         self.writer = BagWriter(
             self.path,
             overwrite=config.overwrite,
+            flag='overwrite:=true',
             chunk_bytes=config.chunk_kib * 1024,
             split_duration_ns=round(config.split_duration_s * 1e9) or None,
             split_bytes=round(config.split_size_mib * MIB) or None,

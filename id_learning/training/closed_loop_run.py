@@ -105,7 +105,7 @@ def closed_loop_run(
     if not duration_s > 0:
         raise ConfigError(f'duration must be positive [s], got {duration_s}')
     run = read_run(run_dir)
-    check_output(out, force=force, inputs=[run_dir])  # refused before the loop is run
+    check_output(out, force=force, inputs=[run_dir], kind='closed-loop')  # before the loop
     if run.get('robot', {}).get('joints') != list(robot.joints):
         raise CheckpointError(f'{run_dir}: the run is not for robot {robot.name}')
     bag = Path(run['training_data']['bags'][0]['path'])

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 import warnings
 from collections.abc import Sequence
@@ -31,6 +32,7 @@ from id_learning.models.data import TrainingData
 from id_learning.models.fitting import configure_torch
 from id_learning.models.registry import MODEL_KINDS, make_model
 from id_learning.models.torch_model import TorchModel
+from id_learning.outputs import check_kind, check_target
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import combine_datasets, load_datasets
 
@@ -174,7 +176,8 @@ def run_sweep(
 
     Raises:
         ConfigError: unknown or unsweepable kind, trials < 1, a bad timeout or budget, or an
-            unusable, locked or unreachable storage (names it).
+            unusable, locked or unreachable storage (names it); ``out`` holds other than a sweep
+            (``OutputError``: another command's result is never written into).
         DatasetError, BagError: a bag is unusable.
     """
     import optuna
@@ -188,7 +191,9 @@ def run_sweep(
         finite_number(
             max_seconds_per_trial, 'sweep: --max-seconds-per-trial', low=0, low_open=True
         )
-    out = Path(out)
+    # The folder is added to by every worker: it must be empty or a sweep's, and no input's.
+    out = check_target(Path(out), inputs=[Path(b) for b in bags])
+    check_kind(out, 'sweep', force=False)
     out.mkdir(parents=True, exist_ok=True)
     storage = storage or f'sqlite:///{(out / "sweep.db").resolve()}'
     study_name = study_name or f'{kind}-{target}'
@@ -267,6 +272,36 @@ def _engine_options(storage: str, timeout_s: float) -> dict[str, Any]:
     return {}
 
 
+def _check_sqlite_folder(storage: str) -> None:
+    """Refuse a SQLite URL whose folder is missing or not writable, before any wait.
+
+    SQLite reports both as 'unable to open database file', which the retries would wait out
+    and then blame on a lock: the folder is the cause, and it is named at once.
+
+    Raises:
+        ConfigError: names the URL and the folder.
+    """
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    if not storage.startswith('sqlite'):
+        return
+    try:
+        database = make_url(storage).database
+    except ArgumentError as err:
+        raise ConfigError(f'sweep: the storage {storage!r} is no valid URL: {err}') from None
+    if not database or database == ':memory:' or database.startswith('file:'):
+        return
+    folder = Path(database).absolute().parent
+    if not folder.is_dir():
+        raise ConfigError(
+            f'sweep: the storage {storage!r}: folder {folder} does not exist; create it or '
+            'name another'
+        )
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ConfigError(f'sweep: the storage {storage!r}: folder {folder} is not writable')
+
+
 def _reason(err: Exception) -> str:
     """The driver's one-line reason behind a SQLAlchemy error (without its SQL and links)."""
     text = str(getattr(err, 'orig', None) or err)
@@ -287,6 +322,7 @@ def _open_study(
     import optuna
     from sqlalchemy.exc import SQLAlchemyError
 
+    _check_sqlite_folder(storage)
     engine = _engine_options(storage, timeout_s)
     deadline = time.monotonic() + timeout_s
     last: Exception | None = None

@@ -187,15 +187,16 @@ def test_evaluate_never_writes_over_a_run_or_an_evaluation_without_force(
     assert 'is an input of this command' in said
     other = tmp_path / 'other_run'
     shutil.copytree(small_run.out, other)
-    status, said = _cli(capsys, *base, str(other))
-    assert (status, 'holds a training run already (run.json)' in said) == (2, True), said
+    for force in ((), ('--force',)):  # a run is never replaced by an evaluation
+        status, said = _cli(capsys, *base, str(other), *force)
+        assert (status, 'holds a train run (run.json)' in said) == (2, True), said
+    assert (other / 'run.json').exists()
     evaluation = tmp_path / 'evaluation'
     assert _cli(capsys, *base, str(evaluation))[0] == 0
     status, said = _cli(capsys, *base, str(evaluation))
     assert (status, 'holds an evaluation' in said) == (2, True), said
-    assert _cli(capsys, *base, str(other), '--force')[0] == 0  # replaced: an evaluation now
-    assert not (other / 'run.json').exists()
-    assert json.loads((other / 'metrics.json').read_text())['kind'] == 'evaluation'
+    assert _cli(capsys, *base, str(evaluation), '--force')[0] == 0  # an evaluation replaced
+    assert json.loads((evaluation / 'metrics.json').read_text())['kind'] == 'evaluation'
     assert _tree(small_run.out) == before
 
 

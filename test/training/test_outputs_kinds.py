@@ -1,0 +1,166 @@
+"""--force replaces only a result of the command's own kind (or an empty folder), never an input
+nor a folder inside one; every output path is checked before any work, in one clear line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from support import REPO
+
+from id_learning.cli.main import main
+from id_learning.outputs import (
+    OutputError,
+    check_bag_output,
+    check_file_output,
+    check_kind,
+    check_output,
+    folder_holds,
+)
+
+#: One document per kind of result (what ``folder_holds`` reads).
+RESULTS = {
+    'run': 'run.json',
+    'evaluation': 'metrics.json',
+    'closed-loop': 'closed_loop.json',
+    'diagnosis': 'effects.json',
+    'demo': 'summary.md',
+}
+
+
+def _folder(root, name: str, *files: str):
+    folder = root / name
+    folder.mkdir()
+    for file in files:
+        (folder / file).write_text('{}')
+    return folder
+
+
+def _tree(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob('*') if p.is_file()}
+
+
+def _cli(capsys, *argv: str) -> tuple[int, str]:
+    status = main(list(argv))
+    captured = capsys.readouterr()
+    return status, captured.err + captured.out
+
+
+@pytest.mark.parametrize('kind', sorted(RESULTS))
+def test_each_kind_of_folder_is_told_apart(tmp_path, kind):
+    assert folder_holds(_folder(tmp_path, 'r', RESULTS[kind])).kind == kind
+
+
+def test_bags_sweeps_torn_bags_and_foreign_folders_are_told_apart(tmp_path):
+    assert folder_holds(_folder(tmp_path, 'empty')).kind == 'empty'
+    bag = _folder(tmp_path, 'bag', 'metadata.yaml', 'bag_0.mcap', 'ground_truth.json')
+    assert folder_holds(bag).kind == 'bag'
+    assert folder_holds(_folder(tmp_path, 'torn', 'torn_0.mcap')).kind == 'torn bag'
+    assert folder_holds(_folder(tmp_path, 'mixed', 'metadata.yaml', 'a.mcap', 'x.csv')).kind == (
+        'foreign'
+    )
+    assert folder_holds(_folder(tmp_path, 'sweep', 'sweep.db', 'best.yaml')).kind == 'sweep'
+    assert folder_holds(_folder(tmp_path, 'run', 'run.json', 'metrics.json')).kind == 'run'
+
+
+@pytest.mark.parametrize('kind', sorted(RESULTS))
+def test_force_replaces_only_the_same_kind(tmp_path, kind):
+    for other, document in RESULTS.items():
+        folder = _folder(tmp_path, f'{kind}-{other}', document)
+        if other == kind:
+            check_output(folder, force=True, kind=kind)
+            with pytest.raises(OutputError, match=r'already .*--force'):
+                check_output(folder, kind=kind)
+        else:
+            with pytest.raises(OutputError, match=rf'holds .*\({document}\); --force replaces '):
+                check_output(folder, force=True, kind=kind)
+
+
+def test_a_bag_replaces_only_a_bag_or_an_empty_folder(tmp_path):
+    bag = _folder(tmp_path, 'bag', 'metadata.yaml', 'bag_0.mcap')
+    assert check_bag_output(bag, overwrite=True) == bag
+    with pytest.raises(OutputError, match=r'holds a bag already .*--force'):
+        check_bag_output(bag)
+    check_bag_output(_folder(tmp_path, 'empty'))
+    run = _folder(tmp_path, 'run', 'run.json')
+    with pytest.raises(OutputError, match=r'holds a train run \(run\.json\); --force replaces '
+                       'only a bag'):  # fmt: skip
+        check_bag_output(run, overwrite=True)
+    with pytest.raises(OutputError, match='torn bag'):
+        check_bag_output(_folder(tmp_path, 'torn', 'torn_0.mcap'), overwrite=True)
+    afile = tmp_path / 'afile'
+    afile.write_text('x')
+    with pytest.raises(OutputError, match='afile: exists and is not a folder but a file'):
+        check_bag_output(afile, overwrite=True)
+    with pytest.raises(OutputError, match=r'/proc/x: cannot write in /proc: '):
+        check_bag_output(Path('/proc/x'))
+    with pytest.raises(OutputError, match=r'is a file, not a folder'):
+        check_bag_output(afile / 'sub')
+
+
+def test_an_output_that_is_holds_or_lies_inside_an_input_is_refused(tmp_path):
+    data = _folder(tmp_path, 'data', 'log.csv', 'm.yaml')
+    for out, where in ((data, 'holds'), (tmp_path, 'holds'), (data / 'sub', 'lies inside')):
+        with pytest.raises(OutputError, match=f'{where} .*an input of this command'):
+            check_bag_output(out, overwrite=True, inputs=[data / 'log.csv', data])
+    assert _tree(data) == {'log.csv': b'{}', 'm.yaml': b'{}'}
+
+
+def test_a_sweep_folder_is_added_to_and_nothing_else_is_written_into(tmp_path):
+    check_kind(_folder(tmp_path, 'sweep', 'sweep.db'), 'sweep', force=False)
+    with pytest.raises(OutputError, match=r'holds a train run .*replaces only a sweep'):
+        check_kind(_folder(tmp_path, 'run', 'run.json'), 'sweep', force=False)
+
+
+def test_a_file_output_is_checked_for_its_suffix_its_place_and_what_is_there(tmp_path):
+    png = ('.png', '.pdf')
+    run = _folder(tmp_path, 'run', 'run.json', 'metrics.json')
+    with pytest.raises(OutputError, match=r'metrics\.json: not a file type .*\.png'):
+        check_file_output(run / 'metrics.json', force=True, suffixes=png)
+    with pytest.raises(OutputError, match=r'holds a train run'):
+        check_file_output(run / 'plot.png', force=True, suffixes=png)
+    with pytest.raises(OutputError, match='is a folder; name a file'):
+        check_file_output(_folder(tmp_path, 'x.png'), force=True, suffixes=png)
+    existing = tmp_path / 'old.png'
+    existing.write_bytes(b'png')
+    with pytest.raises(OutputError, match=r'old\.png: exists; .*--force'):
+        check_file_output(existing, suffixes=png)
+    assert check_file_output(existing, force=True, suffixes=png) == existing
+
+
+# -- the commands: refused before any work, the other result untouched --------------------------
+def test_commands_never_replace_another_commands_result_even_with_force(tmp_path, capsys):
+    bag = REPO / 'bags' / 'missing_bag_is_never_read'
+    run = _folder(tmp_path, 'run', 'run.json', 'metrics.json')
+    diagnosis = _folder(tmp_path, 'diagnosis', 'effects.json')
+    before = {folder: _tree(folder) for folder in (run, diagnosis)}
+    twin = str(REPO / 'config' / 'twin_default.yaml')
+    commands = [
+        (['demo', '--bag', str(bag), '--out', str(run), '--skip-training'], 'a demo'),
+        (['diagnose', '--bag', str(bag), '--out', str(run), '--quiet'], 'a diagnosis'),
+        (['simulate', '--config', twin, '--out', str(run), '--quiet'], 'a bag'),
+        (['train', '--bag', str(bag), '--out', str(diagnosis), '--quiet'], 'a train run'),
+    ]
+    for argv, mine in commands:
+        status, said = _cli(capsys, *argv, '--force')
+        assert status == 2, said
+        assert f'replaces only {mine}' in said, said
+        assert 'Traceback' not in said
+    assert {folder: _tree(folder) for folder in (run, diagnosis)} == before
+
+
+def test_bag_outputs_that_are_files_or_unwritable_are_one_line(tmp_path, capsys):
+    afile = tmp_path / 'afile'
+    afile.write_text('mine')
+    twin = str(REPO / 'config' / 'twin_default.yaml')
+    for out, words in ((afile, 'not a folder but a file'), ('/proc/x', 'cannot write in /proc')):
+        status, said = _cli(capsys, 'simulate', '--config', twin, '--out', str(out), '--force')
+        assert (status, words in said, 'Traceback' in said) == (2, True, False), said
+    assert afile.read_text() == 'mine'
+
+
+def test_train_into_its_bag_is_refused(tmp_path, capsys):
+    bag = _folder(tmp_path, 'bag', 'metadata.yaml', 'bag_0.mcap')
+    status, said = _cli(capsys, 'train', '--bag', str(bag), '--out', str(bag / 'sub'), '--quiet')
+    assert (status, 'lies inside' in said) == (2, True), said
+    assert not (bag / 'sub').exists()
