@@ -164,8 +164,11 @@ def _overload(fx: Fixtures, rate: float) -> Outcome:
 def _killed_replay(fx: Fixtures) -> Outcome:
     """The replay SIGKILLed mid-play: the predictor says stale once and keeps running."""
     with _nodes(fx.path('killed_replay'), listen=True) as (start, listener):
+        # A stale threshold of 25 cycles (200 ms): a loaded machine's stall during the play
+        # must not pass for the silence the kill leaves.
         predictor = start('predictor', {
-            'artifact': str(fx.artifact), 'input_topic': '/reference'}, {})  # fmt: skip
+            'artifact': str(fx.artifact), 'input_topic': '/reference',
+            'stale_after_cycles': 25}, {})  # fmt: skip
         replay = start('replay', {
             'bag': str(fx.bag), 'topics': ['/joint_states'], 'publish_clock': False,
             'wait_for_subscribers': 2}, {})  # fmt: skip

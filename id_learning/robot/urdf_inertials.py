@@ -95,7 +95,8 @@ def check_urdf_inertials(urdf: Path | str) -> list[str]:
             raise RobotModelError(text)
         warnings.append(text)
     if warnings:
-        _LOG.warning('%d URDF link(s) with an inertia no rigid body has, too light to matter: %s',
+        _LOG.warning('%d URDF link(s) whose inertia bends the rigid-body rules where it cannot '
+                     'mislead (too light, a thin rod, the triangle inequality): %s',
                      len(warnings), '; '.join(warnings))  # fmt: skip
     return warnings
 
