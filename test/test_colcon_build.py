@@ -153,7 +153,7 @@ def test_the_installed_nodes_replay_a_bag_and_refuse_bad_parameters(workspace, i
     (folder / 'no_artifact').mkdir(exist_ok=True)
     refusals = {
         'predictor': ('artifact:=no_artifact', 'no_artifact: not a model artifact'),
-        'recorder': ('output:=bag', 'bag: bag folder already exists'),
+        'recorder': ('output:=bag', 'bag: holds a bag already'),
     }
     for node, (parameter, message) in refusals.items():
         result = run_installed(workspace, f'{lib}/{node} --ros-args -p {parameter}', folder)

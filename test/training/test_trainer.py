@@ -366,7 +366,7 @@ def test_a_run_in_the_out_folder_is_kept_unless_force_is_given(bags, mabi, tmp_p
     out = tmp_path / 'run'
     first = train_run(bags[:1], mabi, 'motor', ['rnea_lq'], out, progress=False)
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
-    with pytest.raises(ConfigError, match=r'holds a training run already.*--force'):
+    with pytest.raises(ConfigError, match=r'holds a train run already.*--force'):
         train_run(bags[1:], mabi, 'motor', ['rnea_lq'], out, progress=False)
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
     second = train_run(bags[1:], mabi, 'motor', ['rnea_lq'], out, progress=False, overwrite=True)
