@@ -401,7 +401,40 @@ def _run_cases(fx: Fixtures) -> Iterator[Case]:
             return Outcome('data_lost', f'half an artifact left: {left}') if left else outcome
         return Outcome('silently_accepted', 'saved past the file size limit')
 
+    def force_over_notes() -> Outcome:
+        from id_learning.outputs import result_folder
+
+        out = fx.path('eval_with_notes')
+        shutil.rmtree(out, ignore_errors=True)
+        with result_folder(out, command='evaluate') as folder:  # an evaluation, manifest and all
+            (folder.work / 'metrics.json').write_text('{}')
+        (out / 'my_notes.txt').write_text('precious')
+        before = _tree(out)
+        outcome = cli(evaluate(out, '--force'), expect=('eval_with_notes', 'my_notes.txt'))
+        return _unchanged(outcome, out, before)
+
+    def partial_is_a_file() -> Outcome:
+        from id_learning.outputs import partial_path
+
+        out = fx.path('eval_partial_file')
+        partial = partial_path(out)
+        partial.write_text('precious')
+        outcome = cli(evaluate(out, '--force'), expect=('eval_partial_file.partial', 'not an'))
+        kept = partial.is_file() and partial.read_text() == 'precious'
+        return outcome if kept else Outcome('data_lost', f'{partial} replaced: {outcome.said}')
+
+    def plot_in_a_model() -> Outcome:
+        inner = next((p for p in sorted(run.rglob('*')) if p.is_dir()), run)
+        argv = ['inspect', bag, '--plot', str(inner / 'x.png')]
+        outcome = cli(argv, expect=('x.png', 'holds'))
+        return outcome if not (inner / 'x.png').exists() else Outcome('data_lost', 'plot written')
+
     yield Case('evaluate into the evaluated run, with --force', 'evaluate', into_itself)
+    yield Case('evaluate --force over an evaluation holding a user file', 'evaluate',
+               force_over_notes)  # fmt: skip
+    yield Case('evaluate --force where <out>.partial is a user file', 'evaluate',
+               partial_is_a_file)  # fmt: skip
+    yield Case('inspect --plot inside a model folder of a run', 'inspect', plot_in_a_model)
     yield Case('evaluate into another run', 'evaluate', into_another('out_other_run', 'run.json'))
     yield Case('evaluate into an earlier evaluation', 'evaluate',
                into_another('out_earlier_eval', 'metrics.json'))  # fmt: skip

@@ -8,10 +8,12 @@ Every command that writes a result folder (``train``, ``evaluate``, ``closed-loo
 - everything is written into ``<out>.partial``, which holds ``incomplete.json`` (the command, pid,
   host and start time) until it is complete, so that a folder left by a killed command says what
   it is;
-- when complete, the marker is removed and ``<out>.partial`` renamed to ``<out>``. An existing
-  result there is replaced only with ``force``, and then atomically: moved aside, the new one
-  renamed in, the old one removed. Only a result of the same kind (``folder_holds``) or an
-  empty folder is replaced; never an input of the command, nor a folder holding or inside one.
+- when complete, the marker is replaced by the manifest (``.id_learning.json``, what the command
+  wrote) and ``<out>.partial`` renamed to ``<out>``. An existing result there is replaced only
+  with ``force``, and then atomically: moved aside, the new one renamed in, the old one removed.
+  Only a result of the same kind holding nothing its manifest does not list
+  (``id_learning.output_kinds``) or an empty folder is replaced; never an input of the command,
+  nor a folder holding or inside one. Only a ``.partial`` folder holding the marker is ours.
 
 Bags (``check_bag_output``), sweep folders (``check_kind``) and single files such as plots
 (``check_file_output``) pass the same rule before any work starts.
@@ -25,7 +27,6 @@ has fitted). Consumers ask ``incomplete_reason`` whether a folder they read is c
 from __future__ import annotations
 
 import contextlib
-import errno
 import fcntl
 import json
 import logging
@@ -39,13 +40,28 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from id_learning.errors import ConfigError
+from id_learning.output_kinds import (
+    COMMAND_KINDS,
+    INCOMPLETE_FILE,
+    KINDS,
+    MANIFEST_FILE,
+    Holding,
+    OutputError,
+    check_kind,
+    folder_holds,
+    foreign_entries,
+    os_reason,
+    read_marker,
+    refuse_any_but_results,
+    write_manifest,
+)
 
 __all__ = [
     'COMMAND_KINDS',
     'INCOMPLETE_FILE',
     'KINDS',
     'LOCK_SUFFIX',
+    'MANIFEST_FILE',
     'PARTIAL_SUFFIX',
     'Holding',
     'OutputError',
@@ -56,6 +72,7 @@ __all__ = [
     'check_output',
     'check_target',
     'folder_holds',
+    'foreign_entries',
     'incomplete_reason',
     'os_reason',
     'partial_path',
@@ -70,53 +87,7 @@ PARTIAL_SUFFIX = '.partial'
 LOCK_SUFFIX = '.lock'
 #: Where a replaced result waits, for a moment, to be removed.
 REPLACED_SUFFIX = '.replaced'
-INCOMPLETE_FILE = 'incomplete.json'
 INCOMPLETE_FORMAT = 'id_learning.incomplete/1'
-#: The kinds of output, with how messages name them.
-KINDS = {
-    'run': 'a train run',
-    'evaluation': 'an evaluation',
-    'closed-loop': 'a closed-loop result',
-    'diagnosis': 'a diagnosis',
-    'demo': 'a demo',
-    'bag': 'a bag',
-    'sweep': 'a sweep',
-}
-#: The document saying a folder holds a result of a kind; first match wins (a run has metrics).
-RESULT_KINDS = {
-    'run.json': 'run',
-    'summary.md': 'demo',
-    'closed_loop.json': 'closed-loop',
-    'effects.json': 'diagnosis',
-    'metrics.json': 'evaluation',
-    INCOMPLETE_FILE: 'run',
-}
-#: The kind each result-writing command writes.
-COMMAND_KINDS = {
-    'train': 'run',
-    'evaluate': 'evaluation',
-    'closed-loop': 'closed-loop',
-    'diagnose': 'diagnosis',
-    'demo': 'demo',
-}
-#: What a bag folder may hold besides its .mcap files: the twin's ground truth and config.
-BAG_EXTRAS = frozenset({'metadata.yaml', 'ground_truth.json', 'ground_truth.npz',
-                        'twin_config.yaml'})  # fmt: skip
-#: What a sweep folder holds (``training.sweep``): the study, the best settings, the plots.
-SWEEP_FILES = frozenset({'best.yaml', 'optimisation_history.png', 'parameter_importances.png'})
-
-
-class OutputError(ConfigError):
-    """An output cannot be written: names the path and the reason (the OS's, or a conflict).
-
-    A ``ConfigError``: the ``--out`` given cannot be honoured (callers that refused an existing
-    run with ``ConfigError`` before still catch it).
-    """
-
-
-def os_reason(err: OSError) -> str:
-    """The operating system's words for ``err`` (e.g. 'No space left on device')."""
-    return err.strerror or (errno.errorcode.get(err.errno or 0) if err.errno else None) or str(err)
 
 
 def partial_path(out: Path) -> Path:
@@ -158,18 +129,6 @@ def replace_folder(new: Path, final: Path) -> None:
     shutil.rmtree(aside, ignore_errors=True)
 
 
-def _marker(folder: Path) -> dict[str, Any] | None:
-    """The incomplete marker of ``folder``, or None; an unreadable marker still marks it."""
-    path = folder / INCOMPLETE_FILE
-    if not path.is_file():
-        return None
-    try:
-        document = json.loads(path.read_text(encoding='utf-8'))
-    except (OSError, ValueError):
-        return {}
-    return document if isinstance(document, dict) else {}
-
-
 def _is_alive(pid: object) -> bool:
     if not isinstance(pid, int) or pid <= 0:
         return False
@@ -205,92 +164,17 @@ def incomplete_reason(folder: Path) -> str | None:
     in ``.partial`` then), or it is absent while ``<folder>.partial`` exists.
     """
     folder = Path(folder)
-    marker = _marker(folder)
+    marker = read_marker(folder)
     if marker is not None:
         return f'{folder}: incomplete ({_describe_marker(marker)})'
     partial = partial_path(folder)
-    if not folder.exists() and partial.is_dir():
-        marker = _marker(partial) or {}
+    marker = read_marker(partial) if partial.is_dir() else None
+    if not folder.exists() and marker is not None:
         return (
             f'{folder}: does not exist; only {partial} does, an incomplete result '
             f'({_describe_marker(marker)})'
         )
     return None
-
-
-@dataclass(frozen=True)
-class Holding:
-    """What a folder holds, as its files say: what a command may replace is its own kind.
-
-    Attributes:
-        kind: a key of ``KINDS``, ``'empty'``, ``'torn bag'`` (for ``bag recover``) or
-            ``'foreign'``.
-        evidence: the file(s) that say so, for messages.
-    """
-
-    kind: str
-    evidence: str = ''
-
-    def describe(self) -> str:
-        """'a train run (run.json)', 'files that are not ... (a, b)': for one-line messages."""
-        if self.kind == 'empty':
-            return 'nothing'
-        if self.kind == 'torn bag':
-            return f'a torn bag ({self.evidence} without metadata.yaml; bag recover rebuilds it)'
-        if self.kind == 'foreign':
-            return f'files that are not an id_learning result or a bag ({self.evidence})'
-        return f'{KINDS[self.kind]} ({self.evidence})'
-
-
-def _shown(names: Sequence[str]) -> str:  # the first three, for one-line messages
-    return ', '.join(sorted(names)[:3]) + (', ...' if len(names) > 3 else '')
-
-
-def _marker_kind(folder: Path) -> str:
-    """The kind an incomplete marker's command writes ('run' for an unknown command)."""
-    command = (_marker(folder) or {}).get('command')
-    return COMMAND_KINDS.get(command, 'run') if isinstance(command, str) else 'run'
-
-
-def folder_holds(folder: Path) -> Holding:
-    """What ``folder`` holds by its files: a result of one kind, a bag, a sweep, or else.
-
-    Raises:
-        OSError: ``folder`` cannot be listed.
-    """
-    names = [entry.name for entry in Path(folder).iterdir()]
-    if not names:
-        return Holding('empty')
-    for name, kind in RESULT_KINDS.items():
-        if name in names:
-            return Holding(_marker_kind(folder) if name == INCOMPLETE_FILE else kind, name)
-    mcap = [name for name in names if name.endswith(('.mcap', '.mcap.damaged'))]
-    others = [name for name in names if name not in mcap and name not in BAG_EXTRAS]
-    if mcap and not others:
-        if 'metadata.yaml' in names:
-            return Holding('bag', f'metadata.yaml, {_shown(mcap)}')
-        return Holding('torn bag', _shown(mcap))
-    sweep = [name for name in names if name in SWEEP_FILES or name.startswith('sweep.db')]
-    if len(sweep) == len(names) and {'sweep.db', 'best.yaml'} & set(names):
-        return Holding('sweep', _shown(sweep))
-    return Holding('foreign', _shown(others or names))
-
-
-def _refuse_any_but_results(folder: Path, force: bool) -> None:
-    """Without a kind to match: any result is replaced with ``force``, nothing else ever."""
-    held = folder_holds(folder)
-    if held.kind == 'empty':
-        return
-    if held.kind not in COMMAND_KINDS.values():
-        raise OutputError(
-            f'{folder}: holds {held.describe()}; it is never replaced, not even with '
-            '--force: choose another --out'
-        )
-    if not force:
-        raise OutputError(
-            f'{folder}: holds {KINDS[held.kind]} already ({held.evidence}); choose another '
-            '--out, or pass --force to replace it'
-        )
 
 
 def _probe_parent(out: Path) -> None:
@@ -337,6 +221,8 @@ def check_target(out: Path, *, inputs: Sequence[Path] = (), folder: bool = True)
             reverse; ``out`` is, holds or lies inside an input; its parent cannot be written.
     """
     out = Path(out)
+    if '..' in out.parts:  # 'a/../b' is b: never create a, then leave it
+        out = out.resolve()
     if out.is_symlink():
         if not out.exists():
             raise OutputError(
@@ -353,33 +239,6 @@ def check_target(out: Path, *, inputs: Sequence[Path] = (), folder: bool = True)
     return out
 
 
-def check_kind(out: Path, kind: str, *, force: bool, flag: str = '--force') -> None:
-    """Refuse a folder ``out`` that holds something ``force`` may not replace.
-
-    Only an empty folder, or (with ``force``) one of the same ``kind``, is written; a sweep
-    folder is added to, so for ``kind='sweep'`` a sweep is taken without ``force``.
-
-    Raises:
-        OutputError: names ``out``, what it holds and what ``flag`` replaces.
-    """
-    if not out.is_dir():
-        return
-    try:
-        held = folder_holds(out)
-    except OSError as err:
-        raise OutputError(f'{out}: {os_reason(err)}') from err
-    if held.kind == 'empty' or (held.kind == kind and (force or kind == 'sweep')):
-        return
-    if held.kind == kind:
-        raise OutputError(
-            f'{out}: holds {KINDS[kind]} already ({held.evidence}); choose another path, or '
-            f'pass {flag} to replace it'
-        )
-    raise OutputError(
-        f'{out}: holds {held.describe()}; {flag} replaces only {KINDS[kind]}: choose another path'
-    )
-
-
 def check_bag_output(
     out: Path, *, overwrite: bool = False, inputs: Sequence[Path] = (), flag: str = '--force'
 ) -> Path:
@@ -394,6 +253,25 @@ def check_bag_output(
     out = check_target(out, inputs=inputs)
     check_kind(out, 'bag', force=overwrite, flag=flag)
     return out
+
+
+def _refuse_inside_results(out: Path) -> None:
+    """Refuse a file inside a result folder or a bag, at any depth (another command's)."""
+    for depth, parent in enumerate(out.resolve().parents):
+        try:
+            held = folder_holds(parent) if parent.is_dir() else Holding('empty')
+        except OSError as err:
+            if depth == 0:
+                raise OutputError(f'{parent}: {os_reason(err)}') from err
+            continue  # an ancestor that cannot be listed says nothing
+        if held.kind in ('empty', 'foreign'):
+            continue
+        # Above the file's own folder, a document alone may be a user's: a result there says
+        # so by its manifest, its marker or run.json; a bag by its files.
+        ours = {MANIFEST_FILE, INCOMPLETE_FILE, 'run.json'} & {e.name for e in parent.iterdir()}
+        if depth and held.kind not in ('bag', 'torn bag') and not ours:
+            continue
+        raise OutputError(f'{out}: {parent} holds {held.describe()}; write the file elsewhere')
 
 
 def check_file_output(
@@ -413,15 +291,7 @@ def check_file_output(
         raise OutputError(
             f'{out}: not a file type that can be written here; use one of {", ".join(suffixes)}'
         )
-    if out.parent.is_dir():
-        try:
-            held = folder_holds(out.parent)
-        except OSError as err:
-            raise OutputError(f'{out.parent}: {os_reason(err)}') from err
-        if held.kind not in ('empty', 'foreign'):
-            raise OutputError(
-                f'{out}: {out.parent} holds {held.describe()}; write the file elsewhere'
-            )
+    _refuse_inside_results(out)
     if out.exists() and not force:
         raise OutputError(f'{out}: exists; choose another path, or pass --force to replace it')
     return out
@@ -452,19 +322,31 @@ def check_output(
         if kind is not None:
             check_kind(out, kind, force=force)
         elif out.is_dir():
-            _refuse_any_but_results(out, force)
+            refuse_any_but_results(out, force)
     except OSError as err:
         raise OutputError(f'{out}: {os_reason(err)}') from err
     partial = partial_path(out)
-    if partial.exists() and not force:
-        marker = _marker(partial) if partial.is_dir() else None
-        what = f' ({_describe_marker(marker)})' if marker is not None else ''
-        if is_locked or marker is None or not _is_alive(marker.get('pid')):
-            raise OutputError(
-                f'{partial}: an incomplete result is there{what}; pass --force to replace it, '
-                'or choose another --out'
-            )
+    if not (partial.exists() or partial.is_symlink()):
+        return out
+    marker = _partial_marker(partial)
+    if not force and (is_locked or not _is_alive(marker.get('pid'))):
+        raise OutputError(
+            f'{partial}: an incomplete result is there ({_describe_marker(marker)}); pass '
+            '--force to replace it, or choose another --out'
+        )
     return out
+
+
+def _partial_marker(partial: Path) -> dict[str, Any]:
+    """The marker of ``partial``; refuses a ``.partial`` that is not a folder holding one."""
+    marker = None if partial.is_symlink() or not partial.is_dir() else read_marker(partial)
+    if marker is None:
+        what = 'a folder without ' + INCOMPLETE_FILE if partial.is_dir() else 'not a folder'
+        raise OutputError(
+            f'{partial}: exists and is not an incomplete result of id_learning ({what}); it is '
+            'never replaced, not even with --force: move it, or choose another --out'
+        )
+    return marker
 
 
 @dataclass
@@ -525,10 +407,9 @@ def _locked(out: Path) -> Iterator[None]:
 def _start(out: Path, command: str) -> Path:
     """A fresh ``<out>.partial`` with its marker (an interrupted one is removed first)."""
     work = partial_path(out)
-    if work.is_symlink() or work.is_file():
-        work.unlink()
-    elif work.exists():
-        _refuse_any_but_results(work, force=True)  # never remove what is not ours
+    if work.exists() or work.is_symlink():
+        _partial_marker(work)  # never remove what is not ours
+        refuse_any_but_results(work, force=True)
         shutil.rmtree(work)
     work.mkdir()
     marker = {
@@ -590,6 +471,7 @@ def result_folder(
             folder.work = _start(out, command)
             yield folder
             (folder.work / INCOMPLETE_FILE).unlink()
+            write_manifest(folder.work, command)
             replace_folder(folder.work, out)
         except BaseException as err:
             if not folder.keep:

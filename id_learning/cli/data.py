@@ -25,7 +25,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from id_learning.outputs import check_bag_output
     from id_learning.twin import load_twin_config, simulate, write_twin_output
 
-    check_bag_output(Path(args.out), overwrite=args.force, inputs=[Path(args.config)])
+    out = check_bag_output(Path(args.out), overwrite=args.force, inputs=[Path(args.config)])
 
     overrides = {}
     if args.seed is not None:
@@ -44,7 +44,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         check_duration(args.duration, robot.ipo_period_s, robot.n_joints, '--duration')
         config = replace(config, excitation=replace(config.excitation, duration_s=args.duration))
     result = simulate(config, progress=not args.quiet)
-    write_twin_output(result, config, args.out, overwrite=args.force)
+    write_twin_output(result, config, out, overwrite=args.force)
     print(
         f'wrote {result.recording.n_samples} samples '
         f'({result.recording.duration_s:.1f} s) to {args.out}; '
@@ -60,12 +60,12 @@ def cmd_import(args: argparse.Namespace) -> int:
 
     sources = [Path(source) for source in args.source]
     inputs = [*sources, Path(args.mapping), *([Path(args.robot)] if args.robot else [])]
-    check_bag_output(Path(args.out), overwrite=args.force, inputs=inputs)  # before any work
+    out = check_bag_output(Path(args.out), overwrite=args.force, inputs=inputs)  # before work
     robot = options.load_robot(args)
     reports = import_logs(
         sources,
         load_import_mapping(args.mapping),
-        Path(args.out),
+        out,
         robot=robot,
         overwrite=args.force,
     )
@@ -82,18 +82,19 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     """Print topics, counts, rates, jitter, gaps and ranges of a bag."""
     from id_learning.dataset.inspect import inspect_bag, plot_report, render_report
 
+    plot = None
     if args.plot:  # refused before the bag is read
         from id_learning.dataset.inspect_plot import image_suffixes
         from id_learning.outputs import check_file_output
 
-        check_file_output(
+        plot = check_file_output(
             Path(args.plot), force=args.force, inputs=[Path(args.bag)], suffixes=image_suffixes()
         )
     robot = options.load_robot(args) if args.robot else None
     report = inspect_bag(Path(args.bag), robot=robot)
     print(render_report(report))
-    if args.plot:
-        print(f'plot: {plot_report(report, Path(args.plot))}')
+    if plot is not None:
+        print(f'plot: {plot_report(report, plot)}')
     return 0
 
 

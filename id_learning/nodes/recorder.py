@@ -108,6 +108,7 @@ class Recorder(Node):
             split_duration_ns=round(config.split_duration_s * 1e9) or None,
             split_bytes=round(config.split_size_mib * MIB) or None,
         ).open()
+        self.path = self.writer.path  # normalised: "a/../b" is b
         self.counts = {topic: TopicCounts() for topic in config.topics}
         self.flushes = 0
         #: The failed write that ended the recording, or None.

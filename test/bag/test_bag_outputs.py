@@ -119,3 +119,14 @@ def test_the_recorder_refuses_a_run_or_a_file_at_start(tmp_path, run):
         assert (done.returncode, words in said, 'Traceback' in said) == (2, True, False), said
     assert _tree(run) == before
     assert afile.read_text() == 'mine'
+
+
+def test_overwrite_never_deletes_a_file_the_metadata_does_not_list(tmp_path, bag):
+    copy = tmp_path / 'copy'
+    copy.mkdir()
+    for file in bag.iterdir():
+        (copy / file.name).write_bytes(file.read_bytes())
+    (copy / 'extra.mcap').write_text('mine')  # an .mcap file, but not the bag's
+    with pytest.raises(OutputError, match=r'extra\.mcap, which its metadata\.yaml does not'):
+        BagWriter(copy, overwrite=True).open()
+    assert (copy / 'extra.mcap').read_text() == 'mine'

@@ -79,7 +79,7 @@ def test_a_result_is_written_beside_its_folder_and_renamed_there_when_complete(t
         assert (tmp_path / 'deep' / 'result.lock').exists()
         (folder.work / 'metrics.json').write_text('{}')
     assert sorted(p.name for p in (tmp_path / 'deep').iterdir()) == ['result']
-    assert sorted(p.name for p in out.iterdir()) == ['metrics.json']
+    assert sorted(p.name for p in out.iterdir()) == ['.id_learning.json', 'metrics.json']
 
 
 def test_a_failure_leaves_nothing_and_a_kept_partial_says_it_is_incomplete(tmp_path):
@@ -107,7 +107,8 @@ def test_an_existing_result_is_replaced_only_with_force_and_then_whole(tmp_path)
     assert (out / 'metrics.json').read_text() == 'old'
     with result_folder(out, command='evaluate', force=True) as folder:
         (folder.work / 'metrics.json').write_text('new')
-    assert _tree(out) == {'metrics.json': b'new'}  # nothing of the old one is left
+    assert _tree(out).keys() == {'metrics.json', '.id_learning.json'}  # nothing old is left
+    assert (out / 'metrics.json').read_text() == 'new'
     assert sorted(p.name for p in tmp_path.iterdir()) == ['result']
 
 

@@ -3,6 +3,7 @@ nor a folder inside one; every output path is checked before any work, in one cl
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -10,12 +11,16 @@ from support import REPO
 
 from id_learning.cli.main import main
 from id_learning.outputs import (
+    MANIFEST_FILE,
     OutputError,
     check_bag_output,
     check_file_output,
     check_kind,
     check_output,
     folder_holds,
+    foreign_entries,
+    incomplete_reason,
+    result_folder,
 )
 
 #: One document per kind of result (what ``folder_holds`` reads).
@@ -164,3 +169,50 @@ def test_train_into_its_bag_is_refused(tmp_path, capsys):
     status, said = _cli(capsys, 'train', '--bag', str(bag), '--out', str(bag / 'sub'), '--quiet')
     assert (status, 'lies inside' in said) == (2, True), said
     assert not (bag / 'sub').exists()
+
+
+def test_force_never_deletes_a_file_the_manifest_does_not_list(tmp_path):
+    out = tmp_path / 'eval'
+    for _ in range(2):  # the second replaces the first: nothing foreign
+        with result_folder(out, command='evaluate', force=True) as folder:
+            (folder.work / 'metrics.json').write_text('{}')
+    assert json.loads((out / MANIFEST_FILE).read_text())['entries'] == ['metrics.json']
+    (out / 'my_notes.txt').write_text('precious')
+    with pytest.raises(OutputError, match=r'my_notes\.txt, which its \.id_learning\.json'):
+        check_output(out, force=True, kind='evaluation')
+    assert (out / 'my_notes.txt').read_text() == 'precious'
+    assert foreign_entries(out, 'evaluation') == ['my_notes.txt']
+
+
+@pytest.mark.parametrize('force', [False, True])
+def test_a_partial_that_is_not_ours_is_refused_and_kept(tmp_path, force):
+    out = tmp_path / 'eval'
+    (tmp_path / 'eval.partial').write_text('precious')
+    with pytest.raises(OutputError, match=r'eval\.partial: exists and is not an incomplete'):
+        check_output(out, force=force, kind='evaluation')
+    (tmp_path / 'eval.partial').unlink()
+    _folder(tmp_path, 'eval.partial', 'mine.txt')
+    with pytest.raises(OutputError, match=r'a folder without incomplete\.json'):
+        check_output(out, force=force, kind='evaluation')
+    assert (tmp_path / 'eval.partial' / 'mine.txt').exists()
+    assert incomplete_reason(out) is None
+
+
+def test_a_plot_is_refused_anywhere_inside_a_result_or_a_bag(tmp_path):
+    with result_folder(tmp_path / 'run', command='train') as folder:
+        (folder.work / 'run.json').write_text('{}')
+        (folder.work / 'models' / 'mlp').mkdir(parents=True)
+    with pytest.raises(OutputError, match=r'run holds a train run'):
+        check_file_output(tmp_path / 'run' / 'models' / 'mlp' / 'x.png')
+    bag = _folder(tmp_path, 'bag', 'metadata.yaml', 'bag_0.mcap')
+    with pytest.raises(OutputError, match=r'bag holds a bag'):
+        check_file_output(bag / 'x.png')
+    user = _folder(tmp_path, 'mine', 'metrics.json')  # a user's document, no manifest
+    (user / 'plots').mkdir()
+    assert check_file_output(user / 'plots' / 'x.png') == user / 'plots' / 'x.png'
+
+
+def test_a_dotdot_path_creates_no_folder_it_leaves(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert check_output(Path('rel/../rec'), kind='evaluation') == tmp_path / 'rec'
+    assert not (tmp_path / 'rel').exists()

@@ -1,0 +1,293 @@
+"""What a folder holds, and what a command may replace: kinds of result, manifests, bags.
+
+A result folder says its kind by one document (``RESULT_KINDS``); once complete it also holds
+``.id_learning.json``, the manifest listing the entries its command wrote. A bag lists its files
+in ``metadata.yaml``; the twin's ground-truth files are known (``BAG_EXTRAS``). ``--force``
+replaces a folder of its own kind only when it holds nothing else: an entry neither listed nor
+known is foreign, and a folder holding one is never replaced. A result written before manifests
+existed is judged by its kind alone.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from id_learning.errors import ConfigError
+
+__all__ = [
+    'BAG_EXTRAS',
+    'COMMAND_KINDS',
+    'INCOMPLETE_FILE',
+    'KINDS',
+    'MANIFEST_FILE',
+    'RESULT_KINDS',
+    'SWEEP_FILES',
+    'Holding',
+    'OutputError',
+    'check_kind',
+    'folder_holds',
+    'foreign_entries',
+    'os_reason',
+    'read_marker',
+    'refuse_any_but_results',
+    'write_manifest',
+]
+
+INCOMPLETE_FILE = 'incomplete.json'
+#: The manifest of a complete result folder: its command, kind and top-level entries.
+MANIFEST_FILE = '.id_learning.json'
+MANIFEST_FORMAT = 'id_learning.manifest/1'
+#: The kinds of output, with how messages name them.
+KINDS = {
+    'run': 'a train run',
+    'evaluation': 'an evaluation',
+    'closed-loop': 'a closed-loop result',
+    'diagnosis': 'a diagnosis',
+    'demo': 'a demo',
+    'bag': 'a bag',
+    'sweep': 'a sweep',
+}
+#: The document saying a folder holds a result of a kind; first match wins (a run has metrics).
+RESULT_KINDS = {
+    'run.json': 'run',
+    'summary.md': 'demo',
+    'closed_loop.json': 'closed-loop',
+    'effects.json': 'diagnosis',
+    'metrics.json': 'evaluation',
+    INCOMPLETE_FILE: 'run',
+}
+#: The kind each result-writing command writes.
+COMMAND_KINDS = {
+    'train': 'run',
+    'evaluate': 'evaluation',
+    'closed-loop': 'closed-loop',
+    'diagnose': 'diagnosis',
+    'demo': 'demo',
+}
+#: What a bag folder may hold besides its .mcap files: the twin's ground truth and config.
+BAG_EXTRAS = frozenset({'metadata.yaml', 'ground_truth.json', 'ground_truth.npz',
+                        'twin_config.yaml'})  # fmt: skip
+#: What a sweep folder holds (``training.sweep``): the study, the best settings, the plots.
+SWEEP_FILES = frozenset({'best.yaml', 'optimisation_history.png', 'parameter_importances.png'})
+
+
+class OutputError(ConfigError):
+    """An output cannot be written: names the path and the reason (the OS's, or a conflict).
+
+    A ``ConfigError``: the ``--out`` given cannot be honoured (callers that refused an existing
+    run with ``ConfigError`` before still catch it).
+    """
+
+
+def os_reason(err: OSError) -> str:
+    """The operating system's words for ``err`` (e.g. 'No space left on device')."""
+    return err.strerror or (errno.errorcode.get(err.errno or 0) if err.errno else None) or str(err)
+
+
+def read_marker(folder: Path) -> dict[str, Any] | None:
+    """The incomplete marker of ``folder``, or None; an unreadable marker still marks it."""
+    path = folder / INCOMPLETE_FILE
+    if not path.is_file():
+        return None
+    try:
+        document = json.loads(path.read_text(encoding='utf-8'))
+    except (OSError, ValueError):
+        return {}
+    return document if isinstance(document, dict) else {}
+
+
+@dataclass(frozen=True)
+class Holding:
+    """What a folder holds, as its files say: what a command may replace is its own kind.
+
+    Attributes:
+        kind: a key of ``KINDS``, ``'empty'``, ``'torn bag'`` (for ``bag recover``) or
+            ``'foreign'``.
+        evidence: the file(s) that say so, for messages.
+    """
+
+    kind: str
+    evidence: str = ''
+
+    def describe(self) -> str:
+        """'a train run (run.json)', 'files that are not ... (a, b)': for one-line messages."""
+        if self.kind == 'empty':
+            return 'nothing'
+        if self.kind == 'torn bag':
+            return f'a torn bag ({self.evidence} without metadata.yaml; bag recover rebuilds it)'
+        if self.kind == 'foreign':
+            return f'files that are not an id_learning result or a bag ({self.evidence})'
+        return f'{KINDS[self.kind]} ({self.evidence})'
+
+
+def _shown(names: Sequence[str]) -> str:  # the first three, for one-line messages
+    return ', '.join(sorted(names)[:3]) + (', ...' if len(names) > 3 else '')
+
+
+def _marker_kind(folder: Path) -> str:
+    """The kind an incomplete marker's command writes ('run' for an unknown command)."""
+    command = (read_marker(folder) or {}).get('command')
+    return COMMAND_KINDS.get(command, 'run') if isinstance(command, str) else 'run'
+
+
+def folder_holds(folder: Path) -> Holding:
+    """What ``folder`` holds by its files: a result of one kind, a bag, a sweep, or else.
+
+    Raises:
+        OSError: ``folder`` cannot be listed.
+    """
+    names = [entry.name for entry in Path(folder).iterdir()]
+    if not names:
+        return Holding('empty')
+    for name, kind in RESULT_KINDS.items():
+        if name in names:
+            return Holding(_marker_kind(folder) if name == INCOMPLETE_FILE else kind, name)
+    mcap = [name for name in names if name.endswith(('.mcap', '.mcap.damaged'))]
+    others = [name for name in names if name not in mcap and name not in BAG_EXTRAS]
+    if mcap and not others:
+        if 'metadata.yaml' in names:
+            return Holding('bag', f'metadata.yaml, {_shown(mcap)}')
+        return Holding('torn bag', _shown(mcap))
+    sweep = [name for name in names if name in SWEEP_FILES or name.startswith('sweep.db')]
+    if len(sweep) == len(names) and {'sweep.db', 'best.yaml'} & set(names):
+        return Holding('sweep', _shown(sweep))
+    return Holding('foreign', _shown(others or names))
+
+
+def write_manifest(folder: Path, command: str) -> None:
+    """Record in ``folder`` what ``command`` wrote there: its top-level entries, and the kind.
+
+    Raises:
+        OSError: listing ``folder`` or writing the manifest failed.
+    """
+    entries = sorted(entry.name for entry in folder.iterdir() if entry.name != MANIFEST_FILE)
+    document = {
+        'format': MANIFEST_FORMAT,
+        'command': command,
+        'kind': COMMAND_KINDS.get(command, 'run'),
+        'entries': entries,
+    }
+    (folder / MANIFEST_FILE).write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
+
+
+def _listed(document: object, key: str) -> set[str] | None:
+    """The strings of ``document[key]`` (a list), or None when it is not such a list."""
+    if not isinstance(document, dict):
+        return None
+    listed = document.get(key)
+    if not isinstance(listed, list) or not all(isinstance(name, str) for name in listed):
+        return None
+    return set(listed)
+
+
+def _manifest_entries(folder: Path) -> set[str] | None:
+    """The entries the manifest of ``folder`` lists; None without one; empty when unreadable."""
+    path = folder / MANIFEST_FILE
+    if not path.exists():
+        return None
+    try:
+        document = json.loads(path.read_text(encoding='utf-8'))
+    except (OSError, ValueError):
+        return set()
+    return _listed(document, 'entries') or set()
+
+
+def _bag_entries(folder: Path) -> set[str] | None:
+    """The files a bag's ``metadata.yaml`` lists, with ``BAG_EXTRAS``; None when it lists none."""
+    try:
+        document = yaml.safe_load((folder / 'metadata.yaml').read_text(encoding='utf-8'))
+    except (OSError, yaml.YAMLError):
+        return None
+    info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
+    listed = _listed(info, 'relative_file_paths')
+    if listed is None:
+        return None
+    return set(BAG_EXTRAS) | {Path(name).parts[0] for name in listed if Path(name).parts}
+
+
+def foreign_entries(folder: Path, kind: str) -> list[str]:
+    """The entries of ``folder`` (of ``kind``) that its writer did not write, sorted.
+
+    A result: those its manifest does not list; a bag: those neither its ``metadata.yaml`` lists
+    nor known. None without a manifest or a list of files (written before they existed, or by
+    another tool): then its kind alone decides.
+
+    Raises:
+        OSError: ``folder`` cannot be listed.
+    """
+    names = {entry.name for entry in folder.iterdir()}
+    if kind not in (*COMMAND_KINDS.values(), 'bag'):
+        return []
+    listed = _bag_entries(folder) if kind == 'bag' else _manifest_entries(folder)
+    if listed is None:
+        return []
+    return sorted(names - listed - {MANIFEST_FILE})
+
+
+def _refuse_foreign(folder: Path, kind: str, flag: str) -> None:
+    """Refuse replacing ``folder`` when it holds entries its writer did not write (named)."""
+    foreign = foreign_entries(folder, kind)
+    if foreign:
+        source = 'metadata.yaml' if kind == 'bag' else MANIFEST_FILE
+        raise OutputError(
+            f'{folder}: holds {KINDS[kind]} and also {_shown(foreign)}, which its {source} does '
+            f'not list; {flag} never deletes them: move them out, or choose another path'
+        )
+
+
+def refuse_any_but_results(folder: Path, force: bool) -> None:
+    """Without a kind to match: any result is replaced with ``force``, nothing else ever."""
+    held = folder_holds(folder)
+    if held.kind == 'empty':
+        return
+    if held.kind not in COMMAND_KINDS.values():
+        raise OutputError(
+            f'{folder}: holds {held.describe()}; it is never replaced, not even with '
+            '--force: choose another --out'
+        )
+    if not force:
+        raise OutputError(
+            f'{folder}: holds {KINDS[held.kind]} already ({held.evidence}); choose another '
+            '--out, or pass --force to replace it'
+        )
+    _refuse_foreign(folder, held.kind, '--force')
+
+
+def check_kind(out: Path, kind: str, *, force: bool, flag: str = '--force') -> None:
+    """Refuse a folder ``out`` that holds something ``force`` may not replace.
+
+    Only an empty folder, or (with ``force``) one of the same ``kind``, is written; a sweep
+    folder is added to, so for ``kind='sweep'`` a sweep is taken without ``force``.
+
+    Raises:
+        OutputError: names ``out``, what it holds and what ``flag`` replaces.
+    """
+    if not out.is_dir():
+        return
+    try:
+        held = folder_holds(out)
+    except OSError as err:
+        raise OutputError(f'{out}: {os_reason(err)}') from err
+    if held.kind == 'empty' or (held.kind == kind and kind == 'sweep'):
+        return
+    if held.kind == kind and force:
+        try:
+            _refuse_foreign(out, kind, flag)
+        except OSError as err:
+            raise OutputError(f'{out}: {os_reason(err)}') from err
+        return
+    if held.kind == kind:
+        raise OutputError(
+            f'{out}: holds {KINDS[kind]} already ({held.evidence}); choose another path, or '
+            f'pass {flag} to replace it'
+        )
+    raise OutputError(
+        f'{out}: holds {held.describe()}; {flag} replaces only {KINDS[kind]}: choose another path'
+    )
