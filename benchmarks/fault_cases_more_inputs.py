@@ -30,6 +30,10 @@ def more_input_cases(fx: Fixtures) -> Iterator[Case]:
     yield from _bag_cases(fx)
     yield from _twin_cases(fx)
     yield from _sweep_cases(fx)
+    yield from _type_cases(fx)
+    yield from _repeat_cases(fx)
+    yield from _contradiction_cases(fx)
+    yield from _metadata_cases(fx)
 
 
 # -- helpers --------------------------------------------------------------------------------------
@@ -229,3 +233,93 @@ def _sweep_cases(fx: Fixtures) -> Iterator[Case]:
                    expect=('/no/such/dir', 'does not exist'))  # fmt: skip
 
     yield Case('sweep storage in a missing folder', 'sweep', missing_folder)
+
+
+# -- strings where numbers belong -----------------------------------------------------------------
+def _type_cases(fx: Fixtures) -> Iterator[Case]:
+    def twin(value: object) -> Outcome:
+        def change(data: dict) -> None:
+            data['effects']['viscous_friction']['coefficient'] = value
+
+        config = _twin_file(fx, 'quoted', change)
+        return cli(['simulate', '--config', str(config), '--out',
+                    str(fx.path('more_twin_quoted_out')), '--quiet'],
+                   expect=('coefficient', "'420'", 'without quotes'))  # fmt: skip
+
+    yield Case("twin coefficient '420'", 'simulate', lambda: twin('420'))
+    yield Case("twin coefficient ['420']*6", 'simulate', lambda: twin(['420'] * 6))
+
+    def robot(key: str) -> Outcome:
+        import yaml
+
+        data = yaml.safe_load(ROBOT_FILE.read_text())
+        data['urdf'] = str((ROBOT_FILE.parent / data['urdf']).resolve())
+        if key == 'gear_ratio':
+            data['drives']['gear_ratio'] = '205'
+        else:
+            data[key] = '10'
+        path = fx.path(f'more_robot_{key}.yaml')
+        path.write_text(yaml.safe_dump(data, sort_keys=False))
+        return _train(fx, f'robot_{key}', '--robot', str(path),
+                      expect=(path.name, key, 'without quotes'))  # fmt: skip
+
+    for key in ('gear_ratio', 'input_smoothing_hz'):
+        yield Case(f'robot config {key} quoted', 'train', lambda k=key: robot(k))
+
+
+# -- a value given twice in a list ----------------------------------------------------------------
+def _repeat_cases(fx: Fixtures) -> Iterator[Case]:
+    yield Case('train --models rnea_lq,rnea_lq', 'train',
+               lambda: _train(fx, 'twice', '--models', 'rnea_lq,rnea_lq',
+                              expect=('--models', 'rnea_lq given twice')))  # fmt: skip
+
+    def effects() -> Outcome:
+        return cli(['diagnose', '--bag', str(fx.bag), '--effects', 'cogging,cogging', '--out',
+                    str(fx.path('more_diag_twice')), '--quiet', '--force'],
+                   expect=('--effects', 'cogging given twice'))  # fmt: skip
+
+    yield Case('diagnose --effects cogging,cogging', 'diagnose', effects)
+
+    def study_name() -> Outcome:
+        return cli(['sweep', '--bag', str(fx.bag), '--model', 'rnea_lq', '--study-name', '',
+                    '--out', str(fx.path('more_sweep_name'))],
+                   expect=('--study-name', 'must not be empty'))  # fmt: skip
+
+    yield Case("sweep --study-name ''", 'sweep', study_name)
+
+
+# -- contradictory options ------------------------------------------------------------------------
+def _contradiction_cases(fx: Fixtures) -> Iterator[Case]:
+    yield Case('train --split contiguous --split-seed 7', 'train',
+               lambda: _train(fx, 'seed', '--split', 'contiguous', '--split-seed', '7',
+                              expect=('--split-seed', '--split contiguous')))  # fmt: skip
+
+    def demo(option: str, value: str) -> Outcome:
+        return cli(['demo', '--bag', str(fx.bag), '--skip-training', option, value, '--out',
+                    str(fx.path('more_demo_contradiction')), '--force'],
+                   expect=(option, '--skip-training'))  # fmt: skip
+
+    yield Case('demo --skip-training --train-seconds 5', 'demo',
+               lambda: demo('--train-seconds', '5'))  # fmt: skip
+    yield Case('demo --skip-training --online-seconds 1', 'demo',
+               lambda: demo('--online-seconds', '1'))  # fmt: skip
+
+
+# -- metadata.yaml contradicting the files --------------------------------------------------------
+def _metadata_cases(fx: Fixtures) -> Iterator[Case]:
+    def lying() -> Outcome:
+        import yaml
+
+        folder = fx.path('more_bag_metadata')
+        if not folder.exists():
+            shutil.copytree(fx.bag, folder)
+            path = folder / 'metadata.yaml'
+            data = yaml.safe_load(path.read_text())
+            info = data['rosbag2_bagfile_information']
+            info['message_count'] += 5
+            info['duration']['nanoseconds'] = -1
+            path.write_text(yaml.safe_dump(data, sort_keys=False))
+        return cli(['inspect', str(folder)], expect=(),
+                   handled=('metadata: message_count', 'metadata: duration -1'))  # fmt: skip
+
+    yield Case('inspect a bag whose metadata.yaml lies', 'inspect', lying)

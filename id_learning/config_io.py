@@ -220,6 +220,33 @@ def readonly(array: np.ndarray) -> np.ndarray:
     return array
 
 
+def _looks_numeric(text: str) -> bool:
+    """Whether ``text`` reads as a number (a quoted number in YAML)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _word_among_numbers(value: Any) -> object | None:
+    """The first str, bytes or bool in ``value`` (a scalar or nested list), or None.
+
+    numpy turns '420' and True into 420.0 and 1.0 without a word; a config that quotes a number
+    or writes a flag where a number belongs is refused instead.
+    """
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        return value
+    if isinstance(value, np.ndarray):
+        return None if value.dtype.kind in 'iuf' else _word_among_numbers(value.tolist())
+    if isinstance(value, (list, tuple)):
+        for entry in value:
+            word = _word_among_numbers(entry)
+            if word is not None:
+                return word
+    return None
+
+
 def float_vector(
     value: Any,
     where: str,
@@ -233,8 +260,16 @@ def float_vector(
     A scalar is broadcast to every joint.
 
     Raises:
-        ConfigError: wrong length, non-numeric or non-finite entries, or a value below the minimum.
+        ConfigError: wrong length, non-numeric entries (a quoted number such as '420' or a
+            bool included), non-finite entries, or a value below the minimum.
     """
+    word = _word_among_numbers(value)
+    if word is not None:
+        hint = ''
+        if isinstance(word, str) and _looks_numeric(word):
+            hint = f'; write the number without quotes: {word.strip()}'
+        context = '' if word is value else f' in {value!r}'
+        raise ConfigError(f'{where}: expected numbers, got {word!r}{context}{hint}')
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError) as err:

@@ -82,6 +82,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     """Print topics, counts, rates, jitter, gaps and ranges of a bag."""
     from id_learning.dataset.inspect import inspect_bag, plot_report, render_report
 
+    options.refuse_contradictions(args, [('--force', '!--plot', 'there is no plot to replace')])
     plot = None
     if args.plot:  # refused before the bag is read
         from id_learning.dataset.inspect_plot import image_suffixes

@@ -8,7 +8,6 @@ so it sits on top of their modules; the online check is imported only when it ru
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,12 @@ DEMO_MODELS = 'study,rnea_id,rnea_effects'
 DEMO_PHYSICS_SECONDS = 300.0
 #: Budget per model in ``demo``: seven models on the shipped bag within 10 minutes on 2 cores.
 DEMO_SECONDS_PER_MODEL = 60.0
+#: The defaults of the options that default to None, so that --skip-training can refuse them.
+_SECONDS_DEFAULTS = {
+    'train_seconds': DEMO_SECONDS_PER_MODEL,
+    'online_seconds': 30.0,
+    'closed_loop_seconds': 60.0,
+}
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -38,6 +43,21 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """
     from id_learning.outputs import result_folder
 
+    options.refuse_contradictions(
+        args,
+        [
+            (option, '--skip-training', 'nothing is trained')
+            for option in (
+                '--train-seconds',
+                '--online-seconds',
+                '--closed-loop-seconds',
+                '--study-table',
+            )
+        ],
+    )
+    for key, default in _SECONDS_DEFAULTS.items():  # None marks an option not given
+        if getattr(args, key) is None:
+            setattr(args, key, default)
     robot = options.load_robot(args)
     options.model_kinds(args.models)  # unknown kinds refused even with --skip-training
     bag = Path(args.bag or default_bag())
@@ -51,7 +71,6 @@ def _demo_into(args: argparse.Namespace, robot: Any, bag: Path, folder: Any) -> 
     from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
     from id_learning.dataset.recording import load_recording
     from id_learning.evaluation.data_summary import write_summary
-    from id_learning.twin import GROUND_TRUTH_ARRAYS, GROUND_TRUTH_JSON
 
     out, shown = folder.work, folder.out
     print(f'loading {bag} ...', flush=True)
@@ -63,14 +82,10 @@ def _demo_into(args: argparse.Namespace, robot: Any, bag: Path, folder: Any) -> 
         )
     preprocess = PreprocessConfig(target=args.target, mode=args.preprocessing)
     dataset = prepare_dataset(recording, robot, preprocess)
-    ground_truth = tau_clean = None
-    if (bag / GROUND_TRUTH_JSON).is_file():
-        ground_truth = json.loads((bag / GROUND_TRUTH_JSON).read_text(encoding='utf-8'))
-        import numpy as np
+    from id_learning.twin.ground_truth import read_ground_truth
 
-        with np.load(bag / GROUND_TRUTH_ARRAYS) as arrays:
-            key = 'tau_u_clean' if args.target == 'motor' else 'tau_joint_clean'
-            tau_clean = arrays[key].astype(float)
+    truth = read_ground_truth(bag, args.target)  # a damaged one is refused, naming the file
+    ground_truth, tau_clean = (truth.info, truth.tau_clean) if truth else (None, None)
     summary = write_summary(dataset, robot, out, ground_truth=ground_truth, tau_clean=tau_clean)
     print(
         f'{summary.n_samples} samples, {summary.duration_s:.0f} s; '
@@ -225,7 +240,6 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument(
         '--train-seconds',
         type=options.positive_float,
-        default=DEMO_SECONDS_PER_MODEL,
         help=f'wall-clock budget per model fit [s] (default {DEMO_SECONDS_PER_MODEL:g}); the '
         f'identification and the diagnosis get at least {DEMO_PHYSICS_SECONDS:g} s',
     )
@@ -234,14 +248,12 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument(
         '--online-seconds',
         type=options.finite(0.0, 86400.0),
-        default=30.0,
-        help='seconds of the test part replayed through the predictor node (0: skip)',
+        help='seconds of the test part replayed through the predictor node (default 30; 0: skip)',
     )
     p.add_argument(
         '--closed-loop-seconds',
         type=options.finite(0.0, 86400.0),
-        default=60.0,
-        help="seconds of the test part tracked in the twin's closed loop (0: skip)",
+        help="seconds of the test part tracked in the twin's closed loop (default 60; 0: skip)",
     )
     p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
     options.study_table_option(p)

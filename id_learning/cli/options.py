@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 __all__ = [
     'PREPROCESSING_CHOICES',
     'SEED_MAX',
+    'SPLIT_SEED_CONTRADICTION',
     'bag_paths',
     'comma_names',
     'effect_names',
@@ -31,9 +32,12 @@ __all__ = [
     'integer',
     'load_robot',
     'model_kinds',
+    'non_empty_name',
     'positive_float',
     'preprocessing_option',
+    'refuse_contradictions',
     'robot_option',
+    'split_seed',
     'target_option',
 ]
 
@@ -84,8 +88,23 @@ def split_option(p: argparse.ArgumentParser) -> None:
         'the bags stay whole in time either way',
     )
     p.add_argument(
-        '--split-seed', type=seed, default=0, help='seeds the draw of a shuffled split (default 0)'
+        '--split-seed',
+        type=seed,
+        help='seeds the draw of a shuffled split (default 0); only with --split shuffled',
     )
+
+
+def split_seed(args: argparse.Namespace) -> int:
+    """The seed of ``--split-seed``, 0 when not given (None marks it absent)."""
+    return 0 if args.split_seed is None else int(args.split_seed)
+
+
+#: ``--split-seed`` beside a contiguous split: for ``refuse_contradictions``.
+SPLIT_SEED_CONTRADICTION = (
+    '--split-seed',
+    '--split=contiguous',
+    'only a shuffled split draws samples at random',
+)
 
 
 def trim_option(p: argparse.ArgumentParser) -> None:
@@ -194,13 +213,13 @@ def model_kinds(text: str) -> list[str]:
     physics.
 
     Raises:
-        ConfigError: an unknown kind (the message lists the known ones).
+        ConfigError: an unknown kind (the message lists the known ones), or an item given twice.
     """
     from id_learning.models.registry import MODEL_KINDS, STUDY_MODELS
 
     groups = {'all': tuple(MODEL_KINDS), 'study': STUDY_MODELS}
     kinds: list[str] = []
-    for item in (item.strip() for item in text.split(',')):
+    for item in comma_names(text, '--models'):
         for kind in groups.get(item, (item,) if item else ()):
             if kind not in kinds:
                 kinds.append(kind)
@@ -284,11 +303,11 @@ def effect_names(text: str | None, option: str = '--effects') -> list[str] | Non
 
     Raises:
         ConfigError: the option is given but names nothing ('' or ','): an empty selection is
-            refused rather than read as the default set.
+            refused rather than read as the default set; or it names an effect twice.
     """
     if text is None:
         return None
-    names = comma_names(text)
+    names = comma_names(text, option)
     if not names:
         raise ConfigError(
             f'{option} {text!r}: names no effect; name some, or leave it out for all'
@@ -307,6 +326,60 @@ def bag_paths(items: Sequence[str] | None, option: str = '--bag') -> list[Path]:
     return check_distinct(list(items or ()), option)
 
 
-def comma_names(text: str) -> list[str]:
-    """The non-empty items of a comma-separated list, stripped."""
-    return [item.strip() for item in text.split(',') if item.strip()]
+def comma_names(text: str, option: str | None = None) -> list[str]:
+    """The non-empty items of a comma-separated list, stripped.
+
+    Raises:
+        ConfigError: ``option`` is given and an item repeats (a repeat is a typo, never a
+            weight); the message names the option and the item.
+    """
+    names = [item.strip() for item in text.split(',') if item.strip()]
+    if option is not None:
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise ConfigError(
+                f'{option} {text!r}: {", ".join(repeated)} given twice; name each once'
+            )
+    return names
+
+
+def non_empty_name(text: str) -> str:
+    """An argparse type: a name with something in it ('' and blanks refused)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError('must not be empty')
+    return text
+
+
+def refuse_contradictions(args: argparse.Namespace, pairs: Sequence[tuple[str, str, str]]) -> None:
+    """Refuse an option that means nothing beside another one given, naming both.
+
+    Each command calls this first, before it reads a file, so the refusal costs nothing.
+
+    Args:
+        args: the parsed options.
+        pairs: (option, other, why) triples. ``option`` counts as given when its value is not
+            None (or, for a flag, True): such options default to None, so that a value typed
+            equal to the default is caught too. ``other`` is an option (``--skip-training``,
+            given when set) or ``--option=value`` (given when it has that value); a leading
+            '!' (``!--plot``) refuses ``option`` when ``other`` is absent instead.
+
+    Raises:
+        ConfigError: ``option`` and ``other`` are both given; the one line names both.
+    """
+    for option, other, why in pairs:
+        value = getattr(args, _dest(option), None)
+        if value is None or value is False:
+            continue
+        absent = other.startswith('!')
+        name, _, wanted = other.lstrip('!').partition('=')
+        present = getattr(args, _dest(name), None)
+        given = (str(present) == wanted) if wanted else present not in (None, False)
+        if given != absent:
+            shown = f'{name} {wanted}' if wanted else name
+            relation = 'without' if absent else 'with'
+            raise ConfigError(f'{option} means nothing {relation} {shown}: {why}')
+
+
+def _dest(option: str) -> str:
+    """The argparse attribute of an option: '--split-seed' -> 'split_seed'."""
+    return option.lstrip('-').replace('-', '_')

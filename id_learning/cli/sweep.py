@@ -22,6 +22,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from id_learning.dataset.preprocess import PreprocessConfig
     from id_learning.training.sweep import run_sweep
 
+    options.refuse_contradictions(args, [options.SPLIT_SEED_CONTRADICTION])
     robot = options.load_robot(args)
     result = run_sweep(
         options.bag_paths(args.bag),
@@ -37,7 +38,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             target=args.target,
             mode=args.preprocessing,
             split=args.split,
-            split_seed=args.split_seed,
+            split_seed=options.split_seed(args),
         ),
         progress=not args.quiet,
         seed=args.seed,
@@ -84,7 +85,9 @@ def add_sweep_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
         help='wait at most this long for a locked SQLite file or an unreachable server before '
         'giving up (10)',
     )
-    p.add_argument('--study-name', help='the study (default: KIND-TARGET)')
+    p.add_argument(
+        '--study-name', type=options.non_empty_name, help='the study (default: KIND-TARGET)'
+    )
     p.add_argument('--out', required=True, help='folder for best.yaml, plots and the SQLite db')
     p.add_argument(
         '--max-seconds-per-trial',

@@ -74,6 +74,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from id_learning.dataset.preprocess import PreprocessConfig
     from id_learning.training import train_run
 
+    options.refuse_contradictions(args, [options.SPLIT_SEED_CONTRADICTION])
     robot = options.load_robot(args)
     run = train_run(
         options.bag_paths(args.bag),
@@ -86,7 +87,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         device=args.device,
         preprocess=PreprocessConfig(
-            mode=args.preprocessing, split=args.split, split_seed=args.split_seed
+            mode=args.preprocessing, split=args.split, split_seed=options.split_seed(args)
         ),
         study_table=options.study_table(args, robot),
         overwrite=args.force,

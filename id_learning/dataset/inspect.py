@@ -22,7 +22,15 @@ from typing import Literal
 import numpy as np
 from rosbags.serde import SerdeError
 
-from id_learning.bag import JOINT_STATE, JointStateSeries, bag_info, decode_joint_state, iter_raw
+from id_learning.bag import (
+    JOINT_STATE,
+    JointStateSeries,
+    TopicInfo,
+    bag_info,
+    decode_joint_state,
+    iter_raw,
+)
+from id_learning.config_io import parse_yaml
 from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.inspect_plot import plot_report
 from id_learning.dataset.inspect_report import (
@@ -277,6 +285,41 @@ def _contract(
     return ContractReport(*names, (), first is None, first, names_match)
 
 
+def _metadata_mismatches(
+    path: Path, topics: tuple[TopicInfo, ...], log_times: Mapping[str, list[int]]
+) -> tuple[str, ...]:
+    """Where metadata.yaml contradicts the messages the data files hold, one line each.
+
+    A metadata.yaml written by hand or copied from another recording: its message_count, a
+    topic's message_count or its duration disagree with what was read (a negative duration
+    never fits).
+    """
+    lines = [
+        f'metadata: {topic.name} message_count {topic.count}, the file holds '
+        f'{len(log_times[topic.name])}'
+        for topic in topics
+        if topic.count != len(log_times[topic.name])
+    ]
+    try:
+        document = parse_yaml((path / 'metadata.yaml').read_text(encoding='utf-8'), str(path))
+        meta = document['rosbag2_bagfile_information']
+    except (OSError, UnicodeDecodeError, ConfigError, KeyError, TypeError):
+        return tuple(lines)  # the reader opened the bag: what it read is checked above
+    held = sum(len(times) for times in log_times.values())
+    count = meta.get('message_count') if isinstance(meta, dict) else None
+    if count is not None and count != held:
+        lines.append(f'metadata: message_count {count}, the files hold {held}')
+    duration = meta.get('duration', {}) if isinstance(meta, dict) else {}
+    stated = duration.get('nanoseconds') if isinstance(duration, dict) else None
+    stamps = [t for times in log_times.values() for t in times]
+    span = max(stamps) - min(stamps) if stamps else 0
+    if stated is not None and stated != span:
+        lines.append(
+            f'metadata: duration {stated} ns, the messages span {span} ns (last minus first)'
+        )
+    return tuple(lines)
+
+
 def inspect_bag(
     path: Path | str,
     robot: RobotConfig | None = None,
@@ -352,6 +395,7 @@ def inspect_bag(
             reports.append(TopicReport(name, msgtypes[name], count, timing))
 
     report = BagReport(
+        metadata_mismatches=_metadata_mismatches(path, info.topics, log_times),
         path=path,
         storage=info.storage,
         files=info.files,

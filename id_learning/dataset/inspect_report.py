@@ -202,6 +202,8 @@ class BagReport:
             for ``plot_report``.
         robot_joints: the joints of the robot checked against (empty without one): the
             contract topics must name exactly these, or limits cannot be checked.
+        metadata_mismatches: where metadata.yaml's message counts or duration contradict the
+            messages the files hold, one line each.
     """
 
     path: Path
@@ -216,6 +218,7 @@ class BagReport:
     contract: ContractReport
     series: Mapping[str, JointStateSeries] = field(default_factory=dict, repr=False)
     robot_joints: tuple[str, ...] = ()
+    metadata_mismatches: tuple[str, ...] = ()
 
     def topic(self, name: str) -> TopicReport:
         """Return the report of one topic.
@@ -233,7 +236,7 @@ class BagReport:
     @property
     def problems(self) -> tuple[str, ...]:
         """One line per finding that ``load_recording`` would reject or a human should check."""
-        lines: list[str] = []
+        lines = list(self.metadata_mismatches)
         for topic in self.topics:
             lines += _topic_problems(topic)
         contract = self.contract

@@ -232,7 +232,7 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
     limits = _limits(data['limits'], joints, where)
 
     period = data['ipo_period_s']
-    if not isinstance(period, (int, float)) or not 1e-5 <= float(period) <= 1.0:
+    if range_problem(period, low=1e-5, high=1.0):  # a str or bool is no period either
         raise ConfigError(f'{where}: ipo_period_s must be in [1e-5, 1] s, got {period!r}')
     cutoff, smoothing = _cutoffs(data, n, float(period), where)
 

@@ -104,6 +104,11 @@ def refuse_incomplete_run(run_dir: Path) -> None:
     document = _read_document(holder / RUN_FILE)
     if reason is None and document is not None and document.get('format') == RUN_FORMAT:
         status = document.get('status')
+        if status not in (None, 'incomplete', 'complete'):
+            raise CheckpointError(
+                f'{run_dir}: {RUN_FILE} says status {status!r}; a run is complete or '
+                'incomplete (edited by hand?): a new train with --force writes a whole one'
+            )
         if status == 'incomplete' or (status is None and not (holder / METRICS_FILE).is_file()):
             reason = f'{run_dir}: an incomplete training run ({RUN_FILE} says so)'
     if reason is not None:

@@ -341,7 +341,9 @@ def _parse_effect(cls: type[Effect], data: dict[str, Any], n: int, where: str) -
         elif item.name in {'com_m', 'inertia_kgm2'}:
             kwargs[item.name] = tuple(float_vector(value, f'{where}.{item.name}', 3).tolist())
         elif item.name == 'joint':
-            kwargs[item.name] = str(value)
+            if not isinstance(value, str):
+                raise ConfigError(f'{where}.joint: expected a joint name, got {value!r}')
+            kwargs[item.name] = value
         elif item.name == 'periods_per_motor_turn':
             if not isinstance(value, int) or value < 0:
                 raise ConfigError(
@@ -376,25 +378,32 @@ def _parse_effect(cls: type[Effect], data: dict[str, Any], n: int, where: str) -
     return effect
 
 
-def effects_from_dict(
-    data: dict[str, Any] | None, joints: tuple[str, ...], where: str = 'effects'
-) -> EffectSet:
+def effects_from_dict(data: object, joints: tuple[str, ...], where: str = 'effects') -> EffectSet:
     """Parse the ``effects`` mapping of a twin config; missing effects are disabled.
 
     Raises:
         ConfigError: an unknown effect name or key, or a bad value (names the key).
     """
-    data = data or {}
-    unknown = sorted(set(data) - set(EFFECT_NAMES))
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f'{where}: expected a mapping of effect name to settings '
+            f'(e.g. viscous_friction: {{enabled: true}}), got {type(data).__name__} {data!r}'
+        )
+    unknown = sorted(str(key) for key in data if key not in EFFECT_NAMES)
     if unknown:
         raise ConfigError(
             f'{where}: unknown effect(s) {unknown}; known effects: {list(EFFECT_NAMES)}'
         )
     effects = {}
     for name, cls in _CLASSES.items():
-        section = data.get(name) or {}
+        section = data.get(name)
+        section = {} if section is None else section
         if not isinstance(section, dict):
-            raise ConfigError(f'{where}.{name}: expected a mapping')
+            raise ConfigError(
+                f'{where}.{name}: expected a mapping of setting to value '
+                f'(e.g. {{enabled: true}}), got {type(section).__name__} {section!r}'
+            )
         effects[name] = _parse_effect(cls, section, len(joints), f'{where}.{name}')
     spring = effects['gravity_spring']
     assert isinstance(spring, GravitySpring)

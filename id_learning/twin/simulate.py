@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,7 @@ from tqdm import tqdm
 
 from id_learning.config_io import check_keys, finite_number, float_vector, load_yaml_mapping
 from id_learning.dataset.recording import Recording, write_recording
-from id_learning.errors import ConfigError
+from id_learning.errors import ConfigError, DatasetError
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
 from id_learning.robot.config import RobotConfig, load_robot_config
@@ -170,7 +171,7 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
     m = data.get('measurement') or {}
     check_keys(m, _MEASUREMENT, f'{where}: measurement')
     counts = m.get('encoder_counts_per_motor_turn', 0)
-    if not isinstance(counts, int) or counts < 0:
+    if not isinstance(counts, int) or isinstance(counts, bool) or counts < 0:
         raise ConfigError(
             f'{where}: measurement.encoder_counts_per_motor_turn must be an integer >= 0'
         )
@@ -583,8 +584,13 @@ def read_noise_free_torque(
     if not path.is_file():
         return None
     key = 'tau_u_clean' if target == 'motor' else 'tau_joint_clean'
-    with np.load(path) as arrays:
-        stamps, clean = arrays['stamps_ns'], arrays[key]
+    try:
+        with np.load(path) as arrays:
+            stamps, clean = arrays['stamps_ns'], arrays[key]
+    except (KeyError, OSError, ValueError, zipfile.BadZipFile) as err:
+        raise DatasetError(
+            f'{path}: unreadable ground truth ({type(err).__name__}: {err})'
+        ) from err
     rows = np.searchsorted(stamps, stamps_ns)
     if rows.max(initial=0) >= len(stamps) or not np.array_equal(stamps[rows], stamps_ns):
         return None
