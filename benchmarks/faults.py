@@ -37,6 +37,7 @@ from collections import Counter
 from pathlib import Path
 
 from common import write_results
+from fault_cases_bags import bag_more_cases
 from fault_cases_inputs import input_cases
 from fault_cases_more_inputs import more_input_cases
 from fault_cases_nodes import node_cases
@@ -60,7 +61,7 @@ def all_cases(fx: Fixtures) -> list[Case]:
     cases: list[Case] = []
     makers = (bag_cases, cli_cases, artifact_cases, predictor_cases, replay_and_recover_cases,
               import_cases, config_cases, other_door_cases, stream_cases, input_cases,
-              more_input_cases, output_cases, node_cases)  # fmt: skip
+              more_input_cases, bag_more_cases, output_cases, node_cases)  # fmt: skip
     for make in makers:
         cases += list(make(fx))
     return cases

@@ -85,8 +85,44 @@ def _open(path: Path) -> Reader:
         reader.open()
     except (ReaderError, struct.error, EOFError, ValueError, OSError) as err:
         raise BagError(f'{path}: cannot open bag: {err}; {RECOVER_HINT}') from err
+    except Exception as err:
+        if not _is_decode_error(err):
+            raise
+        files = ', '.join(_listed_files(path)) or 'the storage files'
+        raise BagError(
+            f'{path}: cannot open bag: {files} do(es) not decompress or decode '
+            f'({type(err).__name__}: {err}){_compression_note(path)}'
+        ) from err
     _warn_unlisted(path, reader)
     return reader
+
+
+#: Top-level modules whose exceptions mean a storage file does not decompress or decode.
+_DECODE_MODULES = frozenset(
+    {'zstd', 'zstandard', 'compression', 'backports', 'lz4', 'mcap', 'sqlite3', 'rosbags'}
+)
+
+
+def _is_decode_error(err: BaseException) -> bool:
+    """Whether ``err`` comes from a decompressor, a storage plugin or a decoder."""
+    module = type(err).__module__.split('.')[0]
+    return module in _DECODE_MODULES or isinstance(err, (KeyError, IndexError, UnicodeError))
+
+
+def _compression_note(path: Path) -> str:
+    """'; metadata.yaml claims ...' when it names a compression, else ''."""
+    try:
+        meta = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
+        info = meta['rosbag2_bagfile_information']
+        fmt, mode = info.get('compression_format') or '', info.get('compression_mode') or ''
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return ''
+    if not fmt:
+        return ''
+    return (
+        f'; metadata.yaml claims compression_format {fmt}, compression_mode {mode or "none"}: '
+        'the files do not match that claim, fix metadata.yaml or the files'
+    )
 
 
 def _warn_unlisted(path: Path, reader: Reader) -> None:
@@ -127,39 +163,40 @@ def _listed_files(path: Path) -> list[str]:
 
 
 def _data_files(path: Path) -> list[Path]:
-    """A log file itself, or a bag folder's data: metadata.yaml and its storage files.
+    """A log file itself, or a bag folder's storage files (``.mcap``, ``.db3``).
 
-    Files the twin writes beside a bag (ground truth, its config copy) are no part of the data.
+    metadata.yaml is left out: an edited copy of it must not hide a duplicate recording. Files
+    the twin writes beside a bag (ground truth, its config copy) are no part of the data either.
     """
     if path.is_file():
         return [path]
-    return sorted(
-        p
-        for p in path.iterdir()
-        if p.is_file() and (p.name == 'metadata.yaml' or p.suffix in {'.mcap', '.db3'})
-    )
+    return sorted(p for p in path.iterdir() if p.is_file() and p.suffix in {'.mcap', '.db3'})
 
 
-def _content_key(path: Path) -> tuple[int, str]:
-    """Size and SHA-256 of a file, or of a bag folder's data (names and bytes, in name order)."""
-    files = _data_files(path)
-    digest = hashlib.sha256()
+def _content_key(path: Path) -> tuple[int, tuple[str, ...]]:
+    """Total size and the sorted SHA-256 digests of a file, or of a bag folder's storage files.
+
+    File names are left out, so a renamed storage file still matches its original.
+    """
+    digests: list[str] = []
     size = 0
-    for file in files:
-        digest.update(file.relative_to(path).as_posix().encode() if file != path else b'')
+    for file in _data_files(path):
+        digest = hashlib.sha256()
         with file.open('rb') as stream:
             for block in iter(lambda: stream.read(1 << 20), b''):
                 digest.update(block)
                 size += len(block)
-    return size, digest.hexdigest()
+        digests.append(digest.hexdigest())
+    return size, tuple(sorted(digests))
 
 
 def check_distinct(paths: Sequence[Path | str], what: str) -> list[Path]:
     """``paths`` as Paths, refused when one file or bag is given twice.
 
-    Twice means the same resolved path, or the same bytes under another name (a copy): either
-    would weigh one recording double in training, evaluation or an import. Contents are hashed
-    only for inputs of equal total size, so distinct inputs cost a ``stat`` each.
+    Twice means the same resolved path, or the same storage bytes under another name (a copy,
+    even with an edited metadata.yaml): either would weigh one recording double in training,
+    evaluation or an import. Contents are hashed only for inputs of equal storage size, so
+    distinct inputs cost a ``stat`` each.
 
     Raises:
         ConfigError: names both spellings of the input given twice and ``what`` (e.g. --bag).
@@ -175,10 +212,10 @@ def check_distinct(paths: Sequence[Path | str], what: str) -> list[Path]:
         seen[key] = path
     by_size: dict[int, list[Path]] = {}
     for path in out:
-        if path.exists():
+        if path.exists() and _data_files(path):
             by_size.setdefault(sum(f.stat().st_size for f in _data_files(path)), []).append(path)
     for group in (g for g in by_size.values() if len(g) > 1):
-        hashes: dict[tuple[int, str], Path] = {}
+        hashes: dict[tuple[int, tuple[str, ...]], Path] = {}
         for path in group:
             key2 = _content_key(path)
             if key2 in hashes:
@@ -242,6 +279,41 @@ def bag_custom_data(path: Path | str) -> dict[str, str]:
     return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
 
 
+def _storage_types(reader: Reader) -> dict[str, set[str]]:
+    """Message types per topic as the storage files (not metadata.yaml) declare them.
+
+    Empty when the rosbags version at hand does not expose its storage readers.
+    """
+    out: dict[str, set[str]] = {}
+    storage = getattr(reader, 'storage', None)
+    for store in getattr(storage, 'storages', ()) or ():
+        for conn in getattr(store, 'connections', ()) or ():
+            out.setdefault(str(conn.topic), set()).add(str(conn.msgtype))
+    return out
+
+
+def _check_storage_types(path: Path, reader: Reader, topics: Sequence[str]) -> None:
+    """Refuse a topic whose type in metadata.yaml is not the type its storage channel holds.
+
+    rosbags matches messages by topic and type, so such a topic would read as empty.
+
+    Raises:
+        BagError: names the topic, both types and the storage files.
+    """
+    stored = _storage_types(reader)
+    if not stored:
+        return
+    declared = {conn.topic: conn.msgtype for conn in reader.connections}
+    for topic in topics:
+        in_storage = stored.get(topic, set())
+        if in_storage and declared[topic] not in in_storage:
+            raise BagError(
+                f'{path}: topic {topic} has type {declared[topic]} in metadata.yaml but '
+                f'{", ".join(sorted(in_storage))} in {", ".join(_listed_files(path)) or "storage"}'
+                '; the metadata and the storage disagree: fix metadata.yaml'
+            )
+
+
 def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int, bytes]]:
     """Yield (topic, log time [ns], serialized bytes) of the given topics in log-time order.
 
@@ -255,6 +327,7 @@ def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int
         missing = [topic for topic in topics if topic not in by_name]
         if missing:
             raise BagError(f'{path}: missing topic(s) {missing}; the bag has {sorted(by_name)}')
+        _check_storage_types(path, reader, topics)
         connections = [by_name[topic] for topic in topics]
         try:
             for conn, timestamp, data in reader.messages(connections=connections):
@@ -264,15 +337,12 @@ def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int
                 f'{path}: corrupt or truncated bag while reading {topics}: {err}; {RECOVER_HINT}'
             ) from err
         except Exception as err:  # zstd/lz4 raise their own error types on damaged chunks
-            if type(err).__module__.split('.')[0] in {
-                'zstd',
-                'zstandard',
-                'compression',
-                'backports',
-                'lz4',
-            }:
-                raise BagError(f'{path}: damaged compressed chunk: {err}; {RECOVER_HINT}') from err
-            raise
+            if not _is_decode_error(err):
+                raise
+            raise BagError(
+                f'{path}: damaged or undecodable storage data while reading {list(topics)} '
+                f'({type(err).__name__}: {err}){_compression_note(path)}; {RECOVER_HINT}'
+            ) from err
     finally:
         reader.close()
 

@@ -71,6 +71,7 @@ from id_learning.nodes.params import (
     validate_change,
 )
 from id_learning.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, reference_qos, sensor_qos
+from id_learning.nodes.replay_span import check_topics_play, unpaired_tail
 from id_learning.nodes.runtime import run_node
 from id_learning.predictor.reference import reference_from_states
 from id_learning.predictor.timing import RollingStats
@@ -110,6 +111,8 @@ class ReplayPlan:
     msg_types: tuple[str, ...]
     cycles: list[Cycle]
     period_ns: int
+    #: What the node logs as warnings before playing (an unpaired tail).
+    warnings: tuple[str, ...] = ()
 
     @property
     def duration_ns(self) -> int:
@@ -244,6 +247,8 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     Raises:
         BagError: the bag is unreadable, lacks a topic, or a message has no header stamp with
             ``timing: stamp``.
+            Also: a requested topic (or the reference source) yields no message in the span,
+            or its type in metadata.yaml differs from the storage's.
         ConfigError: the span is empty, or reference_smoothing_hz is not below Nyquist.
     """
     path = Path(config.bag)
@@ -294,6 +299,17 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     if start is None:
         raise ConfigError(f'{path}: no messages on {needed}')
 
+    played = [sum(1 for _, i, _ in keyed if i == k) for k in range(len(config.topics))]
+    checked = [*config.topics, *([config.reference_source] if has_reference else [])]
+    if keyed:  # an empty span altogether is refused below as nothing to play
+        check_topics_play(
+            path,
+            checked,
+            [*played, *([len(states)] if has_reference else [])],
+            {topic.name: topic.count for topic in info.topics},
+            f'start_offset_s {config.start_offset_s} s, duration_s {config.duration_s} s',
+        )
+
     def inside(key: int) -> bool:
         return key >= start and (stop is None or key <= stop)
 
@@ -316,11 +332,16 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     origin = cycles[0].stamp_ns
     for cycle in cycles:
         cycle.offset_ns = cycle.stamp_ns - origin
+    tail = None
+    if config.timing == 'stamp':  # log times differ per topic: only stamps pair messages
+        held = [[i for i, _ in cycle.messages] for cycle in cycles]
+        tail = unpaired_tail(path, config.topics, held, [c.stamp_ns for c in cycles])
     return ReplayPlan(
         tuple(config.topics),
         tuple(types[t] for t in config.topics),
         cycles,
         round(robot.ipo_period_s * NS_PER_S),
+        (tail,) if tail else (),
     )
 
 
@@ -369,6 +390,8 @@ class Replay(Node):
             config.diagnostics_period_s, self._publish_diagnostics
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        for warning in self.plan.warnings:
+            self.get_logger().warning(warning)
         self.get_logger().info(
             f'loaded {len(self.plan.cycles)} cycles ({self.plan.message_count} messages, '
             f'{self.plan.duration_ns / NS_PER_S:.2f} s) of {config.bag}; reference '
