@@ -360,7 +360,7 @@ def refuse_contradictions(args: argparse.Namespace, pairs: Sequence[tuple[str, s
         pairs: (option, other, why) triples. ``option`` counts as given when its value is not
             None (or, for a flag, True): such options default to None, so that a value typed
             equal to the default is caught too. ``other`` is an option (``--skip-training``,
-            given when set) or ``--option=value`` (given when it has that value); a leading
+            given when set) or ``--split=contiguous`` (given when it has that value); a leading
             '!' (``!--plot``) refuses ``option`` when ``other`` is absent instead.
 
     Raises:
