@@ -84,7 +84,8 @@ def _demo_into(args: argparse.Namespace, robot: Any, bag: Path, folder: Any) -> 
     dataset = prepare_dataset(recording, robot, preprocess)
     from id_learning.twin.ground_truth import read_ground_truth
 
-    truth = read_ground_truth(bag, args.target)  # a damaged one is refused, naming the file
+    # A damaged one, or one of another simulation, is refused naming the file.
+    truth = read_ground_truth(bag, args.target, recording.stamps_ns)
     ground_truth, tau_clean = (truth.info, truth.tau_clean) if truth else (None, None)
     summary = write_summary(dataset, robot, out, ground_truth=ground_truth, tau_clean=tau_clean)
     print(

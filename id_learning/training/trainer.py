@@ -23,6 +23,7 @@ the report) and ``training.run_folder`` (the files). Their public names are re-e
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -99,6 +100,8 @@ __all__ = [
     'segment_rows',
     'train_run',
 ]
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, eq=False)
@@ -389,7 +392,34 @@ def _load_models(run_dir: Path, run: dict[str, Any], robot: RobotConfig) -> dict
     for kind in sorted(run['kinds'], key=lambda kind: order.get(kind, len(order))):
         folder = run_dir / MODELS_DIR / kind
         results[kind] = ModelResult(kind, load_model(folder, robot, kind), folder, {})
+    _say_what_does_not_belong(run_dir, run, results)
     return results
+
+
+def _say_what_does_not_belong(
+    run_dir: Path, run: dict[str, Any], results: dict[str, ModelResult]
+) -> None:
+    """Warn of what a hand-assembled run holds.
+
+    Entries of models/ that run.json does not list; models fitted on other inputs than the
+    others (copied in from another run).
+    """
+    from id_learning.models.artifact import METADATA_FILE, artifact_inputs, read_metadata
+
+    listed = set(run['kinds'])
+    stray = sorted(p.name for p in (run_dir / MODELS_DIR).iterdir() if p.name not in listed)
+    if stray:
+        _LOG.warning('%s: %s hold(s) %s, which run.json does not list: ignored', run_dir,
+                     MODELS_DIR, ', '.join(stray))  # fmt: skip
+    fitted_on: dict[str, list[str]] = {}
+    for kind, result in results.items():
+        _, fitting = artifact_inputs(read_metadata(result.folder / METADATA_FILE))
+        fitted_on.setdefault('study' if fitting is None else fitting.name, []).append(kind)
+    if len(fitted_on) > 1:
+        groups = '; '.join(f'{name}: {", ".join(kinds)}' for name, kinds in fitted_on.items())
+        _LOG.warning('%s: its models were fitted on different inputs (%s): a model copied '
+                     'in from another run is not compared on equal terms', run_dir,
+                     groups)  # fmt: skip
 
 
 def _unseen_parts(

@@ -29,16 +29,20 @@ class GroundTruth:
     tau_clean: np.ndarray
 
 
-def read_ground_truth(bag: Path | str, target: str) -> GroundTruth | None:
+def read_ground_truth(
+    bag: Path | str, target: str, stamps_ns: np.ndarray | None = None
+) -> GroundTruth | None:
     """The ground truth beside a twin bag, or None when the bag has no ground_truth.json.
 
     Args:
         bag: a bag folder written by ``write_twin_output``.
         target: 'motor' (tau_u) or 'joint' (joint torque).
+        stamps_ns: the recording's stamps [ns]: the ground truth must hold exactly these (one
+            copied from another simulation does not); None: not checked.
 
     Raises:
         DatasetError: ground_truth.json is not a JSON mapping, or ground_truth.npz is missing,
-            unreadable or lacks the target's array (names the file).
+            unreadable, lacks the target's array or holds other stamps (names the file).
     """
     folder = Path(bag)
     json_path, arrays_path = folder / GROUND_TRUTH_JSON, folder / GROUND_TRUTH_ARRAYS
@@ -60,6 +64,7 @@ def read_ground_truth(bag: Path | str, target: str) -> GroundTruth | None:
     try:
         with np.load(arrays_path) as arrays:
             tau = np.asarray(arrays[key], dtype=float)
+            truth_stamps = np.asarray(arrays['stamps_ns']) if 'stamps_ns' in arrays else None
     except FileNotFoundError:
         raise DatasetError(
             f'{arrays_path}: missing beside {json_path.name}; re-run simulate'
@@ -70,4 +75,12 @@ def read_ground_truth(bag: Path | str, target: str) -> GroundTruth | None:
         raise DatasetError(f'{arrays_path}: cannot read the twin ground truth: {err}') from None
     if tau.ndim != 2:
         raise DatasetError(f'{arrays_path}: {key} has shape {tau.shape}, expected (N, joints)')
+    if stamps_ns is not None and (
+        truth_stamps is None or not np.array_equal(truth_stamps, np.asarray(stamps_ns))
+    ):
+        raise DatasetError(
+            f"{arrays_path}: its stamps are not the recording's ({len(stamps_ns)} samples from "
+            f'{int(stamps_ns[0]) if len(stamps_ns) else 0} ns): the ground truth of another '
+            'simulation; remove it or re-run simulate'
+        )
     return GroundTruth(info=info, tau_clean=tau)

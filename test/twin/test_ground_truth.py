@@ -49,3 +49,13 @@ def test_garbage_arrays_name_the_file(tmp_path: Path) -> None:
     (tmp_path / GROUND_TRUTH_ARRAYS).write_bytes(b'not a zip')
     with pytest.raises(DatasetError, match=r'ground_truth\.npz: cannot read'):
         read_ground_truth(tmp_path, 'motor')
+
+
+def test_the_ground_truth_of_another_simulation_is_refused(tmp_path: Path) -> None:
+    (tmp_path / GROUND_TRUTH_JSON).write_text('{}', encoding='utf-8')
+    np.savez(tmp_path / GROUND_TRUTH_ARRAYS, tau_u_clean=np.ones((4, 1)),
+             stamps_ns=np.arange(4) * 8_000_000)  # fmt: skip
+    mine = np.arange(4) * 8_000_000
+    assert read_ground_truth(tmp_path, 'motor', mine) is not None
+    with pytest.raises(DatasetError, match='ground truth of another simulation'):
+        read_ground_truth(tmp_path, 'motor', mine + 1)
