@@ -55,6 +55,7 @@ __all__ = [
     'ConsistencyStream',
     'Inconsistency',
     'KinematicConsistency',
+    'gap_starts',
 ]
 
 #: Lag allowed between a velocity signal and its position [IPO periods].
@@ -67,6 +68,15 @@ STALE_S = 0.01
 WINDOW_S = 0.05
 #: Noise and quantisation allowed (share of the velocity limit; per period for positions).
 FLOOR_SHARE = 0.05
+
+
+def gap_starts(stamps_ns: np.ndarray, period_s: float, gap_periods: float) -> tuple[int, ...]:
+    """0 and every sample after a silence longer than ``gap_periods`` periods.
+
+    The segment starts the gate compares nothing across (``starts`` of its methods).
+    """
+    after = np.flatnonzero(np.diff(stamps_ns) > gap_periods * period_s * 1e9) + 1
+    return (0, *(int(k) for k in after))
 
 
 @dataclass(frozen=True)

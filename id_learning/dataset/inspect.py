@@ -31,7 +31,7 @@ from id_learning.bag import (
     iter_raw,
 )
 from id_learning.config_io import parse_yaml
-from id_learning.dataset.consistency import KinematicConsistency
+from id_learning.dataset.consistency import KinematicConsistency, gap_starts
 from id_learning.dataset.inspect_plot import plot_report
 from id_learning.dataset.inspect_report import (
     FIELDS,
@@ -231,10 +231,9 @@ def _contradictions(series: JointStateSeries, robot: RobotConfig | None) -> tupl
     bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(v).all(axis=1))
     bad[1:] |= np.diff(stamps) <= 0
     gate = KinematicConsistency.for_robot(robot)
-    breaks = np.flatnonzero(
-        bad | np.r_[False, np.diff(stamps) > GAP_PERIODS * robot.ipo_period_s * 1e9]
-    )
-    starts = tuple(sorted({0, *breaks.tolist(), *(breaks + 1).tolist()} - {len(stamps)}))
+    breaks = np.flatnonzero(bad)  # a bad row is a segment of its own
+    gaps = gap_starts(stamps, robot.ipo_period_s, GAP_PERIODS)
+    starts = tuple(sorted({*gaps, *breaks.tolist(), *(breaks + 1).tolist()} - {len(stamps)}))
     clean_q, clean_v = np.where(bad[:, None], 0.0, q), np.where(bad[:, None], 0.0, v)
     failing = gate.failing(stamps, clean_q, clean_v, starts=starts) & ~bad
     if not failing.any():

@@ -50,7 +50,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from id_learning.bag import JOINT_STATE, bag_info, decode_joint_state, iter_raw
 from id_learning.bag.messages import typestore
-from id_learning.dataset.consistency import KinematicConsistency
+from id_learning.dataset.consistency import KinematicConsistency, gap_starts
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import check_accelerations, check_motion
 from id_learning.errors import BagError, ConfigError, DatasetError
@@ -123,12 +123,6 @@ class ReplayPlan:
     def message_count(self) -> int:
         """Messages of the bag's topics (without /clock and the reference)."""
         return sum(1 for cycle in self.cycles for index, _ in cycle.messages if index >= 0)
-
-
-def _gaps(stamps_ns: np.ndarray, period_s: float) -> tuple[int, ...]:
-    """Samples that follow a silence of more than three IPO periods (nothing compared across)."""
-    after = np.flatnonzero(np.diff(stamps_ns) > 3 * period_s * 1e9) + 1
-    return (0, *(int(k) for k in after))
 
 
 def _stamp_ns(data: bytes, msgtype: str, where: str) -> int | None:
@@ -217,7 +211,7 @@ def _reference_bytes(
             )
             # Recorded positions and velocities must describe one motion (the predictor's gate).
             KinematicConsistency.for_robot(robot, tuple(names)).check(
-                stamps, q, v, where=where, starts=_gaps(stamps, robot.ipo_period_s)
+                stamps, q, v, where=where, starts=gap_starts(stamps, robot.ipo_period_s, 3.0)
             )
         except DatasetError as err:
             raise BagError(f'{err}; nothing is played from an impossible reference') from err
