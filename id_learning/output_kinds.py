@@ -29,6 +29,7 @@ __all__ = [
     'MANIFEST_FILE',
     'RESULT_KINDS',
     'SWEEP_FILES',
+    'WRITTEN_ENTRIES',
     'Holding',
     'OutputError',
     'check_kind',
@@ -37,6 +38,7 @@ __all__ = [
     'os_reason',
     'read_marker',
     'refuse_any_but_results',
+    'refuse_unwritten',
     'write_manifest',
 ]
 
@@ -71,6 +73,15 @@ COMMAND_KINDS = {
     'diagnose': 'diagnosis',
     'demo': 'demo',
 }
+#: The top-level entries the result-writing commands write (all kinds together): what an
+#: interrupted result's ``.partial`` folder may hold before ``--force`` removes it.
+WRITTEN_ENTRIES = frozenset({
+    INCOMPLETE_FILE, MANIFEST_FILE, 'run.json', 'metrics.json', 'report.md', 'models', 'model',
+    'run', 'closed_loop', 'effects.json', 'summary.json', 'summary.md', 'online_check.json',
+    'closed_loop.json', 'closed_loop.png', 'rmse_per_joint.png', 'abs_error_boxplot.png',
+    'dissipative_axis1.png', 'torque_shares.png', 'torque_timeseries.png', 'excitation.png',
+    'waterfall.png', 'residual_location.png', 'residual_time.png',
+})  # fmt: skip
 #: What a bag folder may hold besides its .mcap files: the twin's ground truth and config.
 BAG_EXTRAS = frozenset({'metadata.yaml', 'ground_truth.json', 'ground_truth.npz',
                         'twin_config.yaml'})  # fmt: skip
@@ -258,6 +269,22 @@ def refuse_any_but_results(folder: Path, force: bool) -> None:
             '--out, or pass --force to replace it'
         )
     _refuse_foreign(folder, held.kind, '--force')
+
+
+def refuse_unwritten(work: Path) -> None:
+    """Refuse removing an interrupted ``.partial`` that holds entries no command writes.
+
+    Raises:
+        OutputError: names the folder and the entries (``WRITTEN_ENTRIES`` are ours).
+        OSError: ``work`` cannot be listed.
+    """
+    stray = [entry.name for entry in work.iterdir() if entry.name not in WRITTEN_ENTRIES]
+    if stray:
+        raise OutputError(
+            f'{work}: an incomplete result that also holds {_shown(stray)}, which no '
+            'id_learning command writes; --force never deletes them: move them out, or '
+            'choose another --out'
+        )
 
 
 def check_kind(out: Path, kind: str, *, force: bool, flag: str = '--force') -> None:

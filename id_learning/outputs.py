@@ -53,6 +53,7 @@ from id_learning.output_kinds import (
     os_reason,
     read_marker,
     refuse_any_but_results,
+    refuse_unwritten,
     write_manifest,
 )
 
@@ -410,6 +411,7 @@ def _start(out: Path, command: str) -> Path:
     if work.exists() or work.is_symlink():
         _partial_marker(work)  # never remove what is not ours
         refuse_any_but_results(work, force=True)
+        refuse_unwritten(work)
         shutil.rmtree(work)
     work.mkdir()
     marker = {
@@ -466,9 +468,11 @@ def result_folder(
         ) from err
     with _locked(out):
         out = check_output(out, force=force, inputs=inputs, is_locked=True, kind=kind)  # ours
-        folder = ResultFolder(out, partial_path(out))
         try:
-            folder.work = _start(out, command)
+            folder = ResultFolder(out, _start(out, command))  # ours from here: removed on failure
+        except OSError as err:
+            raise OutputError(f'{partial_path(out)}: {os_reason(err)} (starting {out})') from err
+        try:
             yield folder
             (folder.work / INCOMPLETE_FILE).unlink()
             write_manifest(folder.work, command)

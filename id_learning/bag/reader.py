@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import struct
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -194,9 +194,11 @@ def check_distinct(paths: Sequence[Path | str], what: str) -> list[Path]:
     """``paths`` as Paths, refused when one file or bag is given twice.
 
     Twice means the same resolved path, or the same storage bytes under another name (a copy,
-    even with an edited metadata.yaml): either would weigh one recording double in training,
-    evaluation or an import. Contents are hashed only for inputs of equal storage size, so
-    distinct inputs cost a ``stat`` each.
+    even with an edited metadata.yaml), or a bag holding the same messages in other storage
+    bytes (re-compressed, re-chunked): either would weigh one recording double in training,
+    evaluation or an import. Files are hashed only for inputs of equal storage size and
+    messages only for bags whose metadata states the same span and counts, so distinct inputs
+    cost a ``stat`` and a metadata read each.
 
     Raises:
         ConfigError: names both spellings of the input given twice and ``what`` (e.g. --bag).
@@ -215,16 +217,53 @@ def check_distinct(paths: Sequence[Path | str], what: str) -> list[Path]:
         if path.exists() and _data_files(path):
             by_size.setdefault(sum(f.stat().st_size for f in _data_files(path)), []).append(path)
     for group in (g for g in by_size.values() if len(g) > 1):
-        hashes: dict[tuple[int, tuple[str, ...]], Path] = {}
-        for path in group:
-            key2 = _content_key(path)
-            if key2 in hashes:
-                raise ConfigError(
-                    f'{what}: {path} holds the same data as {hashes[key2]} (identical content); '
-                    'give each recording once'
-                )
-            hashes[key2] = path
+        _refuse_equal(group, _content_key, what, 'identical content')
+    by_span: dict[tuple[object, ...], list[Path]] = {}
+    for path in out:
+        if path.is_dir() and (path / 'metadata.yaml').is_file():
+            by_span.setdefault(_span_key(path), []).append(path)
+    for group in (g for k, g in by_span.items() if k and len(g) > 1):
+        _refuse_equal(group, _message_key, what, 'the same messages, stored differently')
     return out
+
+
+def _refuse_equal(
+    group: Sequence[Path], key: Callable[[Path], object], what: str, how: str
+) -> None:
+    """Refuse the first path of ``group`` whose ``key`` an earlier one shares."""
+    seen: dict[object, Path] = {}
+    for path in group:
+        value = key(path)
+        if value in seen:
+            raise ConfigError(
+                f'{what}: {path} holds the same data as {seen[value]} ({how}); '
+                'give each recording once'
+            )
+        seen[value] = path
+
+
+def _span_key(path: Path) -> tuple[object, ...]:
+    """Start, duration and per-topic counts a bag's metadata states; () when it does not open.
+
+    Bags that agree on all of it are hashed message by message: a copy re-compressed or
+    converted to another storage has other bytes but the same messages.
+    """
+    try:
+        info = bag_info(path)
+    except BagError:
+        return ()  # the command's own reading names what is wrong with it
+    counts = tuple(sorted((t.name, t.count) for t in info.topics))
+    return (info.start_ns, info.duration_ns, counts)
+
+
+def _message_key(path: Path) -> str:
+    """SHA-256 over every message's topic, log time and serialized bytes, in log order."""
+    digest = hashlib.sha256()
+    topics = [t.name for t in bag_info(path).topics]
+    for topic, log_ns, data in iter_raw(path, topics):
+        digest.update(f'{topic}\0{log_ns}\0{len(data)}\0'.encode())
+        digest.update(data)
+    return digest.hexdigest()
 
 
 def bag_info(path: Path | str) -> BagInfo:
@@ -329,8 +368,10 @@ def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int
             raise BagError(f'{path}: missing topic(s) {missing}; the bag has {sorted(by_name)}')
         _check_storage_types(path, reader, topics)
         connections = [by_name[topic] for topic in topics]
+        held = dict.fromkeys(topics, 0)
         try:
             for conn, timestamp, data in reader.messages(connections=connections):
+                held[conn.topic] += 1
                 yield conn.topic, int(timestamp), bytes(data)
         except (ReaderError, struct.error, EOFError, ValueError, KeyError) as err:
             raise BagError(
@@ -343,8 +384,26 @@ def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int
                 f'{path}: damaged or undecodable storage data while reading {list(topics)} '
                 f'({type(err).__name__}: {err}){_compression_note(path)}; {RECOVER_HINT}'
             ) from err
+        _warn_miscounted(path, {topic: int(by_name[topic].msgcount) for topic in topics}, held)
     finally:
         reader.close()
+
+
+def _warn_miscounted(path: Path, stated: Mapping[str, int], held: Mapping[str, int]) -> None:
+    """Warn when metadata.yaml's message counts are not what the storage files held.
+
+    The messages read are the data; a count that disagrees means metadata.yaml was edited or
+    copied from another recording, which the user should know before trusting either.
+    """
+    wrong = [f'{t} {stated[t]} stated, {held[t]} held' for t in stated if stated[t] != held[t]]
+    if wrong:
+        _LOG.warning(
+            '%s: metadata.yaml message counts disagree with the storage files (%s); the '
+            'messages the files hold were read: fix or regenerate metadata.yaml '
+            '(`id-learning inspect` lists every mismatch)',
+            path,
+            '; '.join(wrong),
+        )
 
 
 def iter_messages(path: Path | str, topic: str) -> Iterator[tuple[int, Any]]:

@@ -218,6 +218,36 @@ def declare_parameters(node: Node, cls: type) -> None:
                 f'({item.metadata["description"]})'
             ) from err
     refuse_unknown(node, cls)
+    node.add_pre_set_parameters_callback(lambda changes: _refuse_undeclared(node, cls, changes))
+
+
+def _refuse_undeclared(node: Node, cls: type, changes: list[Any]) -> list[Any]:
+    """Refuse setting a parameter the node does not have, at runtime, naming it.
+
+    rclpy's own refusal names none (its list of undeclared names comes out empty).
+
+    Raises:
+        ParameterNotDeclaredException: names each undeclared parameter and the closest one.
+    """
+    from rclpy.exceptions import ParameterNotDeclaredException
+
+    unknown = sorted(change.name for change in changes if not node.has_parameter(change.name))
+    if unknown:
+        known = [item.name for item in dataclasses.fields(cls)]
+        raise ParameterNotDeclaredException(
+            f'{_hinted(unknown, known)} on node {node.get_name()} (its parameters: '
+            f'{", ".join(sorted(known))})'
+        )
+    return changes
+
+
+def _hinted(unknown: list[str], known: list[str]) -> str:
+    """The unknown names, each with the closest known one."""
+    hints = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, sorted(known), n=1)
+        hints.append(f'{name} (did you mean {close[0]}?)' if close else name)
+    return ', '.join(hints)
 
 
 def kind_name(kind: object) -> str:
@@ -249,13 +279,9 @@ def refuse_unknown(node: Node, cls: type) -> None:
     )
     if not unknown:
         return
-    hints = []
-    for name in unknown:
-        close = difflib.get_close_matches(name, sorted(known), n=1)
-        hints.append(f'{name} (did you mean {close[0]}?)' if close else name)
     raise ConfigError(
-        f'node {node.get_name()}: unknown parameter(s) {", ".join(hints)}; its parameters: '
-        f'{", ".join(sorted(known))}'
+        f'node {node.get_name()}: unknown parameter(s) {_hinted(unknown, list(known))}; its '
+        f'parameters: {", ".join(sorted(known))}'
     )
 
 

@@ -9,7 +9,7 @@ import pytest
 import yaml
 from support import sine_recording
 
-from id_learning.bag import bag_info, iter_raw
+from id_learning.bag import JOINT_STATE, BagWriter, bag_info, iter_raw
 from id_learning.bag.reader import check_distinct
 from id_learning.dataset.recording import write_recording
 from id_learning.errors import BagError, ConfigError
@@ -72,3 +72,32 @@ def test_a_copy_with_an_edited_metadata_yaml_is_still_a_duplicate(
 def test_distinct_recordings_pass(bag: Path, tmp_path: Path) -> None:
     other = write_recording(sine_recording(61), tmp_path / 'other')
     assert check_distinct([bag, other], '--bag') == [bag, other]
+
+
+def test_a_copy_stored_in_other_chunks_is_still_a_duplicate(bag: Path, tmp_path: Path) -> None:
+    """Re-chunked (re-compressed) storage: other bytes, the same messages."""
+    copy = tmp_path / 'rechunked'
+    with BagWriter(copy, chunk_bytes=512) as writer:
+        for topic in TOPICS:
+            writer.add_topic(topic, JOINT_STATE)
+        for topic, log_ns, data in iter_raw(bag, TOPICS):
+            writer.write(topic, log_ns, data)
+    assert _storage_bytes(copy) != _storage_bytes(bag)
+    with pytest.raises(ConfigError, match=r'rechunked holds the same data .*stored differently'):
+        check_distinct([bag, copy], '--bag')
+
+
+def test_metadata_counts_the_files_do_not_hold_are_warned_naming_topic(
+    bag: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    def miscount(info: dict[str, list[dict[str, object]]]) -> None:
+        info['topics_with_message_count'][0]['message_count'] = 7
+
+    copy = _edited(bag, tmp_path / 'miscounted', miscount)
+    assert len(list(iter_raw(copy, TOPICS))) == 120  # the messages held are the data
+    assert 'metadata.yaml message counts disagree' in caplog.text
+    assert '/joint_states 7 stated, 60 held' in caplog.text
+
+
+def _storage_bytes(path: Path) -> bytes:
+    return b''.join(f.read_bytes() for f in sorted(path.glob('*.mcap')))

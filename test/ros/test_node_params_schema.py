@@ -140,3 +140,34 @@ def test_a_node_reading_nan_names_itself_and_declares_the_range():
             node.destroy_node()
     finally:
         context.try_shutdown()
+
+
+def test_setting_an_undeclared_parameter_at_runtime_names_it_and_the_closest():
+    pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.exceptions import ParameterNotDeclaredException
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from id_learning.nodes.params import declare_parameters
+
+    context = Context()
+    rclpy.init(context=context, domain_id=0)
+    try:
+        node = Node('predictor', context=context,
+                    parameter_overrides=[Parameter('artifact', value='a')])  # fmt: skip
+        try:
+            declare_parameters(node, PredictorNodeConfig)
+            # The parameter service answers with this exception's text as the reason.
+            with pytest.raises(ParameterNotDeclaredException) as raised:
+                node.set_parameters_atomically([Parameter('range_margn', value=0.2)])
+            assert 'range_margn (did you mean range_margin?) on node predictor' in str(
+                raised.value
+            )
+            result = node.set_parameters_atomically([Parameter('range_margin', value=0.2)])
+            assert result.successful, result.reason
+        finally:
+            node.destroy_node()
+    finally:
+        context.try_shutdown()

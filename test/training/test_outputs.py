@@ -16,8 +16,10 @@ from support import REPO
 
 from id_learning.cli.main import main
 from id_learning.errors import CheckpointError
+from id_learning.output_kinds import WRITTEN_ENTRIES
 from id_learning.outputs import (
     INCOMPLETE_FILE,
+    MANIFEST_FILE,
     OutputError,
     partial_path,
     result_folder,
@@ -306,3 +308,8 @@ def test_a_full_disk_while_writing_a_figure_is_one_line_and_leaves_nothing(
     assert 'File too large' in lines[0]
     assert str(out) in lines[0]
     assert list(tmp_path.iterdir()) == []  # neither the result nor its partial folder
+
+
+def test_every_entry_a_real_result_lists_is_one_a_partial_may_hold(small_run):
+    listed = json.loads((small_run.out / MANIFEST_FILE).read_text())['entries']
+    assert set(listed) <= WRITTEN_ENTRIES, set(listed) - WRITTEN_ENTRIES

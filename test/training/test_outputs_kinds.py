@@ -3,6 +3,7 @@ nor a folder inside one; every output path is checked before any work, in one cl
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from id_learning.outputs import (
     folder_holds,
     foreign_entries,
     incomplete_reason,
+    partial_path,
     result_folder,
 )
 
@@ -196,6 +198,31 @@ def test_a_partial_that_is_not_ours_is_refused_and_kept(tmp_path, force):
         check_output(out, force=force, kind='evaluation')
     assert (tmp_path / 'eval.partial' / 'mine.txt').exists()
     assert incomplete_reason(out) is None
+
+
+def _train_into(out: Path, *, force: bool = False, killed: bool = False) -> None:
+    """Write a run to ``out`` as train does; ``killed``: stop half-way, keeping the partial."""
+    with (
+        contextlib.suppress(KeyboardInterrupt),
+        result_folder(out, command='train', force=force) as folder,
+    ):
+        (folder.work / 'models').mkdir()
+        if killed:
+            folder.keep = True
+            raise KeyboardInterrupt
+        (folder.work / 'run.json').write_text('{}')
+
+
+def test_force_never_deletes_a_user_file_inside_an_interrupted_partial(tmp_path):
+    out = tmp_path / 'run'
+    _train_into(out, killed=True)
+    (partial_path(out) / 'notes.txt').write_text('precious')
+    with pytest.raises(OutputError, match=r'run\.partial: .*holds notes\.txt.*never deletes'):
+        _train_into(out, force=True)
+    assert (partial_path(out) / 'notes.txt').read_text() == 'precious'
+    (partial_path(out) / 'notes.txt').unlink()
+    _train_into(out, force=True)
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST_FILE, 'models', 'run.json']
 
 
 def test_a_plot_is_refused_anywhere_inside_a_result_or_a_bag(tmp_path):
