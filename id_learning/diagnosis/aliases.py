@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from id_learning.diagnosis.selection import PARTS, Design, Fit, PlausibilityCheck
+from id_learning.diagnosis.design import PARTS, Design, Fit
+from id_learning.diagnosis.selection import PlausibilityCheck
 
 __all__ = ['AliasSet', 'find_aliases']
 

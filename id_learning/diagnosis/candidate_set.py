@@ -23,6 +23,7 @@ from id_learning.diagnosis.candidates import (
     plausibility,
     testability,
 )
+from id_learning.diagnosis.design import Design, Fit
 from id_learning.diagnosis.friction_shape import (
     FRICTION_SHAPED,
     SHAPE_EVIDENCE,
@@ -32,7 +33,6 @@ from id_learning.diagnosis.friction_shape import (
 )
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.refinement import refine_setting
-from id_learning.diagnosis.selection import Design, Fit
 from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.terms import (
     LINK_SIDE_EFFECTS,

@@ -27,8 +27,8 @@ from id_learning.dataset.blocks import (
     holm,
     one_sided_p,
 )
+from id_learning.diagnosis.design import Design, Fit
 from id_learning.diagnosis.problem import ResidualProblem
-from id_learning.diagnosis.selection import Design, Fit
 
 __all__ = [
     'MIN_BLOCKS',

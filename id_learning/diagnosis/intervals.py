@@ -12,10 +12,10 @@ import numpy as np
 
 from id_learning.diagnosis.aliases import AliasSet
 from id_learning.diagnosis.candidate_set import CandidateSet, log_velocity_of
+from id_learning.diagnosis.design import Design, Fit
 from id_learning.diagnosis.heldout import time_blocks
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.result import Remainder
-from id_learning.diagnosis.selection import Design, Fit
 from id_learning.physics.terms import EffectSpec, whole_model_form
 
 __all__ = ['ALIAS_ALTERNATIVES', 'HELD_TORQUE_STEPS', 'TOLERANCE_SIGMAS', 'IntervalRule']

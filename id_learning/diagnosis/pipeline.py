@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -37,6 +37,7 @@ from id_learning.dataset.statistics import (
 from id_learning.diagnosis.aliases import AliasSet, find_aliases
 from id_learning.diagnosis.candidate_set import CandidateSet
 from id_learning.diagnosis.config import DiagnosisConfig
+from id_learning.diagnosis.design import PARTS, Design, Fit
 from id_learning.diagnosis.heldout import (
     BlockTest,
     fallback_joints,
@@ -56,16 +57,15 @@ from id_learning.diagnosis.problem import (
 from id_learning.diagnosis.result import DiagnosisResult, FoundEffect, Remainder
 from id_learning.diagnosis.selection import (
     BUDGET_STOP,
-    PARTS,
-    Design,
-    Fit,
     GroupEvaluation,
     SelectionResult,
     forward_select,
     noise_consistency,
+    refused_records,
 )
 from id_learning.diagnosis.separation import separating_motion
 from id_learning.errors import DatasetError
+from id_learning.physics.terms import EffectSpec
 from id_learning.robot.config import RobotConfig
 from id_learning.threads import single_blas_thread
 
@@ -116,6 +116,7 @@ def run_diagnosis(
             last_resort=candidates.is_general,
             start=start,
             deadline=budget.deadline,
+            joint_of=lambda label: candidates.specs[label].joint,
         )
 
     def settled(groups: list[str]) -> list[str]:
@@ -410,20 +411,20 @@ def _assemble(
         interval_covariance = t_crit**2 * covariance
         value_half = np.sqrt(np.clip(np.diag(interval_covariance), 0, None))
         rms = _rmse(np.concatenate([design.contribution(final, label, p) for p in PARTS]))
-        # Low confidence: a structured remainder on one of its joints outweighs what it explains.
         test = tests[label]
-        low = (
-            any(
-                r.structured and 0 < rms[robot.joints.index(r.joint)] < r.rms_nm for r in remainder
-            )
-            or not (test.judged and test.p_value < config.significance)
-            or (spec.joint is not None and spec.joint in fallback)
-        )
         effects.append(
             FoundEffect(
                 spec=spec,
                 status='alias' if label in members else 'found',
-                confidence='low' if low else 'high',
+                confidence=_confidence(
+                    spec,
+                    rms,
+                    test,
+                    remainder,
+                    fallback=fallback,
+                    closed=selection.refused,
+                    config=config,
+                ),
                 coefficients=theta,
                 coefficients_ci=np.stack([theta - half, theta + half], axis=1),
                 parameters=describe_parameters(
@@ -479,6 +480,7 @@ def _assemble(
         stop_reason=selection.stop_reason,
         cut_short=cut_short,
         rejected=_rejected_record(selection),
+        refused=refused_records(design, final, selection.refused, robot.joints),
         marginalised=intervals.unknowns,
         stand_ins=intervals.stand_ins,
         config=config.to_dict()
@@ -486,6 +488,35 @@ def _assemble(
         series=series,
         settings=config,
     )
+
+
+def _confidence(
+    spec: EffectSpec,
+    rms: np.ndarray,
+    test: BlockTest,
+    remainder: list[Remainder],
+    *,
+    fallback: list[int],
+    closed: Mapping[int, GroupEvaluation],
+    config: DiagnosisConfig,
+) -> str:
+    """'high' or 'low' confidence in an effect.
+
+    High only for a significant held-out gain over blocks of time, on a joint that keeps the
+    effect and no refused candidate closed, after which no structured remainder outweighs it
+    and, for a joint effect, its joint's remainder is near the noise.
+    """
+    joints = [r.joint for r in remainder]
+    outweighed = any(r.structured and 0 < rms[joints.index(r.joint)] < r.rms_nm for r in remainder)
+    structured = {r.joint for r in remainder if r.structured}
+    low = (
+        outweighed
+        or not (test.judged and test.p_value < config.significance)
+        or (spec.joint is not None and spec.joint in fallback)
+        or spec.joint_name in structured
+        or spec.joint in closed
+    )
+    return 'low' if low else 'high'
 
 
 def _rejected_record(selection: SelectionResult) -> dict[str, Any] | None:

@@ -26,10 +26,7 @@ from id_learning.diagnosis.candidates import (
     build_library,
 )
 from id_learning.diagnosis.config import DiagnosisConfig
-from id_learning.diagnosis.selection import (
-    PARTS,
-    Design,
-)
+from id_learning.diagnosis.design import PARTS, Design
 from id_learning.diagnosis.standstill import StandstillProjection
 from id_learning.errors import DatasetError
 from id_learning.physics.nominal import NominalModel, NominalQuantities

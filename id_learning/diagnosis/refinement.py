@@ -12,8 +12,8 @@ from collections.abc import Callable
 import numpy as np
 
 from id_learning.diagnosis.candidates import PAYLOAD_COM_LIMIT_M
+from id_learning.diagnosis.design import Design, Fit
 from id_learning.diagnosis.problem import ResidualProblem
-from id_learning.diagnosis.selection import Design, Fit
 from id_learning.physics.balancer import BALANCER_PHASES, BALANCER_RATIOS
 from id_learning.physics.terms import EffectSpec
 

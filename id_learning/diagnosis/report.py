@@ -98,6 +98,7 @@ def _verdict(result: DiagnosisResult) -> list[str]:
             + alias.summary()
             + f'; the model keeps {alias.representative}.'
         )
+    lines += [f'- **Refused**: {text}' for text in refused_texts(result)]
     structured = result.structured_joints()
     if structured:
         lines.append(
@@ -372,6 +373,16 @@ def _plot(result: DiagnosisResult, out: Path) -> list[str]:
     return files
 
 
+def refused_texts(result: DiagnosisResult) -> list[str]:
+    """One sentence per joint a refused candidate closed: what fitted, and the rule it fails."""
+    return [
+        f'{r["label"]} explains the residual on {r["joint"]} best (fitted '
+        f'{", ".join(f"{x:.3g}" for x in r["fitted"])}) but fails its plausibility rule: '
+        f'{r["reason"]}; no other effect is named there, its remainder stays unexplained'
+        for r in result.refused
+    ]
+
+
 def render_summary(result: DiagnosisResult) -> str:
     """A terminal summary: the verdict in one line per finding, then the waterfall as a table."""
     joints = list(result.joints)
@@ -391,6 +402,7 @@ def render_summary(result: DiagnosisResult) -> str:
             '  untestable on this excitation: '
             + ', '.join(f'{name}[{joint}]' if joint else name for name, joint in untestable)
         )
+    lines += [f'  refused: {text}' for text in refused_texts(result)]
     structured = result.structured_joints()
     if structured:
         lines.append(f'  unexplained structured remainder on: {", ".join(structured)}')

@@ -125,6 +125,9 @@ class DiagnosisResult:
         stop_reason: why the selection stopped.
         cut_short: the steps the time budget left out (``DiagnosisConfig.max_seconds``).
         rejected: the best candidate that did not enter, and why.
+        refused: per joint it closed, a candidate that explains the joint's residual best but
+            fails its plausibility rule (its fitted values and the rule): that joint's
+            remainder is reported as unexplained rather than filled with other effects.
         nominal_joints: joints whose held-out part the effects do not improve: the refit model
             gives the nominal torque there.
         marginalised: candidates for datasheet values no effect names (torque constants, rotor
@@ -155,6 +158,7 @@ class DiagnosisResult:
     location: list[JointLocation]
     stop_reason: str
     rejected: dict[str, Any] | None
+    refused: list[dict[str, Any]] = field(default_factory=list)
     nominal_joints: list[str] = field(default_factory=list)
     cut_short: list[str] = field(default_factory=list)
     marginalised: list[str] = field(default_factory=list)
@@ -177,8 +181,9 @@ class DiagnosisResult:
         return [(e['name'], e['joint']) for e in self.untestable if e['all_variants']]
 
     def structured_joints(self) -> list[str]:
-        """Joints with an unexplained, structured remainder."""
-        return [r.joint for r in self.remainder if r.structured]
+        """Joints with an unexplained, structured remainder (or closed by a refused candidate)."""
+        closed = {record['joint'] for record in self.refused}
+        return [r.joint for r in self.remainder if r.structured or r.joint in closed]
 
     @cached_property
     def augmented_model(self) -> AugmentedModel:
@@ -277,6 +282,7 @@ class DiagnosisResult:
             'stop_reason': self.stop_reason,
             'cut_short': list(self.cut_short),
             'rejected': self.rejected,
+            'refused': self.refused,
             'marginalised': list(self.marginalised),
             'stand_ins': list(self.stand_ins),
             'config': self.config,

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from id_learning.diagnosis.design import Design, Fit
 from id_learning.diagnosis.problem import ResidualProblem
-from id_learning.diagnosis.selection import Design, Fit
 
 __all__ = ['describe', 'separating_motion']
 

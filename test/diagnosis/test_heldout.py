@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from id_learning.diagnosis.design import Design
 from id_learning.diagnosis.heldout import MIN_BLOCKS, fallback_joints, judge_effects
-from id_learning.diagnosis.selection import Design
 from id_learning.errors import RobotModelError
 from id_learning.physics.augmented import AugmentedModel
 from id_learning.physics.terms import EffectSpec

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from id_learning.diagnosis.aliases import find_aliases
-from id_learning.diagnosis.selection import Design, forward_select
+from id_learning.diagnosis.design import Design
+from id_learning.diagnosis.selection import forward_select
 
 M, N = 400, 2
 
@@ -250,3 +251,53 @@ def test_a_group_with_other_columns_fits_as_a_design_built_anew(signals):
     for part in ('train', 'test'):
         assert rss[part] == pytest.approx(expected[part], rel=1e-9)
     assert rss['train'] != pytest.approx(base.fit(groups).rss['train'], rel=1e-6)
+
+
+def _chopped(t: np.ndarray, pieces: int = 3) -> dict[str, np.ndarray]:
+    """sin(t) cut into ``pieces`` interleaved parts: each explains 1/pieces of it."""
+    part = np.floor(t * 3).astype(int) % pieces
+    return {f'part{k}': on_joint(np.sin(t) * (part == k), 0) for k in range(pieces)}
+
+
+def refusing(*labels: str):
+    def check(design, fit):
+        return {
+            g: (g not in labels, 'beyond its bound' if g in labels else '') for g in fit.groups
+        }
+
+    return check
+
+
+def test_a_refused_candidate_that_fits_a_joint_closes_it_to_stand_ins():
+    t = np.linspace(0, 20, 2 * M)
+    columns = {'true': on_joint(np.sin(t), 0), **_chopped(t), 'd': on_joint(np.cos(3 * t), 1)}
+    design = design_with(3.0 * np.sin(t)[:, None] * [1, 0] + 2.0 * columns['d'][:, :, 0], columns)
+    # Without the joint known, the stand-ins fill joint 0 with three wrong names.
+    blind = forward_select(design, list(columns), refusing('true'))
+    assert {'part0', 'part1', 'part2'} <= set(blind.selected)
+    selection = forward_select(design, list(columns), refusing('true'), joint_of=_joint(columns))
+    assert selection.selected == ['d']
+    assert list(selection.refused) == [0]
+    assert selection.refused[0].label == 'true'
+    assert 'beyond its bound' in selection.refused[0].reason
+
+
+def test_a_refused_candidate_closes_its_joint_only_once_it_fits_what_is_left():
+    t = np.linspace(0, 20, 2 * M)
+    columns = {'true': on_joint(np.sin(t), 0), **_chopped(t), 'e': on_joint(np.cos(3 * t), 0)}
+    design = design_with(3.0 * columns['true'][:, :, 0] + 4.0 * columns['e'][:, :, 0], columns)
+    selection = forward_select(design, list(columns), refusing('true'), joint_of=_joint(columns))
+    assert selection.selected == ['e']  # the plausible effect enters first, then it closes
+    assert list(selection.refused) == [0]
+
+
+def test_a_refused_candidate_no_better_than_a_plausible_one_closes_nothing(signals):
+    design = design_with(3.0 * signals['a'][:, :, 0], signals)
+    selection = forward_select(design, list(signals), refusing('a_copy'), joint_of=_joint(signals))
+    assert selection.selected == ['a']
+    assert selection.refused == {}
+
+
+def _joint(columns: dict[str, np.ndarray]):
+    """joint_of for single-joint columns: the joint whose column is not zero."""
+    return lambda label: int(np.flatnonzero(np.abs(columns[label]).sum(axis=(0, 2)))[0])
