@@ -16,6 +16,7 @@ import numpy as np
 
 from id_learning.evaluation.data_summary import rms
 from id_learning.evaluation.study import MODEL_LABELS, STUDY_FINDINGS
+from id_learning.physics.friction import coulomb
 
 __all__ = [
     'DISSIPATION_FREE_SHARE',
@@ -100,7 +101,7 @@ def friction_share(
     n = tau.shape[1]
     friction = np.empty_like(remainder)
     for j in range(n):
-        basis = np.column_stack([v[:, j], np.tanh(v[:, j] / smoothing_velocity), np.ones(len(v))])
+        basis = np.column_stack([v[:, j], coulomb(v[:, j], smoothing_velocity), np.ones(len(v))])
         theta, *_ = np.linalg.lstsq(basis, remainder[:, j], rcond=None)
         friction[:, j] = basis[:, :2] @ theta[:2]
     label = rms(tau)

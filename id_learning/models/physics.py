@@ -41,6 +41,7 @@ from id_learning.models.network_common import (
 )
 from id_learning.models.torch_model import TorchModel
 from id_learning.models.torch_utils import to_tensor
+from id_learning.physics.friction import coulomb
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
@@ -172,7 +173,7 @@ class RneaLqModel(_NominalPhysics):
         names = self.config.parameter_names
         columns = {'rotor_inertia_motor_side': rotor_basis, 'viscous': v}
         if 'coulomb' in names:
-            columns['coulomb'] = np.tanh(v / self.config.coulomb_velocity)
+            columns['coulomb'] = coulomb(v, self.config.coulomb_velocity)
         if 'offset' in names:
             columns['offset'] = np.ones_like(v)
         return columns
@@ -223,7 +224,7 @@ class RneaLqModel(_NominalPhysics):
         gear = self.robot.drives.gear_ratio
         friction = p['viscous'] * v
         if 'coulomb' in self.config.parameter_names:
-            friction = friction + p['coulomb'] * np.tanh(v / self.config.coulomb_velocity)
+            friction = friction + p['coulomb'] * coulomb(v, self.config.coulomb_velocity)
         return {
             'rotor_inertia': p['rotor_inertia_motor_side'] * gear**2 * a,
             'friction': friction,
@@ -244,15 +245,15 @@ class RneaLqModel(_NominalPhysics):
         """One sample's torque, the terms of ``predict`` folded: q, v, a (n,) -> tau (n,)."""
         p = self._parameters()
         rotor = p['rotor_inertia_motor_side'] * self.robot.drives.gear_ratio**2
-        viscous, coulomb, offset = p['viscous'], p['coulomb'], p['offset']
+        viscous, level, offset = p['viscous'], p['coulomb'], p['offset']
         has_coulomb = 'coulomb' in self.config.parameter_names
-        inverse_velocity = 1.0 / self.config.coulomb_velocity
-        rnea, tanh = self.sample_rnea(), np.tanh
+        smoothing = self.config.coulomb_velocity
+        rnea = self.sample_rnea()
 
         def predict_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             tau: np.ndarray = rnea(q, v, a) + rotor * a + viscous * v + offset
             if has_coulomb:
-                tau += coulomb * tanh(v * inverse_velocity)
+                tau += level * coulomb(v, smoothing)
             return tau
 
         return predict_one

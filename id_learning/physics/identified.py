@@ -26,6 +26,7 @@ import pinocchio as pin
 
 from id_learning.errors import CheckpointError
 from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
+from id_learning.physics.friction import coulomb, load_dependent, stribeck, viscous
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
@@ -62,12 +63,11 @@ def friction_columns(
         smoothing_velocity: v_eps [rad/s], where the sign turns smoothly through zero.
         stribeck_velocity: (n,) v_s per joint [rad/s].
     """
-    sign = np.tanh(v / smoothing_velocity)
     columns = {
-        'viscous': lambda: v,
-        'coulomb': lambda: sign,
-        'stribeck': lambda: np.exp(-((v / stribeck_velocity) ** 2)) * sign,
-        'load_dependent': lambda: np.abs(tau_link) * sign,
+        'viscous': lambda: viscous(v)[0],
+        'coulomb': lambda: coulomb(v, smoothing_velocity),
+        'stribeck': lambda: stribeck(v, stribeck_velocity, smoothing_velocity),
+        'load_dependent': lambda: load_dependent(v, tau_link, smoothing_velocity),
     }
     return {law: columns[law]() for law in laws}
 

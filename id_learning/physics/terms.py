@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+import id_learning.physics.friction as laws
 from id_learning.errors import RobotModelError
 from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
 from id_learning.physics.nominal import NominalModel, NominalQuantities
@@ -131,24 +132,10 @@ class EffectSpec:
         return cls(str(data['name']), joint, joint_name, dict(data.get('settings') or {}))
 
 
-def _friction_sign(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -> np.ndarray:
-    sign: np.ndarray = np.tanh(qs.v[:, j] / settings['smoothing_velocity'])
-    return sign
-
-
 def _viscous(qs: NominalQuantities, j: Any, settings: Mapping[str, Any]) -> tuple[np.ndarray, ...]:
-    """v; or sign(v) |v|^delta (``settings['exponent']``), after v where ``settings['linear']``.
-
-    Gear grease thickens or thins with speed: a drive's viscous torque grows linearly at low
-    speed and bends at high speed, which a power law alone, one shape from zero speed on, does
-    not follow over a long speed range. (A power law alone is what earlier files hold.)
-    """
-    v: np.ndarray = qs.v[:, j]
+    """``friction.viscous`` of the joint's velocity, in the settings' form (exponent, linear)."""
     exponent = settings.get('exponent', 1.0)
-    if np.all(np.asarray(exponent) == 1.0):
-        return (v,)
-    power: np.ndarray = np.sign(v) * np.abs(v) ** np.asarray(exponent, dtype=float)
-    return (v, power) if settings.get('linear') else (power,)
+    return laws.viscous(qs.v[:, j], exponent, linear=bool(settings.get('linear')))
 
 
 def _gravity_spring(
@@ -182,12 +169,14 @@ JointColumns = Callable[
 #: may also be an index array with settings arrays of its length: all joints of an effect at once.
 JOINT_COLUMNS: dict[str, JointColumns] = {
     'viscous_friction': lambda qs, j, s, model: _viscous(qs, j, s),
-    'coulomb_friction': lambda qs, j, s, model: (_friction_sign(qs, j, s),),
+    'coulomb_friction': lambda qs, j, s, model: (
+        laws.coulomb(qs.v[:, j], s['smoothing_velocity']),
+    ),
     'stribeck_friction': lambda qs, j, s, model: (
-        np.exp(-((qs.v[:, j] / s['velocity']) ** 2)) * _friction_sign(qs, j, s),
+        laws.stribeck(qs.v[:, j], s['velocity'], s['smoothing_velocity']),
     ),
     'load_dependent_friction': lambda qs, j, s, model: (
-        np.abs(qs.tau_rigid[:, j]) * _friction_sign(qs, j, s),
+        laws.load_dependent(qs.v[:, j], qs.tau_rigid[:, j], s['smoothing_velocity']),
     ),
     'rotor_inertia': lambda qs, j, s, model: (model.robot.drives.gear_ratio[j] ** 2 * qs.a[:, j],),
     'gravity_spring': _gravity_spring,
@@ -312,10 +301,9 @@ def load_slope(spec: EffectSpec, quantities: NominalQuantities) -> np.ndarray:
     Per unit coefficient and N*m of link torque L (``quantities.tau_rigid``) on its joint.
     """
     j = spec.joint
-    slope: np.ndarray = np.sign(quantities.tau_rigid[:, j]) * _friction_sign(
-        quantities, j, spec.settings
+    return laws.load_slope(
+        quantities.v[:, j], quantities.tau_rigid[:, j], spec.settings['smoothing_velocity']
     )
-    return slope
 
 
 def uses_model_load(spec: EffectSpec) -> bool:

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from id_learning.errors import ConfigError
+from id_learning.physics.friction import coulomb
 from id_learning.predictor.adaptation_inertia import InertiaAdapter, stabilised
 from id_learning.robot.config import RobotConfig
 
@@ -125,14 +126,14 @@ class FrictionAdapter:
     def regressors(self, v: np.ndarray) -> np.ndarray:
         """(n, 3) columns of each joint at velocities v (n,)."""
         phi = np.ones((len(v), 3))
-        np.tanh(v / self.config.smoothing_velocity, out=phi[:, 0])
+        phi[:, 0] = coulomb(v, self.config.smoothing_velocity)
         phi[:, 1] = v
         return phi
 
     def correction(self, v: np.ndarray) -> np.ndarray:
         """(n,) tau_u to add to the model's prediction at velocities v (n,) [N*m]."""
         theta = self.theta
-        scaled = np.tanh(v / self.config.smoothing_velocity)
+        scaled = coulomb(v, self.config.smoothing_velocity)
         return scaled * theta[:, 0] + v * theta[:, 1] + theta[:, 2]
 
     def update(

@@ -21,6 +21,7 @@ import numpy as np
 
 from id_learning.errors import ConfigError
 from id_learning.physics.base_parameters import base_parameters
+from id_learning.physics.friction import coulomb
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
@@ -97,7 +98,7 @@ class InertiaAdapter:
         n = len(v)
         out = np.zeros((n, 3 * n + len(self.names)))
         rows = np.arange(n)
-        out[rows, 3 * rows] = np.tanh(v / self.smoothing_velocity)
+        out[rows, 3 * rows] = coulomb(v, self.smoothing_velocity)
         out[rows, 3 * rows + 1] = v
         out[rows, 3 * rows + 2] = 1.0
         order = self._order

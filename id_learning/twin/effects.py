@@ -15,6 +15,7 @@ import numpy as np
 
 from id_learning.config_io import check_keys, float_vector
 from id_learning.errors import ConfigError
+from id_learning.physics.friction import coulomb, load_dependent, stribeck, viscous, warm_up
 
 __all__ = [
     'EFFECT_NAMES',
@@ -34,8 +35,6 @@ __all__ = [
     'TorqueOffset',
     'ViscousFriction',
     'effects_from_dict',
-    'smooth_sign',
-    'warm_up',
 ]
 
 EFFECT_NAMES = (
@@ -55,11 +54,6 @@ EFFECT_NAMES = (
 )
 
 
-def smooth_sign(v: np.ndarray, v_eps: float | np.ndarray) -> np.ndarray:
-    """tanh(v / v_eps): a sign function without the jump at v = 0 (pre-sliding regime)."""
-    return np.tanh(np.asarray(v) / v_eps)
-
-
 @dataclass(frozen=True, eq=False)
 class Effect:
     """Base of all effects: a name and whether it is switched on."""
@@ -77,20 +71,6 @@ class Effect:
         return out
 
 
-def warm_up(
-    warm_scale: float, warm_up_s: float, shift_time_s: np.ndarray | None
-) -> np.ndarray | float:
-    """(N, 1) scale of a friction that falls as the drive warms up over a shift, or 1.
-
-    scale(t) = warm_scale + (1 - warm_scale) * exp(-t / warm_up_s), t (N,) the time into the
-    shift [s] (lubricant viscosity falls with temperature); ``warm_up_s`` 0 keeps it constant.
-    """
-    if shift_time_s is None or warm_up_s <= 0:
-        return 1.0
-    decay = np.exp(-np.asarray(shift_time_s, dtype=float) / warm_up_s)
-    return (warm_scale + (1.0 - warm_scale) * decay)[:, None]
-
-
 @dataclass(frozen=True, eq=False)
 class ViscousFriction(Effect):
     """tau = d * v, with d [N*m*s/rad] per joint, times the warm-up scale (``warm_up``)."""
@@ -103,7 +83,9 @@ class ViscousFriction(Effect):
 
     def torque(self, v: np.ndarray, shift_time_s: np.ndarray | None = None) -> np.ndarray:
         """Friction torque (..., n) [N*m] at velocities v [rad/s] (N, n) and shift times (N,)."""
-        return self.coefficient * v * warm_up(self.warm_scale, self.warm_up_s, shift_time_s)
+        scale = warm_up(self.warm_scale, self.warm_up_s, shift_time_s)
+        (column,) = viscous(v)
+        return self.coefficient * column * scale
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,7 +105,7 @@ class CoulombFriction(Effect):
     def torque(self, v: np.ndarray, shift_time_s: np.ndarray | None = None) -> np.ndarray:
         """Friction torque (..., n) [N*m] at velocities (N, n) and shift times (N,)."""
         scale = warm_up(self.warm_scale, self.warm_up_s, shift_time_s)
-        return self.level * smooth_sign(v, self.smoothing_velocity) * scale
+        return self.level * coulomb(v, self.smoothing_velocity) * scale
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,11 +120,7 @@ class StribeckFriction(Effect):
 
     def torque(self, v: np.ndarray) -> np.ndarray:
         """Friction torque (..., n) [N*m]."""
-        return (
-            self.level
-            * np.exp(-((v / self.velocity) ** 2))
-            * smooth_sign(v, self.smoothing_velocity)
-        )
+        return self.level * stribeck(v, self.velocity, self.smoothing_velocity)
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,7 +134,7 @@ class LoadDependentFriction(Effect):
 
     def torque(self, v: np.ndarray, load: np.ndarray) -> np.ndarray:
         """Friction torque (..., n) [N*m] for load torques ``load`` [N*m] through the gear."""
-        return self.coefficient * np.abs(load) * smooth_sign(v, self.smoothing_velocity)
+        return self.coefficient * load_dependent(v, load, self.smoothing_velocity)
 
 
 @dataclass(frozen=True, eq=False)
