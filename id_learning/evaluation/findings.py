@@ -142,11 +142,15 @@ class _Case:
 
 
 def _budget_notes(kinds: list[str], stopped_by: dict[str, str | None]) -> list[str]:
-    return [
-        f'{model_label(k)} stopped at its time budget, so it may be under-trained'
-        for k in kinds
-        if stopped_by.get(k) == 'time_budget'
-    ]
+    notes = []
+    for k in kinds:
+        reason = stopped_by.get(k) or ''
+        name = model_label(k)
+        if reason.startswith('time_budget'):
+            notes.append(f'{name} stopped at its time budget, so it may be under-trained')
+        if reason.endswith('no validation gain after epoch 0'):
+            notes.append(f'{name} never improved on the validation part: untrained')
+    return notes
 
 
 def _verdict(

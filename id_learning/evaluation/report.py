@@ -208,7 +208,7 @@ def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, A
     kinds = list(report.models)
     predictions = _predictions(report, kinds)
     rmse_norm = {k: np.asarray(metrics[k]['rmse_normalised']) for k in kinds}
-    stopped_by = {k: (metrics[k].get('history') or {}).get('stopped_by') for k in kinds}
+    stopped_by = {k: _stopped_by(metrics[k].get('history') or {}) for k in kinds}
 
     components = nominal_components(ds, report.robot)
     share = friction_share(ds.tau, components['remainder'], ds.study.v)
@@ -235,3 +235,11 @@ def write_report(report: ReportInput, out: Path) -> tuple[Path, list[dict[str, A
     path = out / 'report.md'
     write_text_atomic(path, '\n'.join(lines))  # whole or absent, even on a full disk
     return path, [f.to_dict() for f in findings]
+
+
+def _stopped_by(history: dict[str, Any]) -> str | None:
+    """Why a network's fit stopped, and whether it ever improved on the validation part."""
+    reason = history.get('stopped_by')
+    if reason is not None and history.get('never_improved'):
+        return f'{reason}; no validation gain after epoch 0'
+    return reason

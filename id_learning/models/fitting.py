@@ -96,10 +96,16 @@ class TrainHistory:
     seconds: float = 0.0
     stopped_by: str = 'max_epochs'
 
+    @property
+    def never_improved(self) -> bool:
+        """Whether the validation loss never fell below its first epoch's in a longer fit."""
+        return self.best_epoch == 0 and len(self.validation_loss) > 1
+
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary (losses on the normalised scale)."""
         return {
             'epochs': len(self.train_loss),
+            'never_improved': self.never_improved,
             'best_epoch': self.best_epoch,
             'best_validation_loss': self.best_validation_loss,
             'final_train_loss': self.train_loss[-1] if self.train_loss else None,
@@ -210,6 +216,18 @@ def train_module(
     module.load_state_dict(best_state)
     history.seconds = time.perf_counter() - start
     _LOG.info('%s: %s', description, history.to_dict())
+    if history.never_improved:
+        _LOG.warning(
+            '%s: the validation loss never improved after the first epoch (%.3g, then %.3g '
+            'after %d epochs, training loss %.3g): the weights kept are those of epoch 0, which '
+            'learned nothing that carries to the validation part; record more varied motion, '
+            'or lower the learning rate',
+            description,
+            history.validation_loss[0],
+            history.validation_loss[-1],
+            len(history.validation_loss),
+            history.train_loss[-1],
+        )
     return history
 
 

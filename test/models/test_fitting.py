@@ -41,13 +41,18 @@ def run(config: OptimConfig) -> tuple[list[float], Scalar, object]:
     return seen, module, history
 
 
-def test_early_stopping_after_patience_epochs_keeps_the_best_weights() -> None:
+def test_early_stopping_after_patience_epochs_keeps_the_best_weights(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     seen, module, history = run(
         OptimConfig(learning_rate=LEARNING_RATE, batch_size=4, max_epochs=50, patience=5)
     )
     assert len(seen) == 6
     assert history.stopped_by == 'early_stopping'
     assert history.best_epoch == 0
+    # A fit whose validation loss never improved is said: its weights learned nothing.
+    assert history.to_dict()['never_improved'] is True
+    assert 'never improved after the first epoch' in caplog.text
     assert float(module.w.detach()) == pytest.approx(seen[0])
     assert seen == pytest.approx([LEARNING_RATE * k for k in range(1, 7)], rel=1e-3)
 
