@@ -30,7 +30,7 @@ from id_learning.models.registry import load_model
 from id_learning.outputs import check_output, result_folder
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import load_datasets, preprocess_from_dict, segment_rows
-from id_learning.training.run_folder import MODELS_DIR, read_run
+from id_learning.training.run_folder import MODELS_DIR, read_run, training_bag
 from id_learning.twin import load_twin_config
 from id_learning.twin.plant import TwinPlant
 from id_learning.twin.simulate import TWIN_CONFIG_COPY
@@ -108,7 +108,7 @@ def closed_loop_run(
     check_output(out, force=force, inputs=[run_dir], kind='closed-loop')  # before the loop
     if run.get('robot', {}).get('joints') != list(robot.joints):
         raise CheckpointError(f'{run_dir}: the run is not for robot {robot.name}')
-    bag = Path(run['training_data']['bags'][0]['path'])
+    bag = training_bag(run, run_dir)
     twin_path = _twin_config_path(bag, twin_config)
     twin = load_twin_config(twin_path)
     if twin.robot.name != robot.name or twin.robot.joints != robot.joints:

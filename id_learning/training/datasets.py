@@ -410,7 +410,10 @@ def training_data_summary(
     Under a shuffled split each bag entry also holds its sample count and the SHA-256 of its
     training mask, so that ``evaluate`` can tell whether it rebuilt the very same split.
     """
-    entries: list[dict[str, Any]] = [{'path': str(b), 'sha256': bag_sha256(b)} for b in bags]
+    entries: list[dict[str, Any]] = [
+        {'path': str(b), 'absolute_path': str(Path(b).resolve()), 'sha256': bag_sha256(b)}
+        for b in bags
+    ]
     if dataset.train_mask is not None:
         segments = dataset.extra['segments']
         for entry in entries:

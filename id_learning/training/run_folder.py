@@ -22,6 +22,7 @@ from id_learning.errors import CheckpointError
 from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.outputs import incomplete_reason, partial_path, write_text_atomic
 from id_learning.robot.config import RobotConfig
+from id_learning.training.datasets import bag_sha256
 from id_learning.training.fitting import ModelResult
 from id_learning.training.measure import metric_notes
 
@@ -38,6 +39,7 @@ __all__ = [
     'refuse_incomplete_run',
     'run_document',
     'save_models',
+    'training_bag',
     'write_json',
 ]
 
@@ -135,6 +137,40 @@ def read_run(run_dir: Path) -> dict[str, Any]:
     if not isinstance(document, dict) or document.get('format') != RUN_FORMAT:
         raise CheckpointError(f'{path}: format is not {RUN_FORMAT!r}')
     return document
+
+
+def training_bag(run: dict[str, Any], run_dir: Path, index: int = 0) -> Path:
+    """Where a run's ``index``-th training bag is now, wherever the command runs from.
+
+    run.json holds the path as given to ``train`` (relative to where it ran) and, since it has
+    it, the absolute path; a relative path is also tried beside the run folder, so a run and
+    its bag moved together are still found.
+
+    Raises:
+        CheckpointError: the bag is at none of those places (each named).
+    """
+    entry = run['training_data']['bags'][index]
+    given = Path(entry['path'])
+    tried = [Path(entry['absolute_path'])] if entry.get('absolute_path') else []
+    tried.append(given)
+    if not given.is_absolute():
+        tried.append(run_dir.parent / given)
+    other = []
+    for path in dict.fromkeys(tried):
+        if path.exists():
+            if 'sha256' not in entry or bag_sha256(path) == entry['sha256']:
+                return path
+            other.append(path)
+    if other:
+        raise CheckpointError(
+            f'{run_dir}: its training bag {given} is not found: {other[0]} holds other data '
+            '(another SHA-256); pass the bag or the twin config explicitly'
+        )
+    raise CheckpointError(
+        f'{run_dir}: its training bag {given} is not found (tried '
+        f'{", ".join(str(p) for p in dict.fromkeys(tried))}); move it back, or pass the bag '
+        'or the twin config explicitly'
+    )
 
 
 def run_document(

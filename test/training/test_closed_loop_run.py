@@ -28,11 +28,14 @@ def test_closed_loop_tracks_the_test_motion_better_with_feed_forward(run, mabi, 
     np.testing.assert_allclose(document['improvement_best'], base / best)
     with pytest.raises(ConfigError, match=r"no model\(s\) \['lstm'\] in the run"):
         closed_loop_run(run.out, mabi, tmp_path / 'x', kinds=['lstm'], progress=False)
-    bare = tmp_path / 'bare'
+    # The same bag without the twin's config beside it (a copy of the data alone).
+    bare, plain = tmp_path / 'bare', tmp_path / 'plain'
     shutil.copytree(run.out, bare)
     meta = json.loads((bare / 'run.json').read_text())
-    for entry in meta['training_data']['bags']:
-        entry['path'] = str(tmp_path / 'nowhere')
+    for k, entry in enumerate(meta['training_data']['bags']):
+        copy = plain / str(k)
+        shutil.copytree(entry['path'], copy, ignore=shutil.ignore_patterns('twin_config.yaml'))
+        entry['path'] = entry['absolute_path'] = str(copy)
     (bare / 'run.json').write_text(json.dumps(meta))
     with pytest.raises(ConfigError, match=r'twin_config\.yaml.*pass --twin'):
         closed_loop_run(bare, mabi, tmp_path / 'y', progress=False)
