@@ -251,29 +251,37 @@ class ResidualProblem:
         self.library = build_library(self.model, self.joined_quantities(), self.config)
 
     def _check_length(self, all_rows: list[dict[str, np.ndarray]]) -> None:
-        """Refuse recordings whose parts hold too few independent samples (all together)."""
+        """Refuse recordings whose parts hold too few independent samples (all together).
+
+        The length advised is the one at which both parts would hold enough: each part keeps
+        its share of the samples less a fixed number at its ends (trimmed), so its independent
+        samples grow with the recorded time beyond those (plus 10 %: the noise's correlation
+        time is itself an estimate).
+        """
+        n_total = sum(len(d.q) for d in self.datasets)
+        n_train = sum(d.n_train for d in self.datasets)
+        total = n_total * self.period
+        short, needed = {}, 0.0
         for part in PARTS:
             count = sum(len(rows[part]) for rows in all_rows)
-            n_eff = count * self.step / self.noise.correlation_samples
-            if n_eff.min() >= self.config.min_effective_samples:
+            n_eff = float((count * self.step / self.noise.correlation_samples).min())
+            if n_eff >= self.config.min_effective_samples:
                 continue
-            n_total = sum(len(d.q) for d in self.datasets)
-            n_train = sum(d.n_train for d in self.datasets)
+            short[part] = n_eff
             share = (n_total - n_train if part == 'test' else n_train) / n_total
-            needed = (
-                self.config.min_effective_samples
-                * self.noise.correlation_samples.max()
-                * self.period
-                / share
-                + 3 * self.trim * self.period
-            )
-            total = sum(len(d.q) for d in self.datasets) * self.period
-            raise DatasetError(
-                f'{", ".join(d.source for d in self.datasets)}: {total:.1f} s is too short to '
-                f'diagnose: the {part} part holds {n_eff.min():.1f} independent samples on the '
-                f'slowest-filtered joint, fewer than {self.config.min_effective_samples:g}; '
-                f'record at least {needed:.0f} s'
-            )
+            kept = count * self.step  # recorded samples the kept rows stand for
+            lost = share * n_total - kept  # what its trimmed ends cost, whatever the length
+            wanted = kept * self.config.min_effective_samples / max(n_eff, 1e-9) * 1.1
+            needed = max(needed, (wanted + lost) / share * self.period)
+        if not short:
+            return
+        part, n_eff = min(short.items(), key=lambda item: item[1])
+        raise DatasetError(
+            f'{", ".join(d.source for d in self.datasets)}: {total:.1f} s is too short to '
+            f'diagnose: the {" and ".join(short)} part(s) hold too few independent samples on '
+            f'the slowest-filtered joint ({part}: {n_eff:.1f}, fewer than '
+            f'{self.config.min_effective_samples:g}); record at least {math.ceil(needed)} s'
+        )
 
     def _smooth(self, dataset: Dataset) -> NominalQuantities:
         """Quantities along the filtered motion, for the testability of switching effects."""
