@@ -258,6 +258,11 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         if problem:
             raise ConfigError(f'{where}: topics.{key}: {topic!r} is no ROS topic name: {problem}')
     topics = TopicConfig(**topics_data)
+    if topics.joint_states == topics.motor_currents:
+        raise ConfigError(
+            f'{where}: topics.joint_states and topics.motor_currents are both '
+            f'{topics.joint_states!r}: the joint states and the motor currents are two topics'
+        )
 
     name = data['name']
     if not isinstance(name, str) or not name:

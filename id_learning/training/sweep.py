@@ -12,6 +12,7 @@ share one study.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -328,6 +329,7 @@ def _open_study(
     last: Exception | None = None
     for attempt in range(STORAGE_ATTEMPTS):
         try:
+            optuna.logging.set_verbosity(optuna.logging.WARNING)  # its own INFO lines, too
             return optuna.create_study(
                 study_name=study_name,
                 storage=optuna.storages.RDBStorage(storage, engine_kwargs=engine),
@@ -386,14 +388,21 @@ def _plots(study: optuna.Study, out: Path) -> tuple[Path, ...]:
 
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+    import optuna
     from optuna.exceptions import ExperimentalWarning
     from optuna.visualization import matplotlib as optuna_plots
 
+    complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    settings = {json.dumps(t.params, sort_keys=True, default=str) for t in complete}
+    plots: list[tuple[str, Any]] = [
+        ('optimisation_history.png', optuna_plots.plot_optimization_history)
+    ]
+    if len(settings) > 1:  # importances compare trials of different settings
+        plots.append(('parameter_importances.png', optuna_plots.plot_param_importances))
+    else:
+        _LOG.info('sweep: no parameter importances from %d distinct setting(s)', len(settings))
     written = []
-    for name, draw in (
-        ('optimisation_history.png', optuna_plots.plot_optimization_history),
-        ('parameter_importances.png', optuna_plots.plot_param_importances),
-    ):
+    for name, draw in plots:
         try:
             with warnings.catch_warnings():  # optuna's matplotlib plots are 'experimental'
                 warnings.simplefilter('ignore', ExperimentalWarning)

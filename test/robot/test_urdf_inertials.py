@@ -94,6 +94,9 @@ def test_a_locked_joint_position_and_a_topic_name_are_checked(write_config) -> N
     topic = write_config('mabi_max100', set={'topics': {'motor_currents': '/motor currents'}})
     with pytest.raises(ConfigError, match=r"topics\.motor_currents: '/motor currents' is no ROS"):
         load_robot_config(topic)
+    same = write_config('mabi_max100', set={'topics': {'motor_currents': '/joint_states'}})
+    with pytest.raises(ConfigError, match=r'joint_states and topics\.motor_currents are both'):
+        load_robot_config(same)
 
 
 def test_a_negative_mass_is_refused(tmp_path: Path) -> None:
