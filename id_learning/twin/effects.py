@@ -15,6 +15,7 @@ import numpy as np
 
 from id_learning.config_io import check_keys, float_vector
 from id_learning.errors import ConfigError
+from id_learning.physics.effects import EFFECT_NAMES
 from id_learning.physics.friction import coulomb, load_dependent, stribeck, viscous, warm_up
 
 __all__ = [
@@ -36,22 +37,6 @@ __all__ = [
     'ViscousFriction',
     'effects_from_dict',
 ]
-
-EFFECT_NAMES = (
-    'viscous_friction',
-    'coulomb_friction',
-    'stribeck_friction',
-    'load_dependent_friction',
-    'rotor_inertia',
-    'gravity_spring',
-    'payload_mass',
-    'joint_offset',
-    'torque_constant_scale',
-    'signal_delay',
-    'cogging',
-    'torque_offset',
-    'inertial_parameter_error',
-)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,133 @@
+"""What one physical effect is, as the physics layer sees it: its parameters, its columns.
+
+An effect adds X @ theta [N*m] to the joint torques, with X (N, n, k) its regressor columns built
+from the nominal model's quantities and theta its k parameters in physical units. Each effect is
+one object (``Effect``) that knows its own form; nothing outside ``physics.effects`` asks an
+effect's name to decide what to do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from id_learning.physics.nominal import NominalModel, NominalQuantities
+
+__all__ = ['Effect', 'JointEffect', 'Parameter']
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One column's parameter: its name and SI unit ('1' for a ratio)."""
+
+    name: str
+    unit: str
+
+
+class Effect:
+    """One physical effect the nominal model lacks (subclasses set the class attributes).
+
+    Attributes:
+        name: the stable name the twin, the diagnosis and effects.json share.
+        parameters: one per column, in column order (k of them; an effect whose column count
+            depends on its settings lists the first and describes the rest itself).
+        robot_wide: sits on no single joint (a payload, a delay, the link parameters).
+        link_side: changes the torque the links put on the joints (the load of load-dependent
+            friction), as against the drive's own terms.
+        needs_regressor: its columns read the inertial-parameter regressor.
+        whole_model_key: the setting that puts it in the whole model's form (it then acts on
+            the whole delivered torque, not only the URDF's), or None.
+    """
+
+    name: ClassVar[str] = ''
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    robot_wide: ClassVar[bool] = False
+    link_side: ClassVar[bool] = False
+    needs_regressor: ClassVar[bool] = False
+    whole_model_key: ClassVar[str | None] = None
+
+    def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
+        """What tells this effect's candidates apart in a label, besides the joint."""
+        del settings
+        return []
+
+    def columns(
+        self,
+        quantities: NominalQuantities,
+        joint: int | None,
+        settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> np.ndarray:
+        """(N, n, k) columns along the quantities: the effect adds columns @ theta [N*m]."""
+        raise NotImplementedError(self.name)
+
+    def needs_derivatives(self, settings: Mapping[str, Any]) -> bool:
+        """Whether its columns read d tau / d q, d tau / d v or M(q)."""
+        del settings
+        return False
+
+    def is_whole_model(self, settings: Mapping[str, Any]) -> bool:
+        """Whether these settings put it in the whole model's form (``whole_model_key``)."""
+        key = self.whole_model_key
+        return key is not None and settings.get(key) == 'model'
+
+    def whole_model_settings(self) -> dict[str, str]:
+        """The settings of its whole model's form.
+
+        Raises:
+            ValueError: it has no such form.
+        """
+        if self.whole_model_key is None:
+            raise ValueError(f'{self.name} has no whole-model form')
+        return {self.whole_model_key: 'model'}
+
+    def linearised_about(self, settings: Mapping[str, Any]) -> float:
+        """The value its column is taken about (a delay's last estimate [s]); 0: none."""
+        del settings
+        return 0.0
+
+    def uses_model_load(self, settings: Mapping[str, Any]) -> bool:
+        """Whether it grows with the whole model's link torque (not the URDF's alone)."""
+        del settings
+        return False
+
+
+JointColumns = tuple[np.ndarray, ...]
+
+
+class JointEffect(Effect):
+    """An effect on one joint that acts on that joint alone.
+
+    Its columns are a function of the quantities at joint index j, written with numpy
+    broadcasting, so j may also be an index array with settings arrays of its length: all joints
+    of an effect at once (how a saved model folds them).
+    """
+
+    def joint_columns(
+        self,
+        quantities: NominalQuantities,
+        joint: Any,
+        settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> JointColumns:
+        """Its k columns at joint index (or index array) ``joint``, (N,) or (N, m) each."""
+        raise NotImplementedError(self.name)
+
+    def columns(
+        self,
+        quantities: NominalQuantities,
+        joint: int | None,
+        settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> np.ndarray:
+        """(N, n, k): its joint columns on its joint's rows, zero on the others."""
+        if joint is None:
+            raise ValueError(f'{self.name} needs a joint')
+        parts = self.joint_columns(quantities, joint, settings, model)
+        out = np.zeros((*quantities.q.shape, len(parts)))
+        for c, column in enumerate(parts):
+            out[:, joint, c] = column
+        return out

@@ -1,0 +1,71 @@
+"""The registry of effects: one object per effect, the names the twin and the diagnosis share."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from id_learning.errors import ConfigError
+from id_learning.physics import NominalModel
+from id_learning.physics.effects import EFFECT_NAMES, REGISTRY, JointEffect, effect
+from id_learning.physics.terms import EffectSpec, effect_columns
+from id_learning.twin.effects import effects_from_dict
+
+#: Settings that make each effect's columns well defined on the MABI (one candidate each).
+SETTINGS = {
+    'viscous_friction': {},
+    'coulomb_friction': {'smoothing_velocity': 0.005},
+    'stribeck_friction': {'smoothing_velocity': 0.005, 'velocity': 0.05},
+    'load_dependent_friction': {'smoothing_velocity': 0.005},
+    'rotor_inertia': {},
+    'gravity_spring': {'ratio': 0.6, 'phase_rad': 0.0},
+    'torque_constant_scale': {},
+    'cogging': {'periods_per_motor_turn': 6},
+    'torque_offset': {},
+}
+
+
+def test_every_effect_has_a_unique_name_and_parameters_with_units():
+    assert len(REGISTRY) == len(EFFECT_NAMES) == 13
+    for item in REGISTRY.values():
+        assert item.parameters, item.name
+        assert all(p.name and p.unit for p in item.parameters), item.name
+
+
+def test_the_twin_models_every_effect_of_the_registry(mabi):
+    assert tuple(effects_from_dict({}, mabi.joints).effects) == EFFECT_NAMES
+
+
+def test_an_unknown_effect_is_refused_naming_the_known_ones():
+    with pytest.raises(ConfigError, match=r"unknown effect 'spring'; known effects: \['viscous"):
+        effect('spring')
+
+
+def test_a_joint_effect_gives_every_joint_at_once_what_it_gives_each(mabi):
+    model = NominalModel(mabi)
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1, 1, (50, 6))
+    quantities = model.evaluate(q, rng.normal(0, 0.5, q.shape), rng.normal(0, 2, q.shape))
+    joints = np.arange(6)
+    for name, settings in SETTINGS.items():
+        item = effect(name)
+        assert isinstance(item, JointEffect)
+        together = item.joint_columns(quantities, joints, settings, model)
+        for j in range(6):
+            alone = effect_columns(
+                EffectSpec(name, j, mabi.joints[j], settings), quantities, model
+            )
+            assert alone.shape[2] == len(together), name
+            for c, column in enumerate(together):
+                np.testing.assert_allclose(alone[:, j, c], column[:, j], err_msg=name)
+                assert not np.delete(alone[:, :, c], j, axis=1).any(), name
+
+
+def test_labels_tell_candidates_apart_by_their_settings():
+    a = EffectSpec('stribeck_friction', 1, 'joint_2', {'velocity': 0.05})
+    b = EffectSpec('stribeck_friction', 1, 'joint_2', {'velocity': 0.1})
+    assert a.label == 'stribeck_friction[joint_2, v_s=0.05]' != b.label
+    whole = EffectSpec('signal_delay', settings=effect('signal_delay').whole_model_settings())
+    assert whole.label == 'signal_delay[whole model]'
+    with pytest.raises(ValueError, match='coulomb_friction has no whole-model form'):
+        effect('coulomb_friction').whole_model_settings()
