@@ -152,7 +152,8 @@ class ImportMapping:
         joints: the mapped joints, in the order written unless a robot config reorders them.
         time: the time stamp column, or None when ``period_s`` gives the time base.
         period_s: fixed sampling period [s] (stamp k = start + k * period), or None.
-        format: 'csv' or 'npz'; None takes it from the file suffix.
+        format: 'csv' (gzip-compressed too) or 'npz'; None takes it from the file suffix
+            (``.csv.gz`` is csv).
         header: whether a CSV's first non-comment row names the columns; 'auto' detects it
             (a header when a non-empty field is no number).
         delimiter: CSV field separator: one character, 'tab' or 'whitespace'; None sniffs.
@@ -191,6 +192,7 @@ class ImportMapping:
         _check_options(self, self.where)
         _check_time_base(self, self.where)
         _check_joints(self.joints, self.where)
+        _check_columns_once(self, self.where)
         _check_resample(self, self.where)
         if self.motors is not None:
             _check_motors(self.motors, self.joints, self.where)
@@ -297,6 +299,25 @@ def _check_joints(joints: tuple[JointColumns, ...], where: str) -> None:
             raise ConfigError(
                 f'{where}: {quantity} is mapped for joints {mapped} but not for {unmapped}; '
                 'map it for all joints or for none'
+            )
+
+
+def _check_columns_once(mapping: ImportMapping, where: str) -> None:
+    """Refuse one source column (and index) mapped to two fields: one would copy the other."""
+    uses: dict[tuple[str | int, int | None], list[str]] = {}
+    specs = [] if mapping.time is None else [('time', mapping.time)]
+    for joint in mapping.joints:
+        for quantity in QUANTITIES:
+            spec = getattr(joint, quantity)
+            if spec is not None:
+                specs.append((f'{joint.name} {quantity}', spec))
+    for use, spec in specs:
+        named = uses.setdefault((spec.column, spec.index), [])
+        named.append(use)
+        if len(named) == 2:
+            raise ConfigError(
+                f'{where}: column {spec.describe()} is mapped twice ({", ".join(named)}); map '
+                'each column to one field'
             )
 
 

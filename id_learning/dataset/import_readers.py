@@ -1,13 +1,18 @@
 """Read a log file (CSV or NPZ) into named raw columns, before any conversion.
 
 CSV files are split line by line so that every data row keeps its line number for messages; the
-delimiter and the header row are detected unless the mapping names them.
+delimiter and the header row are detected unless the mapping names them. A gzip-compressed CSV
+(``.csv.gz``) is read as its decompressed text. The file's first bytes are checked against the
+format it is read as, so that an NPZ read as CSV (or the other way round) is named as such
+rather than failing to decode.
 """
 
 from __future__ import annotations
 
 import csv
+import gzip
 import zipfile
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,12 +23,15 @@ import numpy as np
 from id_learning.dataset.import_mapping import ImportMapping
 from id_learning.errors import ConfigError, DatasetError
 
-__all__ = ['LogTable', 'is_float', 'read_table']
+__all__ = ['LogTable', 'is_float', 'log_suffix', 'read_table']
 
 # Sniffing order: tab and semicolon first, since a comma may be a decimal separator there.
 _SNIFF_DELIMITERS = ('tab', ';', ',', 'whitespace')
 _SNIFF_LINES = 20
 _CSV_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat', '.log')
+_ZIP_MAGIC = b'PK\x03\x04'
+_GZIP_MAGIC = b'\x1f\x8b'
+_NPY_MAGIC = b'\x93NUM'
 
 
 @dataclass(frozen=True)
@@ -53,15 +61,31 @@ def read_table(source: Path, mapping: ImportMapping) -> LogTable:
     """Read the log as the mapping's format says, else as its file suffix says.
 
     Raises:
-        ConfigError: no format is given and the suffix names none.
+        ConfigError: no format is given and the suffix names none, or the file's first bytes
+            show another format than the one it is read as (names the format to set).
         DatasetError: the file cannot be read, or holds no data rows.
     """
     file_format = mapping.format or _format_from_suffix(source, mapping)
-    return _read_npz(source) if file_format == 'npz' else _read_csv(source, mapping)
+    said = (
+        f"the mapping's format: {file_format}"
+        if mapping.format
+        else f'its suffix {log_suffix(source)!r}'
+    )
+    if file_format == 'npz':
+        return _read_npz(source, said, mapping.where)
+    return _read_csv(source, mapping, _csv_text(source, said, mapping.where))
+
+
+def log_suffix(path: Path) -> str:
+    """The suffix that names the format, lower case: ``.csv`` also for ``log.csv.gz``."""
+    suffixes = [suffix.lower() for suffix in path.suffixes]
+    if len(suffixes) > 1 and suffixes[-1] == '.gz':
+        return suffixes[-2]
+    return path.suffix.lower()
 
 
 def _format_from_suffix(source: Path, mapping: ImportMapping) -> Literal['csv', 'npz']:
-    suffix = source.suffix.lower()
+    suffix = log_suffix(source)
     if suffix == '.npz':
         return 'npz'
     if suffix in _CSV_SUFFIXES:
@@ -72,7 +96,30 @@ def _format_from_suffix(source: Path, mapping: ImportMapping) -> Literal['csv', 
     )
 
 
-def _read_npz(source: Path) -> LogTable:
+def _read_npz(source: Path, said: str, where: str) -> LogTable:
+    """The arrays of an NPZ archive; a file without the zip signature is named for what it is."""
+    try:
+        with source.open('rb') as stream:
+            head = stream.read(len(_ZIP_MAGIC))
+    except OSError as err:
+        raise DatasetError(f'{source}: cannot read NPZ file: {err}') from err
+    if not head:
+        raise DatasetError(f'{source}: empty file')
+    if head.startswith(_GZIP_MAGIC):
+        raise DatasetError(
+            f'{source}: this file is gzip-compressed; decompress it (gunzip) and import the '
+            '.npz (an NPZ archive can be compressed itself: numpy.savez_compressed)'
+        )
+    if head.startswith(_NPY_MAGIC):
+        raise DatasetError(
+            f'{source}: a single NPY array, not an NPZ archive of named arrays; save the columns '
+            'with numpy.savez(path, name=array, ...)'
+        )
+    if not head.startswith(_ZIP_MAGIC[:2]):  # PK: any zip record (an empty archive too)
+        raise ConfigError(
+            f'{source}: {said} does not fit this file, which is no NPZ (zip) archive (it starts '
+            f'with {head!r}); for a CSV log set format: csv in {where}'
+        )
     try:
         loaded = np.load(source, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):
@@ -84,11 +131,34 @@ def _read_npz(source: Path) -> LogTable:
     return LogTable(source, columns, None)
 
 
-def _read_csv(source: Path, mapping: ImportMapping) -> LogTable:
+def _csv_text(source: Path, said: str, where: str) -> str:
+    """The file's text, decompressed when gzip-compressed (``.csv.gz``).
+
+    Raises:
+        ConfigError: the file is an NPZ (zip) archive (names the format to set).
+        DatasetError: unreadable, a broken gzip stream, or no UTF-8 text.
+    """
     try:
-        text = source.read_text(encoding='utf-8-sig')
-    except (OSError, UnicodeDecodeError) as err:
+        data = source.read_bytes()
+    except OSError as err:
         raise DatasetError(f'{source}: cannot read CSV file: {err}') from err
+    if data.startswith(_GZIP_MAGIC):
+        try:
+            data = gzip.decompress(data)
+        except (OSError, EOFError, zlib.error) as err:
+            raise DatasetError(f'{source}: cannot decompress this gzip file: {err}') from err
+    if data.startswith(_ZIP_MAGIC):
+        raise ConfigError(
+            f'{source}: {said} does not fit this file, which looks like an NPZ (zip) archive (it '
+            f'starts with PK\\x03\\x04); set format: npz in {where}'
+        )
+    try:
+        return data.decode('utf-8-sig')
+    except UnicodeDecodeError as err:
+        raise DatasetError(f'{source}: cannot read CSV file: not UTF-8 text ({err})') from err
+
+
+def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:
     comment = mapping.comment
     numbered = [
         (number, line)

@@ -18,15 +18,25 @@ reported with the lines around them.
 
 from __future__ import annotations
 
+import hashlib
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from id_learning.dataset.import_mapping import ResamplePolicy
 from id_learning.errors import ConfigError
 
-__all__ = ['GAP_PERIODS', 'Gridded', 'Segment', 'interpolate_segments', 'slot_segments']
+__all__ = [
+    'GAP_PERIODS',
+    'Gridded',
+    'Segment',
+    'check_distinct_samples',
+    'interpolate_segments',
+    'slot_segments',
+]
 
 #: Default longest pause inside a segment, in grid periods (what loading a bag tolerates).
 GAP_PERIODS = 3.0
@@ -84,6 +94,42 @@ class Gridded:
     holes: list[tuple[int, int, float]] = field(default_factory=list)
     breaks: list[tuple[int, int, float]] = field(default_factory=list)
     short: list[tuple[int, int, float]] = field(default_factory=list)
+
+
+def _samples_digest(grid: Gridded) -> str:
+    """SHA-256 of the gridded samples: each segment's grid slots and SI values (-0.0 as 0.0)."""
+    digest = hashlib.sha256()
+    for segment in grid.segments:
+        digest.update(np.int64(len(segment.slots)).tobytes())
+        digest.update(np.ascontiguousarray(segment.slots, dtype=np.int64).tobytes())
+        for key in sorted(segment.values):
+            digest.update(key.encode())
+            values = np.ascontiguousarray(segment.values[key], dtype=np.float64) + 0.0
+            digest.update(values.tobytes())
+    return digest.hexdigest()
+
+
+def check_distinct_samples(grids: Sequence[Gridded], sources: Sequence[Path]) -> None:
+    """Refuse two files whose samples on the grid are identical: one recording weighed twice.
+
+    Byte-identical copies are refused before reading (``bag.reader.check_distinct``); this
+    catches the same samples in other bytes: other float formatting or line endings, a CSV and
+    its NPZ export, a gzipped copy, or stamps shifted by a constant (slots count from a file's
+    first grid point).
+
+    Raises:
+        ConfigError: names both files.
+    """
+    seen: dict[str, Path] = {}
+    for grid, source in zip(grids, sources, strict=True):
+        digest = _samples_digest(grid)
+        if digest in seen:
+            n = sum(len(segment.slots) for segment in grid.segments)
+            raise ConfigError(
+                f'import: {source} holds the same samples as {seen[digest]} ({n} samples, stamps '
+                'and values identical after parsing); give each recording once'
+            )
+        seen[digest] = source
 
 
 def _max_gap_s(policy: ResamplePolicy, period_s: float, step_s: float | None = None) -> float:

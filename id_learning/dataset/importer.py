@@ -11,7 +11,8 @@ stretch of a file between pauses longer than ``resample.max_gap_s``, is a segmen
 preprocessing and the train/test split treat as a recording of its own. Nothing is filled or
 dropped silently: rows dropped by the NaN, implausible-value and beyond-limits policies (with
 column, joint and value), holes bridged by resampling, pauses that end a segment and segments too
-short to keep are all in the report.
+short to keep are all in the report. One log given twice is refused, also in other bytes (a
+reformatted, compressed or NPZ copy: the same samples after parsing).
 
 This module reads the mapped columns and writes the bag; the mapping and its checks are in
 ``import_mapping.py``, the CSV and NPZ readers in ``import_readers.py``, the values and row checks
@@ -38,8 +39,13 @@ from id_learning.dataset.import_mapping import (
     JointColumns,
     load_import_mapping,
 )
-from id_learning.dataset.import_readers import LogTable, is_float, read_table
-from id_learning.dataset.import_resample import Gridded, interpolate_segments, slot_segments
+from id_learning.dataset.import_readers import LogTable, is_float, log_suffix, read_table
+from id_learning.dataset.import_resample import (
+    Gridded,
+    check_distinct_samples,
+    interpolate_segments,
+    slot_segments,
+)
 from id_learning.dataset.import_stamps import grid_period_s, relative_times, snap_to_grid
 from id_learning.dataset.import_values import (
     Field,
@@ -47,6 +53,7 @@ from id_learning.dataset.import_values import (
     apply_row_policies,
     joint_side,
     si_values,
+    warn_narrow_floats,
 )
 from id_learning.dataset.plausibility import check_efforts, check_motion
 from id_learning.dataset.recording import Recording, write_recording
@@ -326,11 +333,12 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
     for source in map(Path, sources):
         if source.is_dir():
             found = sorted(
-                p for p in source.iterdir() if p.is_file() and p.suffix.lower() in _LOG_SUFFIXES
+                p for p in source.iterdir() if p.is_file() and log_suffix(p) in _LOG_SUFFIXES
             )
             if not found:
                 raise DatasetError(
-                    f'{source}: no log files ({", ".join(_LOG_SUFFIXES)}) in this folder'
+                    f'{source}: no log files ({", ".join(_LOG_SUFFIXES)}, also gzipped) in '
+                    'this folder'
                 )
             files.extend(found)
         elif source.is_file():
@@ -376,6 +384,7 @@ def _read_file(
     joints = tuple(mapping.joints[i] for i in order)
     table = read_table(source, mapping)
     fields = _fields(mapping, joints)
+    warn_narrow_floats(table.columns, fields, source)
     raw = _raw_matrix(table, fields, mapping)
     keep, dropped = _finite_rows(raw, fields, table, mapping)
     values = si_values(raw, fields)
@@ -487,7 +496,9 @@ def import_logs(
 
     Raises:
         ConfigError: the mapping does not fit the log or the robot (missing column, joint names,
-            no velocity while ``velocity_from_position`` is False).
+            no velocity while ``velocity_from_position`` is False, a format the file's first
+            bytes contradict), or one log is given twice (same file, same bytes, or the same
+            samples after parsing).
         DatasetError: unreadable log, non-numeric or (under 'refuse') non-finite, implausible or
             beyond-limits cells (each names line and column), more than half of the rows to drop
             for implausible or beyond-limits values, stamps
@@ -512,6 +523,7 @@ def import_logs(
             f'the logs are on different sampling grids ({found}); set resample.period_s and '
             'resample.method: interpolate to put them on one'
         )
+    check_distinct_samples([grid for grid, _ in read], files)  # the same data in other bytes
     where = str(files[0]) if len(files) == 1 else f'{files[0].parent} ({len(files)} files)'
     joints = tuple(mapping.joints[i].name for i in order)
     recording = _recording([grid for grid, _ in read], joints, start_ns, where)
