@@ -10,16 +10,14 @@ from typing import Any
 import numpy as np
 
 from id_learning.errors import RobotModelError
+from id_learning.physics.effects import JointEffect, effect
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import (
     JOINT_COLUMNS,
-    LINK_SIDE_EFFECTS,
     EffectSpec,
     effect_columns,
     needs_derivatives,
     needs_regressor,
-    uses_model_load,
-    whole_model_form,
 )
 from id_learning.robot.config import RobotConfig
 
@@ -112,22 +110,23 @@ class AugmentedModel:
         tau += held_back
         deferred, scales, whole_delays = [], [], []
         for spec, theta in terms:
-            if whole_model_form(spec, 'torque_constant_scale'):
+            item = effect(spec.name)
+            if _whole_scale(spec):
                 scales.append((spec, theta))
                 continue
-            if uses_model_load(spec):
+            if item.uses_model_load(spec.settings):
                 deferred.append((spec, theta))
                 continue
-            if whole_model_form(spec, 'signal_delay'):
+            if item.delays_the_label and item.is_whole_model(spec.settings):
                 whole_delays.append(float(theta[0]))
                 continue
             contribution = effect_columns(spec, quantities, self.nominal) @ theta
             tau += contribution
-            if spec.name in LINK_SIDE_EFFECTS:
+            if item.link_side:
                 link += contribution
-            if spec.name == 'torque_offset':
+            if item.label_offset:
                 offsets += contribution
-            elif spec.name != 'signal_delay':
+            elif not item.delays_the_label:
                 held_back += contribution
         if deferred:
             loaded = replace(quantities, tau_rigid=link)
@@ -163,8 +162,8 @@ class AugmentedModel:
         others = [
             (spec, theta)
             for spec, theta in terms
-            if spec.name not in ('signal_delay', 'torque_offset')
-            and not whole_model_form(spec, 'torque_constant_scale')
+            if not (effect(spec.name).delays_the_label or effect(spec.name).label_offset)
+            and not _whole_scale(spec)
         ]
         specs = [spec for spec, _ in others]
         q, v, a, jerk = quantities.q, quantities.v, quantities.a, quantities.jerk
@@ -187,15 +186,16 @@ class AugmentedModel:
         """
         groups: dict[tuple[str, tuple[str, ...]], list[tuple[EffectSpec, np.ndarray]]] = {}
         rest: list[tuple[EffectSpec, np.ndarray]] = []
-        scaled = any(whole_model_form(spec, 'torque_constant_scale') for spec, _ in self.terms)
+        scaled = any(_whole_scale(spec) for spec, _ in self.terms)
         for spec, theta in self.terms:
+            item = effect(spec.name)
             scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
-            foldable = not (
-                uses_model_load(spec)
-                or spec.name in LINK_SIDE_EFFECTS
-                or (scaled and spec.name == 'torque_offset')
+            foldable = isinstance(item, JointEffect) and not (
+                item.uses_model_load(spec.settings)
+                or item.link_side
+                or (scaled and item.label_offset)
             )
-            if spec.name in JOINT_COLUMNS and theta.shape == (1,) and scalar and foldable:
+            if theta.shape == (1,) and scalar and foldable:
                 key = (spec.name, tuple(sorted(spec.settings)))
                 groups.setdefault(key, []).append((spec, theta))
             else:
@@ -206,7 +206,7 @@ class AugmentedModel:
             keys = members[0][0].settings.keys()
             settings = {k: np.array([spec.settings[k] for spec, _ in members]) for k in keys}
             theta = np.array([theta[0] for _, theta in members])
-            folded.append((JOINT_COLUMNS[name], joints, settings, theta))
+            folded.append((JOINT_COLUMNS[name], joints, settings, theta))  # one joint effect
         specs = [spec for spec, _ in rest]
         derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
         nominal, additive, fallback = self.nominal, self._additive, self._fallback
@@ -263,3 +263,9 @@ class AugmentedModel:
             for spec, theta in entries
         ]
         return cls(robot, str(data['target']), terms, nominal_joints=list(fallback))
+
+
+def _whole_scale(spec: EffectSpec) -> bool:
+    """Whether a term is a label-gain error of the whole model's form (scales all delivered)."""
+    item = effect(spec.name)
+    return item.scales_the_label and item.is_whole_model(spec.settings)

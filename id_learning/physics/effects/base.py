@@ -40,6 +40,12 @@ class Effect:
         needs_regressor: its columns read the inertial-parameter regressor.
         whole_model_key: the setting that puts it in the whole model's form (it then acts on
             the whole delivered torque, not only the URDF's), or None.
+        scales_the_label: an error of the label's gain (the torque constant): in its whole
+            model's form it scales everything the drive delivers.
+        delays_the_label: a delay of the label behind the motion: in its whole model's form
+            it holds back every other term.
+        label_offset: a constant the current reading adds (a sensor offset): no gain scales
+            it and no delay holds it back.
     """
 
     name: ClassVar[str] = ''
@@ -48,6 +54,9 @@ class Effect:
     link_side: ClassVar[bool] = False
     needs_regressor: ClassVar[bool] = False
     whole_model_key: ClassVar[str | None] = None
+    scales_the_label: ClassVar[bool] = False
+    delays_the_label: ClassVar[bool] = False
+    label_offset: ClassVar[bool] = False
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         """What tells this effect's candidates apart in a label, besides the joint."""

@@ -193,6 +193,7 @@ class TorqueConstantScale(JointEffect):
     name = 'torque_constant_scale'
     parameters = (Parameter('label_gain_change', '1'),)
     whole_model_key = 'of'
+    scales_the_label = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return ['whole model'] if self.is_whole_model(settings) else []
@@ -217,6 +218,7 @@ class SignalDelay(Effect):
     parameters = (Parameter('delay', 's'),)
     robot_wide = True
     whole_model_key = 'rate_of'
+    delays_the_label = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return ['whole model'] if self.is_whole_model(settings) else []
@@ -259,6 +261,7 @@ class TorqueOffset(JointEffect):
 
     name = 'torque_offset'
     parameters = (Parameter('offset', 'N*m'),)
+    label_offset = True
 
     def joint_columns(
         self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
