@@ -8,10 +8,18 @@ in ``library`` and its tests.
 from __future__ import annotations
 
 from id_learning.errors import ConfigError
-from id_learning.physics.effects.base import Effect, JointEffect, Parameter
+from id_learning.physics.effects.base import Effect, FittedTerm, JointEffect, Parameter
 from id_learning.physics.effects.library import LIBRARY
 
-__all__ = ['EFFECT_NAMES', 'REGISTRY', 'Effect', 'JointEffect', 'Parameter', 'effect']
+__all__ = [
+    'EFFECT_NAMES',
+    'REGISTRY',
+    'Effect',
+    'FittedTerm',
+    'JointEffect',
+    'Parameter',
+    'effect',
+]
 
 #: name -> effect, in the library's order.
 REGISTRY: dict[str, Effect] = {item.name: item for item in LIBRARY}

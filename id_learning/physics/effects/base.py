@@ -16,7 +16,7 @@ import numpy as np
 
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 
-__all__ = ['Effect', 'JointEffect', 'Parameter']
+__all__ = ['Effect', 'FittedTerm', 'JointEffect', 'Parameter', 'entry']
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,16 @@ class Parameter:
 
     name: str
     unit: str
+
+
+def entry(name: str, value: float, low: float, high: float, unit: str) -> dict[str, Any]:
+    """One described parameter: name, value, its interval (low, high, ordered) and unit."""
+    return {
+        'name': name,
+        'value': float(value),
+        'ci': [float(min(low, high)), float(max(low, high))],
+        'unit': unit,
+    }
 
 
 class Effect:
@@ -102,6 +112,58 @@ class Effect:
         """Whether it grows with the whole model's link torque (not the URDF's alone)."""
         del settings
         return False
+
+    def describe(
+        self,
+        fit: FittedTerm,
+        model: NominalModel,
+    ) -> list[dict[str, Any]]:
+        """Its physical parameters with intervals, in the twin's terms where one exists.
+
+        One dict per parameter: name, value, ci (low, high), unit. By default one per column,
+        as ``parameters`` names them.
+        """
+        del model
+        lo, hi = fit.low, fit.high
+        return [
+            entry(p.name, fit.theta[k], lo[k], hi[k], p.unit)
+            for k, p in enumerate(self.parameters[: len(fit.theta)])
+        ]
+
+
+@dataclass(frozen=True, eq=False)
+class FittedTerm:
+    """One fitted term of an effect, as ``Effect.describe`` reads it.
+
+    Attributes:
+        joint: the joint index it sits on (None: robot-wide).
+        settings: the settings of its columns.
+        theta: (k,) fitted column coefficients in physical units.
+        half_width: (k,) half widths of their confidence intervals (same units).
+        interval_covariance: (k, k) covariance of theta scaled so that the square roots of its
+            diagonal are ``half_width``; for parameters that mix coefficients, or None.
+        refined: settings estimated again beside the fit, name -> [value, low, high] (a
+            Stribeck velocity); a setting not there is taken as exact.
+    """
+
+    joint: int | None
+    settings: Mapping[str, Any]
+    theta: np.ndarray
+    half_width: np.ndarray
+    interval_covariance: np.ndarray | None = None
+    refined: Mapping[str, list[float]] | None = None
+
+    @property
+    def low(self) -> np.ndarray:
+        """Lower ends of the coefficients' intervals."""
+        out: np.ndarray = self.theta - self.half_width
+        return out
+
+    @property
+    def high(self) -> np.ndarray:
+        """Upper ends of the coefficients' intervals."""
+        out: np.ndarray = self.theta + self.half_width
+        return out
 
 
 JointColumns = tuple[np.ndarray, ...]

@@ -6,6 +6,7 @@ from ``physics.friction`` (written once), the balancer's basis from ``physics.ba
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -13,7 +14,15 @@ import numpy as np
 
 import id_learning.physics.friction as laws
 from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
-from id_learning.physics.effects.base import Effect, JointColumns, JointEffect, Parameter
+from id_learning.physics.base_parameters import base_parameters
+from id_learning.physics.effects.base import (
+    Effect,
+    FittedTerm,
+    JointColumns,
+    JointEffect,
+    Parameter,
+    entry,
+)
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
 
@@ -38,6 +47,20 @@ class ViscousFriction(JointEffect):
     ) -> JointColumns:  # fmt: skip
         exponent = settings.get('exponent', 1.0)
         return laws.viscous(quantities.v[:, joint], exponent, linear=bool(settings.get('linear')))
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        exponent = float(fit.settings.get('exponent', 1.0))
+        if exponent == 1.0:
+            return super().describe(fit, model)
+        theta, lo, hi = fit.theta, fit.low, fit.high
+        power = len(theta) - 1  # after the linear part, if any
+        linear = [entry('coefficient', theta[0], lo[0], hi[0], 'N*m*s/rad')] if power else []
+        return [
+            *linear,
+            entry('power_coefficient', theta[power], lo[power], hi[power],
+                  f'N*m*(s/rad)^{exponent:g}'),
+            entry('exponent', exponent, exponent, exponent, '1'),
+        ]  # fmt: skip
 
 
 class CoulombFriction(JointEffect):
@@ -68,6 +91,14 @@ class StribeckFriction(JointEffect):
     ) -> JointColumns:  # fmt: skip
         v = quantities.v[:, joint]
         return (laws.stribeck(v, settings['velocity'], settings['smoothing_velocity']),)
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        exact = [fit.settings['velocity']] * 3
+        v, v_low, v_high = (fit.refined or {}).get('velocity', exact)
+        return [
+            entry('level', fit.theta[0], fit.low[0], fit.high[0], 'N*m'),
+            entry('velocity', v, v_low, v_high, 'rad/s'),
+        ]
 
 
 class LoadDependentFriction(JointEffect):
@@ -107,6 +138,25 @@ class RotorInertia(JointEffect):
     ) -> JointColumns:  # fmt: skip
         return (model.robot.drives.gear_ratio[joint] ** 2 * quantities.a[:, joint],)
 
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        """On joint-torque labels the axis inertia seen link side; on motor labels the rotor's."""
+        j = fit.joint
+        if j is None:
+            return super().describe(fit, model)
+        theta, lo, hi = fit.theta[0], fit.low[0], fit.high[0]
+        drives = model.robot.drives
+        if model.target != 'motor':
+            n2 = float(drives.gear_ratio[j]) ** 2
+            return [entry('axis_inertia_change_link_side', n2 * theta, n2 * lo, n2 * hi, 'kg*m^2')]
+        nominal = drives.rotor_inertia[j]
+        out = [entry('rotor_inertia_motor_side', nominal + theta, nominal + lo, nominal + hi,
+                     'kg*m^2')]  # fmt: skip
+        if nominal > 0:
+            out.append(
+                entry('scale', 1 + theta / nominal, 1 + lo / nominal, 1 + hi / nominal, '1')
+            )
+        return out
+
 
 class GravitySpring(JointEffect):
     """A balancer's torque (``physics.balancer``) for its geometry in the settings.
@@ -133,6 +183,21 @@ class GravitySpring(JointEffect):
             return tuple(basis[..., k] for k in range(BALANCER_TERMS))
         dq = q - settings['reference_rad']
         return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        theta, lo, hi = fit.theta, fit.low, fit.high
+        if 'ratio' in fit.settings:
+            ratio, phase = fit.settings['ratio'], fit.settings['phase_rad']
+            return [
+                entry('arm_ratio', ratio, ratio, ratio, '1'),
+                entry('phase', phase, phase, phase, 'rad'),
+                *[entry(f'f{k}', theta[k], lo[k], hi[k], 'N*m') for k in range(len(theta))],
+            ]
+        unit = {1: 'N*m/rad'}
+        return [
+            entry(f'c{k}', theta[k - 1], lo[k - 1], hi[k - 1], unit.get(k, f'N*m/rad^{k}'))
+            for k in range(1, len(theta) + 1)
+        ]
 
 
 class PayloadMass(Effect):
@@ -163,6 +228,20 @@ class PayloadMass(Effect):
         )
         rows = slice(N_INERTIAL_PARAMETERS * body, N_INERTIAL_PARAMETERS * (body + 1))
         out: np.ndarray = quantities.regressor[:, :, rows] @ mapping
+        return out
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        theta, half = fit.theta, fit.half_width
+        mass = float(theta[0])
+        out = [entry('mass', mass, fit.low[0], fit.high[0], 'kg')]
+        if mass > 0:
+            for axis, k in zip('xyz', range(1, 4), strict=True):
+                com = theta[k] / mass
+                spread = abs(com) * math.hypot(half[k] / max(abs(theta[k]), 1e-12), half[0] / mass)
+                out.append(entry(f'com_{axis}', com, com - spread, com + spread, 'm'))
+        for k, axes in enumerate(('xx', 'xy', 'yy', 'xz', 'yz', 'zz'), start=4):
+            if k < len(theta):  # rotational inertia about the centre of mass, frame axes
+                out.append(entry(f'inertia_{axes}', theta[k], fit.low[k], fit.high[k], 'kg*m^2'))
         return out
 
 
@@ -203,6 +282,14 @@ class TorqueConstantScale(JointEffect):
         model: NominalModel,
     ) -> JointColumns:  # fmt: skip
         return (quantities.tau_nominal[:, joint],)
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        """The torque constant's scale s: tau_u from currents = tau_true / s = (1 + c) tau."""
+
+        def scale(c: float) -> float:
+            return 1.0 / (1.0 + c) if c > -1 else math.inf
+
+        return [entry('scale', scale(fit.theta[0]), scale(fit.high[0]), scale(fit.low[0]), '1')]
 
 
 class SignalDelay(Effect):
@@ -255,6 +342,16 @@ class Cogging(JointEffect):
         phase = settings['periods_per_motor_turn'] * gear * quantities.q[:, joint]
         return np.sin(phase), np.cos(phase)
 
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        amplitude = float(np.hypot(fit.theta[0], fit.theta[1]))
+        spread = float(np.hypot(fit.half_width[0], fit.half_width[1]))
+        phase = math.atan2(fit.theta[1], fit.theta[0])
+        return [
+            entry('amplitude', amplitude, max(amplitude - spread, 0.0), amplitude + spread, 'N*m'),
+            # The phase's interval means nothing near zero amplitude: the whole circle.
+            entry('phase', phase, -math.pi, math.pi, 'rad'),
+        ]
+
 
 class TorqueOffset(JointEffect):
     """A constant torque on the joint (a current sensor's offset)."""
@@ -286,6 +383,40 @@ class InertialParameterError(Effect):
         if quantities.regressor is None:
             raise ValueError('inertial_parameter_error needs quantities with regressor=True')
         out: np.ndarray = quantities.regressor @ np.asarray(settings['base_directions'])
+        return out
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        """The base parameters whose interval excludes the URDF's value, and how many there are.
+
+        A change c along the identifiable directions D moves the link parameters by D c and the
+        base parameters (``physics.base_parameters``) by E D c; each is named after the
+        parameter it stands for, with what it groups.
+        """
+        directions = np.asarray(fit.settings['base_directions'])
+        base = base_parameters(model.dynamics, model.robot.limits)
+        mapping = base.matrix @ directions
+        urdf = base.matrix @ model.dynamics.inertial_parameters()
+        change = mapping @ fit.theta
+        covariance = fit.interval_covariance
+        if covariance is None:
+            half = np.zeros_like(change)
+        else:
+            half = np.sqrt(
+                np.clip(np.einsum('ik,kl,il->i', mapping, covariance, mapping), 0, None)
+            )
+        changed = np.flatnonzero(np.abs(change) > half)
+        out: list[dict[str, Any]] = [{
+            'name': 'changed_base_parameters',
+            'value': int(changed.size),
+            'ci': None,
+            'unit': f'count of {base.count} (interval excludes the URDF value)',
+        }]  # fmt: skip
+        for i in changed:
+            value = urdf[i] + change[i]
+            out.append(
+                entry(base.names[i], value, value - half[i], value + half[i], base.units[i])
+            )
+            out[-1]['urdf'] = float(urdf[i])
         return out
 
 
