@@ -14,6 +14,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from id_learning.physics.effects.judgement import JointMotion, PlausibilityFacts, Trial, Verdict
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 
 __all__ = ['Effect', 'FittedTerm', 'JointEffect', 'Parameter', 'entry']
@@ -50,6 +51,10 @@ class Effect:
         needs_regressor: its columns read the inertial-parameter regressor.
         whole_model_key: the setting that puts it in the whole model's form (it then acts on
             the whole delivered torque, not only the URDF's), or None.
+        needs_motion: only motion shows it (friction, cogging, inertia): its joint must move.
+        needs_both_directions: its sign flips with the direction: its joint must move both ways.
+        motor_side_only: exists in tau_u from currents only, not in a torque measured after the
+            gear.
         scales_the_label: an error of the label's gain (the torque constant): in its whole
             model's form it scales everything the drive delivers.
         delays_the_label: a delay of the label behind the motion: in its whole model's form
@@ -64,6 +69,9 @@ class Effect:
     link_side: ClassVar[bool] = False
     needs_regressor: ClassVar[bool] = False
     whole_model_key: ClassVar[str | None] = None
+    needs_motion: ClassVar[bool] = False
+    needs_both_directions: ClassVar[bool] = False
+    motor_side_only: ClassVar[bool] = False
     scales_the_label: ClassVar[bool] = False
     delays_the_label: ClassVar[bool] = False
     label_offset: ClassVar[bool] = False
@@ -112,6 +120,20 @@ class Effect:
         """Whether it grows with the whole model's link torque (not the URDF's alone)."""
         del settings
         return False
+
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Whether a fitted value is physically plausible; the reason when not (``judgement``)."""
+        raise NotImplementedError(self.name)
+
+    def excitation_problem(self, settings: Mapping[str, Any], motion: JointMotion) -> str:
+        """Why this joint's motion cannot show the effect in these settings; '' if it can."""
+        del settings, motion
+        return ''
+
+    def plausible_bound(self, joint: int | None, model: NominalModel) -> float | None:
+        """The largest plausible size of a one-parameter effect (to judge what is detectable)."""
+        del joint, model
+        return None
 
     def describe(
         self,

@@ -13,8 +13,6 @@ from typing import Any
 import numpy as np
 
 import id_learning.physics.friction as laws
-from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
-from id_learning.physics.base_parameters import base_parameters
 from id_learning.physics.effects.base import (
     Effect,
     FittedTerm,
@@ -23,8 +21,20 @@ from id_learning.physics.effects.base import (
     Parameter,
     entry,
 )
+from id_learning.physics.effects.judgement import (
+    JointMotion,
+    PlausibilityFacts,
+    Trial,
+    Verdict,
+    within,
+)
+from id_learning.physics.effects.links import (
+    GRAVITY_SPRING,
+    INERTIAL_PARAMETER_ERROR,
+    JOINT_OFFSET,
+    PAYLOAD_MASS,
+)
 from id_learning.physics.nominal import NominalModel, NominalQuantities
-from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
 
 __all__ = ['LIBRARY']
 
@@ -34,6 +44,7 @@ class ViscousFriction(JointEffect):
 
     name = 'viscous_friction'
     parameters = (Parameter('coefficient', 'N*m*s/rad'),)
+    needs_motion = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         if settings.get('exponent', 1.0) == 1.0:
@@ -62,12 +73,25 @@ class ViscousFriction(JointEffect):
             entry('exponent', exponent, exponent, exponent, '1'),
         ]  # fmt: skip
 
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Dissipative and within the torque limit up to the joint's top speed."""
+        j = _joint(trial)
+        limits = model.robot.limits
+        exponent = float(trial.settings.get('exponent', 1.0))
+        if len(trial.theta) == 1:
+            bound = limits.torque[j] / limits.velocity[j] ** exponent
+            unit = 'N*m*s/rad' if exponent == 1.0 else f'N*m*(s/rad)^{exponent:g}'
+            return trial.first_within(0.0, bound, unit)
+        return _viscous_curve(trial, exponent, float(limits.velocity[j]), float(limits.torque[j]))
+
 
 class CoulombFriction(JointEffect):
     """F_c tanh(v / v_eps)."""
 
     name = 'coulomb_friction'
     parameters = (Parameter('level', 'N*m'),)
+    needs_motion = True
+    needs_both_directions = True
 
     def joint_columns(
         self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
@@ -75,12 +99,18 @@ class CoulombFriction(JointEffect):
     ) -> JointColumns:  # fmt: skip
         return (laws.coulomb(quantities.v[:, joint], settings['smoothing_velocity']),)
 
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Dissipative, and at most half the joint's torque limit."""
+        return trial.first_within(0.0, 0.5 * model.robot.limits.torque[_joint(trial)], 'N*m')
+
 
 class StribeckFriction(JointEffect):
     """F_s exp(-(v / v_s)^2) tanh(v / v_eps), one candidate per Stribeck velocity v_s."""
 
     name = 'stribeck_friction'
     parameters = (Parameter('level', 'N*m'),)
+    needs_motion = True
+    needs_both_directions = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return [f'v_s={settings["velocity"]:g}']
@@ -100,6 +130,23 @@ class StribeckFriction(JointEffect):
             entry('velocity', v, v_low, v_high, 'rad/s'),
         ]
 
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Dissipative, and at most half the joint's torque limit."""
+        return trial.first_within(0.0, 0.5 * model.robot.limits.torque[_joint(trial)], 'N*m')
+
+    def excitation_problem(self, settings: Mapping[str, Any], motion: JointMotion) -> str:
+        """Enough slow motion: the hump lives below v_s."""
+        vs = settings['velocity']
+        slow = motion.moving & (np.abs(motion.v) < vs)
+        share = slow.sum() / max(motion.moving.sum(), 1)
+        needed = motion.thresholds['min_slow_fraction']
+        if share >= needed:
+            return ''
+        return (
+            f'too little slow motion: {100 * share:.1f} % of the moving samples of '
+            f'{motion.joint_name} are slower than v_s = {vs:g} rad/s (needs {100 * needed:g} %)'
+        )
+
 
 class LoadDependentFriction(JointEffect):
     """mu |L| tanh(v / v_eps), L the link torque on the joint.
@@ -111,6 +158,8 @@ class LoadDependentFriction(JointEffect):
 
     name = 'load_dependent_friction'
     parameters = (Parameter('coefficient', '1'),)
+    needs_motion = True
+    needs_both_directions = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return ['model load'] if self.uses_model_load(settings) else []
@@ -125,12 +174,17 @@ class LoadDependentFriction(JointEffect):
         v, load = quantities.v[:, joint], quantities.tau_rigid[:, joint]
         return (laws.load_dependent(v, load, settings['smoothing_velocity']),)
 
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Dissipative, and at most half the link torque (a gear's efficiency is above 50 %)."""
+        return trial.first_within(0.0, 0.5, '')
+
 
 class RotorInertia(JointEffect):
     """A change J of the rotor inertia (motor side): J N^2 a on the joint."""
 
     name = 'rotor_inertia'
     parameters = (Parameter('rotor_inertia_change_motor_side', 'kg*m^2'),)
+    needs_motion = True
 
     def joint_columns(
         self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
@@ -157,113 +211,12 @@ class RotorInertia(JointEffect):
             )
         return out
 
-
-class GravitySpring(JointEffect):
-    """A balancer's torque (``physics.balancer``) for its geometry in the settings.
-
-    Terms written before the balancer form hold a polynomial in (q - reference_rad) instead.
-    """
-
-    name = 'gravity_spring'
-    parameters = (Parameter('f0', 'N*m'), Parameter('f1', 'N*m'), Parameter('f2', 'N*m'))
-    link_side = True
-
-    def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
-        if 'ratio' not in settings:
-            return []
-        return [f'r={settings["ratio"]:.3g}, phi={settings["phase_rad"]:.3g}']
-
-    def joint_columns(
-        self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
-        model: NominalModel,
-    ) -> JointColumns:  # fmt: skip
-        q = quantities.q[:, joint]
-        if 'ratio' in settings:
-            basis = balancer_basis(q, settings['ratio'], settings['phase_rad'])
-            return tuple(basis[..., k] for k in range(BALANCER_TERMS))
-        dq = q - settings['reference_rad']
-        return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
-
-    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
-        theta, lo, hi = fit.theta, fit.low, fit.high
-        if 'ratio' in fit.settings:
-            ratio, phase = fit.settings['ratio'], fit.settings['phase_rad']
-            return [
-                entry('arm_ratio', ratio, ratio, ratio, '1'),
-                entry('phase', phase, phase, phase, 'rad'),
-                *[entry(f'f{k}', theta[k], lo[k], hi[k], 'N*m') for k in range(len(theta))],
-            ]
-        unit = {1: 'N*m/rad'}
-        return [
-            entry(f'c{k}', theta[k - 1], lo[k - 1], hi[k - 1], unit.get(k, f'N*m/rad^{k}'))
-            for k in range(1, len(theta) + 1)
-        ]
-
-
-class PayloadMass(Effect):
-    """A payload at the payload frame: its mass and first moments (and inertia if asked)."""
-
-    name = 'payload_mass'
-    parameters = (
-        Parameter('mass', 'kg'),
-        Parameter('first_moment_x', 'kg*m'),
-        Parameter('first_moment_y', 'kg*m'),
-        Parameter('first_moment_z', 'kg*m'),
-    )
-    robot_wide = True
-    link_side = True
-    needs_regressor = True
-
-    def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
-        return [str(settings['frame']), *(['with inertia'] if settings.get('inertia') else [])]
-
-    def columns(
-        self, quantities: NominalQuantities, joint: int | None, settings: Mapping[str, Any],
-        model: NominalModel,
-    ) -> np.ndarray:  # fmt: skip
-        if quantities.regressor is None:
-            raise ValueError('payload_mass needs quantities evaluated with regressor=True')
-        body, mapping = model.payload_map(
-            str(settings['frame']), settings['com_guess_m'], bool(settings.get('inertia'))
-        )
-        rows = slice(N_INERTIAL_PARAMETERS * body, N_INERTIAL_PARAMETERS * (body + 1))
-        out: np.ndarray = quantities.regressor[:, :, rows] @ mapping
-        return out
-
-    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
-        theta, half = fit.theta, fit.half_width
-        mass = float(theta[0])
-        out = [entry('mass', mass, fit.low[0], fit.high[0], 'kg')]
-        if mass > 0:
-            for axis, k in zip('xyz', range(1, 4), strict=True):
-                com = theta[k] / mass
-                spread = abs(com) * math.hypot(half[k] / max(abs(theta[k]), 1e-12), half[0] / mass)
-                out.append(entry(f'com_{axis}', com, com - spread, com + spread, 'm'))
-        for k, axes in enumerate(('xx', 'xy', 'yy', 'xz', 'yz', 'zz'), start=4):
-            if k < len(theta):  # rotational inertia about the centre of mass, frame axes
-                out.append(entry(f'inertia_{axes}', theta[k], fit.low[k], fit.high[k], 'kg*m^2'))
-        return out
-
-
-class JointOffset(Effect):
-    """An encoder offset: the links sit at q + offset, d tau / d q times it."""
-
-    name = 'joint_offset'
-    parameters = (Parameter('offset', 'rad'),)
-    link_side = True
-
-    def needs_derivatives(self, settings: Mapping[str, Any]) -> bool:
-        return True
-
-    def columns(
-        self, quantities: NominalQuantities, joint: int | None, settings: Mapping[str, Any],
-        model: NominalModel,
-    ) -> np.ndarray:  # fmt: skip
-        if joint is None:
-            raise ValueError('joint_offset needs a joint')
-        if quantities.dtau_dq is None:
-            raise ValueError('joint_offset needs quantities evaluated with derivatives=True')
-        return quantities.dtau_dq[:, :, joint : joint + 1].copy()
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """A brake or gear stage adds inertia; a datasheet is rarely off by more than 3x."""
+        nominal = model.robot.drives.rotor_inertia[_joint(trial)]
+        low = -0.9 * nominal if nominal > 0 else 0.0
+        high = 3.0 * nominal if nominal > 0 else 1e-3
+        return trial.first_within(low, high, 'kg*m^2')
 
 
 class TorqueConstantScale(JointEffect):
@@ -271,6 +224,7 @@ class TorqueConstantScale(JointEffect):
 
     name = 'torque_constant_scale'
     parameters = (Parameter('label_gain_change', '1'),)
+    motor_side_only = True
     whole_model_key = 'of'
     scales_the_label = True
 
@@ -290,6 +244,10 @@ class TorqueConstantScale(JointEffect):
             return 1.0 / (1.0 + c) if c > -1 else math.inf
 
         return [entry('scale', scale(fit.theta[0]), scale(fit.high[0]), scale(fit.low[0]), '1')]
+
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """A torque constant off by at most 30 % (datasheet tolerance and temperature)."""
+        return trial.first_within(-0.3, 0.3, '')
 
 
 class SignalDelay(Effect):
@@ -324,12 +282,24 @@ class SignalDelay(Effect):
         out: np.ndarray = -model.nominal_rate(quantities)[:, :, None]
         return out
 
+    def plausible_bound(self, joint: int | None, model: NominalModel) -> float | None:
+        """At most 50 ms or ten IPO cycles [s]."""
+        return max(0.05, 10.0 * model.robot.ipo_period_s)
+
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Labels lag the motion, never lead it, by at most ``plausible_bound``."""
+        bound = self.plausible_bound(None, model)
+        assert bound is not None
+        return trial.first_within(0.0, bound, 's')
+
 
 class Cogging(JointEffect):
     """Torque ripple periodic in the motor angle: sin and cos of p N q."""
 
     name = 'cogging'
     parameters = (Parameter('sine', 'N*m'), Parameter('cosine', 'N*m'))
+    needs_motion = True
+    needs_both_directions = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return [f'p={settings["periods_per_motor_turn"]}']
@@ -352,6 +322,26 @@ class Cogging(JointEffect):
             entry('phase', phase, -math.pi, math.pi, 'rad'),
         ]
 
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """An amplitude of at most 5 % of the joint's torque limit."""
+        limit = model.robot.limits.torque[_joint(trial)]
+        amplitude = float(np.hypot(trial.theta[0], trial.theta[1]))
+        spread = trial.margin * float(np.hypot(trial.sd[0], trial.sd[1]))
+        return within(amplitude, spread, 0.0, 0.05 * limit, 'N*m amplitude')
+
+    def excitation_problem(self, settings: Mapping[str, Any], motion: JointMotion) -> str:
+        """Its ripple frequency p N |v| / (2 pi) below the label filter's cut-off."""
+        p = settings['periods_per_motor_turn']
+        frequency = p * motion.gear_ratio * np.abs(motion.v[motion.moving]) / (2 * math.pi)
+        share = float(np.mean(frequency < motion.cutoff_hz))
+        if share >= motion.thresholds['min_below_cutoff_fraction']:
+            return ''
+        return (
+            f'above the filter cut-off: its frequency p N |v| / (2 pi) is below the '
+            f'{motion.cutoff_hz:g} Hz cut-off in only {100 * share:.1f} % of the moving '
+            f'samples of {motion.joint_name}'
+        )
+
 
 class TorqueOffset(JointEffect):
     """A constant torque on the joint (a current sensor's offset)."""
@@ -366,58 +356,10 @@ class TorqueOffset(JointEffect):
     ) -> JointColumns:  # fmt: skip
         return (np.ones_like(quantities.q[:, joint]),)
 
-
-class InertialParameterError(Effect):
-    """The links' inertial parameters off their CAD values, along the base directions given."""
-
-    name = 'inertial_parameter_error'
-    parameters = (Parameter('base_parameter', 'SI'),)
-    robot_wide = True
-    link_side = True
-    needs_regressor = True
-
-    def columns(
-        self, quantities: NominalQuantities, joint: int | None, settings: Mapping[str, Any],
-        model: NominalModel,
-    ) -> np.ndarray:  # fmt: skip
-        if quantities.regressor is None:
-            raise ValueError('inertial_parameter_error needs quantities with regressor=True')
-        out: np.ndarray = quantities.regressor @ np.asarray(settings['base_directions'])
-        return out
-
-    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
-        """The base parameters whose interval excludes the URDF's value, and how many there are.
-
-        A change c along the identifiable directions D moves the link parameters by D c and the
-        base parameters (``physics.base_parameters``) by E D c; each is named after the
-        parameter it stands for, with what it groups.
-        """
-        directions = np.asarray(fit.settings['base_directions'])
-        base = base_parameters(model.dynamics, model.robot.limits)
-        mapping = base.matrix @ directions
-        urdf = base.matrix @ model.dynamics.inertial_parameters()
-        change = mapping @ fit.theta
-        covariance = fit.interval_covariance
-        if covariance is None:
-            half = np.zeros_like(change)
-        else:
-            half = np.sqrt(
-                np.clip(np.einsum('ik,kl,il->i', mapping, covariance, mapping), 0, None)
-            )
-        changed = np.flatnonzero(np.abs(change) > half)
-        out: list[dict[str, Any]] = [{
-            'name': 'changed_base_parameters',
-            'value': int(changed.size),
-            'ci': None,
-            'unit': f'count of {base.count} (interval excludes the URDF value)',
-        }]  # fmt: skip
-        for i in changed:
-            value = urdf[i] + change[i]
-            out.append(
-                entry(base.names[i], value, value - half[i], value + half[i], base.units[i])
-            )
-            out[-1]['urdf'] = float(urdf[i])
-        return out
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """At most 10 % of the joint's torque limit (a current sensor's offset)."""
+        limit = model.robot.limits.torque[_joint(trial)]
+        return trial.first_within(-0.1 * limit, 0.1 * limit, 'N*m')
 
 
 #: Every effect, in the library's stable order.
@@ -427,12 +369,48 @@ LIBRARY: tuple[Effect, ...] = (
     StribeckFriction(),
     LoadDependentFriction(),
     RotorInertia(),
-    GravitySpring(),
-    PayloadMass(),
-    JointOffset(),
+    GRAVITY_SPRING,
+    PAYLOAD_MASS,
+    JOINT_OFFSET,
     TorqueConstantScale(),
     SignalDelay(),
     Cogging(),
     TorqueOffset(),
-    InertialParameterError(),
+    INERTIAL_PARAMETER_ERROR,
 )
+
+
+def _joint(trial: Trial) -> int:
+    """The joint a joint effect's trial sits on."""
+    if trial.joint is None:
+        raise ValueError('a joint effect needs a joint')
+    return trial.joint
+
+
+def _viscous_curve(trial: Trial, exponent: float, max_velocity: float, limit: float) -> Verdict:
+    """A linear-plus-power viscous law b v + c v^delta: dissipative and within the limit.
+
+    Its torque at each speed up to the joint's limit is linear in (b, c): it must not be
+    negative, nor exceed the torque limit, beyond its margin (from 2 % of the top speed on:
+    below, the Coulomb level holds the curve up).
+    """
+    theta, margin = trial.theta, trial.margin
+    speeds = max_velocity * np.linspace(0.02, 1.0, 50)
+    basis = np.stack([speeds, speeds**exponent], axis=1)
+    torque = basis @ theta
+    variance = np.einsum('ik,kl,il->i', basis, trial.covariance, basis)
+    spread = margin * np.sqrt(np.clip(variance, 0, None))
+    law = f'viscous law {theta[0]:.4g} v + {theta[1]:.4g} v^{exponent:g} gives'
+    low = int(np.argmin(torque + spread))
+    if torque[low] + spread[low] < 0:
+        return False, (
+            f'{law} {torque[low]:.4g} +- {spread[low] / margin:.2g} N*m at '
+            f'{speeds[low]:.3g} rad/s: friction that drives the joint'
+        )
+    high = int(np.argmax(torque - spread))
+    if torque[high] - spread[high] > limit:
+        return False, (
+            f'{law} {torque[high]:.4g} N*m at {speeds[high]:.3g} rad/s, beyond the torque '
+            f'limit {limit:g}'
+        )
+    return True, ''

@@ -1,0 +1,340 @@
+"""The link-side effects: what changes the torque the links put on the joints.
+
+A balancer (gravity spring), a payload, an encoder offset and errors of the links' inertial
+parameters; load-dependent friction grows with what they add (``Effect.link_side``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
+from id_learning.physics.base_parameters import base_parameters
+from id_learning.physics.effects.base import (
+    Effect,
+    FittedTerm,
+    JointColumns,
+    JointEffect,
+    Parameter,
+    entry,
+)
+from id_learning.physics.effects.judgement import PlausibilityFacts, Trial, Verdict
+from id_learning.physics.nominal import NominalModel, NominalQuantities
+from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
+
+__all__ = [
+    'GRAVITY_SPRING',
+    'INERTIAL_PARAMETER_ERROR',
+    'JOINT_OFFSET',
+    'PAYLOAD_COM_LIMIT_M',
+    'PAYLOAD_MASS',
+]
+
+#: Farthest a payload's centre of mass may lie from its frame [m]: a tool or a spindle, not a
+#: lever arm.
+PAYLOAD_COM_LIMIT_M = 1.0
+#: How far an encoder zero error may move the payload frame before a cell notices it [m]
+#: (every taught point off by as much), and the largest joint offset plausible at all [rad].
+MASTERING_TOLERANCE_M = 0.03
+JOINT_OFFSET_MAX_RAD = 0.2
+
+
+class GravitySpring(JointEffect):
+    """A balancer's torque (``physics.balancer``) for its geometry in the settings.
+
+    Terms written before the balancer form hold a polynomial in (q - reference_rad) instead.
+    """
+
+    name = 'gravity_spring'
+    parameters = (Parameter('f0', 'N*m'), Parameter('f1', 'N*m'), Parameter('f2', 'N*m'))
+    link_side = True
+
+    def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
+        if 'ratio' not in settings:
+            return []
+        return [f'r={settings["ratio"]:.3g}, phi={settings["phase_rad"]:.3g}']
+
+    def joint_columns(
+        self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> JointColumns:  # fmt: skip
+        q = quantities.q[:, joint]
+        if 'ratio' in settings:
+            basis = balancer_basis(q, settings['ratio'], settings['phase_rad'])
+            return tuple(basis[..., k] for k in range(BALANCER_TERMS))
+        dq = q - settings['reference_rad']
+        return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        theta, lo, hi = fit.theta, fit.low, fit.high
+        if 'ratio' in fit.settings:
+            ratio, phase = fit.settings['ratio'], fit.settings['phase_rad']
+            return [
+                entry('arm_ratio', ratio, ratio, ratio, '1'),
+                entry('phase', phase, phase, phase, 'rad'),
+                *[entry(f'f{k}', theta[k], lo[k], hi[k], 'N*m') for k in range(len(theta))],
+            ]
+        unit = {1: 'N*m/rad'}
+        return [
+            entry(f'c{k}', theta[k - 1], lo[k - 1], hi[k - 1], unit.get(k, f'N*m/rad^{k}'))
+            for k in range(1, len(theta) + 1)
+        ]
+
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Mounted to carry the arm's weight, and no stronger than 1.5 times gravity there.
+
+        It falls where gravity's torque rises, or it takes load off on average (a balancer on
+        joint 3 turns with q3, gravity there with q2 + q3: their shapes may rise together while
+        the balancer's mean still opposes gravity's). Both are linear in theta: refused only
+        where both add to gravity beyond the margin.
+        """
+        j = trial.joint
+        assert j is not None
+        x = trial.columns[:, j, :]
+        theta, covariance, margin = trial.theta, trial.covariance, trial.margin
+        spring, gravity = x @ theta, facts.gravity[:, j]
+        if np.std(spring) == 0 or np.std(gravity) == 0:
+            return False, 'no gravity torque to balance'
+        about_mean, about_zero = (g @ x / len(x) for g in (gravity - gravity.mean(), gravity))
+        if all(c @ theta - margin * math.sqrt(max(c @ covariance @ c, 0.0)) > 0
+               for c in (about_mean, about_zero)):  # fmt: skip
+            shape = about_mean @ theta / (np.std(spring) * np.std(gravity))
+            mean = about_zero @ theta / math.sqrt(np.mean(spring**2) * np.mean(gravity**2))
+            return False, (
+                f'it would add to gravity (correlation {shape:+.2f}, {mean:+.2f} about zero), '
+                'not balance'
+            )
+        if np.sqrt(np.mean(spring**2)) > 1.5 * np.sqrt(np.mean(gravity**2)):
+            return False, 'it would exceed 1.5 times the gravity torque it balances'
+        return True, ''
+
+
+class PayloadMass(Effect):
+    """A payload at the payload frame: its mass and first moments (and inertia if asked)."""
+
+    name = 'payload_mass'
+    parameters = (
+        Parameter('mass', 'kg'),
+        Parameter('first_moment_x', 'kg*m'),
+        Parameter('first_moment_y', 'kg*m'),
+        Parameter('first_moment_z', 'kg*m'),
+    )
+    robot_wide = True
+    link_side = True
+    needs_regressor = True
+
+    def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
+        return [str(settings['frame']), *(['with inertia'] if settings.get('inertia') else [])]
+
+    def columns(
+        self, quantities: NominalQuantities, joint: int | None, settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> np.ndarray:  # fmt: skip
+        if quantities.regressor is None:
+            raise ValueError('payload_mass needs quantities evaluated with regressor=True')
+        body, mapping = model.payload_map(
+            str(settings['frame']), settings['com_guess_m'], bool(settings.get('inertia'))
+        )
+        rows = slice(N_INERTIAL_PARAMETERS * body, N_INERTIAL_PARAMETERS * (body + 1))
+        out: np.ndarray = quantities.regressor[:, :, rows] @ mapping
+        return out
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        theta, half = fit.theta, fit.half_width
+        mass = float(theta[0])
+        out = [entry('mass', mass, fit.low[0], fit.high[0], 'kg')]
+        if mass > 0:
+            for axis, k in zip('xyz', range(1, 4), strict=True):
+                com = theta[k] / mass
+                spread = abs(com) * math.hypot(half[k] / max(abs(theta[k]), 1e-12), half[0] / mass)
+                out.append(entry(f'com_{axis}', com, com - spread, com + spread, 'm'))
+        for k, axes in enumerate(('xx', 'xy', 'yy', 'xz', 'yz', 'zz'), start=4):
+            if k < len(theta):  # rotational inertia about the centre of mass, frame axes
+                out.append(entry(f'inertia_{axes}', theta[k], fit.low[k], fit.high[k], 'kg*m^2'))
+        return out
+
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """A positive mass up to the robot's moving mass, its centre near the frame."""
+        mass, spread = float(trial.theta[0]), trial.margin * float(trial.sd[0])
+        if not (mass + spread > 0.0 and mass - spread <= facts.moving_mass_kg):
+            return False, (
+                f'mass {mass:.3g} kg outside (0, {facts.moving_mass_kg:.3g}] kg (moving mass)'
+            )
+        com = np.asarray(trial.theta[1:4]) / mass
+        if np.linalg.norm(com) > PAYLOAD_COM_LIMIT_M:
+            return False, (
+                f'centre of mass {np.linalg.norm(com):.2f} m from the frame '
+                f'(> {PAYLOAD_COM_LIMIT_M:g} m)'
+            )
+        return True, ''
+
+
+class JointOffset(Effect):
+    """An encoder offset: the links sit at q + offset, d tau / d q times it."""
+
+    name = 'joint_offset'
+    parameters = (Parameter('offset', 'rad'),)
+    link_side = True
+
+    def needs_derivatives(self, settings: Mapping[str, Any]) -> bool:
+        return True
+
+    def columns(
+        self, quantities: NominalQuantities, joint: int | None, settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> np.ndarray:  # fmt: skip
+        if joint is None:
+            raise ValueError('joint_offset needs a joint')
+        if quantities.dtau_dq is None:
+            raise ValueError('joint_offset needs quantities evaluated with derivatives=True')
+        return quantities.dtau_dq[:, :, joint : joint + 1].copy()
+
+    def plausible_bound(self, joint: int | None, model: NominalModel) -> float | None:
+        """Judged by what it does at the payload frame [rad].
+
+        Taught points are off by up to the offset times the frame's farthest distance from the
+        axis: a heavy axis 2 m from the flange may hide 1 degree, a wrist axis 0.25 m from it
+        several.
+        """
+        assert joint is not None
+        lever = float(model.lever_arms()[joint])
+        return min(JOINT_OFFSET_MAX_RAD, MASTERING_TOLERANCE_M / max(lever, 1e-9))
+
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """Within what mastering leaves unnoticed (``plausible_bound``)."""
+        bound = self.plausible_bound(trial.joint, model)
+        assert bound is not None
+        return trial.first_within(-bound, bound, 'rad')
+
+
+class InertialParameterError(Effect):
+    """The links' inertial parameters off their CAD values, along the base directions given."""
+
+    name = 'inertial_parameter_error'
+    parameters = (Parameter('base_parameter', 'SI'),)
+    robot_wide = True
+    link_side = True
+    needs_regressor = True
+
+    def columns(
+        self, quantities: NominalQuantities, joint: int | None, settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> np.ndarray:  # fmt: skip
+        if quantities.regressor is None:
+            raise ValueError('inertial_parameter_error needs quantities with regressor=True')
+        out: np.ndarray = quantities.regressor @ np.asarray(settings['base_directions'])
+        return out
+
+    def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+        """The base parameters whose interval excludes the URDF's value, and how many there are.
+
+        A change c along the identifiable directions D moves the link parameters by D c and the
+        base parameters (``physics.base_parameters``) by E D c; each is named after the
+        parameter it stands for, with what it groups.
+        """
+        directions = np.asarray(fit.settings['base_directions'])
+        base = base_parameters(model.dynamics, model.robot.limits)
+        mapping = base.matrix @ directions
+        urdf = base.matrix @ model.dynamics.inertial_parameters()
+        change = mapping @ fit.theta
+        covariance = fit.interval_covariance
+        if covariance is None:
+            half = np.zeros_like(change)
+        else:
+            half = np.sqrt(
+                np.clip(np.einsum('ik,kl,il->i', mapping, covariance, mapping), 0, None)
+            )
+        changed = np.flatnonzero(np.abs(change) > half)
+        out: list[dict[str, Any]] = [{
+            'name': 'changed_base_parameters',
+            'value': int(changed.size),
+            'ci': None,
+            'unit': f'count of {base.count} (interval excludes the URDF value)',
+        }]  # fmt: skip
+        for i in changed:
+            value = urdf[i] + change[i]
+            out.append(
+                entry(base.names[i], value, value - half[i], value + half[i], base.units[i])
+            )
+            out[-1]['urdf'] = float(urdf[i])
+        return out
+
+    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
+        """CAD-derived link data are off by tens of per cent at most, not by the whole link.
+
+        Bounds on the change of each body's parameters: mass 15 % + 0.5 kg; first moment 10 %
+        + 3 cm times the mass; inertia about the joint frame 20 % (Frobenius norm) + the mass
+        times (5 cm)^2; each beyond the margin. The data fix only the identifiable
+        combinations, so the change judged is the most plausible one that produces the same
+        torques: the fitted change plus the null-space shift that minimises its size relative
+        to these bounds.
+        """
+        directions = np.asarray(trial.settings['base_directions'])
+        null = np.asarray(trial.settings.get('null_directions', np.zeros((len(directions), 0))))
+        bounds = np.concatenate([_body_bounds(nominal) for nominal in facts.body_parameters])
+        weight = 1.0 / bounds
+        mapping = directions
+        if null.shape[1]:
+            # min_z |W (D theta + N z)|: project D theta off the weighted null space.
+            weighted_null = weight[:, None] * null
+            shift, *_ = np.linalg.lstsq(weighted_null, -(weight[:, None] * directions), rcond=None)
+            mapping = directions + null @ shift
+        change_all = mapping @ np.asarray(trial.theta)
+        covariance_all = mapping @ trial.covariance @ mapping.T
+        for body, nominal in enumerate(facts.body_parameters):
+            rows = slice(N_INERTIAL_PARAMETERS * body, N_INERTIAL_PARAMETERS * (body + 1))
+            ok, reason = _plausible_body_change(
+                change_all[rows], covariance_all[rows, rows], nominal, trial.margin
+            )
+            if not ok:
+                return False, f'body {body + 1}: {reason}'
+        return True, ''
+
+
+GRAVITY_SPRING = GravitySpring()
+PAYLOAD_MASS = PayloadMass()
+JOINT_OFFSET = JointOffset()
+INERTIAL_PARAMETER_ERROR = InertialParameterError()
+
+
+def _body_limits(nominal: np.ndarray) -> tuple[float, float, float]:
+    """Plausible change of a body's mass [kg], first moment [kg*m], inertia [kg*m^2]."""
+    mass = float(nominal[0])
+    return (
+        0.15 * mass + 0.5,
+        0.1 * float(np.linalg.norm(nominal[1:4])) + 0.03 * mass,
+        0.2 * float(np.linalg.norm(nominal[4:])) + mass * 0.05**2,
+    )
+
+
+def _body_bounds(nominal: np.ndarray) -> np.ndarray:
+    """The limits spread over the 10 parameters (vector parts share their norm's limit)."""
+    mass, first, inertia = _body_limits(nominal)
+    return np.array([mass, *[first / math.sqrt(3)] * 3, *[inertia / math.sqrt(6)] * 6])
+
+
+def _plausible_body_change(
+    change: np.ndarray, change_covariance: np.ndarray, nominal: np.ndarray, margin: float
+) -> Verdict:
+    mass_limit, first_limit, inertia_limit = _body_limits(nominal)
+    checks = (
+        ('mass', slice(0, 1), mass_limit, 'kg'),
+        ('first moment', slice(1, 4), first_limit, 'kg*m'),
+        ('inertia', slice(4, 10), inertia_limit, 'kg*m^2'),
+    )
+    for what, part, bound, unit in checks:
+        vector = change[part]
+        size = float(np.linalg.norm(vector))
+        # Standard error of the size along the change's own direction.
+        direction = vector / size if size > 0 else vector
+        spread = float(np.sqrt(max(direction @ change_covariance[part, part] @ direction, 0.0)))
+        if size - margin * spread > bound:
+            return False, (
+                f'the {what} of the link would change by {size:.3g} {unit}, more than a '
+                f'plausible data error ({bound:.3g} {unit})'
+            )
+    return True, ''
