@@ -15,9 +15,13 @@ import numpy as np
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.errors import ConfigError
 from id_learning.physics.effects import effect
-from id_learning.physics.effects.judgement import JointMotion, PlausibilityFacts, Trial
+from id_learning.physics.effects.judgement import (
+    CandidateGrid,
+    JointMotion,
+    PlausibilityFacts,
+    Trial,
+)
 from id_learning.physics.effects.links import PAYLOAD_COM_LIMIT_M
-from id_learning.physics.inertial import inertial_base_directions
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import EffectSpec, gravity_loaded_joints
 
@@ -65,50 +69,18 @@ def build_library(
     model: NominalModel, quantities: NominalQuantities, config: DiagnosisConfig
 ) -> list[EffectSpec]:
     """Every candidate of the enabled effects for this robot, in the effects' stable order."""
-    robot = model.robot
-    joints = robot.joints
-    eps = config.smoothing_velocity
-    specs: list[EffectSpec] = []
-    springs = spring_joints(model, quantities, config)
-    for name in config.effects:
-        if name == 'signal_delay':
-            specs.append(EffectSpec(name))
-        elif name == 'inertial_parameter_error':
-            base, null = inertial_base_directions(model.dynamics, model.robot.limits)
-            specs.append(
-                EffectSpec(
-                    name,
-                    settings={'base_directions': base.tolist(), 'null_directions': null.tolist()},
-                )
-            )
-        elif name == 'payload_mass':
-            specs.append(
-                EffectSpec(
-                    name, settings={'frame': robot.payload_frame, 'com_guess_m': [0.0, 0.0, 0.0]}
-                )
-            )
-        else:
-            for j, joint in enumerate(joints):
-                if name == 'stribeck_friction':
-                    specs += [
-                        EffectSpec(name, j, joint, {'velocity': vs, 'smoothing_velocity': eps})
-                        for vs in config.stribeck_velocities
-                    ]
-                elif name == 'cogging':
-                    specs += [
-                        EffectSpec(name, j, joint, {'periods_per_motor_turn': p})
-                        for p in config.cogging_periods
-                    ]
-                elif name == 'gravity_spring':
-                    if j in springs:
-                        # A middling geometry; a selected balancer's is refined (pipeline).
-                        settings = {'ratio': 0.5, 'phase_rad': 0.0}
-                        specs.append(EffectSpec(name, j, joint, settings))
-                elif name in ('coulomb_friction', 'load_dependent_friction'):
-                    specs.append(EffectSpec(name, j, joint, {'smoothing_velocity': eps}))
-                else:
-                    specs.append(EffectSpec(name, j, joint))
-    return specs
+    joints = model.robot.joints
+    grid = CandidateGrid(
+        config.smoothing_velocity,
+        tuple(config.stribeck_velocities),
+        tuple(config.cogging_periods),
+        tuple(spring_joints(model, quantities, config)),
+    )
+    return [
+        EffectSpec(name, j, joints[j] if j is not None else '', settings)
+        for name in config.effects
+        for j, settings in effect(name).candidates(model, grid)
+    ]
 
 
 # -- testability and plausibility -----------------------------------------------------------------

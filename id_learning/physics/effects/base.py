@@ -14,7 +14,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from id_learning.physics.effects.judgement import JointMotion, PlausibilityFacts, Trial, Verdict
+from id_learning.physics.effects.judgement import (
+    CandidateGrid,
+    JointMotion,
+    PlausibilityFacts,
+    Trial,
+    Verdict,
+)
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 
 __all__ = ['Effect', 'FittedTerm', 'JointEffect', 'Parameter', 'entry']
@@ -75,6 +81,18 @@ class Effect:
     scales_the_label: ClassVar[bool] = False
     delays_the_label: ClassVar[bool] = False
     label_offset: ClassVar[bool] = False
+
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """(joint index or None, settings) of each candidate the diagnosis tries.
+
+        By default one per joint with no settings, or one for the robot if robot-wide.
+        """
+        del grid
+        if self.robot_wide:
+            return [(None, {})]
+        return [(j, {}) for j in range(model.robot.n_joints)]
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         """What tells this effect's candidates apart in a label, besides the joint."""

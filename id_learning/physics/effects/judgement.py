@@ -104,3 +104,20 @@ class JointMotion:
     gear_ratio: float
     cutoff_hz: float
     thresholds: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class CandidateGrid:
+    """The settings the diagnosis tries each effect with (``DiagnosisConfig``).
+
+    Attributes:
+        smoothing_velocity: v_eps of the friction laws [rad/s].
+        stribeck_velocities: Stribeck velocities v_s tried per joint [rad/s].
+        cogging_periods: cogging periods per motor turn tried per joint.
+        spring_joints: the joints that may carry a balancer (indices).
+    """
+
+    smoothing_velocity: float
+    stribeck_velocities: tuple[float, ...]
+    cogging_periods: tuple[int, ...]
+    spring_joints: tuple[int, ...]

@@ -22,6 +22,7 @@ from id_learning.physics.effects.base import (
     entry,
 )
 from id_learning.physics.effects.judgement import (
+    CandidateGrid,
     JointMotion,
     PlausibilityFacts,
     Trial,
@@ -103,6 +104,13 @@ class CoulombFriction(JointEffect):
         """Dissipative, and at most half the joint's torque limit."""
         return trial.first_within(0.0, 0.5 * model.robot.limits.torque[_joint(trial)], 'N*m')
 
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """One per joint, at the grid's smoothing velocity."""
+        eps = grid.smoothing_velocity
+        return [(j, {'smoothing_velocity': eps}) for j in range(model.robot.n_joints)]
+
 
 class StribeckFriction(JointEffect):
     """F_s exp(-(v / v_s)^2) tanh(v / v_eps), one candidate per Stribeck velocity v_s."""
@@ -147,6 +155,17 @@ class StribeckFriction(JointEffect):
             f'{motion.joint_name} are slower than v_s = {vs:g} rad/s (needs {100 * needed:g} %)'
         )
 
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """One per joint and Stribeck velocity of the grid (the selected one is refined)."""
+        eps = grid.smoothing_velocity
+        return [
+            (j, {'velocity': vs, 'smoothing_velocity': eps})
+            for j in range(model.robot.n_joints)
+            for vs in grid.stribeck_velocities
+        ]
+
 
 class LoadDependentFriction(JointEffect):
     """mu |L| tanh(v / v_eps), L the link torque on the joint.
@@ -177,6 +196,13 @@ class LoadDependentFriction(JointEffect):
     def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
         """Dissipative, and at most half the link torque (a gear's efficiency is above 50 %)."""
         return trial.first_within(0.0, 0.5, '')
+
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """One per joint, at the grid's smoothing velocity."""
+        eps = grid.smoothing_velocity
+        return [(j, {'smoothing_velocity': eps}) for j in range(model.robot.n_joints)]
 
 
 class RotorInertia(JointEffect):
@@ -341,6 +367,16 @@ class Cogging(JointEffect):
             f'{motion.cutoff_hz:g} Hz cut-off in only {100 * share:.1f} % of the moving '
             f'samples of {motion.joint_name}'
         )
+
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """One per joint and cogging period of the grid."""
+        return [
+            (j, {'periods_per_motor_turn': p})
+            for j in range(model.robot.n_joints)
+            for p in grid.cogging_periods
+        ]
 
 
 class TorqueOffset(JointEffect):

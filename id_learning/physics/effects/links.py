@@ -22,7 +22,8 @@ from id_learning.physics.effects.base import (
     Parameter,
     entry,
 )
-from id_learning.physics.effects.judgement import PlausibilityFacts, Trial, Verdict
+from id_learning.physics.effects.judgement import CandidateGrid, PlausibilityFacts, Trial, Verdict
+from id_learning.physics.inertial import inertial_base_directions
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS
 
@@ -112,6 +113,12 @@ class GravitySpring(JointEffect):
             return False, 'it would exceed 1.5 times the gravity torque it balances'
         return True, ''
 
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """One on each joint that may carry a balancer, of a middling geometry (refined)."""
+        return [(j, {'ratio': 0.5, 'phase_rad': 0.0}) for j in grid.spring_joints]
+
 
 class PayloadMass(Effect):
     """A payload at the payload frame: its mass and first moments (and inertia if asked)."""
@@ -171,6 +178,12 @@ class PayloadMass(Effect):
                 f'(> {PAYLOAD_COM_LIMIT_M:g} m)'
             )
         return True, ''
+
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """One at the robot's payload frame, its centre of mass guessed there (refined)."""
+        return [(None, {'frame': model.robot.payload_frame, 'com_guess_m': [0.0, 0.0, 0.0]})]
 
 
 class JointOffset(Effect):
@@ -293,6 +306,13 @@ class InertialParameterError(Effect):
             if not ok:
                 return False, f'body {body + 1}: {reason}'
         return True, ''
+
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """One along the identifiable (base) directions of the links' parameters."""
+        base, null = inertial_base_directions(model.dynamics, model.robot.limits)
+        return [(None, {'base_directions': base.tolist(), 'null_directions': null.tolist()})]
 
 
 GRAVITY_SPRING = GravitySpring()
