@@ -16,7 +16,8 @@ Every command that writes a result folder (``train``, ``evaluate``, ``closed-loo
   nor a folder holding or inside one. Only a ``.partial`` folder holding the marker is ours.
 
 Bags (``check_bag_output``), sweep folders (``check_kind``) and single files such as plots
-(``check_file_output``) pass the same rule before any work starts.
+(``check_file_output``) pass the same rule before any work starts. A bag is locked the same way
+while it is written (``bag_output``, ``BagWriter``): a second writer is refused naming the first.
 
 A failure while writing (disk full, a file size limit, no permission) raises ``OutputError``
 naming the path and the operating system's reason; nothing is left under ``<out>``, and the
@@ -34,6 +35,7 @@ import os
 import platform
 import shutil
 import tempfile
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -67,6 +69,7 @@ __all__ = [
     'Holding',
     'OutputError',
     'ResultFolder',
+    'bag_output',
     'check_bag_output',
     'check_file_output',
     'check_kind',
@@ -76,6 +79,7 @@ __all__ = [
     'foreign_entries',
     'incomplete_reason',
     'os_reason',
+    'output_lock',
     'partial_path',
     'replace_folder',
     'result_folder',
@@ -89,6 +93,8 @@ LOCK_SUFFIX = '.lock'
 #: Where a replaced result waits, for a moment, to be removed.
 REPLACED_SUFFIX = '.replaced'
 INCOMPLETE_FORMAT = 'id_learning.incomplete/1'
+#: The output locks this process holds: lock path -> the thread holding it (``output_lock``).
+_HELD: dict[Path, int] = {}
 
 
 def partial_path(out: Path) -> Path:
@@ -246,14 +252,45 @@ def check_bag_output(
     """Refuse a bag folder that cannot or must not be written; returns the folder to write.
 
     A bag replaces only a bag (``metadata.yaml`` and ``.mcap`` files, nothing foreign) or an
-    empty folder, and only with ``overwrite`` (``flag`` names it in messages).
+    empty folder, and only with ``overwrite`` (``flag`` names it in messages). A bag another
+    process is writing (its ``<out>.lock`` held) is refused naming that process: in progress, it
+    looks torn. Probing takes the lock for a moment (a disk already full is refused here).
 
     Raises:
-        OutputError: as ``check_target`` and ``check_kind`` say.
+        OutputError: as ``check_target`` and ``check_kind`` say; another process writes ``out``.
     """
     out = check_target(out, inputs=inputs)
+    if out.parent.is_dir():
+        with output_lock(out):
+            pass
     check_kind(out, 'bag', force=overwrite, flag=flag)
     return out
+
+
+@contextlib.contextmanager
+def bag_output(
+    out: Path, *, overwrite: bool = False, inputs: Sequence[Path] = (), flag: str = '--force'
+) -> Iterator[Path]:
+    """Hold ``<out>.lock`` while a bag is written to ``out``; yields the folder to write.
+
+    A command holds it from its checks to its last file (the twin's ground truth after the bag),
+    so a second writer of the same bag is refused at once, naming the first's pid, instead of
+    finding a bag in progress that looks torn. ``BagWriter`` takes the same lock (it goes on
+    under its command's). The parent folders of ``out`` are created.
+
+    Raises:
+        OutputError: as ``check_bag_output`` says; another process writes ``out``; the lock
+            cannot be created.
+    """
+    out = check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(
+            f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
+        ) from err
+    with output_lock(out):
+        yield check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag)
 
 
 def _refuse_inside_results(out: Path) -> None:
@@ -397,12 +434,43 @@ def _locked(out: Path) -> Iterator[None]:
     else:
         raise OutputError(f'{path}: could not be locked (it kept being replaced)')
     try:
-        os.ftruncate(fd, 0)
-        os.write(fd, f'{os.getpid()}\n'.encode())
+        try:  # a disk already full takes the file but not the pid
+            os.ftruncate(fd, 0)
+            os.write(fd, f'{os.getpid()}\n'.encode())
+        except OSError as err:
+            raise OutputError(f'{path}: {os_reason(err)} (locking {out})') from err
         yield
     finally:
         path.unlink(missing_ok=True)
         os.close(fd)
+
+
+def _held_key(out: Path) -> Path:
+    """The lock of ``out`` as one key however ``out`` is spelled (relative, through links)."""
+    return Path(os.path.realpath(out.parent)) / (out.name + LOCK_SUFFIX)
+
+
+@contextlib.contextmanager
+def output_lock(out: Path) -> Iterator[None]:
+    """Hold ``<out>.lock`` (flock, not waiting) while writing ``out``; its parent must exist.
+
+    Taken again by the thread holding it, it goes on (a command holds it, the writer it calls
+    takes it too); another thread or process is refused, naming the holder's pid.
+
+    Raises:
+        OutputError: another writer holds it, or it cannot be created or written.
+    """
+    out = Path(out)
+    key, me = _held_key(out), threading.get_ident()
+    if _HELD.get(key) == me:
+        yield
+        return
+    with _locked(out):
+        _HELD[key] = me
+        try:
+            yield
+        finally:
+            del _HELD[key]
 
 
 def _start(out: Path, command: str) -> Path:
@@ -466,7 +534,7 @@ def result_folder(
         raise OutputError(
             f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
         ) from err
-    with _locked(out):
+    with _locked(out):  # not output_lock: a result has one writer, even in one thread
         out = check_output(out, force=force, inputs=inputs, is_locked=True, kind=kind)  # ours
         try:
             folder = ResultFolder(out, _start(out, command))  # ours from here: removed on failure

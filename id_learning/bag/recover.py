@@ -12,16 +12,21 @@ length is).
 Safety: the rebuilt bag is written to a hidden sibling folder and read back (per-topic counts must
 match the scan) before anything of the original is touched. In place, the damaged files are then
 renamed to ``<file>.damaged``, the new files moved in (``metadata.yaml`` last), and the damaged
-files deleted unless ``keep_damaged``. Files other than ``.mcap`` and ``metadata.yaml`` in the
-folder are left alone. A bag that is already complete is never rewritten.
+files deleted unless ``keep_damaged``; when a rename fails (or is interrupted) the ones done are
+undone. Files other than ``.mcap`` and ``metadata.yaml`` in the folder are left alone. A bag that
+is already complete is never rewritten. The folder written (the bag in place, or ``out``) is
+locked as a bag writer locks it (``outputs.output_lock``), and checked writable before the scan.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import re
 import shutil
 import struct
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from io import BytesIO
@@ -41,6 +46,7 @@ from id_learning.bag.messages import message_definition
 from id_learning.bag.reader import TopicInfo, bag_info
 from id_learning.bag.writer import BagWriter
 from id_learning.errors import BagError
+from id_learning.outputs import check_target, os_reason, output_lock
 
 __all__ = ['FileScan', 'RecoverReport', 'recover_bag']
 
@@ -405,22 +411,74 @@ def _write(target: Path, files: list[Path], topics: _Topics) -> tuple[FileScan, 
 def _install_in_place(
     path: Path, staged: Path, files: list[Path], keep_damaged: bool
 ) -> tuple[Path, ...]:
-    """Swap the damaged files for the staged bag's, keeping ``metadata.yaml`` for last."""
+    """Swap the damaged files for the staged bag's, keeping ``metadata.yaml`` for last.
+
+    A failed or interrupted rename undoes the renames done (the original is as it was).
+
+    Raises:
+        BagError: a rename failed (the path and the OS's reason).
+    """
     old = [*files, *([path / 'metadata.yaml'] if (path / 'metadata.yaml').exists() else [])]
     damaged = [file.with_name(file.name + DAMAGED_SUFFIX) for file in old]
     clashes = [str(file) for file in damaged if file.exists()]
     if clashes:
         raise BagError(f'{path}: {clashes} already exist; move them away and recover again')
     new = sorted(staged.iterdir(), key=lambda file: file.name == 'metadata.yaml')
-    for file, target in zip(old, damaged, strict=True):
-        file.replace(target)
-    for file in new:
-        file.replace(path / file.name)
+    done: list[tuple[Path, Path]] = []  # (from, to), in order
+    try:
+        for file, target in [*zip(old, damaged, strict=True), *((f, path / f.name) for f in new)]:
+            file.replace(target)
+            done.append((file, target))
+    except BaseException as err:
+        try:
+            for file, target in reversed(done):
+                target.replace(file)
+            state = 'the original files are back in place'
+        except OSError:
+            state = f'the original files are kept as *{DAMAGED_SUFFIX} in {path}'
+        if not isinstance(err, OSError):
+            raise
+        raise BagError(
+            f'{err.filename2 or err.filename or path}: {os_reason(err)} (installing the '
+            f'recovered bag in {path}); {state}; recover into a new folder with --out NEW_FOLDER'
+        ) from err
     if keep_damaged:
         return tuple(damaged)
     for file in damaged:
         file.unlink()
     return ()
+
+
+def _prepare_output(path: Path, target: Path | None, lock: contextlib.ExitStack) -> Path | None:
+    """Refuse folders that cannot be written, before any work; lock the one recovered into.
+
+    In place, the bag folder (its files are swapped) and its parent (the rebuilt bag is staged
+    there) are probed; ``target`` passes ``outputs.check_target``. The lock, held until ``lock``
+    closes, keeps a writer of that bag (or another recovery) out. Returns ``target``.
+
+    Raises:
+        BagError: a folder cannot be written (the OS's reason; in place, ``--out`` suggested).
+        OutputError: ``target`` is refused, or another process writes the folder.
+    """
+    if target is not None:
+        target = check_target(target, inputs=[path])
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise BagError(f'{target.parent}: {os_reason(err)} (creating the folder)') from err
+    probed = ((path, 'its files are replaced'), (path.parent, 'the bag is rebuilt'))
+    for folder, why in () if target else probed:
+        try:
+            fd, probe = tempfile.mkstemp(prefix='.id_learning-probe-', dir=folder)
+        except OSError as err:
+            raise BagError(
+                f'{path}: cannot write in {folder} ({os_reason(err)}), where {why} when '
+                'recovering in place; recover into a new folder with --out NEW_FOLDER'
+            ) from err
+        os.close(fd)
+        os.unlink(probe)
+    lock.enter_context(output_lock(target or path))
+    return target
 
 
 def recover_bag(
@@ -448,7 +506,10 @@ def recover_bag(
 
     Raises:
         BagError: path is not a folder of ``.mcap`` files, a file is not MCAP, a type is unknown,
-            ``out`` exists, or the rebuilt bag does not read back.
+            ``out`` exists, a folder to write cannot be written, or the rebuilt bag does not
+            read back.
+        OutputError: ``out`` is refused (``outputs.check_target``), or another process writes
+            the folder recovered into (named by its pid).
     """
     path = Path(path)
     if not path.is_dir():
@@ -464,34 +525,18 @@ def recover_bag(
     target = None if out is None or Path(out).resolve() == path.resolve() else Path(out)
     if target is not None and target.exists():
         raise BagError(f'{target}: already exists; give a new folder to recover into')
-
-    topics = _Topics()
-    scans = [_scan_file(file, topics, None) for file in files]
-    if had_metadata and _is_intact(path, scans, topics):
-        _LOG.info('%s: bag is complete with valid metadata; nothing to recover', path)
-        return RecoverReport(path, path, True, had_metadata, tuple(scans), topics.infos())
-    _check_types(path, topics)
-
-    # A hidden sibling: same file system (renames are atomic), and the bag inside keeps the
-    # final folder's name, which BagWriter uses for the .mcap file names.
-    parent = (target or path).parent
-    name = (target or path).name
-    staging_root = parent / f'.{name}.recovering'
-    if staging_root.exists():
-        shutil.rmtree(staging_root)  # left by an interrupted recovery; ours by its name
-    staging_root.mkdir(parents=True)
-    try:
-        staged = staging_root / name
-        written = _write(staged, files, topics)
-        if written != tuple(scans):
-            raise BagError(f'{path}: the files changed while being recovered; try again')
-        if target is not None:
-            staged.replace(target)
-            kept: tuple[Path, ...] = ()
-        else:
-            kept = _install_in_place(path, staged, files, keep_damaged)
-    finally:
-        shutil.rmtree(staging_root, ignore_errors=True)
+    with contextlib.ExitStack() as lock:
+        if not had_metadata:  # torn for sure: refused before the long scan, not after
+            target = _prepare_output(path, target, lock)
+        topics = _Topics()
+        scans = [_scan_file(file, topics, None) for file in files]
+        if had_metadata and _is_intact(path, scans, topics):
+            _LOG.info('%s: bag is complete with valid metadata; nothing to recover', path)
+            return RecoverReport(path, path, True, had_metadata, tuple(scans), topics.infos())
+        _check_types(path, topics)
+        if had_metadata:
+            target = _prepare_output(path, target, lock)
+        kept = _rebuild(path, target, files, tuple(scans), topics, keep_damaged=keep_damaged)
     report = RecoverReport(
         path=path,
         output=target or path,
@@ -510,3 +555,36 @@ def recover_bag(
         report.bytes_discarded,
     )
     return report
+
+
+def _rebuild(
+    path: Path,
+    target: Path | None,
+    files: list[Path],
+    scans: tuple[FileScan, ...],
+    topics: _Topics,
+    *,
+    keep_damaged: bool,
+) -> tuple[Path, ...]:
+    """Write the recovered bag beside its destination, then move it there; the kept originals."""
+    # A hidden sibling: same file system (renames are atomic), and the bag inside keeps the
+    # final folder's name, which BagWriter uses for the .mcap file names.
+    parent = (target or path).parent
+    name = (target or path).name
+    staging_root = parent / f'.{name}.recovering'
+    if staging_root.exists():
+        shutil.rmtree(staging_root)  # left by an interrupted recovery; ours by its name
+    staging_root.mkdir(parents=True)
+    try:
+        staged = staging_root / name
+        written = _write(staged, files, topics)
+        if written != scans:
+            raise BagError(f'{path}: the files changed while being recovered; try again')
+        if target is not None:
+            staged.replace(target)
+            kept: tuple[Path, ...] = ()
+        else:
+            kept = _install_in_place(path, staged, files, keep_damaged)
+    finally:
+        shutil.rmtree(staging_root, ignore_errors=True)
+    return kept

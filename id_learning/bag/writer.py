@@ -15,6 +15,7 @@ and the OS's reason.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 from collections.abc import Callable
@@ -29,7 +30,7 @@ from mcap.writer import Writer as McapWriter
 
 from id_learning.bag.messages import message_definition
 from id_learning.errors import BagError
-from id_learning.outputs import check_bag_output, os_reason
+from id_learning.outputs import bag_output, os_reason
 
 __all__ = ['BagWriter', 'write_metadata']
 
@@ -142,8 +143,11 @@ def write_metadata(
     }
     text = yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
     tmp = bag_dir / 'metadata.yaml.tmp'
-    tmp.write_text(text, encoding='utf-8')
-    tmp.replace(bag_dir / 'metadata.yaml')
+    try:
+        tmp.write_text(text, encoding='utf-8')
+        tmp.replace(bag_dir / 'metadata.yaml')
+    finally:  # a torn tmp would make the folder foreign, no longer a bag to recover
+        tmp.unlink(missing_ok=True)
 
 
 class BagWriter:
@@ -151,6 +155,8 @@ class BagWriter:
 
     Use as a context manager; ``metadata.yaml`` is written on close. Optional splitting starts a
     new ``.mcap`` file once the current one spans ``split_duration_ns`` or holds ``split_bytes``.
+    From ``open`` to ``close`` it holds ``<path>.lock`` (``outputs.bag_output``): a second writer
+    of the same bag is refused, naming this one's pid.
     """
 
     def __init__(
@@ -186,27 +192,56 @@ class BagWriter:
         self._pending: dict[str, int] = {}
         #: The failed write that stopped the writer, or None.
         self.failure: BagError | None = None
+        self._lock = contextlib.ExitStack()
 
     # -- life cycle -------------------------------------------------------------------------------
     def open(self) -> Self:
-        """Create the folder and the first MCAP file.
+        """Lock the bag, create the folder and the first MCAP file.
 
         An existing folder is written only when empty, or replaced when it holds a bag and
         ``overwrite`` is set (``outputs.check_bag_output``): never another command's result.
+        When the first file cannot be started (a disk already full), what was created is
+        removed: no empty file is left to look like a torn bag.
 
         Raises:
-            OutputError: the folder is refused (one line naming it and what it holds).
-            BagError: creating it failed (the OS's reason).
+            OutputError: the folder is refused (one line naming it and what it holds), or
+                another process writes it (named by its pid).
+            BagError: creating the folder or the first file failed (the OS's reason).
         """
-        self.path = check_bag_output(self.path, overwrite=self.overwrite, flag=self.flag)
+        try:
+            self.path = self._lock.enter_context(
+                bag_output(self.path, overwrite=self.overwrite, flag=self.flag)
+            )
+            self._create()
+        except BaseException:
+            self._lock.close()
+            raise
+        return self
+
+    def _create(self) -> None:
+        """The folder and the first file; on failure, the folder as ``open`` found it."""
+        created = not self.path.exists()
         try:
             if self.path.is_dir() and any(self.path.iterdir()):
                 shutil.rmtree(self.path)  # a bag, and overwrite is set
             self.path.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise BagError(f'{self.path}: {os_reason(err)} (creating the bag folder)') from err
-        self._start_file()
-        return self
+        try:
+            self._start_file()
+        except (OSError, ValueError) as err:
+            if self._stream is not None:
+                self._stream.close()
+            self._mcap = self._stream = None
+            with contextlib.suppress(OSError):
+                (self.path / self._files[-1].path).unlink(missing_ok=True)
+                if created:
+                    self.path.rmdir()
+            reason = os_reason(err) if isinstance(err, OSError) else str(err)
+            raise BagError(
+                f'{self.path}: writing failed: {reason} (starting {self._files[-1].path}); '
+                'nothing was written'
+            ) from err
 
     def __enter__(self) -> Self:
         return self.open()
@@ -250,23 +285,26 @@ class BagWriter:
         Raises:
             BagError: finishing the file or writing ``metadata.yaml`` failed (the OS's reason).
         """
-        if self.failure is not None:
-            if self._stream is not None:
-                self._stream.close()
-            self._mcap = self._stream = None
-            return
-        if self._mcap is None:
-            return
-        self._guarded(self._finish_file)
-        self._confirm()
-        self._guarded(
-            lambda: write_metadata(
-                self.path,
-                [(t.name, t.msgtype, t.type_hash, t.count) for t in self._topics.values()],
-                [(f.path, f.first_ns or 0, f.last_ns or 0, f.count) for f in self._files],
-                self.custom_data,
+        try:
+            if self.failure is not None:
+                if self._stream is not None:
+                    self._stream.close()
+                self._mcap = self._stream = None
+                return
+            if self._mcap is None:
+                return
+            self._guarded(self._finish_file)
+            self._confirm()
+            self._guarded(
+                lambda: write_metadata(
+                    self.path,
+                    [(t.name, t.msgtype, t.type_hash, t.count) for t in self._topics.values()],
+                    [(f.path, f.first_ns or 0, f.last_ns or 0, f.count) for f in self._files],
+                    self.custom_data,
+                )
             )
-        )
+        finally:
+            self._lock.close()
 
     def flush(self) -> None:
         """Finish the chunk in progress and push everything written so far to the file.

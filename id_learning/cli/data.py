@@ -22,29 +22,30 @@ __all__ = [
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run the digital twin and write a bag with its ground truth."""
-    from id_learning.outputs import check_bag_output
+    from id_learning.outputs import bag_output
     from id_learning.twin import load_twin_config, simulate, write_twin_output
 
-    out = check_bag_output(Path(args.out), overwrite=args.force, inputs=[Path(args.config)])
+    # One writer per bag from the check to the ground truth beside it.
+    with bag_output(Path(args.out), overwrite=args.force, inputs=[Path(args.config)]) as out:
+        overrides = {}
+        if args.seed is not None:
+            overrides['seed'] = args.seed
+        if args.robot_seed is not None:
+            overrides['robot_seed'] = args.robot_seed
+        if args.joint_torque_sensors:
+            overrides['joint_torque_sensors'] = True
+        config = load_twin_config(args.config, overrides)
+        if args.duration is not None:
+            from dataclasses import replace
 
-    overrides = {}
-    if args.seed is not None:
-        overrides['seed'] = args.seed
-    if args.robot_seed is not None:
-        overrides['robot_seed'] = args.robot_seed
-    if args.joint_torque_sensors:
-        overrides['joint_torque_sensors'] = True
-    config = load_twin_config(args.config, overrides)
-    if args.duration is not None:
-        from dataclasses import replace
+            from id_learning.twin.bounds import check_duration
 
-        from id_learning.twin.bounds import check_duration
-
-        robot = config.robot
-        check_duration(args.duration, robot.ipo_period_s, robot.n_joints, '--duration')
-        config = replace(config, excitation=replace(config.excitation, duration_s=args.duration))
-    result = simulate(config, progress=not args.quiet)
-    write_twin_output(result, config, out, overwrite=args.force)
+            robot = config.robot
+            check_duration(args.duration, robot.ipo_period_s, robot.n_joints, '--duration')
+            excitation = replace(config.excitation, duration_s=args.duration)
+            config = replace(config, excitation=excitation)
+        result = simulate(config, progress=not args.quiet)
+        write_twin_output(result, config, out, overwrite=args.force)
     print(
         f'wrote {result.recording.n_samples} samples '
         f'({result.recording.duration_s:.1f} s) to {args.out}; '
@@ -56,19 +57,19 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_import(args: argparse.Namespace) -> int:
     """Convert CSV/NPZ logs (files or folders) into one bag of the bag contract."""
     from id_learning.dataset.importer import import_logs, load_import_mapping
-    from id_learning.outputs import check_bag_output
+    from id_learning.outputs import bag_output
 
     sources = [Path(source) for source in args.source]
     inputs = [*sources, Path(args.mapping), *([Path(args.robot)] if args.robot else [])]
-    out = check_bag_output(Path(args.out), overwrite=args.force, inputs=inputs)  # before work
-    robot = options.load_robot(args)
-    reports = import_logs(
-        sources,
-        load_import_mapping(args.mapping),
-        out,
-        robot=robot,
-        overwrite=args.force,
-    )
+    with bag_output(Path(args.out), overwrite=args.force, inputs=inputs) as out:  # before work
+        robot = options.load_robot(args)
+        reports = import_logs(
+            sources,
+            load_import_mapping(args.mapping),
+            out,
+            robot=robot,
+            overwrite=args.force,
+        )
     for report in reports:
         print(report.summary())
     if len(reports) > 1:

@@ -7,9 +7,15 @@ command's --help.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import os
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from types import FrameType
 
 from id_learning import __version__
 from id_learning.cli.data import add_data_commands
@@ -19,9 +25,113 @@ from id_learning.cli.sweep import add_sweep_command
 from id_learning.cli.train import add_train_commands
 from id_learning.errors import IdLearningError
 
-__all__ = ['build_parser', 'main', 'train_main']
+__all__ = ['Terminated', 'build_parser', 'main', 'train_main']
 
 _LOG = logging.getLogger('id_learning.cli')
+
+#: The commands that write a result folder through ``outputs.result_folder``.
+_RESULT_COMMANDS = frozenset({'train', 'evaluate', 'closed-loop', 'diagnose', 'demo'})
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C raises KeyboardInterrupt: every writer cleans up alike."""
+
+
+class _Stopping(logging.Filter):
+    """Drops Optuna's report of the trial a signal stopped (a traceback): one line says it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stopped = False
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not self.stopped
+
+
+@contextlib.contextmanager
+def _signals_raise() -> Iterator[None]:
+    """SIGINT raises KeyboardInterrupt, SIGTERM ``Terminated``, while the command runs.
+
+    A signal ignored when the tool started (a background job) stays ignored; the handlers
+    before are restored after (``main`` may run in a process that goes on).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    stopping = _Stopping()
+    raised = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+
+    def handle(number: int, frame: FrameType | None) -> None:
+        stopping.stopped = True
+        raise raised[signal.Signals(number)]
+
+    previous = {number: signal.getsignal(number) for number in raised}
+    for number, handler in previous.items():
+        if handler is defaults[number]:
+            signal.signal(number, handle)
+    optuna = logging.getLogger('optuna.study._optimize')
+    optuna.addFilter(stopping)
+    try:
+        yield
+    finally:
+        optuna.removeFilter(stopping)
+        for number, handler in previous.items():
+            if handler is defaults[number]:
+                signal.signal(number, handler)
+
+
+def _stat(path: Path | None) -> tuple[int, int] | None:
+    """(inode, modification time [ns]) of ``path``, or None: did a command write there."""
+    try:
+        status = os.stat(path) if path is not None else None
+    except OSError:
+        return None
+    return None if status is None else (status.st_ino, status.st_mtime_ns)
+
+
+def _written(args: argparse.Namespace) -> Path | None:
+    """The bag, recovered bag or plot a command writes (None: no such output, or a result)."""
+    if args.command in ('simulate', 'import'):
+        return Path(args.out)
+    if args.command == 'bag':  # in place, metadata.yaml is replaced last, and only then
+        return Path(args.out) if args.out else Path(args.bag) / 'metadata.yaml'
+    plot = getattr(args, 'plot', None) if args.command == 'inspect' else None
+    return Path(plot) if plot else None
+
+
+def _left(args: argparse.Namespace, before: tuple[int, int] | None) -> str:
+    """What a command stopped by a signal leaves, and where: the rest of its one line."""
+    if args.command in _RESULT_COMMANDS:
+        from id_learning.outputs import partial_path, read_marker
+
+        out = Path(args.out)
+        for partial in dict.fromkeys((partial_path(out), partial_path(out.resolve()))):
+            if partial.is_dir() and read_marker(partial) is not None:
+                return (
+                    f'what was written so far is in {partial}, an incomplete result that '
+                    '--force replaces'
+                )
+        return f'nothing was written to {out}'
+    if args.command == 'sweep':
+        return 'the study keeps the trials that finished; run the same sweep again to go on'
+    path = _written(args)
+    if path is None:
+        return 'nothing was written'
+    changed = _stat(path) != before
+    if args.command == 'bag' and args.out:
+        return f'{path} holds the recovered bag' if changed else f'nothing was written to {path}'
+    if args.command == 'bag':
+        return (
+            f'{path.parent} holds the recovered bag' if changed else f'{path.parent} is as it was'
+        )
+    if args.command == 'inspect':
+        return f'{path} was written' if changed else 'nothing was written'
+    return (
+        f'{path} holds an incomplete bag; delete it, or pass --force to replace it'
+        if changed
+        else f'nothing was written to {path}'
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -39,17 +149,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the tool; package errors print one clear line and exit with status 2."""
+    """Run the tool; package errors print one clear line and exit with status 2.
+
+    Ctrl-C (SIGINT) and SIGTERM print one line saying what is left where and exit with
+    130 and 143 (128 + the signal's number): the writers clean up as for any failure.
+    """
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING,
         format='%(levelname)s %(name)s: %(message)s',
     )
+    before = _stat(_written(args))
     try:
-        return int(args.func(args))
+        with _signals_raise():
+            return int(args.func(args))
     except IdLearningError as err:
         print(f'id-learning {args.command}: error: {err}', file=sys.stderr)
         return 2
+    except KeyboardInterrupt as err:
+        number = signal.SIGTERM if isinstance(err, Terminated) else signal.SIGINT
+        stopped = 'terminated' if number == signal.SIGTERM else 'interrupted'
+        print(f'id-learning {args.command}: {stopped}; {_left(args, before)}', file=sys.stderr)
+        return 128 + number
 
 
 def _without_ros_arguments(argv: Sequence[str]) -> list[str]:

@@ -5,13 +5,19 @@ Apart from the analysis so that matplotlib is needed, and imported, only when a 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from id_learning.dataset.inspect_report import FIELDS, BagReport
 from id_learning.dataset.recording import Recording
 from id_learning.errors import ConfigError
+from id_learning.output_kinds import OutputError, os_reason
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ['image_suffixes', 'plot_report']
 
@@ -107,6 +113,7 @@ def plot_report(
 
     Raises:
         ConfigError: max_points is below 2, or the suffix is not an image format.
+        OutputError: the image cannot be written (the path and the OS's reason).
     """
     from matplotlib.figure import Figure
 
@@ -136,6 +143,31 @@ def plot_report(
     axes[-1].set_xlabel('time since first sample [s]')
     robot = f', robot {report.robot_name}' if report.robot_name else ''
     figure.suptitle(f'{report.path}: {report.start_iso}, {report.duration_s:.1f} s{robot}')
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(out_png, dpi=100, format=out_png.suffix[1:].lower())
+    _save(figure, out_png)
     return out_png
+
+
+def _save(figure: Figure, out: Path) -> None:
+    """Write ``figure`` through a temporary sibling and a rename: the image is whole or absent.
+
+    A full disk is one line, leaving no torn image (and, with --force, the old one as it was).
+
+    Raises:
+        OutputError: creating the folder or writing the image failed (the OS's reason).
+    """
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(
+            f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
+        ) from err
+    tmp = out.with_name(f'.{out.name}.tmp-{os.getpid()}')
+    try:
+        figure.savefig(tmp, dpi=100, format=out.suffix[1:].lower())
+        tmp.replace(out)
+    except OSError as err:
+        raise OutputError(
+            f'{out}: {os_reason(err)} (writing the plot); nothing was written'
+        ) from err
+    finally:
+        tmp.unlink(missing_ok=True)

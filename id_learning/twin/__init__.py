@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from id_learning.twin.effects import EFFECT_NAMES, EffectSet, effects_from_dict
+from id_learning.twin.ground_truth import read_noise_free_torque, write_twin_output
 from id_learning.twin.simulate import (
     GROUND_TRUTH_ARRAYS,
     GROUND_TRUTH_JSON,
@@ -10,10 +11,8 @@ from id_learning.twin.simulate import (
     TwinConfig,
     TwinResult,
     load_twin_config,
-    read_noise_free_torque,
     simulate,
     true_dynamics,
-    write_twin_output,
 )
 
 __all__ = [

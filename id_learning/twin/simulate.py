@@ -10,21 +10,17 @@ hidden parameters, so one robot can be recorded many times.
 
 from __future__ import annotations
 
-import json
 import logging
-import os
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from tqdm import tqdm
 
 from id_learning.config_io import check_keys, finite_number, float_vector, load_yaml_mapping
-from id_learning.dataset.recording import Recording, write_recording
-from id_learning.errors import ConfigError, DatasetError
+from id_learning.dataset.recording import Recording
+from id_learning.errors import ConfigError
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
 from id_learning.robot.config import RobotConfig, load_robot_config
@@ -57,10 +53,8 @@ __all__ = [
     'friction_and_cogging',
     'load_twin_config',
     'random_streams',
-    'read_noise_free_torque',
     'simulate',
     'true_dynamics',
-    'write_twin_output',
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -536,63 +530,3 @@ def _ground_truth_parameters(
         },
         'units': {'torque': 'N*m joint side', 'current': 'A', 'angle': 'rad', 'time': 's'},
     }
-
-
-def write_twin_output(
-    result: TwinResult, config: TwinConfig, out: Path | str, *, overwrite: bool = False
-) -> Path:
-    """Write the bag plus ground truth (JSON parameters, NPZ noise-free torques) and the config.
-
-    The ground-truth files sit inside the bag folder, where rosbag2 tools ignore them.
-    """
-    out = Path(out)
-    write_recording(result.recording, out, config.robot.topics, overwrite=overwrite)
-    (out / GROUND_TRUTH_JSON).write_text(
-        json.dumps(result.parameters, indent=1) + '\n', encoding='utf-8'
-    )
-    # Only the two noise-free torques are stored per sample (float32: ~1e-4 N*m resolution); the
-    # true motion is exact from the excitation coefficients in the JSON, and the components are
-    # summarised there, which keeps the shipped bag small.
-    np.savez_compressed(
-        out / GROUND_TRUTH_ARRAYS,
-        stamps_ns=result.recording.stamps_ns,
-        tau_u_clean=result.tau_u_clean.astype(np.float32),
-        tau_joint_clean=result.tau_joint_clean.astype(np.float32),
-    )
-    raw = dict(config.raw)
-    raw['robot'] = os.path.relpath(Path(config.robot_file).resolve(), out.resolve())
-    (out / TWIN_CONFIG_COPY).write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
-    _LOG.info('twin: wrote %d samples to %s', result.recording.n_samples, out)
-    return out
-
-
-def read_noise_free_torque(
-    bag: Path | str, target: str, stamps_ns: np.ndarray
-) -> np.ndarray | None:
-    """The twin's noise-free label torque at the given stamps, or None for a bag without it.
-
-    Args:
-        bag: a bag folder written by ``write_twin_output``.
-        target: 'motor' (tau_u) or 'joint' (joint torque).
-        stamps_ns: (N,) the stamps wanted (a preprocessed recording's grid).
-
-    Returns:
-        (N, n) noise-free tau_u or joint torque [N*m]; None when the bag holds no ground truth
-        or it lacks one of the stamps (the recording was edited after the twin wrote it).
-    """
-    path = Path(bag) / GROUND_TRUTH_ARRAYS
-    if not path.is_file():
-        return None
-    key = 'tau_u_clean' if target == 'motor' else 'tau_joint_clean'
-    try:
-        with np.load(path) as arrays:
-            stamps, clean = arrays['stamps_ns'], arrays[key]
-    except (KeyError, OSError, ValueError, zipfile.BadZipFile) as err:
-        raise DatasetError(
-            f'{path}: unreadable ground truth ({type(err).__name__}: {err})'
-        ) from err
-    rows = np.searchsorted(stamps, stamps_ns)
-    if rows.max(initial=0) >= len(stamps) or not np.array_equal(stamps[rows], stamps_ns):
-        return None
-    torque: np.ndarray = clean[rows].astype(float)
-    return torque
