@@ -16,8 +16,6 @@ import numpy as np
 
 from id_learning.diagnosis.aliases import AliasSet
 from id_learning.diagnosis.candidates import (
-    SPECIAL_CASES,
-    SPRING_STAND_INS,
     ExcitationFacts,
     PlausibilityFacts,
     plausibility,
@@ -25,7 +23,6 @@ from id_learning.diagnosis.candidates import (
 )
 from id_learning.diagnosis.design import Design, Fit
 from id_learning.diagnosis.friction_shape import (
-    FRICTION_SHAPED,
     SHAPE_EVIDENCE,
     FrictionShape,
     identify_friction_shape,
@@ -34,11 +31,8 @@ from id_learning.diagnosis.friction_shape import (
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.refinement import refine_setting
 from id_learning.physics.base_parameters import CadPrior
-from id_learning.physics.terms import (
-    LINK_SIDE_EFFECTS,
-    EffectSpec,
-    whole_model_settings,
-)
+from id_learning.physics.effects import REGISTRY, effect
+from id_learning.physics.terms import EffectSpec, whole_model_settings
 
 __all__ = ['LABEL_GAIN_STD', 'ROTOR_INERTIA_STD', 'CandidateSet']
 
@@ -55,11 +49,8 @@ LOAD_TOLERANCE = 0.01
 #: Step in a log setting for the columns' derivative (``setting_sensitivities``).
 _LOG_STEP = 0.05
 
-#: Effects whose columns hold the other effects' torque in the whole model's form.
-_WHOLE_MODEL_KINDS = ('signal_delay', 'torque_constant_scale')
-
-#: The effects that ``SPECIAL_CASES`` are cases of.
-_GENERAL_EFFECTS = frozenset(SPECIAL_CASES.values())
+#: The effects that special ones are cases of (``Effect.special_case_of``).
+_GENERAL_EFFECTS = frozenset(item.special_case_of for item in REGISTRY.values()) - {None}
 
 
 class CandidateSet:
@@ -98,7 +89,7 @@ class CandidateSet:
         """Identify each joint's friction curve shape and put it in its friction candidates."""
         problem = self.problem
         default = (problem.config.smoothing_velocity, 1.0)
-        if not set(FRICTION_SHAPED) & set(problem.config.effects):
+        if not any(effect(name).friction_shaped for name in problem.config.effects):
             return [default] * problem.robot.n_joints
         y = problem.residual('train')
         n_eff = problem.n_effective('train')
@@ -278,7 +269,7 @@ class CandidateSet:
 
     def conflicts(self, label: str, selected: Sequence[str]) -> bool:
         """Two Stribeck velocities of one joint never enter together."""
-        if self.specs[label].name != 'stribeck_friction':
+        if not effect(self.specs[label].name).exclusive_variants:
             return False
         return any(self.variants(label, other) for other in selected)
 
@@ -388,7 +379,7 @@ class CandidateSet:
         whole model's form (the selection then runs again, and this once more, so that the
         columns hold the final effects).
         """
-        others = [g for g in selected if self.specs[g].name not in _WHOLE_MODEL_KINDS]
+        others = [g for g in selected if not _whole_model_kind(self.specs[g])]
         if not others or not self._whole_model_candidates():
             return False
         design = self.design(y, n_eff)
@@ -402,15 +393,15 @@ class CandidateSet:
         fit. A delay's value depends on the torque its column holds (it is fitted on that
         torque's rate), so a fit that reports it (``IntervalRule``) holds its own torque.
         """
-        others = [g for g in fit.groups if self.specs[g].name not in _WHOLE_MODEL_KINDS]
+        others = [g for g in fit.groups if not _whole_model_kind(self.specs[g])]
         terms = [(self.specs[g], design.physical(fit, g)) for g in others]
         self.problem.rate_terms = terms
-        self.problem.scale_terms = [t for t in terms if t[0].name != 'torque_offset']
+        self.problem.scale_terms = [t for t in terms if not effect(t[0].name).label_offset]
         changed = False
         for label in self._whole_model_candidates():
             spec = self.specs[label]
             whole = spec.replace_settings(**whole_model_settings(spec.name))
-            if spec.name == 'signal_delay' and label in fit.groups:
+            if effect(spec.name).delays_the_label and label in fit.groups:
                 # Its column about the delay just fitted (``delay_about``).
                 delay = float(design.physical(fit, label)[0])
                 whole = whole.replace_settings(about=max(delay, 0.0))
@@ -420,7 +411,7 @@ class CandidateSet:
 
     def _whole_model_candidates(self) -> list[str]:
         """The testable delay and torque-constant candidates."""
-        return [g for g in self.testable if self.specs[g].name in _WHOLE_MODEL_KINDS]
+        return [g for g in self.testable if _whole_model_kind(self.specs[g])]
 
     def saved(self) -> tuple[Any, ...]:
         """What ``refine`` changes: specs, columns, the problem's terms (see ``restore``)."""
@@ -457,8 +448,8 @@ class CandidateSet:
         the last fit (``ResidualProblem.load_offset``) until the fit stops moving.
         """
         specs = [self.specs[label] for label in selected]
-        loads = [i for i, s in enumerate(specs) if s.name == 'load_dependent_friction']
-        link = [g for g, s in zip(selected, specs, strict=True) if s.name in LINK_SIDE_EFFECTS]
+        loads = [i for i, s in enumerate(specs) if effect(s.name).reads_link_torque]
+        link = [g for g, s in zip(selected, specs, strict=True) if effect(s.name).link_side]
         problem, selected = self.problem, list(selected)
         if not loads or not link:
             if problem.load_terms:  # a friction no longer selected loads no link column
@@ -487,11 +478,11 @@ class CandidateSet:
     def _refresh_link_side(self) -> None:
         """Rebuild the link-side candidates' columns (they carry the friction's share)."""
         for label in self.testable:
-            if self.specs[label].name in LINK_SIDE_EFFECTS:
+            if effect(self.specs[label].name).link_side:
                 self._swap(label, self.specs[label])
 
     def _general_of(self, special: str, general: str) -> bool:
-        return SPECIAL_CASES.get(self.specs[special].name) == self.specs[general].name
+        return effect(self.specs[special].name).special_case_of == self.specs[general].name
 
     def special_cases(self, selected: Sequence[str], aliases: Sequence[AliasSet]) -> list[str]:
         """``selected`` with each general effect replaced by a special case that mimics it.
@@ -503,8 +494,12 @@ class CandidateSet:
         out = list(selected)
         for alias in aliases:
             special = [m for m in alias.members[1:] if self._general_of(m, alias.representative)]
-            if self.specs[alias.representative].name == 'gravity_spring':
-                special = [m for m in alias.members[1:] if self.specs[m].name in SPRING_STAND_INS]
+            if effect(self.specs[alias.representative].name).claims_hardware:
+                special = [
+                    m
+                    for m in alias.members[1:]
+                    if effect(self.specs[m].name).stands_in_for_hardware
+                ]
             if special:
                 best = min(special, key=lambda m: alias.unexplained.get(m, math.inf))
                 out[out.index(alias.representative)] = best
@@ -556,4 +551,9 @@ def log_velocity_of(label: str) -> str:
 
 def _shaped_on(spec: EffectSpec, j: int) -> bool:
     """Whether a candidate is one of joint j's friction laws (they share its curve shape)."""
-    return spec.joint == j and spec.name in FRICTION_SHAPED
+    return spec.joint == j and effect(spec.name).friction_shaped
+
+
+def _whole_model_kind(spec: EffectSpec) -> bool:
+    """Whether a candidate's columns hold the other effects' torque in the whole model's form."""
+    return effect(spec.name).whole_model_key is not None

@@ -27,7 +27,6 @@ from id_learning.physics.terms import EffectSpec, gravity_loaded_joints
 
 __all__ = [
     'PAYLOAD_COM_LIMIT_M',
-    'SPECIAL_CASES',
     'ExcitationFacts',
     'PlausibilityFacts',
     'build_library',
@@ -35,19 +34,6 @@ __all__ = [
     'spring_joints',
     'testability',
 ]
-
-
-#: Effects that are special cases of a more general one: the same physics with fewer columns. A
-#: payload is a mass at the flange and a rotor inertia the inertia of a moving part, both errors
-#: of the mass distribution that ``inertial_parameter_error`` (every link's base parameters) can
-#: also take. The general effect is then no alternative explanation but the same one with more
-#: freedom: where the special case explains what the data show, it is named and the general
-#: effect is not listed as its alias (parsimony; a kinematic joint offset or a balancer spring,
-#: which the link parameters can only mimic, stay aliases).
-SPECIAL_CASES = {
-    'payload_mass': 'inertial_parameter_error',
-    'rotor_inertia': 'inertial_parameter_error',
-}
 
 
 def spring_joints(
@@ -103,14 +89,6 @@ class ExcitationFacts:
 
 def _moving(v: np.ndarray, eps: float) -> np.ndarray:
     return np.abs(v) > 2.0 * eps
-
-
-#: Effects preferred over a gravity spring that they mimic (an alias set): no hardware claimed.
-SPRING_STAND_INS = ('joint_offset', 'torque_offset', 'inertial_parameter_error', 'payload_mass')
-#: Effects that exist in tau_u from currents only, not in a torque measured after the gear.
-#: (A rotor is not seen after the gear either, but the same column is then an error of the
-#: URDF's inertia about the joint axis: described link side, as a change.)
-MOTOR_SIDE_EFFECTS = ('torque_constant_scale',)
 
 
 def testability(

@@ -15,17 +15,11 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from id_learning.diagnosis.config import DiagnosisConfig
+from id_learning.physics.effects import effect
 from id_learning.physics.terms import EffectSpec
 
-__all__ = ['FRICTION_SHAPED', 'SHAPE_EVIDENCE', 'FrictionShape', 'identify_friction_shape']
+__all__ = ['SHAPE_EVIDENCE', 'FrictionShape', 'identify_friction_shape', 'reshaped']
 
-#: Candidates whose columns depend on the friction curve's shape.
-FRICTION_SHAPED = (
-    'viscous_friction',
-    'coulomb_friction',
-    'stribeck_friction',
-    'load_dependent_friction',
-)
 #: Stribeck velocities [rad/s] beside the sign while judging the shape: a hump is no sharp sign.
 _HUMPS = (0.015, 0.05)
 #: Twice the log-likelihood ratio a setting other than the configured one must earn.
@@ -100,13 +94,5 @@ def identify_friction_shape(
 
 def reshaped(spec: EffectSpec, shape: FrictionShape) -> EffectSpec:
     """A friction candidate with the joint's curve shape in its settings."""
-    eps, exponent = shape
-    if spec.name == 'viscous_friction':
-        # Stiffening: linear at low speed, bending at speed. Thinning: a power alone, whose
-        # slope at zero speed a free linear part would turn into a softer Coulomb turn (with
-        # one, 7 of 15 twin recordings took v + |v|^0.6 for a linear law, beside the turn).
-        settings: dict[str, float | bool] = {}
-        if exponent != 1.0:
-            settings = {'exponent': exponent} | ({'linear': True} if exponent > 1.0 else {})
-        return EffectSpec(spec.name, spec.joint, spec.joint_name, settings)
-    return spec.replace_settings(smoothing_velocity=eps)
+    settings = effect(spec.name).reshaped_settings(spec.settings, *shape)
+    return EffectSpec(spec.name, spec.joint, spec.joint_name, settings)

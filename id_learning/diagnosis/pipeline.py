@@ -24,7 +24,6 @@ import logging
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -62,9 +61,12 @@ from id_learning.diagnosis.selection import (
     forward_select,
     noise_consistency,
     refused_records,
+    rejected_record,
+    selection_record,
 )
 from id_learning.diagnosis.separation import separating_motion
 from id_learning.errors import DatasetError
+from id_learning.physics.effects import effect
 from id_learning.physics.terms import EffectSpec
 from id_learning.robot.config import RobotConfig
 from id_learning.threads import single_blas_thread
@@ -264,7 +266,11 @@ def _best_other(label: str, aliases: list[AliasSet], candidates: CandidateSet) -
     """The member of ``label``'s alias set, no spring, that leaves least of it; None if none."""
     for alias in aliases:
         if alias.representative == label:
-            others = [m for m in alias.members[1:] if candidates.specs[m].name != 'gravity_spring']
+            others = [
+                m
+                for m in alias.members[1:]
+                if not effect(candidates.specs[m].name).claims_hardware
+            ]
             if others:
                 return min(others, key=lambda m: alias.unexplained.get(m, np.inf))
     return None
@@ -283,7 +289,7 @@ def _unconfirmed_springs(
     position-dependent errors (offsets, link parameters) on the training part; it is named only
     when the held-out part confirms it with every other effect in the model.
     """
-    springs = [label for label in selected if candidates.specs[label].name == 'gravity_spring']
+    springs = [label for label in selected if effect(candidates.specs[label].name).claims_hardware]
     if not springs:
         return []
     tests = judge_effects(design, selected, design.fit(selected), *blocks)
@@ -438,7 +444,7 @@ def _assemble(
                 contribution_rms_nm=rms,
                 variance_explained=explained[label],
                 variance_explained_total=explained_total[label],
-                selection=_selection_record(step, test) | {'interval_inflation': inflation},
+                selection=selection_record(step, test) | {'interval_inflation': inflation},
             )
         )
     after_test = _after(design, final, 'test', fallback)
@@ -479,7 +485,7 @@ def _assemble(
         location=location,
         stop_reason=selection.stop_reason,
         cut_short=cut_short,
-        rejected=_rejected_record(selection),
+        rejected=rejected_record(selection),
         refused=refused_records(design, final, selection.refused, robot.joints),
         marginalised=intervals.unknowns,
         stand_ins=intervals.stand_ins,
@@ -517,40 +523,6 @@ def _confidence(
         or spec.joint in closed
     )
     return 'low' if low else 'high'
-
-
-def _rejected_record(selection: SelectionResult) -> dict[str, Any] | None:
-    """The best candidate that did not enter, and why, JSON-ready; None if every one did."""
-    r = selection.rejected
-    if r is None:
-        return None
-    return {
-        'label': r.label,
-        'p_value': r.p_value,
-        'level': selection.level,
-        'delta_bic': r.delta_bic,
-        'held_out_gain': r.held_out_gain,
-        'plausible': r.plausible,
-        'reason': r.reason,
-    }
-
-
-def _selection_record(step: GroupEvaluation, test: BlockTest) -> dict[str, Any]:
-    """The tests an effect passed when it entered, and its held-out block test, JSON-ready."""
-    return {
-        'f_statistic': step.f_statistic,
-        'p_value': step.p_value,
-        'delta_bic': step.delta_bic,
-        'held_out_gain': step.held_out_gain,
-        'columns': step.extra_rank,
-        'held_out_blocks': {
-            # None: too few blocks to judge (JSON has no NaN).
-            'p_value_holm': None if np.isnan(test.p_value) else test.p_value,
-            'n_blocks': test.n_blocks,
-            'block_s': test.block_s,
-            'gain_share': test.gain,
-        },
-    }
 
 
 def _after(design: Design, final: Fit, part: str, fallback: list[int]) -> np.ndarray:

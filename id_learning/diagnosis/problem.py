@@ -29,9 +29,9 @@ from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.design import PARTS, Design
 from id_learning.diagnosis.standstill import StandstillProjection
 from id_learning.errors import DatasetError
+from id_learning.physics.effects import effect
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 from id_learning.physics.terms import (
-    LINK_SIDE_EFFECTS,
     EffectSpec,
     delay_about,
     effect_columns,
@@ -39,14 +39,14 @@ from id_learning.physics.terms import (
     needs_derivatives,
     needs_regressor,
     uses_model_load,
-    whole_model_form,
+    whole_model_delay,
+    whole_model_scale,
 )
 from id_learning.robot.config import RobotConfig
 
 _T = TypeVar('_T')
 
 __all__ = [
-    'SWITCHING_EFFECTS',
     'PreparedRecording',
     'ResidualProblem',
     'as_datasets',
@@ -57,10 +57,6 @@ __all__ = [
     'kept_rows',
     'trim_samples',
 ]
-
-#: Effects whose signature switches with the sign of v or the position within a motor turn: the
-#: low-pass can remove most of it, so their testability checks what the filter keeps.
-SWITCHING_EFFECTS = ('coulomb_friction', 'stribeck_friction', 'load_dependent_friction', 'cogging')
 
 
 def evaluation_rows(
@@ -286,7 +282,7 @@ class ResidualProblem:
     def _smooth(self, dataset: Dataset) -> NominalQuantities:
         """Quantities along the filtered motion, for the testability of switching effects."""
         q, v, a = dataset.study.q, dataset.study.v, dataset.study.a
-        if 'load_dependent_friction' in self.config.effects:
+        if any(effect(name).reads_link_torque for name in self.config.effects):
             return self.model.evaluate(q, v, a)
         zeros = np.zeros_like(q)  # only the load-dependent columns read the torques
         return NominalQuantities(q, v, a, zeros, zeros, zeros, zeros)
@@ -336,18 +332,18 @@ class ResidualProblem:
         filtered: dict[str, list[np.ndarray]] = {'train': [], 'test': []}
         raw_train = []
         raw_energy = kept_energy = 0.0
-        switching = spec.name in SWITCHING_EFFECTS
+        switching = effect(spec.name).switching
         for r in self.recordings:
             if delay_about(spec) > 0:
                 x, xf = self._delay_secant(r, spec)
             else:
                 quantities = self._loaded(r) if uses_model_load(spec) else r.quantities
                 x = effect_columns(spec, quantities, self.model)
-                if spec.name in LINK_SIDE_EFFECTS and self.load_terms:
+                if effect(spec.name).link_side and self.load_terms:
                     x = x * (1.0 + self._load_share(r))[:, :, None]
-                if whole_model_form(spec, 'signal_delay'):
+                if whole_model_delay(spec):
                     x = x - self._terms_rate(r)[:, :, None]
-                if whole_model_form(spec, 'torque_constant_scale'):
+                if whole_model_scale(spec):
                     x = x.copy()
                     x[:, spec.joint, 0] += self._terms_torque(r, self.scale_terms)[:, spec.joint]
                 xf = filter_columns(x, r.dataset) if r.dataset.is_through_filter else x
@@ -440,7 +436,7 @@ class ResidualProblem:
         """
         d0 = delay_about(spec)
         total = r.quantities.tau_nominal
-        if whole_model_form(spec, 'signal_delay'):
+        if whole_model_delay(spec):
             total = total + self._terms_torque(r, self.rate_terms)
         dataset = r.dataset
         both = np.stack([total, as_label(total, dataset)], axis=-1)  # raw, as the label meets it

@@ -35,6 +35,7 @@ from scipy import stats
 
 from id_learning.dataset.statistics import f_test
 from id_learning.diagnosis.design import PARTS, Design, Fit
+from id_learning.diagnosis.heldout import BlockTest
 
 __all__ = [
     'BUDGET_STOP',
@@ -42,6 +43,8 @@ __all__ = [
     'SelectionResult',
     'forward_select',
     'refused_records',
+    'rejected_record',
+    'selection_record',
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -327,3 +330,37 @@ def refused_records(
             'p_value': e.p_value,
         })  # fmt: skip
     return out
+
+
+def rejected_record(selection: SelectionResult) -> dict[str, Any] | None:
+    """The best candidate that did not enter, and why, JSON-ready; None if every one did."""
+    r = selection.rejected
+    if r is None:
+        return None
+    return {
+        'label': r.label,
+        'p_value': r.p_value,
+        'level': selection.level,
+        'delta_bic': r.delta_bic,
+        'held_out_gain': r.held_out_gain,
+        'plausible': r.plausible,
+        'reason': r.reason,
+    }
+
+
+def selection_record(step: GroupEvaluation, test: BlockTest) -> dict[str, Any]:
+    """The tests an effect passed when it entered, and its held-out block test, JSON-ready."""
+    return {
+        'f_statistic': step.f_statistic,
+        'p_value': step.p_value,
+        'delta_bic': step.delta_bic,
+        'held_out_gain': step.held_out_gain,
+        'columns': step.extra_rank,
+        'held_out_blocks': {
+            # None: too few blocks to judge (JSON has no NaN).
+            'p_value_holm': None if np.isnan(test.p_value) else test.p_value,
+            'n_blocks': test.n_blocks,
+            'block_s': test.block_s,
+            'gain_share': test.gain,
+        },
+    }

@@ -18,6 +18,8 @@ from id_learning.physics.terms import (
     effect_columns,
     needs_derivatives,
     needs_regressor,
+    whole_model_delay,
+    whole_model_scale,
 )
 from id_learning.robot.config import RobotConfig
 
@@ -111,13 +113,13 @@ class AugmentedModel:
         deferred, scales, whole_delays = [], [], []
         for spec, theta in terms:
             item = effect(spec.name)
-            if _whole_scale(spec):
+            if whole_model_scale(spec):
                 scales.append((spec, theta))
                 continue
             if item.uses_model_load(spec.settings):
                 deferred.append((spec, theta))
                 continue
-            if item.delays_the_label and item.is_whole_model(spec.settings):
+            if whole_model_delay(spec):
                 whole_delays.append(float(theta[0]))
                 continue
             contribution = effect_columns(spec, quantities, self.nominal) @ theta
@@ -163,7 +165,7 @@ class AugmentedModel:
             (spec, theta)
             for spec, theta in terms
             if not (effect(spec.name).delays_the_label or effect(spec.name).label_offset)
-            and not _whole_scale(spec)
+            and not whole_model_scale(spec)
         ]
         specs = [spec for spec, _ in others]
         q, v, a, jerk = quantities.q, quantities.v, quantities.a, quantities.jerk
@@ -186,7 +188,7 @@ class AugmentedModel:
         """
         groups: dict[tuple[str, tuple[str, ...]], list[tuple[EffectSpec, np.ndarray]]] = {}
         rest: list[tuple[EffectSpec, np.ndarray]] = []
-        scaled = any(_whole_scale(spec) for spec, _ in self.terms)
+        scaled = any(whole_model_scale(spec) for spec, _ in self.terms)
         for spec, theta in self.terms:
             item = effect(spec.name)
             scalar = all(isinstance(x, (int, float)) for x in spec.settings.values())
@@ -263,9 +265,3 @@ class AugmentedModel:
             for spec, theta in entries
         ]
         return cls(robot, str(data['target']), terms, nominal_joints=list(fallback))
-
-
-def _whole_scale(spec: EffectSpec) -> bool:
-    """Whether a term is a label-gain error of the whole model's form (scales all delivered)."""
-    item = effect(spec.name)
-    return item.scales_the_label and item.is_whole_model(spec.settings)

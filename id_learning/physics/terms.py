@@ -34,7 +34,9 @@ __all__ = [
     'needs_derivatives',
     'needs_regressor',
     'uses_model_load',
+    'whole_model_delay',
     'whole_model_form',
+    'whole_model_scale',
     'whole_model_settings',
 ]
 
@@ -186,3 +188,15 @@ def load_slope(spec: EffectSpec, quantities: NominalQuantities) -> np.ndarray:
 def uses_model_load(spec: EffectSpec) -> bool:
     """Whether a load-dependent friction term grows with the model's link torque (its form)."""
     return effect(spec.name).uses_model_load(spec.settings)
+
+
+def whole_model_scale(spec: EffectSpec) -> bool:
+    """Whether a term is a label-gain error of the whole model's form (scales all delivered)."""
+    item = effect(spec.name)
+    return item.scales_the_label and item.is_whole_model(spec.settings)
+
+
+def whole_model_delay(spec: EffectSpec) -> bool:
+    """Whether a term is a label delay of the whole model's form (holds back every term)."""
+    item = effect(spec.name)
+    return item.delays_the_label and item.is_whole_model(spec.settings)

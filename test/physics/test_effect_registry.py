@@ -7,7 +7,8 @@ import pytest
 
 from id_learning.errors import ConfigError
 from id_learning.physics import NominalModel
-from id_learning.physics.effects import EFFECT_NAMES, REGISTRY, JointEffect, effect
+from id_learning.physics.effects import EFFECT_NAMES, REGISTRY, FittedTerm, JointEffect, effect
+from id_learning.physics.effects.judgement import CandidateGrid, PlausibilityFacts, Trial
 from id_learning.physics.terms import EffectSpec, effect_columns
 from id_learning.twin.effects import effects_from_dict
 
@@ -69,3 +70,33 @@ def test_labels_tell_candidates_apart_by_their_settings():
     assert whole.label == 'signal_delay[whole model]'
     with pytest.raises(ValueError, match='coulomb_friction has no whole-model form'):
         effect('coulomb_friction').whole_model_settings()
+
+
+def test_every_effect_judges_a_fit_and_lists_candidates(mabi):
+    """No effect is left to a name dispatch elsewhere: each answers every question itself."""
+    model = NominalModel(mabi)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-1, 1, (80, 6))
+    quantities = model.evaluate(
+        q, rng.normal(0, 0.5, q.shape), rng.normal(0, 2, q.shape), derivatives=True,
+        regressor=True,
+    )  # fmt: skip
+    facts = PlausibilityFacts(
+        np.ones(6), model.dynamics.gravity(q), 1000.0,
+        model.dynamics.inertial_parameters().reshape(-1, 10),
+    )  # fmt: skip
+    grid = CandidateGrid(0.005, (0.05,), (6,), (1,))
+    for name, item in REGISTRY.items():
+        assert item.special_case_of in (None, *REGISTRY), name
+        candidates = item.candidates(model, grid)
+        assert candidates, name
+        joint, settings = candidates[0]
+        spec = EffectSpec(name, joint, mabi.joints[joint] if joint is not None else '', settings)
+        columns = effect_columns(spec, quantities, model)
+        k = columns.shape[2]
+        trial = Trial(joint, settings, np.zeros(k), np.eye(k), columns)
+        ok, reason = item.plausibility(trial, model, facts)
+        assert isinstance(ok, bool), name
+        assert isinstance(reason, str), name
+        described = item.describe(FittedTerm(joint, settings, np.zeros(k), np.ones(k)), model)
+        assert all({'name', 'value', 'ci', 'unit'} <= set(p) for p in described), name

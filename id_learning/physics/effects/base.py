@@ -57,6 +57,19 @@ class Effect:
         needs_regressor: its columns read the inertial-parameter regressor.
         whole_model_key: the setting that puts it in the whole model's form (it then acts on
             the whole delivered torque, not only the URDF's), or None.
+        special_case_of: the more general effect it is a case of (the same physics with fewer
+            columns: a payload or a rotor is a mass distribution the links' parameters can also
+            take); where it explains the data it is named, not the general one (parsimony).
+        claims_hardware: naming it claims hardware the robot may not have (a balancer): it
+            must hold on held-out time and gives way to an alias that claims none.
+        stands_in_for_hardware: claims no hardware and may take the place of one that does,
+            when the data cannot tell them apart.
+        friction_shaped: one of a joint's friction laws, which share its curve's shape (the
+            smoothing velocity, a curved viscous law).
+        switching: switches with the direction of motion: its filtered signature is judged
+            on the smooth motion.
+        exclusive_variants: two of its candidates on one joint never enter together.
+        reads_link_torque: its columns read the link torque (load-dependent friction).
         needs_motion: only motion shows it (friction, cogging, inertia): its joint must move.
         needs_both_directions: its sign flips with the direction: its joint must move both ways.
         motor_side_only: exists in tau_u from currents only, not in a torque measured after the
@@ -75,6 +88,13 @@ class Effect:
     link_side: ClassVar[bool] = False
     needs_regressor: ClassVar[bool] = False
     whole_model_key: ClassVar[str | None] = None
+    special_case_of: ClassVar[str | None] = None
+    claims_hardware: ClassVar[bool] = False
+    stands_in_for_hardware: ClassVar[bool] = False
+    friction_shaped: ClassVar[bool] = False
+    switching: ClassVar[bool] = False
+    exclusive_variants: ClassVar[bool] = False
+    reads_link_torque: ClassVar[bool] = False
     needs_motion: ClassVar[bool] = False
     needs_both_directions: ClassVar[bool] = False
     motor_side_only: ClassVar[bool] = False
@@ -142,6 +162,13 @@ class Effect:
     def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
         """Whether a fitted value is physically plausible; the reason when not (``judgement``)."""
         raise NotImplementedError(self.name)
+
+    def reshaped_settings(
+        self, settings: Mapping[str, Any], smoothing_velocity: float, exponent: float
+    ) -> dict[str, Any]:
+        """Its settings in a joint's friction curve shape (v_eps, viscous exponent)."""
+        del exponent
+        return {**settings, 'smoothing_velocity': smoothing_velocity}
 
     def excitation_problem(self, settings: Mapping[str, Any], motion: JointMotion) -> str:
         """Why this joint's motion cannot show the effect in these settings; '' if it can."""

@@ -45,6 +45,7 @@ class ViscousFriction(JointEffect):
 
     name = 'viscous_friction'
     parameters = (Parameter('coefficient', 'N*m*s/rad'),)
+    friction_shaped = True
     needs_motion = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
@@ -85,12 +86,27 @@ class ViscousFriction(JointEffect):
             return trial.first_within(0.0, bound, unit)
         return _viscous_curve(trial, exponent, float(limits.velocity[j]), float(limits.torque[j]))
 
+    def reshaped_settings(
+        self, settings: Mapping[str, Any], smoothing_velocity: float, exponent: float
+    ) -> dict[str, Any]:
+        """Stiffening: linear at low speed, bending at speed. Thinning: a power alone.
+
+        A free linear part beside a thinning power would turn its slope at zero speed into a
+        softer Coulomb turn (with one, 7 of 15 twin recordings took v + |v|^0.6 for a linear
+        law, beside the turn).
+        """
+        if exponent == 1.0:
+            return {}
+        return {'exponent': exponent} | ({'linear': True} if exponent > 1.0 else {})
+
 
 class CoulombFriction(JointEffect):
     """F_c tanh(v / v_eps)."""
 
     name = 'coulomb_friction'
     parameters = (Parameter('level', 'N*m'),)
+    friction_shaped = True
+    switching = True
     needs_motion = True
     needs_both_directions = True
 
@@ -117,6 +133,9 @@ class StribeckFriction(JointEffect):
 
     name = 'stribeck_friction'
     parameters = (Parameter('level', 'N*m'),)
+    friction_shaped = True
+    switching = True
+    exclusive_variants = True
     needs_motion = True
     needs_both_directions = True
 
@@ -177,6 +196,9 @@ class LoadDependentFriction(JointEffect):
 
     name = 'load_dependent_friction'
     parameters = (Parameter('coefficient', '1'),)
+    friction_shaped = True
+    switching = True
+    reads_link_torque = True
     needs_motion = True
     needs_both_directions = True
 
@@ -210,6 +232,7 @@ class RotorInertia(JointEffect):
 
     name = 'rotor_inertia'
     parameters = (Parameter('rotor_inertia_change_motor_side', 'kg*m^2'),)
+    special_case_of = 'inertial_parameter_error'
     needs_motion = True
 
     def joint_columns(
@@ -324,6 +347,7 @@ class Cogging(JointEffect):
 
     name = 'cogging'
     parameters = (Parameter('sine', 'N*m'), Parameter('cosine', 'N*m'))
+    switching = True
     needs_motion = True
     needs_both_directions = True
 
@@ -384,6 +408,7 @@ class TorqueOffset(JointEffect):
 
     name = 'torque_offset'
     parameters = (Parameter('offset', 'N*m'),)
+    stands_in_for_hardware = True
     label_offset = True
 
     def joint_columns(

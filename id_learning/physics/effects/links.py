@@ -52,6 +52,7 @@ class GravitySpring(JointEffect):
 
     name = 'gravity_spring'
     parameters = (Parameter('f0', 'N*m'), Parameter('f1', 'N*m'), Parameter('f2', 'N*m'))
+    claims_hardware = True
     link_side = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
@@ -130,6 +131,8 @@ class PayloadMass(Effect):
         Parameter('first_moment_y', 'kg*m'),
         Parameter('first_moment_z', 'kg*m'),
     )
+    special_case_of = 'inertial_parameter_error'
+    stands_in_for_hardware = True
     robot_wide = True
     link_side = True
     needs_regressor = True
@@ -171,6 +174,8 @@ class PayloadMass(Effect):
             return False, (
                 f'mass {mass:.3g} kg outside (0, {facts.moving_mass_kg:.3g}] kg (moving mass)'
             )
+        if mass == 0.0:
+            return True, ''  # no mass to place: no centre to judge
         com = np.asarray(trial.theta[1:4]) / mass
         if np.linalg.norm(com) > PAYLOAD_COM_LIMIT_M:
             return False, (
@@ -191,6 +196,7 @@ class JointOffset(Effect):
 
     name = 'joint_offset'
     parameters = (Parameter('offset', 'rad'),)
+    stands_in_for_hardware = True
     link_side = True
 
     def needs_derivatives(self, settings: Mapping[str, Any]) -> bool:
@@ -229,6 +235,7 @@ class InertialParameterError(Effect):
 
     name = 'inertial_parameter_error'
     parameters = (Parameter('base_parameter', 'SI'),)
+    stands_in_for_hardware = True
     robot_wide = True
     link_side = True
     needs_regressor = True
