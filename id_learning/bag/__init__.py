@@ -16,6 +16,7 @@ from id_learning.bag.reader import (
     bag_info,
     iter_messages,
     iter_raw,
+    iter_typed,
     read_joint_states,
 )
 from id_learning.bag.writer import BagWriter
@@ -33,5 +34,6 @@ __all__ = [
     'encode_joint_state',
     'iter_messages',
     'iter_raw',
+    'iter_typed',
     'read_joint_states',
 ]

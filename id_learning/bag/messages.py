@@ -13,6 +13,7 @@ from rosbags.typesys import Stores, get_typestore
 __all__ = [
     'JOINT_STATE',
     'JointStateMessage',
+    'JointStateSeries',
     'canonical_cdr',
     'decode_joint_state',
     'encode_joint_state',
@@ -112,3 +113,24 @@ def decode_joint_state(data: bytes | memoryview) -> JointStateMessage:
         velocity=msg.velocity,
         effort=msg.effort,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class JointStateSeries:
+    """The JointState messages of one topic, stacked.
+
+    Attributes:
+        topic: topic name.
+        stamps_ns: (N,) header stamps [ns].
+        log_ns: (N,) bag log times [ns].
+        names: joint names, in the messages' order.
+        position: (N, n); velocity and effort (N, n) or None when the messages leave them empty.
+    """
+
+    topic: str
+    stamps_ns: np.ndarray
+    log_ns: np.ndarray
+    names: tuple[str, ...]
+    position: np.ndarray | None
+    velocity: np.ndarray | None
+    effort: np.ndarray | None

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import os
 import struct
+import traceback
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
 
 import numpy as np
@@ -16,7 +18,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 from tqdm import tqdm
 
-from id_learning.bag.messages import JOINT_STATE, decode_joint_state, typestore
+from id_learning.bag.messages import JOINT_STATE, JointStateSeries, decode_joint_state, typestore
 from id_learning.errors import BagError, ConfigError, DatasetError
 
 __all__ = [
@@ -28,6 +30,7 @@ __all__ = [
     'check_distinct',
     'iter_messages',
     'iter_raw',
+    'iter_typed',
     'read_joint_states',
 ]
 
@@ -63,8 +66,12 @@ class BagInfo:
         """Return a topic by name.
 
         Raises:
-            BagError: the bag has no such topic (lists those it has).
+            BagError: the bag has no such topic (lists those it has), or holds it with several
+                message types (names each).
         """
+        _refuse_several_types(
+            self.path, [(t.name, t.msgtype, t.count) for t in self.topics], [name]
+        )
         for topic in self.topics:
             if topic.name == name:
                 return topic
@@ -80,21 +87,69 @@ def _open(path: Path) -> Reader:
         raise BagError(f'{path}: expected a rosbag2 folder (with metadata.yaml), got a file')
     if not (path / 'metadata.yaml').is_file():
         raise BagError(f'{path}: not a complete rosbag2 folder (no metadata.yaml); {RECOVER_HINT}')
+    _check_metadata(path)
     reader = Reader(path)
     try:
         reader.open()
     except (ReaderError, struct.error, EOFError, ValueError, OSError) as err:
         raise BagError(f'{path}: cannot open bag: {err}; {RECOVER_HINT}') from err
     except Exception as err:
-        if not _is_decode_error(err):
-            raise
         files = ', '.join(_listed_files(path)) or 'the storage files'
+        if not _is_decode_error(err):
+            if (torn := _storage_failure(err)) is None:
+                raise
+            raise BagError(
+                f'{path}: cannot open bag: {torn or files} is torn or corrupt (its storage '
+                f'reader failed: {type(err).__name__}: {err}); {RECOVER_HINT}'
+            ) from err
         raise BagError(
             f'{path}: cannot open bag: {files} do(es) not decompress or decode '
             f'({type(err).__name__}: {err}){_compression_note(path)}'
         ) from err
     _warn_unlisted(path, reader)
     return reader
+
+
+def _check_metadata(path: Path) -> None:
+    """Refuse a metadata.yaml that is not text, or that lists storage files outside the bag.
+
+    rosbags reads each listed file by its name from the bag folder, so an absolute entry or one
+    leading out of it (``../other/other_0.mcap``) names data the bag does not hold.
+
+    Raises:
+        BagError: names metadata.yaml and why, or the bag, the entry and why.
+    """
+    try:
+        (path / 'metadata.yaml').read_bytes().decode('utf-8')
+    except UnicodeDecodeError as err:
+        raise BagError(
+            f'{path / "metadata.yaml"}: not a text YAML file (byte {err.start} is not UTF-8: '
+            f'binary or damaged); {RECOVER_HINT}'
+        ) from err
+    for entry in _listed_files(path):  # [] when unreadable: rosbags names what is wrong
+        why = 'an absolute path' if PurePath(entry).is_absolute() else 'outside the bag folder'
+        if PurePath(entry).is_absolute() or os.path.normpath(entry).split(os.sep)[0] == os.pardir:
+            raise BagError(
+                f'{path}: metadata.yaml relative_file_paths lists {entry!r}, {why}; a bag holds '
+                f'its storage files in its own folder: copy the file in and list it by name '
+                f'({PurePath(entry).name!r})'
+            )
+
+
+def _storage_failure(err: BaseException) -> str | None:
+    """The storage file's name ('' when unknown) if ``err`` was raised in a rosbags storage plugin.
+
+    Judged by the traceback's frames (which module raised), not by the message: anything raised
+    there reading a file means the file is torn or corrupt (a bare MCAP magic makes ``ord``
+    raise TypeError, a damaged length field MemoryError or OverflowError, a bad offset OSError).
+    """
+    found: str | None = None
+    for frame, _ in traceback.walk_tb(err.__traceback__):
+        if str(frame.f_globals.get('__name__')).startswith('rosbags.rosbag2.storage_'):
+            local = frame.f_locals
+            name = getattr(local.get('self'), 'path', None) or getattr(local.get('bio'), 'name', 0)
+            found = Path(name).name if isinstance(name, (str, os.PathLike)) else found or ''
+    return found
 
 
 #: Top-level modules whose exceptions mean a storage file does not decompress or decode.
@@ -134,13 +189,7 @@ def _warn_unlisted(path: Path, reader: Reader) -> None:
     listed = {Path(name).name for name in getattr(reader, 'paths', ())} or {
         Path(str(item)).name for item in _listed_files(path)
     }
-    extra = tuple(
-        sorted(
-            p.name
-            for p in path.iterdir()
-            if p.suffix in {'.mcap', '.db3'} and p.name not in listed
-        )
-    )
+    extra = tuple(sorted({p.name for p in _data_files(path)} - listed))
     key = (path.resolve(), extra)
     if extra and key not in _WARNED_UNLISTED:
         _WARNED_UNLISTED.add(key)
@@ -276,14 +325,7 @@ def bag_info(path: Path | str) -> BagInfo:
     reader = _open(path)
     files = tuple(sorted(p.name for p in path.iterdir() if p.suffix in {'.mcap', '.db3'}))
     try:
-        topics = tuple(
-            TopicInfo(
-                conn.topic,
-                conn.msgtype,
-                int(conn.msgcount),
-            )
-            for conn in reader.connections
-        )
+        topics = tuple(TopicInfo(c.topic, c.msgtype, int(c.msgcount)) for c in reader.connections)
         return BagInfo(
             path=path,
             storage='mcap' if all(name.endswith('.mcap') for name in files) else 'other',
@@ -312,7 +354,7 @@ def bag_custom_data(path: Path | str) -> dict[str, str]:
     try:
         text = (path / 'metadata.yaml').read_text(encoding='utf-8')
         info = yaml.safe_load(text).get('rosbag2_bagfile_information', {})
-    except (OSError, yaml.YAMLError, AttributeError) as err:
+    except (OSError, ValueError, yaml.YAMLError, AttributeError) as err:  # ValueError: not UTF-8
         raise BagError(f'{path}: cannot read metadata.yaml: {err}') from err
     custom = info.get('custom_data') if isinstance(info, dict) else None
     return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
@@ -342,14 +384,39 @@ def _check_storage_types(path: Path, reader: Reader, topics: Sequence[str]) -> N
     stored = _storage_types(reader)
     if not stored:
         return
-    declared = {conn.topic: conn.msgtype for conn in reader.connections}
     for topic in topics:
         in_storage = stored.get(topic, set())
-        if in_storage and declared[topic] not in in_storage:
+        for msgtype in {c.msgtype for c in reader.connections if c.topic == topic} - in_storage:
+            if not in_storage:
+                continue
             raise BagError(
-                f'{path}: topic {topic} has type {declared[topic]} in metadata.yaml but '
+                f'{path}: topic {topic} has type {msgtype} in metadata.yaml but '
                 f'{", ".join(sorted(in_storage))} in {", ".join(_listed_files(path)) or "storage"}'
                 '; the metadata and the storage disagree: fix metadata.yaml'
+            )
+
+
+def _refuse_several_types(
+    path: Path, found: Sequence[tuple[str, str, int]], topics: Sequence[str]
+) -> None:
+    """Refuse the first of ``topics`` that ``found`` (topic, type, count) gives several types.
+
+    A topic carries one type: selected by topic, one type would be read and the rest called
+    missing or empty.
+
+    Raises:
+        BagError: names the topic and each type with its message count.
+    """
+    for topic in topics:
+        types: dict[str, int] = {}
+        for name, msgtype, count in found:
+            if name == topic:
+                types[msgtype] = types.get(msgtype, 0) + int(count)
+        if len(types) > 1:
+            held = ', '.join(f'{t} ({n} message{"s" * (n != 1)})' for t, n in types.items())
+            raise BagError(
+                f'{path}: topic {topic} holds {len(types)} message types: {held}; a topic '
+                'carries one type: record the others on topics of their own'
             )
 
 
@@ -357,34 +424,56 @@ def iter_raw(path: Path | str, topics: Sequence[str]) -> Iterator[tuple[str, int
     """Yield (topic, log time [ns], serialized bytes) of the given topics in log-time order.
 
     Raises:
+        BagError: a topic is missing or holds messages of several types, or the file is
+            truncated or corrupt.
+    """
+    for topic, _, log_ns, data in iter_typed(path, topics, several_types=False):
+        yield topic, log_ns, data
+
+
+def iter_typed(
+    path: Path | str, topics: Sequence[str], *, several_types: bool = True
+) -> Iterator[tuple[str, str, int, bytes]]:
+    """Yield (topic, message type, log time [ns], serialized bytes) in log-time order.
+
+    A topic holding messages of several types is read whole, each message with its type (for
+    reporting on such a bag); ``several_types=False`` refuses it, as ``iter_raw`` does.
+
+    Raises:
         BagError: a topic is missing, or the file is truncated or corrupt.
     """
     path = Path(path)
     reader = _open(path)
     try:
-        by_name = {conn.topic: conn for conn in reader.connections}
-        missing = [topic for topic in topics if topic not in by_name]
+        connections = [conn for conn in reader.connections if conn.topic in topics]
+        present = {conn.topic for conn in reader.connections}
+        missing = [topic for topic in topics if topic not in present]
         if missing:
-            raise BagError(f'{path}: missing topic(s) {missing}; the bag has {sorted(by_name)}')
+            raise BagError(f'{path}: missing topic(s) {missing}; the bag has {sorted(present)}')
+        if not several_types:
+            found = [(c.topic, c.msgtype, int(c.msgcount)) for c in connections]
+            _refuse_several_types(path, found, topics)
         _check_storage_types(path, reader, topics)
-        connections = [by_name[topic] for topic in topics]
         held = dict.fromkeys(topics, 0)
         try:
             for conn, timestamp, data in reader.messages(connections=connections):
                 held[conn.topic] += 1
-                yield conn.topic, int(timestamp), bytes(data)
+                yield conn.topic, conn.msgtype, int(timestamp), bytes(data)
         except (ReaderError, struct.error, EOFError, ValueError, KeyError) as err:
             raise BagError(
                 f'{path}: corrupt or truncated bag while reading {topics}: {err}; {RECOVER_HINT}'
             ) from err
         except Exception as err:  # zstd/lz4 raise their own error types on damaged chunks
-            if not _is_decode_error(err):
+            torn = _storage_failure(err)
+            if not _is_decode_error(err) and torn is None:
                 raise
             raise BagError(
-                f'{path}: damaged or undecodable storage data while reading {list(topics)} '
-                f'({type(err).__name__}: {err}){_compression_note(path)}; {RECOVER_HINT}'
+                f'{path}: damaged or undecodable storage data{f" in {torn}" if torn else ""} '
+                f'while reading {list(topics)} ({type(err).__name__}: {err})'
+                f'{_compression_note(path)}; {RECOVER_HINT}'
             ) from err
-        _warn_miscounted(path, {topic: int(by_name[topic].msgcount) for topic in topics}, held)
+        stated = {t: sum(int(c.msgcount) for c in connections if c.topic == t) for t in topics}
+        _warn_miscounted(path, stated, held)
     finally:
         reader.close()
 
@@ -429,27 +518,6 @@ def iter_messages(path: Path | str, topic: str) -> Iterator[tuple[int, Any]]:
                 f'{msgtype}: {err}'
             ) from err
         yield log_ns, message
-
-
-@dataclass(frozen=True, eq=False)
-class JointStateSeries:
-    """The JointState messages of one topic, stacked.
-
-    Attributes:
-        topic: topic name.
-        stamps_ns: (N,) header stamps [ns].
-        log_ns: (N,) bag log times [ns].
-        names: joint names, in the messages' order.
-        position: (N, n); velocity and effort (N, n) or None when the messages leave them empty.
-    """
-
-    topic: str
-    stamps_ns: np.ndarray
-    log_ns: np.ndarray
-    names: tuple[str, ...]
-    position: np.ndarray | None
-    velocity: np.ndarray | None
-    effort: np.ndarray | None
 
 
 def read_joint_states(path: Path | str, topic: str, *, progress: bool = False) -> JointStateSeries:

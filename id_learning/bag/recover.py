@@ -351,7 +351,7 @@ def _metadata_files(path: Path) -> set[str] | None:
         data = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
         listed = data['rosbag2_bagfile_information']['relative_file_paths']
         return {Path(str(entry)).name for entry in listed}
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
+    except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError):  # ValueError: not UTF-8
         return None
 
 

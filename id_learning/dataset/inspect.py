@@ -28,7 +28,7 @@ from id_learning.bag import (
     TopicInfo,
     bag_info,
     decode_joint_state,
-    iter_raw,
+    iter_typed,
 )
 from id_learning.config_io import parse_yaml
 from id_learning.dataset.consistency import KinematicConsistency, gap_starts
@@ -255,8 +255,18 @@ def _contract(
     topics: TopicConfig,
     msgtypes: Mapping[str, str],
     decoded: Mapping[str, _JointStateTopic],
+    several_types: tuple[str, ...],
 ) -> ContractReport:
     names = (topics.joint_states, topics.motor_currents)
+    needed = {topics.joint_states: ('position', 'velocity'), topics.motor_currents: ('effort',)}
+    empty = tuple(
+        (name, key)
+        for name in names
+        if name in decoded and decoded[name].names is not None
+        for key in needed[name]
+        if not decoded[name].lengths.get(key)
+    )
+    mixed = tuple(name for name in names if name in several_types)
     missing = tuple(name for name in names if msgtypes.get(name) != JOINT_STATE)
     if missing:
         wrong = tuple((name, msgtypes[name]) for name in missing if name in msgtypes)
@@ -268,7 +278,7 @@ def _contract(
             and bool(states.all_stamps)
             and bool(states.lengths.get('effort'))
         )
-        return ContractReport(*names, missing, None, None, None, wrong, torques_only)
+        return ContractReport(*names, missing, None, None, None, wrong, torques_only, empty, mixed)
     states, currents = decoded[topics.joint_states], decoded[topics.motor_currents]
     a = np.array(states.all_stamps, dtype=np.int64)
     b = np.array(currents.all_stamps, dtype=np.int64)
@@ -281,23 +291,30 @@ def _contract(
     names_match = (
         None if states.names is None or currents.names is None else states.names == currents.names
     )
-    return ContractReport(*names, (), first is None, first, names_match)
+    return ContractReport(
+        *names, (), first is None, first, names_match, empty_fields=empty, several_types=mixed
+    )
 
 
 def _metadata_mismatches(
-    path: Path, topics: tuple[TopicInfo, ...], log_times: Mapping[str, list[int]]
+    path: Path, topics: tuple[TopicInfo, ...], log_times: Mapping[tuple[str, str], list[int]]
 ) -> tuple[str, ...]:
     """Where metadata.yaml contradicts the messages the data files hold, one line each.
 
     A metadata.yaml written by hand or copied from another recording: its message_count, a
     topic's message_count or its duration disagree with what was read (a negative duration
-    never fits).
+    never fits). ``log_times`` holds the messages read by (topic, type).
     """
+    counts: dict[tuple[str, str], int] = {}
+    for topic in topics:
+        key = (topic.name, topic.msgtype)
+        counts[key] = counts.get(key, 0) + topic.count
+    several = {name for name, _ in counts if sum(name == other for other, _ in counts) > 1}
     lines = [
-        f'metadata: {topic.name} message_count {topic.count}, the file holds '
-        f'{len(log_times[topic.name])}'
-        for topic in topics
-        if topic.count != len(log_times[topic.name])
+        f'metadata: {name}{f" ({msgtype})" if name in several else ""} message_count {count}, '
+        f'the file holds {len(log_times[name, msgtype])}'
+        for (name, msgtype), count in counts.items()
+        if count != len(log_times[name, msgtype])
     ]
     try:
         document = parse_yaml((path / 'metadata.yaml').read_text(encoding='utf-8'), str(path))
@@ -348,17 +365,28 @@ def inspect_bag(
         raise ConfigError(f'period_s must be > 0 s, got {period_s!r}')
     info = bag_info(path)
     nominal = period_s if period_s is not None else (robot.ipo_period_s if robot else None)
-    msgtypes = {topic.name: topic.msgtype for topic in info.topics}
-    names = [topic.name for topic in info.topics]
+    types: dict[str, list[str]] = {}
+    for topic_info in info.topics:
+        types.setdefault(topic_info.name, []).append(topic_info.msgtype)
+    # A topic of several types is reported by one: JointState where it is one of them.
+    msgtypes = {
+        name: JOINT_STATE if JOINT_STATE in kind else kind[0] for name, kind in types.items()
+    }
+    names = list(types)
     decoded = {
         name: _JointStateTopic(name) for name, kind in msgtypes.items() if kind == JOINT_STATE
     }
-    log_times: dict[str, list[int]] = {name: [] for name in names}
-    for topic, log_ns, data in iter_raw(path, names):
-        index = len(log_times[topic])
-        log_times[topic].append(log_ns)
-        if topic in decoded:
-            decoded[topic].add(index, log_ns, data)
+    every: dict[tuple[str, str], list[int]] = {(t.name, t.msgtype): [] for t in info.topics}
+    log_times = {name: every[name, msgtype] for name, msgtype in msgtypes.items()}
+    for topic, msgtype, log_ns, data in iter_typed(path, names):
+        every[topic, msgtype].append(log_ns)
+        if topic in decoded and msgtype == JOINT_STATE:
+            decoded[topic].add(len(log_times[topic]) - 1, log_ns, data)
+    several_types = tuple(
+        (name, tuple((kind, len(every[name, kind])) for kind in dict.fromkeys(kinds)))
+        for name, kinds in types.items()
+        if len(set(kinds)) > 1
+    )
 
     reports = []
     series: dict[str, JointStateSeries] = {}
@@ -394,17 +422,23 @@ def inspect_bag(
             reports.append(TopicReport(name, msgtypes[name], count, timing))
 
     report = BagReport(
-        metadata_mismatches=_metadata_mismatches(path, info.topics, log_times),
+        metadata_mismatches=_metadata_mismatches(path, info.topics, every),
+        several_types=several_types,
         path=path,
         storage=info.storage,
         files=info.files,
         start_ns=info.start_ns,
         start_iso=_iso_utc(info.start_ns),
         duration_s=info.duration_ns * 1e-9,
-        message_count=sum(len(times) for times in log_times.values()),
+        message_count=sum(len(times) for times in every.values()),
         robot_name=robot.name if robot else None,
         topics=tuple(reports),
-        contract=_contract(robot.topics if robot else TopicConfig(), msgtypes, decoded),
+        contract=_contract(
+            robot.topics if robot else TopicConfig(),
+            msgtypes,
+            decoded,
+            tuple(name for name, _ in several_types),
+        ),
         series=series,
         robot_joints=robot.joints if robot else (),
     )

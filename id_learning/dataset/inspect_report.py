@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Literal
 
 from id_learning.bag import JOINT_STATE, JointStateSeries
+from id_learning.dataset.recording import joint_name_mismatch
 from id_learning.errors import BagError
 
 __all__ = [
@@ -167,6 +168,10 @@ class ContractReport:
         names_match: both topics name the same joints; None when a topic is missing or empty.
         joint_torques_only: no motor-current topic, and the joint states carry efforts (joint
             torque sensors): a recording for ``--target joint``, which needs no currents.
+        empty_fields: (topic, field) the contract needs but the messages leave empty: position
+            or velocity of the joint states, effort (the currents) of the motor currents.
+        several_types: contract topics that hold messages of more than one type (the readers
+            refuse them; the report covers their JointState messages).
     """
 
     joint_states: str
@@ -177,11 +182,21 @@ class ContractReport:
     names_match: bool | None
     wrong_types: tuple[tuple[str, str], ...] = ()
     joint_torques_only: bool = False
+    empty_fields: tuple[tuple[str, str], ...] = ()
+    several_types: tuple[str, ...] = ()
 
     @property
     def is_met(self) -> bool:
-        """Whether both topics are there with matching stamps and joint names."""
-        return not self.missing and bool(self.stamps_match) and bool(self.names_match)
+        """Whether the bag meets the contract.
+
+        Both topics are there, of one type each, with the fields it needs, and their stamps and
+        joint names match.
+        """
+        return (
+            not (self.missing or self.empty_fields or self.several_types)
+            and bool(self.stamps_match)
+            and bool(self.names_match)
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,6 +219,8 @@ class BagReport:
             contract topics must name exactly these, or limits cannot be checked.
         metadata_mismatches: where metadata.yaml's message counts or duration contradict the
             messages the files hold, one line each.
+        several_types: topics holding messages of several types: (topic, ((type, messages
+            read), ...)); the topic's report covers one of them (JointState where it is one).
     """
 
     path: Path
@@ -219,6 +236,7 @@ class BagReport:
     series: Mapping[str, JointStateSeries] = field(default_factory=dict, repr=False)
     robot_joints: tuple[str, ...] = ()
     metadata_mismatches: tuple[str, ...] = ()
+    several_types: tuple[tuple[str, tuple[tuple[str, int], ...]], ...] = ()
 
     def topic(self, name: str) -> TopicReport:
         """Return the report of one topic.
@@ -237,6 +255,13 @@ class BagReport:
     def problems(self) -> tuple[str, ...]:
         """One line per finding that ``load_recording`` would reject or a human should check."""
         lines = list(self.metadata_mismatches)
+        for name, types in self.several_types:
+            held = ', '.join(f'{t} ({n} message{"s" * (n != 1)})' for t, n in types)
+            lines.append(
+                f'{name}: holds {len(types)} message types: {held}; train and the other '
+                f'readers refuse it (a topic carries one type); reported: its '
+                f'{self.topic(name).msgtype} messages'
+            )
         for topic in self.topics:
             lines += _topic_problems(topic)
         contract = self.contract
@@ -249,16 +274,34 @@ class BagReport:
                 f'contract: {contract.motor_currents} stamps differ from {contract.joint_states} '
                 f'from sample {contract.first_mismatch} on'
             )
+        for name, key in contract.empty_fields:
+            what = ' (the motor currents)' if name == contract.motor_currents else ''
+            lines.append(f'{name}: messages carry no {key}{what}')
         lines += self._joint_mismatches()
         if contract.names_match is False:
             lines.append(
                 f'contract: {contract.motor_currents} and {contract.joint_states} name '
-                'different joints'
+                f'different joints ({self._names_differ()})'
             )
         return tuple(lines)
 
+    def _names_differ(self) -> str:
+        """How the currents' joints differ from the joint states', in load_recording's words."""
+        contract = self.contract
+        states, currents = (
+            [joint.name for joint in self.topic(name).joints]
+            for name in (contract.joint_states, contract.motor_currents)
+        )
+        mismatch = joint_name_mismatch(currents, states)
+        if mismatch is None:
+            return 'the same joints, in another order: train matches them by name'
+        return f'{contract.motor_currents} against {contract.joint_states}: {mismatch}'
+
     def _joint_mismatches(self) -> list[str]:
-        """A contract topic whose joints are not the robot's: training would refuse the bag."""
+        """A contract topic whose joints are not the robot's: training would refuse the bag.
+
+        Joints named twice (with the robot's joints otherwise) are ``_topic_problems``' line.
+        """
         if not self.robot_joints:
             return []
         lines = []
@@ -269,10 +312,9 @@ class BagReport:
             if topic.name not in contract_topics or not names or set(names) == wanted:
                 continue
             unknown = [name for name in names if name not in wanted]
-            missing = [name for name in self.robot_joints if name not in names]
             lines.append(
                 f'{topic.name}: joints do not match {self.robot_name} '
-                f"(not the robot's: {unknown}; missing: {missing}); limits were not checked "
+                f'({joint_name_mismatch(names, self.robot_joints)}); limits were not checked '
                 f'for {unknown or "the missing joints"}'
             )
         return lines
@@ -301,6 +343,12 @@ def _topic_problems(topic: TopicReport) -> list[str]:
         )
     if topic.undecodable:
         lines.append(f'{topic.name}: {topic.undecodable} message(s) do not deserialize')
+    names = [joint.name for joint in topic.joints]
+    if repeated := list(dict.fromkeys(name for name in names if names.count(name) > 1)):
+        lines.append(
+            f'{topic.name}: joint name(s) {repeated} repeated within a message (train refuses '
+            'the bag)'
+        )
     if topic.inconsistent:
         lines.append(
             f'{topic.name}: {topic.inconsistent} message(s) change joint names or array lengths, '

@@ -187,6 +187,10 @@ def _verdict_lines(report: BagReport) -> list[str]:
         verdict = f'stamps differ from sample {contract.first_mismatch} on'
     if contract.names_match is False:
         verdict += '; joint names differ'
+    for name in contract.several_types:
+        verdict += f'; {name} holds several message types'
+    for name, key in contract.empty_fields:
+        verdict += f'; {name} carries no {key}'
     problems = report.problems
     return [
         '',

@@ -16,6 +16,7 @@ from __future__ import annotations
 import itertools
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -46,6 +47,7 @@ __all__ = [
     'Recording',
     'check_finite',
     'check_stamps',
+    'joint_name_mismatch',
     'load_recording',
     'write_recording',
 ]
@@ -188,15 +190,29 @@ def write_recording(
     return path
 
 
+def joint_name_mismatch(names: Sequence[str], expected: Sequence[str]) -> str | None:
+    """How ``names`` differ from ``expected``, in the words of ``load_recording``'s refusal.
+
+    'missing [...], unexpected [...]', with ', repeated [...]' for joints named more than once;
+    None when both name the same joints once each (the order does not matter: it is fixed up).
+    """
+    missing = [name for name in expected if name not in names]
+    unexpected = [name for name in names if name not in expected]
+    repeated = list(dict.fromkeys(name for name in names if list(names).count(name) > 1))
+    if not (missing or unexpected or repeated):
+        return None
+    return f'missing {missing}, unexpected {unexpected}' + (
+        f', repeated {repeated}' if repeated else ''
+    )
+
+
 def _reorder(series: JointStateSeries, joints: tuple[str, ...], where: str) -> np.ndarray:
     """Column permutation that puts a topic's joints in config order (by name)."""
-    if set(series.names) != set(joints) or len(series.names) != len(joints):
-        missing = [name for name in joints if name not in series.names]
-        extra = [name for name in series.names if name not in joints]
+    mismatch = joint_name_mismatch(series.names, joints)
+    if mismatch is not None:
         raise DatasetError(
             f'{where}: joint names {list(series.names)} '
-            f'do not match the robot config {list(joints)} '
-            f'(missing {missing}, unexpected {extra})'
+            f'do not match the robot config {list(joints)} ({mismatch})'
         )
     return np.array([series.names.index(name) for name in joints])
 

@@ -1,4 +1,4 @@
-"""The reader's refusals: storage that does not match metadata.yaml, and duplicate recordings."""
+"""Reader refusals: storage unlike metadata.yaml, torn or stray files, mixed types, copies."""
 
 from __future__ import annotations
 
@@ -7,9 +7,18 @@ from pathlib import Path
 
 import pytest
 import yaml
+from rosbags.rosbag2 import StoragePlugin, Writer
 from support import sine_recording
 
-from id_learning.bag import JOINT_STATE, BagWriter, bag_info, iter_raw
+from id_learning.bag import (
+    JOINT_STATE,
+    BagWriter,
+    bag_info,
+    iter_raw,
+    iter_typed,
+    read_joint_states,
+)
+from id_learning.bag.messages import typestore
 from id_learning.bag.reader import check_distinct
 from id_learning.dataset.recording import write_recording
 from id_learning.errors import BagError, ConfigError
@@ -101,3 +110,73 @@ def test_metadata_counts_the_files_do_not_hold_are_warned_naming_topic(
 
 def _storage_bytes(path: Path) -> bytes:
     return b''.join(f.read_bytes() for f in sorted(path.glob('*.mcap')))
+
+
+def test_a_storage_file_holding_only_its_magic_is_a_torn_bag_naming_the_file(
+    bag: Path, tmp_path: Path
+) -> None:
+    """What a recorder killed right after opening its file leaves: 8 bytes, no records."""
+    copy = Path(shutil.copytree(bag, tmp_path / 'magic'))
+    (storage,) = copy.glob('*.mcap')
+    storage.write_bytes(storage.read_bytes()[:8])
+    for read in (bag_info, lambda path: list(iter_raw(path, TOPICS))):
+        with pytest.raises(
+            BagError, match=rf'magic: .*{storage.name} is torn or corrupt.*recover'
+        ):
+            read(copy)
+
+
+@pytest.mark.parametrize('entry', ['../bag/bag_0.mcap', '/elsewhere/bag_0.mcap'])
+def test_storage_files_listed_outside_the_bag_folder_are_refused_naming_the_entry(
+    bag: Path, tmp_path: Path, entry: str
+) -> None:
+    def point_away(info: dict[str, object]) -> None:
+        info['relative_file_paths'] = [entry]
+
+    copy = _edited(bag, tmp_path / 'away', point_away)
+    for file in copy.glob('*.mcap'):
+        file.unlink()  # so nothing of the bag's own is there to read instead
+    why = 'outside the bag folder' if entry.startswith('..') else 'an absolute path'
+    for read in (bag_info, lambda path: list(iter_raw(path, TOPICS))):
+        with pytest.raises(BagError, match=rf"away: .*relative_file_paths lists '{entry}', {why}"):
+            read(copy)
+
+
+def test_a_binary_metadata_yaml_is_named_as_not_text(bag: Path, tmp_path: Path) -> None:
+    copy = Path(shutil.copytree(bag, tmp_path / 'binary'))
+    (copy / 'metadata.yaml').write_bytes(bytes(range(128, 256)) * 2)
+    with pytest.raises(BagError, match=r'binary/metadata\.yaml: not a text YAML file'):
+        bag_info(copy)
+
+
+def _with_a_string_on_joint_states(bag: Path, out: Path) -> Path:
+    """``bag`` rewritten with one std_msgs/String message more on /joint_states."""
+    store = typestore()
+    with Writer(out, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {
+            topic: writer.add_connection(topic, JOINT_STATE, typestore=store) for topic in TOPICS
+        }
+        string = writer.add_connection('/joint_states', 'std_msgs/msg/String', typestore=store)
+        for topic, log_ns, data in iter_raw(bag, TOPICS):
+            writer.write(conns[topic], log_ns, data)
+        message = store.types['std_msgs/msg/String'](data='hello')
+        writer.write(string, log_ns + 1, bytes(store.serialize_cdr(message, string.msgtype)))
+    return out
+
+
+def test_a_topic_of_two_types_is_refused_naming_both_with_counts(
+    bag: Path, tmp_path: Path
+) -> None:
+    mixed = _with_a_string_on_joint_states(bag, tmp_path / 'mixed')
+    both = (
+        r'mixed: topic /joint_states holds 2 message types: sensor_msgs/msg/JointState '
+        r'\(60 messages\), std_msgs/msg/String \(1 message\)'
+    )
+    with pytest.raises(BagError, match=both):
+        list(iter_raw(mixed, TOPICS))
+    with pytest.raises(BagError, match=both):
+        read_joint_states(mixed, '/joint_states')
+    assert len(list(iter_raw(mixed, ['/motor_currents']))) == 60  # the other topic reads
+    kinds = [msgtype for topic, msgtype, _, _ in iter_typed(mixed, TOPICS) if topic == TOPICS[0]]
+    assert sorted(set(kinds)) == [JOINT_STATE, 'std_msgs/msg/String']
+    assert len(kinds) == 61
