@@ -17,10 +17,14 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-from collections.abc import Mapping
+import re
+import sys
+from collections.abc import Mapping, Sequence
 from dataclasses import field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, get_type_hints
+
+import yaml
 
 from id_learning.config_io import (
     describe_range,
@@ -40,7 +44,12 @@ __all__ = [
     'declare_parameters',
     'load_node_config',
     'param',
+    'params_file_problem',
+    'params_files',
     'read_snapshot',
+    'refuse_foreign_params_files',
+    'section_matches',
+    'shared_topic_problem',
     'validate_change',
 ]
 
@@ -126,6 +135,29 @@ def check_schema(config: object) -> None:
                     raise ConfigError(f'{item.name}: {name!r} is no ROS topic name: {problem}')
 
 
+def shared_topic_problem(named: Mapping[str, str], own: Mapping[str, str]) -> str | None:
+    """Two parameters naming one topic, or one naming a topic the node keeps; None if neither.
+
+    One node cannot publish and subscribe different types on one topic (rcl refuses it with a
+    misleading error), and with one type it would feed on its own output.
+
+    Args:
+        named: topic of each parameter in use (as written, or resolved by the node).
+        own: what the node itself uses each of its fixed topics for (``/diagnostics``, ...).
+    """
+    seen: dict[str, str] = {}
+    for parameter, topic in named.items():
+        if topic in own:
+            return f"{parameter} {topic!r} is the topic of the node's {own[topic]}: choose another"
+        if topic in seen:
+            return (
+                f'{seen[topic]} and {parameter} both name topic {topic!r}: each needs its own '
+                '(on one, the node would mix the two, refuse them, or feed on its own output)'
+            )
+        seen[topic] = parameter
+    return None
+
+
 _FIELD_TYPES: dict[type, dict[str, Any]] = {}
 
 
@@ -174,18 +206,103 @@ def load_node_config(path: Path | str, node: str, cls: type[_T]) -> _T:
     data = load_yaml_mapping(path)
     section = data.get(node) or data.get(f'/{node}') or data.get('/**')
     if not isinstance(section, Mapping) or not isinstance(section.get('ros__parameters'), Mapping):
-        raise ConfigError(f'{path}: no {node}: ros__parameters: section')
+        problem = params_file_problem(path, data, node)
+        raise ConfigError(problem or f'{path}: no {node}: ros__parameters: section')
     values = dict(section['ros__parameters'])
     values = {key: value for key, value in values.items() if key != 'use_sim_time'}
     return config_from_mapping(cls, values, f'{path}: {node}')
 
 
+def section_matches(key: str, node: str, namespace: str = '/') -> bool:
+    """Whether a parameter file's top-level key applies to a node, by rcl's rules.
+
+    A key is a node's name, its fully qualified name, or a pattern of it where ``*`` stands
+    for one name token and ``**`` for any number (``/**`` is every node); a key without a
+    leading slash is taken from the root. The bare name is accepted in any namespace.
+    """
+    fqn = f'{namespace.rstrip("/")}/{node}'
+    if key in (node, fqn):
+        return True
+    parts = []
+    for token in (key if key.startswith('/') else f'/{key}').split('/')[1:]:
+        if token == '**':
+            parts.append('(?:/[^/]+)*')
+        else:
+            parts.append('/' + '[^/]*'.join(re.escape(piece) for piece in token.split('*')))
+    return re.fullmatch(''.join(parts), fqn) is not None
+
+
+def params_file_problem(path: Path, data: object, node: str, namespace: str = '/') -> str | None:
+    """Why a parameter file given to a node sets none of its parameters, or None.
+
+    rcl applies only the sections whose key matches the node; a misspelt key (``recordr:``) is
+    skipped without a word and the node would run on its defaults.
+    """
+    if not isinstance(data, Mapping) or not data:
+        return None  # rcl read it before the node started: nothing of ours to add
+    keys = [str(key) for key in data]
+    if any(section_matches(key, node, namespace) for key in keys):
+        return None
+    fqn = f'{namespace.rstrip("/")}/{node}'
+    leaves = {key.rstrip('/').rsplit('/', 1)[-1]: key for key in keys}
+    close = difflib.get_close_matches(node, sorted(leaves), n=1, cutoff=0.6)
+    hint = f' (did you mean {node} for {leaves[close[0]]}?)' if close else ''
+    return (
+        f'{path}: no section of it is for node {fqn}{hint}: its sections are {keys}, so the node '
+        f'would run on its defaults; name the section {node}: (or /**: for every node)'
+    )
+
+
+def params_files(args: Sequence[str] | None) -> list[Path]:
+    """The ``--params-file`` files of a command line (None: ``sys.argv``), in its ROS part."""
+    words = list(sys.argv[1:] if args is None else args)
+    files, is_ros = [], False
+    for index, word in enumerate(words):
+        if word in ('--ros-args', '--'):
+            is_ros = word == '--ros-args'
+        elif is_ros and word == '--params-file' and index + 1 < len(words):
+            files.append(Path(words[index + 1]))
+    return files
+
+
+#: The arguments ``runtime.run_node`` gave rclpy.init (None: ``sys.argv``): their params files.
+COMMAND_LINE: list[str] | None = None
+
+
+def refuse_foreign_params_files(node: Node, args: Sequence[str] | None = None) -> None:
+    """Refuse a ``--params-file`` with no section for this node (a misspelt ``recordr:``).
+
+    rcl skips such a file without a word: the node would run on its defaults, a recorder
+    recording the default topics to the default folder.
+
+    Args:
+        args: the command line; None: ``COMMAND_LINE``.
+
+    Raises:
+        ConfigError: names the file, its sections and the node, with the closest section.
+    """
+    for path in params_files(COMMAND_LINE if args is None else args):
+        try:
+            data = yaml.safe_load(path.read_text(encoding='utf-8'))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            continue  # rcl read it before the node started; nothing to add here
+        problem = params_file_problem(path, data, node.get_name(), node.get_namespace())
+        if problem:
+            raise ConfigError(f'node {node.get_name()}: {problem}')
+
+
 # -- ROS ----------------------------------------------------------------------------------------
 def declare_parameters(node: Node, cls: type) -> None:
-    """Declare every field of a node config as a parameter with its description and default."""
+    """Declare every field of a node config as a parameter with its description and default.
+
+    Raises:
+        ConfigError: a params file with no section for the node, a value of the wrong type, or
+            a parameter the node does not have.
+    """
     from rcl_interfaces.msg import ParameterDescriptor, ParameterType
     from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
+    refuse_foreign_params_files(node)
     types = _field_types(cls)
     ros_types = {
         bool: ParameterType.PARAMETER_BOOL,
@@ -194,15 +311,19 @@ def declare_parameters(node: Node, cls: type) -> None:
         str: ParameterType.PARAMETER_STRING,
         tuple[str, ...]: ParameterType.PARAMETER_STRING_ARRAY,
     }
+    overrides = getattr(node, '_parameter_overrides', {})
     for item in dataclasses.fields(cls):
         kind = types[item.name]
         default = item.default
+        if kind is float and item.name in overrides:  # a YAML '1': declared as the double 1.0
+            overrides[item.name] = _as_double(overrides[item.name])
         descriptor = ParameterDescriptor(
             name=item.name,
             type=ros_types[kind],
             description=item.metadata['description'],
             read_only=item.metadata['read_only'],
-            # A YAML '1' for a float parameter is an integer: accept it and convert on reading.
+            # A YAML '1' for a float parameter is an integer: converted to a double (above, and
+            # at runtime in _before_set); other types reach the snapshot, which names them.
             dynamic_typing=kind is float,
         )
         descriptor.additional_constraints = constraints(item)
@@ -218,13 +339,24 @@ def declare_parameters(node: Node, cls: type) -> None:
                 f'({item.metadata["description"]})'
             ) from err
     refuse_unknown(node, cls)
-    node.add_pre_set_parameters_callback(lambda changes: _refuse_undeclared(node, cls, changes))
+    node.add_pre_set_parameters_callback(lambda changes: _before_set(node, cls, changes))
 
 
-def _refuse_undeclared(node: Node, cls: type, changes: list[Any]) -> list[Any]:
-    """Refuse setting a parameter the node does not have, at runtime, naming it.
+def _as_double(given: Any) -> Any:
+    """An integer rclpy Parameter as the double of the same value; any other as it is."""
+    from rclpy.parameter import Parameter
 
-    rclpy's own refusal names none (its list of undeclared names comes out empty).
+    if given.type_ != Parameter.Type.INTEGER:
+        return given
+    return Parameter(given.name, Parameter.Type.DOUBLE, float(given.value))
+
+
+def _before_set(node: Node, cls: type, changes: list[Any]) -> list[Any]:
+    """Refuse an undeclared parameter at runtime, naming it; an int for a float becomes a double.
+
+    rclpy's own refusal names none (its list of undeclared names comes out empty). An integer
+    for a float parameter (``ros2 param set`` sends 1 as one) becomes the double of the same
+    value, so that the parameter keeps its type DOUBLE.
 
     Raises:
         ParameterNotDeclaredException: names each undeclared parameter and the closest one.
@@ -238,7 +370,10 @@ def _refuse_undeclared(node: Node, cls: type, changes: list[Any]) -> list[Any]:
             f'{_hinted(unknown, known)} on node {node.get_name()} (its parameters: '
             f'{", ".join(sorted(known))})'
         )
-    return changes
+    types = _field_types(cls)
+    return [
+        _as_double(change) if types.get(change.name) is float else change for change in changes
+    ]
 
 
 def _hinted(unknown: list[str], known: list[str]) -> str:

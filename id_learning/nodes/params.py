@@ -18,6 +18,7 @@ gains a line only for a rule between fields.
 from __future__ import annotations
 
 import datetime
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -30,6 +31,7 @@ from id_learning.nodes.param_schema import (
     load_node_config,
     param,
     read_snapshot,
+    shared_topic_problem,
     validate_change,
 )
 from id_learning.predictor.config import GuardConfig, OutOfRangeAction
@@ -45,6 +47,7 @@ __all__ = [
     'guard_config',
     'load_node_config',
     'read_snapshot',
+    'refuse_shared_topics',
     'resolve_robot_config',
     'validate_change',
 ]
@@ -56,6 +59,20 @@ JOINT_STATE = 'sensor_msgs/msg/JointState'
 #: The deepest queue a node keeps [messages], and the most threads it starts.
 MAX_QUEUE_DEPTH = 1_000_000
 MAX_THREADS = 256
+#: Groups of (topic by parameter, what the node uses its own fixed topics for), see topic_checks.
+TopicChecks = list[tuple[dict[str, str], dict[str, str]]]
+#: The shortest and longest period of a node's timers [s]: a shorter one spins a CPU core on
+#: reports nobody reads; a longer one overflows the timer's int64 nanoseconds.
+MIN_PERIOD_S = 0.05
+MAX_PERIOD_S = 3600.0
+#: The smallest recorder split [s], [MiB] (besides 0 = off): a new file per message otherwise.
+MIN_SPLIT_S = 0.1
+MIN_SPLIT_MIB = 0.1
+#: The shortest repeat of the predictor's 'still stale' line [s] (besides 0 = once).
+MIN_LOG_PERIOD_S = 1.0
+#: What a node publishes on its own fixed topics (a topic parameter naming one is refused).
+DIAGNOSTICS = {'/diagnostics': 'diagnostics (diagnostic_msgs/msg/DiagnosticArray)'}
+DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
 
 
 # -- the three nodes ------------------------------------------------------------------------------
@@ -91,10 +108,9 @@ class RecorderConfig:
     flush_period_s: float = param(
         0.25,
         'Period of the flush that ends the MCAP chunk and pushes it to the file [s]; bounds what '
-        'a SIGKILL can lose. At most 0.5 s.',
-        low=0.0,
+        'a SIGKILL can lose. From 0.01 s (a chunk per flush) to 0.5 s.',
+        low=0.01,
         high=0.5,
-        low_open=True,
     )
     chunk_kib: int = param(
         512,
@@ -104,18 +120,22 @@ class RecorderConfig:
     )
     split_duration_s: float = param(
         0.0,
-        'Start a new .mcap file after this much log time [s]; 0 = no split by duration.',
+        'Start a new .mcap file after this much log time [s], at least 0.1 s; 0 = no split by '
+        'duration.',
         low=0.0,
     )
     split_size_mib: float = param(
-        0.0, 'Start a new .mcap file at this file size [MiB]; 0 = no split by size.', low=0.0
+        0.0,
+        'Start a new .mcap file at this file size [MiB], at least 0.1 MiB; 0 = no split by size.',
+        low=0.0,
     )
     diagnostics_period_s: float = param(
         1.0,
-        'Period of the counts published on /diagnostics [s].',
+        'Period of the counts published on /diagnostics [s], from 0.05 s (20 '
+        'reports a second) to an hour.',
         read_only=False,
-        low=0.0,
-        low_open=True,
+        low=MIN_PERIOD_S,
+        high=MAX_PERIOD_S,
     )
     executor: str = param(
         'single_threaded', 'rclpy executor that runs the callbacks.', choices=EXECUTORS
@@ -134,6 +154,25 @@ class RecorderConfig:
         for msg_type in self.msg_types:
             if msg_type.count('/') != 2:
                 raise ConfigError(f'msg_types: expected pkg/msg/Type, got {msg_type!r}')
+        for name, low, unit in (('split_duration_s', MIN_SPLIT_S, 's'),
+                                ('split_size_mib', MIN_SPLIT_MIB, 'MiB')):  # fmt: skip
+            if 0 < getattr(self, name) < low:
+                raise ConfigError(
+                    f'{name}: must be 0 (off) or at least {low:g} {unit} (a file per message '
+                    f'otherwise), got {getattr(self, name)!r}'
+                )
+        refuse_shared_topics(self)
+
+    def topic_checks(self) -> TopicChecks:
+        """Groups of (topic by parameter, the node's own topics) no two of which may meet.
+
+        Its own /diagnostics may be recorded (with every other node's reports), as the
+        DiagnosticArray it is: recorded as another type, the two would clash.
+        """
+        named = {f'topics[{k}]': topic for k, topic in enumerate(self.topics)}
+        typed = zip(named.items(), self.msg_types, strict=True)
+        foreign = {name: topic for (name, topic), kind in typed if kind != DIAGNOSTIC_ARRAY}
+        return [(named, {}), (foreign, DIAGNOSTICS)]
 
     def bag_path(self, now: datetime.datetime | None = None) -> Path:
         """The bag folder to write."""
@@ -224,10 +263,11 @@ class ReplayConfig:
     exit_when_done: bool = param(True, 'Shut the node down after the last cycle (unless loop).')
     diagnostics_period_s: float = param(
         1.0,
-        'Period of the timing report on /diagnostics [s].',
+        'Period of the timing report on /diagnostics [s], from 0.05 s (20 '
+        'reports a second) to an hour.',
         read_only=False,
-        low=0.0,
-        low_open=True,
+        low=MIN_PERIOD_S,
+        high=MAX_PERIOD_S,
     )
     executor: str = param(
         'single_threaded', 'rclpy executor that runs the callbacks.', choices=EXECUTORS
@@ -240,6 +280,19 @@ class ReplayConfig:
         check_schema(self)
         if not self.topics and self.reference_mode == 'none':
             raise ConfigError('nothing to publish: topics is empty and reference_mode is none')
+        refuse_shared_topics(self)
+
+    def topic_checks(self) -> TopicChecks:
+        """Groups of (topic by parameter, the node's own topics) no two of which may meet.
+
+        A bag's /diagnostics may be played beside the replay's own reports (one type); a bag's
+        /clock may not while the replay publishes its own.
+        """
+        named = {f'topics[{k}]': topic for k, topic in enumerate(self.topics)}
+        if self.reference_mode != 'none':
+            named['reference_topic'] = self.reference_topic
+        own = {'/clock': 'clock (publish_clock)'} if self.publish_clock else {}
+        return [(named, own)]
 
 
 @dataclass(frozen=True)
@@ -408,7 +461,7 @@ class PredictorNodeConfig:
     stale_log_period_s: float = param(
         60.0,
         'A stale reference is logged once when it goes stale, then every this many seconds '
-        'while it lasts (it is on /diagnostics throughout); 0 = once [s].',
+        'while it lasts (it is on /diagnostics throughout), at least 1 s; 0 = once [s].',
         read_only=False,
         low=0.0,
     )
@@ -420,10 +473,10 @@ class PredictorNodeConfig:
     )
     diagnostics_period_s: float = param(
         1.0,
-        'Period of the report on /diagnostics [s].',
+        'Period of the report on /diagnostics [s], from 0.05 s (20 reports a second) to an hour.',
         read_only=False,
-        low=0.0,
-        low_open=True,
+        low=MIN_PERIOD_S,
+        high=MAX_PERIOD_S,
     )
     executor: str = param(
         'events',
@@ -438,6 +491,49 @@ class PredictorNodeConfig:
         if not self.artifact:
             raise ConfigError('artifact is required: the model artifact folder')
         check_schema(self)
+        if 0 < self.stale_log_period_s < MIN_LOG_PERIOD_S:  # a line per watchdog tick otherwise
+            raise ConfigError(
+                f'stale_log_period_s: must be 0 (once) or at least {MIN_LOG_PERIOD_S:g} s, got '
+                f'{self.stale_log_period_s!r}'
+            )
+        refuse_shared_topics(self)
+
+    def topic_checks(self) -> TopicChecks:
+        """Groups of (topic by parameter, the node's own topics) no two of which may meet."""
+        named = {'input_topic': self.input_topic, 'output_topic': self.output_topic}
+        if self.command_topic:
+            named['command_topic'] = self.command_topic
+        if self.adaptation != 'off':
+            named['measured_topic'] = self.measured_topic
+        return [(named, DIAGNOSTICS)]
+
+
+# -- rules between fields -------------------------------------------------------------------------
+def refuse_shared_topics(
+    config: RecorderConfig | ReplayConfig | PredictorNodeConfig,
+    resolve: Callable[[str], str] | None = None,
+    where: str = '',
+) -> None:
+    """Refuse two topic parameters of a node on one topic, or one on a topic the node keeps.
+
+    Args:
+        config: the node's parameters (``topic_checks`` says which topics may not meet).
+        resolve: the node's name resolution (namespace, remaps); None: as written, where only
+            equal strings are surely one topic ('tau_u' and '/tau_u' are one in the root
+            namespace only: the node checks again with the resolved names).
+        where: put before the reason (the node).
+
+    Raises:
+        ConfigError: names both parameters (or the parameter and the node's use) and the topic.
+    """
+    name = resolve or (lambda topic: topic)
+    for named, own in config.topic_checks():
+        problem = shared_topic_problem(
+            {parameter: name(topic) for parameter, topic in named.items()},
+            {name(topic): what for topic, what in own.items()},
+        )
+        if problem:
+            raise ConfigError(f'{where}{problem}')
 
 
 # -- files ----------------------------------------------------------------------------------------

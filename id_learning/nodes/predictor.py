@@ -15,19 +15,23 @@ last 20 samples.
 Safety (all decided in the core, logged here throttled): nothing non-finite is published;
 outputs are clamped to the robot's torque limits (times ``torque_limit_scale``) and counted;
 samples with wrong joints, NaN or Inf, or stamps that do not advance are rejected with an error
-and the node keeps running; inputs outside the training range are counted and warned about. When
-no valid sample has arrived for ``stale_after_cycles`` IPO cycles the reference is stale: a
-watchdog says so (throttled), nothing is published, and with ``command_topic`` one zero command
-is sent (a forward command controller holds its last command). The history is reset when the
-reference resumes.
+and the node keeps running, and so is a header stamp that is no time (``nanosec`` >= 1e9 or a
+negative ``sec``: ``invalid_stamp``, refused here before the core); inputs outside the training
+range are counted and warned about. When no valid sample has arrived for ``stale_after_cycles``
+IPO cycles the reference is stale: a watchdog says so (throttled), nothing is published, and with
+``command_topic`` one zero command is sent (a forward command controller holds its last command).
+The history is reset when the reference resumes.
 
 Diagnostics (/diagnostics, every ``diagnostics_period_s``): input rate, receive-to-publish
 latency and compute latency (median, p99, max), counts of predictions, clamps per joint, rejects
 per reason, out-of-range samples, stale episodes, IPO cycles the reference's stamps skipped
-(samples that never arrived: not sent, lost, or overwritten in a full input queue) and samples
-published later than one IPO period after they arrived. The level is warn while rejects, clamps,
-out-of-range samples, skipped cycles or late samples occur (counts grown since the previous report;
-the totals stay in the values), error while the reference is stale. ``latency_from`` says where
+(samples that never arrived: not sent, lost, or overwritten in a full input queue; also across
+holes longer than the stale threshold, so that every cycle from the first stamp to the last is
+received or skipped) and samples published later than one IPO period after they arrived. The
+level is warn while rejects, clamps, out-of-range samples, skipped cycles or late samples occur
+(counts grown since the previous report; the totals stay in the values), and while a publisher of
+another message type is on the input topic (DDS never delivers its messages: it is named, with the
+``input_type`` that would take them); the stale reference reports warn. ``latency_from`` says where
 the latency starts: with rclpy's executors at the middleware's receive timestamp
 (``middleware_receive``); with the events executor, which cannot pass that timestamp to the
 callback, at the callback's start (``callback_start``), which leaves out the wait between arrival
@@ -63,7 +67,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
-from id_learning.errors import CheckpointError, ConfigError
+from id_learning.errors import ConfigError
+from id_learning.nodes.endpoints import (
+    Foreign,
+    ForeignPublishers,
+    endpoint,
+    refuse_clashing_topics,
+)
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     diagnostic_array,
@@ -83,6 +93,16 @@ from id_learning.nodes.params import (
     resolve_robot_config,
     validate_change,
 )
+from id_learning.nodes.predictor_report import (
+    INPUT_TYPES,
+    TROUBLES,
+    NodeCounts,
+    adaptation_loop,
+    count_values,
+    final_report,
+    setup_warnings,
+    troubles,
+)
 from id_learning.nodes.qos import DIAGNOSTICS_QOS, TORQUE_QOS, reference_qos
 from id_learning.nodes.runtime import run_node
 from id_learning.predictor import (
@@ -93,24 +113,13 @@ from id_learning.predictor import (
     StepResult,
     configure_inference_threads,
 )
-from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
-from id_learning.robot.config import RobotConfig, load_robot_config
+from id_learning.predictor.guards import stamp_problem
+from id_learning.robot.config import load_robot_config
 
-__all__ = ['Predictor', 'main']
+__all__ = ['Predictor', 'adaptation_loop', 'main']
 
-#: What turns the diagnostics level to warn while it grows (the counts of report_values).
-TROUBLES = (
-    'rejected',
-    'clamped',
-    'slew-limited',
-    'held',
-    'resynchronised',
-    'out of range',
-    'with the physics prior',
-    'cycles skipped',
-    'late',
-)
 NODE_NAME = 'predictor'
+JOINT_STATE = 'sensor_msgs/msg/JointState'
 
 
 class Predictor(Node):
@@ -133,6 +142,7 @@ class Predictor(Node):
         declare_parameters(self, PredictorNodeConfig)
         self.config = read_snapshot(self, PredictorNodeConfig)
         config = self.config
+        refuse_clashing_topics(self, config)  # before the artifact is loaded
         self.robot = load_robot_config(resolve_robot_config(config.robot_config))
         configure_inference_threads(config.torch_threads)
         self.core = FeedForwardPredictor.from_artifact(
@@ -145,20 +155,22 @@ class Predictor(Node):
         self.done: Future = Future()  # never completes: runs until shut down
         self.names = list(self.core.joint_names)
         self.latency_s = RollingStats(config.latency_window)
-        self.callback_errors = 0
-        #: Published later than one IPO period after the sample arrived (see latency_from).
-        self.late_samples = 0
+        self.counts = NodeCounts()
         #: The TROUBLES counts at the last diagnostics report.
         self._troubles = (0,) * len(TROUBLES)
         self._window_start = (time.monotonic(), 0)
         self._stale_logged_ns = 0
         self._is_closed = False
-        self._tau_u: Publisher = self.create_publisher(JointState, config.output_topic, output_qos)
-        self._command: Publisher | None = (
-            self.create_publisher(Float64MultiArray, config.command_topic, output_qos)
-            if config.command_topic
-            else None
-        )
+        with endpoint(self, 'output_topic', config.output_topic):
+            self._tau_u: Publisher = self.create_publisher(
+                JointState, config.output_topic, output_qos
+            )
+        self._command: Publisher | None = None
+        if config.command_topic:
+            with endpoint(self, 'command_topic', config.command_topic):
+                self._command = self.create_publisher(
+                    Float64MultiArray, config.command_topic, output_qos
+                )
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         n = len(self.names)
         self._tau_u_bytes = SerializedOutput(
@@ -197,12 +209,18 @@ class Predictor(Node):
         # only then, and nothing it sends queues (and is overwritten, uncounted) while the model
         # warms up. rclpy passes the message info as a second argument to a callback that takes
         # two; its type hints know only the one-argument form.
-        self._subscription = self.create_subscription(
-            kind,
-            config.input_topic,
-            cast(Callable[[Any], None], callback),
-            input_qos or reference_qos(config.input_depth),
-        )
+        with endpoint(self, 'input_topic', config.input_topic):
+            self._subscription = self.create_subscription(
+                kind,
+                config.input_topic,
+                cast(Callable[[Any], None], callback),
+                input_qos or reference_qos(config.input_depth),
+            )
+        taken = {kind: msg_type for msg_type, kind in INPUT_TYPES.items()}[config.input_type]
+        expected = {self._subscription.topic_name: taken}
+        if self._measured is not None:
+            expected[self._measured.topic_name] = JOINT_STATE
+        self.foreign = ForeignPublishers(self, expected)
         source = self.core.range.source if self.core.range else 'none'
         self.get_logger().info(
             f'{self.core.model.kind} model from {Path(config.artifact).resolve()}: '
@@ -222,40 +240,8 @@ class Predictor(Node):
 
     def _warn_about_setup(self) -> None:
         """Say once, at start, what in the artifact's setup will cost accuracy."""
-        config = self.config
-        fallback = self.core.fallback
-        if (
-            self.core.out_of_range_action == 'fallback'
-            and fallback
-            and 'nominal' in fallback.source
-        ):
-            self.get_logger().warning(
-                'outside the training range the fallback is the nominal model, without friction '
-                'or any identified term: give fallback_artifact an rnea_id artifact (train writes '
-                'one beside the model with --models including rnea_id)'
-            )
-        if config.fallback_artifact and fallback is None:
-            self.get_logger().warning(
-                f'fallback_artifact ignored: a {self.core.model.kind} model is physics itself'
-            )
-        artifact = Path(self.config.artifact)
-        if artifact.parent.name == 'models':  # a model of a run: say when the run is not whole
-            from id_learning.training.run_folder import refuse_incomplete_run
-
-            try:
-                refuse_incomplete_run(artifact.parent.parent)
-            except CheckpointError as err:
-                self.get_logger().warning(
-                    f'the model is complete but its run is not: {err}; its report and the '
-                    'physics prior beside it may be missing'
-                )
-        if self.core.fitting_inputs is None or self.core.fitting_inputs.name == 'study':
-            self.get_logger().warning(
-                "the model was fitted on inputs low-passed like the labels (the study's "
-                "preprocessing), not on a controller's reference: expect larger errors where "
-                'the reference changes faster than the label filter (retrain with the default '
-                'preprocessing)'
-            )
+        for warning in setup_warnings(self.core, self.config):
+            self.get_logger().warning(warning)
 
     # -- the hot path -----------------------------------------------------------------------------
     def _warm_up(self) -> None:
@@ -278,6 +264,11 @@ class Predictor(Node):
     def _on_reference(self, msg: Any, received_wall_ns: int = 0) -> None:
         receive_ns = time.monotonic_ns()
         try:
+            stamp = msg.header.stamp
+            problem = stamp_problem(stamp.sec, stamp.nanosec)
+            if problem is not None:  # folded into ns it would be another time: refused here
+                self._refuse_stamp(problem)
+                return
             sample = self._convert(msg)
             result = self.core.step(sample, receive_ns)
             if result.reject is not None:
@@ -299,7 +290,7 @@ class Predictor(Node):
                 latency_s = (time.monotonic_ns() - receive_ns) * 1e-9
             self.latency_s.add(latency_s)
             if latency_s > self.core.config.period_s:
-                self.late_samples += 1
+                self.counts.late_samples += 1
             if (
                 result.resumed_after_stale
                 or result.is_out_of_range
@@ -310,7 +301,7 @@ class Predictor(Node):
                 self._log_result(result)
             self.core.prepare_next()  # off the path from sample to torque
         except Exception as err:  # the edge of the callback: report and keep running
-            self.callback_errors += 1
+            self.counts.callback_errors += 1
             self.get_logger().error(
                 f'reference callback failed: {type(err).__name__}: {err}',
                 throttle_duration_sec=self.config.log_throttle_s,
@@ -322,9 +313,10 @@ class Predictor(Node):
         if self.config.adaptation == 'off':
             return None
         self.core.adaptation = adaptation_loop(self.config, self.robot, self.core)
-        return self.create_subscription(
-            JointState, self.config.measured_topic, self._on_measured, reference_qos(64)
-        )
+        with endpoint(self, 'measured_topic', self.config.measured_topic):
+            return self.create_subscription(
+                JointState, self.config.measured_topic, self._on_measured, reference_qos(64)
+            )
 
     def _on_measured(self, msg: JointState) -> None:
         """The drive's currents of a served cycle: the adaptation learns from them."""
@@ -338,11 +330,20 @@ class Predictor(Node):
                 return
             loop.measured_message(stamp, list(msg.name), list(msg.effort), self.names)
         except Exception as err:  # the edge of the callback: report and keep running
-            self.callback_errors += 1
+            self.counts.callback_errors += 1
             self.get_logger().error(
                 f'measured-current callback failed: {type(err).__name__}: {err}',
                 throttle_duration_sec=self.config.log_throttle_s,
             )
+
+    def _refuse_stamp(self, problem: str) -> None:
+        """Refuse a sample whose header stamp is no time (counted as rejected invalid_stamp)."""
+        self.counts.invalid_stamps += 1
+        self.get_logger().error(
+            f'sample refused: no model torque (invalid_stamp): header stamp {problem} '
+            f'({self.counts.invalid_stamps} so far)',
+            throttle_duration_sec=self.config.log_throttle_s,
+        )
 
     def _log_reject(self, result: StepResult) -> None:
         throttle = self.config.log_throttle_s
@@ -418,94 +419,90 @@ class Predictor(Node):
     def report_values(self) -> dict[str, object]:
         """The diagnostics key-values (counts since start; latencies over the last window)."""
         counters = self.core.counters
+        received = counters.received + self.counts.invalid_stamps
         now = time.monotonic()
         start, received_then = self._window_start
-        rate = (counters.received - received_then) / max(now - start, 1e-9)
-        self._window_start = (now, counters.received)
+        self._window_start = (now, received)
         latency = self.latency_s.summary()
         compute = self.core.compute_s.summary()
         values: dict[str, object] = {
             'model': self.core.model.kind,
             'artifact': self.config.artifact,
             'adaptation': self.config.adaptation,
-            'input_rate_hz': rate,
-            'received': counters.received,
-            'published': counters.published,
-            'model_torques': counters.predicted,
-            'held_samples': counters.held_samples,
-            'rejected': counters.rejected,
+            'input_rate_hz': (received - received_then) / max(now - start, 1e-9),
+            **count_values(self.core, self.counts),
+            # Matched on the writer side: a consumer listed here receives every tau_u.
+            'tau_u_subscriptions': self._tau_u.get_subscription_count(),
+            'latency_from': self.latency_from,
+            'latency_median_ms': latency.median * 1e3,
+            'latency_p99_ms': latency.p99 * 1e3,
+            'latency_max_ms': latency.max * 1e3,
+            'latency_samples': latency.count,
+            'compute_median_ms': compute.median * 1e3,
+            'compute_p99_ms': compute.p99 * 1e3,
+            'compute_max_ms': compute.max * 1e3,
         }
-        values.update({f'rejected_{reason.value}': counters.rejects[reason] for reason in Reject})
-        values.update(
-            {
-                'clamped_samples': counters.clamped_samples,
-                'slew_limited_samples': counters.slew_limited_samples,
-                'resyncs': counters.resyncs,
-                'out_of_range_samples': counters.out_of_range,
-                'out_of_range_action': self.core.out_of_range_action,
-                'fallback_samples': counters.fallback_samples,
-                'fallback': self.core.fallback.source if self.core.fallback else 'none',
-                'stale': self.core.is_stale,
-                'stale_episodes': counters.stale_episodes,
-                'history_resets': counters.history_resets,
-                'skipped_cycles': counters.skipped_cycles,
-                'late_samples': self.late_samples,
-                'callback_errors': self.callback_errors,
-                # Matched on the writer side: a consumer listed here receives every tau_u.
-                'tau_u_subscriptions': self._tau_u.get_subscription_count(),
-                'latency_from': self.latency_from,
-                'latency_median_ms': latency.median * 1e3,
-                'latency_p99_ms': latency.p99 * 1e3,
-                'latency_max_ms': latency.max * 1e3,
-                'latency_samples': latency.count,
-                'compute_median_ms': compute.median * 1e3,
-                'compute_p99_ms': compute.p99 * 1e3,
-                'compute_max_ms': compute.max * 1e3,
-            }
-        )
+        if self.foreign.present:
+            values['wrong_type_publishers'] = '; '.join(
+                f'{item.node} {item.msg_type} on {item.topic}' for item in self.foreign.present
+            )
         if self.core.adaptation is not None:
             values.update(self.core.adaptation.report(self.names))
-        values.update(
-            {
-                f'clamped_{name}': int(count)
-                for name, count in zip(self.names, counters.clamped_per_joint, strict=True)
-            }
-        )
-        values.update(
-            {
-                f'slew_limited_{name}': int(count)
-                for name, count in zip(self.names, counters.slew_limited_per_joint, strict=True)
-            }
-        )
+        for label, per_joint in (('clamped', counters.clamped_per_joint),
+                                 ('slew_limited', counters.slew_limited_per_joint)):  # fmt: skip
+            values.update(
+                {f'{label}_{name}': int(n) for name, n in zip(self.names, per_joint, strict=True)}
+            )
         return values
+
+    def _check_publisher_types(self) -> str:
+        """Name each new publisher of another type on the input (or measured) topic, once.
+
+        Returns:
+            The ones there now, in words ('' if none).
+        """
+        texts = []
+        for item in self.foreign.look():
+            self.get_logger().warning(self._foreign_text(item))
+        for item in self.foreign.present:
+            texts.append(self._foreign_text(item))
+        return '; '.join(texts)
+
+    def _foreign_text(self, item: Foreign) -> str:
+        expected = self.foreign.expected[item.topic]
+        text = (
+            f'node {item.node} publishes {item.msg_type} on {item.topic}, which takes '
+            f'{expected}: none of it arrives'
+        )
+        if item.topic != self._subscription.topic_name:
+            return f'{text} (measured_topic)'
+        accepting = INPUT_TYPES.get(item.msg_type)
+        return text + (
+            f'; input_type {accepting} would take it (now {self.config.input_type})'
+            if accepting
+            else f'; no input_type takes it (now {self.config.input_type})'
+        )
 
     def _publish_diagnostics(self) -> None:
         values = self.report_values()
         counters = self.core.counters
-        troubles = (
-            counters.rejected,
-            counters.clamped_samples,
-            counters.slew_limited_samples,
-            counters.held_samples,
-            counters.resyncs,
-            counters.out_of_range,
-            counters.fallback_samples,
-            counters.skipped_cycles,
-            self.late_samples,
-        )
+        foreign = self._check_publisher_types()
+        now_troubles = troubles(self.core, self.counts)
         if self.core.is_stale:
             silence_s = (self.core.silence_ns(time.monotonic_ns()) or 0) * 1e-9
             level, message = 'warn', f'reference stale for {silence_s:.1f} s: not publishing'
-        elif counters.received == 0:
+        elif counters.received + self.counts.invalid_stamps == 0:
             level, message = 'ok', 'waiting for the reference'
-        elif any(now > before for now, before in zip(troubles, self._troubles, strict=True)):
+        elif any(now > before for now, before in zip(now_troubles, self._troubles, strict=True)):
             # Warn while troubles occur (counts grew since the last report); totals stay in values.
             grew = [f'{now - before} {name}' for name, now, before in zip(
-                TROUBLES, troubles, self._troubles, strict=True) if now > before]  # fmt: skip
+                TROUBLES, now_troubles, self._troubles, strict=True) if now > before]  # fmt: skip
             level = 'warn'
             message = f'since the last report: {", ".join(grew)}'
         else:
             level, message = 'ok', f'{counters.published} published'
+        if foreign:
+            level, message = 'warn', f'{message}; {foreign}'
         self._diagnostics.publish(
             serialize_exact(
                 diagnostic_array(
@@ -518,7 +515,7 @@ class Predictor(Node):
                 )
             )
         )
-        self._troubles = troubles
+        self._troubles = now_troubles
 
     def close(self) -> None:
         """Log the final counts and latencies."""
@@ -534,39 +531,7 @@ class Predictor(Node):
                 self.get_logger().error(f'adapted parameters not saved: {err}')
             else:
                 self.get_logger().info(f'adapted parameters saved to {self._adaptation_file}')
-        counters = self.core.counters
-        latency = self.latency_s.summary()
-        self.get_logger().info(
-            f'{counters.received} samples received, {counters.published} published '
-            f'({counters.held_samples} held), {counters.rejected} without a model torque '
-            f'{ {r.value: c for r, c in counters.rejects.items() if c} }, '
-            f'{counters.clamped_samples} clamped, {counters.slew_limited_samples} slew-limited, '
-            f'{counters.resyncs} time base resyncs, {counters.out_of_range} out of range, '
-            f'{counters.fallback_samples} with the physics prior, '
-            f'{counters.stale_episodes} stale episodes, {counters.skipped_cycles} cycles skipped, '
-            f'{self.late_samples} late; receive-to-publish latency median '
-            f'{latency.median * 1e3:.3f} ms, p99 {latency.p99 * 1e3:.3f} ms'
-        )
-
-
-def adaptation_loop(
-    config: PredictorNodeConfig, robot: RobotConfig, core: FeedForwardPredictor
-) -> AdaptationLoop:
-    """The RLS adaptation of a motor-target model.
-
-    Raises:
-        ConfigError: the model predicts a measured joint torque, which currents do not give.
-    """
-    target = core.target
-    if target != 'motor':
-        raise ConfigError(
-            f'adaptation rls learns tau_u from motor currents; the {core.model.kind} model '
-            f'predicts the {target} target: set adaptation off'
-        )
-    settings = AdaptationConfig(time_constant_s=config.adaptation_time_constant_s)
-    return AdaptationLoop.for_robot(
-        robot, core.joint_names, settings, inertia=config.adaptation == 'rls_inertia'
-    )
+        self.get_logger().info(final_report(self.core, self.counts, self.latency_s.summary()))
 
 
 def main(args: Sequence[str] | None = None) -> int:

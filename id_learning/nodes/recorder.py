@@ -25,7 +25,14 @@ in the file and comes back with ``id-learning bag recover``.
 
 A publisher of another message type on a recorded topic cannot be matched (nothing of it reaches
 the bag): the recorder looks at the topics' publishers on every diagnostics period, warns once per
-topic and type found, naming both types, and lists it on /diagnostics (level warn).
+publisher and type found, naming both types and the publisher's node, and lists it on
+/diagnostics (level warn). Header stamps are recorded as sent, never read: a stamp that is no
+time (``nanosec`` >= 1e9) is the replay's and the predictor's to refuse.
+
+Topics are checked before anything is recorded: one recorded twice (also under two names that
+resolve to one) is refused, and so is /diagnostics recorded as another type than the
+DiagnosticArray the recorder publishes there itself (as that type, its own reports are recorded
+with everyone else's).
 
 Usage: ``ros2 run id_learning recorder --ros-args -p output:=runs/excitation_01``.
 """
@@ -48,6 +55,7 @@ from rclpy.task import Future
 
 from id_learning.bag import BagWriter
 from id_learning.errors import BagError
+from id_learning.nodes.endpoints import ForeignPublishers, endpoint, refuse_clashing_topics
 from id_learning.nodes.msg_conversions import diagnostic_array, message_class, serialize_exact
 from id_learning.nodes.params import (
     RecorderConfig,
@@ -99,16 +107,6 @@ class Recorder(Node):
         self.config = read_snapshot(self, RecorderConfig)
         config = self.config
         self.done: Future = Future()  # never completes: the recorder runs until shut down
-        self.path = config.bag_path()
-        self.writer = BagWriter(
-            self.path,
-            overwrite=config.overwrite,
-            flag='overwrite:=true',
-            chunk_bytes=config.chunk_kib * 1024,
-            split_duration_ns=round(config.split_duration_s * 1e9) or None,
-            split_bytes=round(config.split_size_mib * MIB) or None,
-        ).open()
-        self.path = self.writer.path  # normalised: "a/../b" is b
         self.counts = {topic: TopicCounts() for topic in config.topics}
         self.flushes = 0
         #: The failed write that ended the recording, or None.
@@ -125,22 +123,40 @@ class Recorder(Node):
         receive = self._on_message_info if self._has_sequence else self._on_message
         self._uses_system_time = not _ros_time_is_active(self)
         self._by_topic: dict[str, Any] = {}
-        self._expected_types = dict(zip(config.topics, config.msg_types, strict=True))
-        self.wrong_types: dict[str, set[str]] = {topic: set() for topic in config.topics}
-        for topic, msg_type in zip(config.topics, config.msg_types, strict=True):
+        refuse_clashing_topics(self, config)
+        typed = list(zip(config.topics, config.msg_types, strict=True))
+        self._resolved = {topic: self.resolve_topic_name(topic) for topic in config.topics}
+        self.foreign = ForeignPublishers(
+            self, {self._resolved[topic]: msg_type for topic, msg_type in typed}
+        )
+        # Subscribed before the bag is opened (nothing is taken before the node spins): a
+        # topic that cannot be subscribed leaves no bag behind.
+        for k, (topic, msg_type) in enumerate(typed):
             msg_class = message_class(msg_type)
-            self.writer.add_topic(topic, msg_type)
             events = SubscriptionEventCallbacks(
                 message_lost=functools.partial(self._on_lost, topic)
             )
-            self._by_topic[topic] = self.create_subscription(
-                msg_class,
-                topic,
-                functools.partial(receive, topic),
-                qos,
-                raw=True,
-                event_callbacks=events,
-            )
+            with endpoint(self, f'topics[{k}]', topic):
+                self._by_topic[topic] = self.create_subscription(
+                    msg_class,
+                    topic,
+                    functools.partial(receive, topic),
+                    qos,
+                    raw=True,
+                    event_callbacks=events,
+                )
+        self.path = config.bag_path()
+        self.writer = BagWriter(
+            self.path,
+            overwrite=config.overwrite,
+            flag='overwrite:=true',
+            chunk_bytes=config.chunk_kib * 1024,
+            split_duration_ns=round(config.split_duration_s * 1e9) or None,
+            split_bytes=round(config.split_size_mib * MIB) or None,
+        ).open()
+        self.path = self.writer.path  # normalised: "a/../b" is b
+        for topic, msg_type in typed:
+            self.writer.add_topic(topic, msg_type)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._flush_timer = self.create_timer(config.flush_period_s, self._flush)
         self._diagnostics_timer = self.create_timer(
@@ -254,16 +270,17 @@ class Recorder(Node):
         )
 
     def check_publisher_types(self) -> None:
-        """Warn once per topic and type about publishers of a type the topic is not recorded as."""
-        for topic, expected in self._expected_types.items():
-            found = {info.topic_type for info in self.get_publishers_info_by_topic(topic)}
-            new = found - {expected} - self.wrong_types[topic]
-            if new:
-                self.wrong_types[topic] |= new
-                self.get_logger().warning(
-                    f'{topic}: a publisher sends {", ".join(sorted(new))}, but the topic is '
-                    f'recorded as {expected} (msg_types): none of its messages reach the bag'
-                )
+        """Warn once per publisher and type of a type its topic is not recorded as."""
+        for item in self.foreign.look():
+            self.get_logger().warning(
+                f'{item.topic}: a publisher sends {item.msg_type}, but the topic is recorded as '
+                f'{self.foreign.expected[item.topic]} (msg_types): none of its messages reach '
+                f'the bag (publisher: node {item.node})'
+            )
+
+    def wrong_types(self, topic: str) -> list[str]:
+        """The other types publishers were found to send on a recorded topic."""
+        return self.foreign.types_seen(self._resolved[topic])
 
     def report_values(self) -> dict[str, object]:
         """The diagnostics key-values: totals, then per topic."""
@@ -283,14 +300,14 @@ class Recorder(Node):
             values[f'{topic} written'] = counts.written
             values[f'{topic} dropped'] = counts.dropped
             values[f'{topic} lost'] = counts.lost
-            if self.wrong_types[topic]:
-                values[f'{topic} wrong type'] = ', '.join(sorted(self.wrong_types[topic]))
+            if self.wrong_types(topic):
+                values[f'{topic} wrong type'] = ', '.join(self.wrong_types(topic))
         return values
 
     def _publish_diagnostics(self) -> None:
         self.check_publisher_types()
         total = self.totals()
-        wrong = [topic for topic, types in self.wrong_types.items() if types]
+        wrong = [topic for topic in self.counts if self.wrong_types(topic)]
         level = 'error' if self.failure else 'warn' if total.dropped or wrong else 'ok'
         message = (
             f'{total.written} written, {total.dropped} dropped'

@@ -20,6 +20,11 @@ trajectory, like the controller's interpolator). It is published as a one-point
 trajectory_msgs/JointTrajectory (q, v, a) or a sensor_msgs/JointState (q, v), stamped with the
 sample's stamp.
 
+A header stamp that is no time (``nanosec`` >= 1e9 or a negative ``sec``) refuses the bag,
+naming the message, wherever the replay reads stamps (every topic with ``timing: stamp``, the
+reference source always): folded into nanoseconds it would be another time. Topics that are only
+played (``timing: log_time``) go out as recorded; the predictor refuses such stamps itself.
+
 Jitter: for every cycle the lateness (publish time minus its deadline) is recorded; the median,
 99th percentile and maximum [ms] and the number of cycles later than one IPO period are logged at
 the end and published on /diagnostics. With ``loop`` the bag starts again one period after its
@@ -54,6 +59,7 @@ from id_learning.dataset.consistency import KinematicConsistency, gap_starts
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import check_accelerations, check_motion
 from id_learning.errors import BagError, ConfigError, DatasetError
+from id_learning.nodes.endpoints import endpoint, refuse_clashing_topics
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     clock_message,
@@ -73,6 +79,7 @@ from id_learning.nodes.params import (
 from id_learning.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, reference_qos, sensor_qos
 from id_learning.nodes.replay_span import check_topics_play, unpaired_tail
 from id_learning.nodes.runtime import run_node
+from id_learning.predictor.guards import stamp_problem
 from id_learning.predictor.reference import reference_from_states
 from id_learning.predictor.timing import RollingStats
 from id_learning.robot.config import RobotConfig, load_robot_config
@@ -129,7 +136,8 @@ def _stamp_ns(data: bytes, msgtype: str, where: str) -> int | None:
     """The header stamp of one message [ns], None when its type has no header.
 
     Raises:
-        BagError: the bytes are no message of the topic's type (names ``where``).
+        BagError: the bytes are no message of the topic's type, or its stamp is invalid
+            (``nanosec`` >= 1e9 or ``sec`` < 0; names ``where``).
     """
     try:
         msg = typestore().deserialize_cdr(data, msgtype)
@@ -138,7 +146,14 @@ def _stamp_ns(data: bytes, msgtype: str, where: str) -> int | None:
     header = getattr(msg, 'header', None)
     if header is None:
         return None
-    return int(header.stamp.sec) * NS_PER_S + int(header.stamp.nanosec)
+    sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
+    problem = stamp_problem(sec, nanosec)
+    if problem is not None:  # folded in, it would be another time: refused, as the predictor does
+        raise BagError(
+            f'{where}: invalid header stamp: {problem}; nothing is played from a bag whose '
+            'stamps cannot be placed (recorded by a sender with a broken clock?)'
+        )
+    return sec * NS_PER_S + nanosec
 
 
 def _reference_bytes(
@@ -271,13 +286,14 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
         if start is not None and log_ns + log_to_key < start - pad - NS_PER_S:
             continue
         key = log_ns
-        if config.timing == 'stamp':
+        is_source = has_reference and topic == config.reference_source
+        if config.timing == 'stamp' or is_source:  # the reference carries the source's stamps
             stamp = _stamp_ns(data, types[topic], f'{path}: {topic} message {counts[topic]}')
             if stamp is None:
                 raise BagError(
                     f'{path}: {topic} ({types[topic]}) has no header stamp; use timing:=log_time'
                 )
-            key = stamp
+            key = stamp if config.timing == 'stamp' else log_ns
         if start is None:
             log_to_key = key - log_ns
             start = key + round(config.start_offset_s * NS_PER_S)
@@ -285,7 +301,6 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
                 stop = start + round(config.duration_s * NS_PER_S)
         if stop is not None and key > stop + pad + NS_PER_S:
             break  # the bag is in log-time order: nothing later belongs to the span
-        is_source = has_reference and topic == config.reference_source
         if is_source and start - pad <= key and (stop is None or key <= stop + pad):
             states.append((key, data))
         if topic in index and key >= start and (stop is None or key <= stop):
@@ -352,20 +367,26 @@ class Replay(Node):
         declare_parameters(self, ReplayConfig)
         self.config = read_snapshot(self, ReplayConfig)
         config = self.config
+        refuse_clashing_topics(self, config)  # before the bag is read
         self.robot = load_robot_config(resolve_robot_config(config.robot_config))
         self.plan = build_plan(config, self.robot)
         self.done: Future = Future()
         qos = sensor_qos(config.qos_depth)
-        self._topic_publishers: list[Publisher] = [
-            self.create_publisher(message_class(msg_type), topic, qos)
-            for topic, msg_type in zip(self.plan.topics, self.plan.msg_types, strict=True)
-        ]
+        self._topic_publishers: list[Publisher] = []
+        for k, (topic, msg_type) in enumerate(
+            zip(self.plan.topics, self.plan.msg_types, strict=True)
+        ):
+            with endpoint(self, f'topics[{k}] ({msg_type} in the bag)', topic):
+                self._topic_publishers.append(
+                    self.create_publisher(message_class(msg_type), topic, qos)
+                )
         self._reference: Publisher | None = None
         if config.reference_mode != 'none':
             kind = JointTrajectory if config.reference_mode == 'trajectory' else JointState
-            self._reference = self.create_publisher(
-                kind, config.reference_topic, reference_qos(config.qos_depth)
-            )
+            with endpoint(self, 'reference_topic', config.reference_topic):
+                self._reference = self.create_publisher(
+                    kind, config.reference_topic, reference_qos(config.qos_depth)
+                )
         self._clock_publisher = (
             self.create_publisher(Clock, '/clock', CLOCK_QOS) if config.publish_clock else None
         )

@@ -23,6 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 from id_learning.errors import IdLearningError
+from id_learning.nodes import param_schema
 
 __all__ = ['ClosableNode', 'close_spun_node', 'make_executor', 'run_node']
 
@@ -153,6 +154,7 @@ def run_node(
     stop = _StopOnSignal()
     node: ClosableNode | None = None
     status = 0
+    param_schema.COMMAND_LINE = None if args is None else list(args)  # its --params-file files
     try:
         node = make_node()
         spinner = make_executor(executor(node))

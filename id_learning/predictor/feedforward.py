@@ -248,6 +248,11 @@ class FeedForwardPredictor:
         predictor.target = artifact_target(metadata)
         return predictor
 
+    @property
+    def skipped_in_holes(self) -> int:
+        """IPO cycles the stamps skipped in gaps longer than the stale threshold (``stamps``)."""
+        return self._clock.hole_cycles
+
     def warm_up(self, calls: int = 25) -> None:
         """Run the guards and the model on a sample at rest, leaving no trace in the state.
 

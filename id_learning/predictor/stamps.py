@@ -15,16 +15,28 @@ stamp leaps more than ``max_age_s`` ahead of the time base is a future stamp (a 
 needs ``max_age_s`` 0); any sample not after the last accepted is out of order. A time base that no
 longer holds (the sender's clock stepped, a replay restarted) never locks the stream out: after
 ``resync_after`` such rejections in a row the next sample starts a new time base.
+
+Gaps: the IPO cycles between consecutive stamps seen (refused samples are seen) are counted,
+whatever happens between them (rejections, resyncs, history resets, stale periods), so that every
+cycle from the first stamp to the last is a sample received or a cycle skipped. ``skipped``
+returns those of a gap within the stale threshold (a few samples lost or overwritten); those of a
+longer gap (a hole: a burst that overflowed the input queue, a sender that paused) go to
+``hole_cycles``, since a hole is also a stale episode. A stamp that leaps more than ``MAX_LEAP_S``
+ahead of the time base is a step of the sender's clock, not cycles: its gap is not counted, and
+counting goes on from it once the time base takes it (accepted, or at a resync).
 """
 
 from __future__ import annotations
 
 from id_learning.predictor.outcome import Reject
 
-__all__ = ['DRIFT', 'StampClock']
+__all__ = ['DRIFT', 'MAX_LEAP_S', 'StampClock']
 
 #: How fast the offset may grow between a sender's clock and ours (share of the stamps' advance).
 DRIFT = 1.0
+#: The furthest a stamp may run ahead of the time base across a hole and still be counted as
+#: cycles [s]: a burst of queued references runs ahead by its length; a clock step by more.
+MAX_LEAP_S = 1.0
 
 
 class StampClock:
@@ -45,23 +57,46 @@ class StampClock:
         self.rejections = 0
         #: The newest stamp seen, refused or not [ns].
         self.newest_ns: int | None = None
+        #: IPO cycles in holes (gaps beyond the stale threshold) between the stamps seen.
+        self.hole_cycles = 0
+        #: The hole the last stamp passed to ``skipped`` ends: (stamp, its cycles, the newest
+        #: stamp before it); ``judge`` counts it or, for a leap of the clock, not.
+        self._hole: tuple[int, int, int] | None = None
 
     def skipped(self, stamp_ns: int, stale_after_ns: int, period_s: float) -> int:
         """IPO cycles skipped since the newest stamp seen (refused samples are seen).
 
-        Counted within the stale threshold only: what a queue overwrote or the sender never
-        sent; a longer gap is a hole, counted as a stale episode.
+        Returns those of a gap within the stale threshold: what a queue overwrote or the sender
+        never sent. A longer gap is a hole (also a stale episode): ``judge``, called next with the
+        same stamp, adds its cycles to ``hole_cycles`` unless the stamp leapt ahead.
         """
         newest = self.newest_ns
+        self._hole = None
         if newest is not None and stamp_ns <= newest:
             return 0
         self.newest_ns = stamp_ns
-        if newest is None or stamp_ns - newest > stale_after_ns:
+        if newest is None:
             return 0
-        return max(round((stamp_ns - newest) * 1e-9 / period_s) - 1, 0)
+        cycles = max(round((stamp_ns - newest) * 1e-9 / period_s) - 1, 0)
+        if stamp_ns - newest > stale_after_ns:
+            self._hole = (stamp_ns, cycles, newest)
+            return 0
+        return cycles
 
     def judge(self, stamp_ns: int, now_ns: int) -> tuple[Reject, str] | None:
-        """Why this sample's stamp is refused, or None (nothing changes here)."""
+        """Why this sample's stamp is refused, or None; settles the hole ``skipped`` found."""
+        refused = self._refusal(stamp_ns, now_ns)
+        hole, self._hole = self._hole, None
+        if hole is not None and hole[0] == stamp_ns:
+            _, cycles, before = hole
+            leap_ns = 0 if self.offset_ns is None else stamp_ns + self.offset_ns - now_ns
+            if leap_ns <= MAX_LEAP_S * 1e9:
+                self.hole_cycles += cycles
+            elif refused is not None:  # a clock step: counting goes on from the old stamps
+                self.newest_ns = before
+        return refused
+
+    def _refusal(self, stamp_ns: int, now_ns: int) -> tuple[Reject, str] | None:
         if self.offset_ns is not None and self.max_age_ns > 0:
             late_ns = now_ns - stamp_ns - self.offset_ns
             if late_ns > self.max_age_ns:

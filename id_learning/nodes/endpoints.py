@@ -1,0 +1,120 @@
+"""Where a node's topics meet the ROS graph: names checked, endpoints made, foreign types named.
+
+- ``refuse_clashing_topics``: the node's topic parameters checked once more with the names it
+  resolves (namespace, remaps): 'reference' and '/reference' are one topic in the root namespace.
+- ``endpoint``: a publisher or subscription that rcl refuses ends the start with one line naming
+  the parameter and the topic, not a traceback.
+- ``ForeignPublishers``: a publisher of another message type on a topic the node takes in is
+  never matched (DDS delivers nothing of it, silently); it is looked for, and named once.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from id_learning.errors import ConfigError
+from id_learning.nodes.params import (
+    PredictorNodeConfig,
+    RecorderConfig,
+    ReplayConfig,
+    refuse_shared_topics,
+)
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+__all__ = ['Foreign', 'ForeignPublishers', 'endpoint', 'refuse_clashing_topics']
+
+#: rcl's source locations at the end of its error text.
+_WHERE = re.compile(r',\s*at\s+\S+:\d+')
+
+
+def refuse_clashing_topics(
+    node: Node, config: RecorderConfig | ReplayConfig | PredictorNodeConfig
+) -> None:
+    """Refuse topic parameters that resolve to one topic, or to one the node keeps for itself.
+
+    Raises:
+        ConfigError: names the node, both parameters and the resolved topic.
+    """
+    refuse_shared_topics(config, node.resolve_topic_name, f'node {node.get_name()}: ')
+
+
+@contextlib.contextmanager
+def endpoint(node: Node, parameter: str, topic: str) -> Iterator[None]:
+    """Turn rcl's refusal to create a publisher or subscription into one clear line.
+
+    Raises:
+        ConfigError: names the node, the parameter, the topic and rcl's reason.
+    """
+    try:
+        yield
+    except RuntimeError as err:  # rclpy's RCLError, e.g. a type that clashes on one topic
+        reason = _WHERE.sub('', str(err).splitlines()[0] if str(err) else type(err).__name__)
+        # rcl may overwrite its first reason ('invalid allocator'): name what the node has there.
+        resolved = node.resolve_topic_name(topic)
+        mine = sorted(
+            f'a {kind} of {info.topic_type}'
+            for kind, infos in (
+                ('publisher', node.get_publishers_info_by_topic(resolved)),
+                ('subscription', node.get_subscriptions_info_by_topic(resolved)),
+            )
+            for info in infos
+            if info.node_name == node.get_name() and info.node_namespace == node.get_namespace()
+        )
+        held = f' (the node already has {", ".join(mine)} on {resolved})' if mine else ''
+        raise ConfigError(
+            f'node {node.get_name()}: {parameter} {topic!r}: ROS 2 refused the topic: '
+            f'{reason}{held}'
+        ) from None
+
+
+@dataclass(frozen=True)
+class Foreign:
+    """A publisher of another type than the node takes on one of its topics."""
+
+    topic: str
+    node: str
+    msg_type: str
+
+
+class ForeignPublishers:
+    """Publishers of another message type on the topics a node takes in.
+
+    Args:
+        node: the node whose graph is looked at.
+        expected: the type the node takes on each topic ('pkg/msg/Type'), by resolved name.
+    """
+
+    def __init__(self, node: Node, expected: Mapping[str, str]) -> None:
+        self._node = node
+        self.expected = dict(expected)
+        #: Every one found since start (each is named once).
+        self.seen: set[Foreign] = set()
+        #: Those present at the last look.
+        self.present: list[Foreign] = []
+
+    def look(self) -> list[Foreign]:
+        """Look at the graph; returns the publishers found for the first time."""
+        present = []
+        for topic, expected in self.expected.items():
+            for info in self._node.get_publishers_info_by_topic(topic):
+                if info.topic_type != expected:
+                    namespace = info.node_namespace.rstrip('/')
+                    present.append(
+                        Foreign(topic, f'{namespace}/{info.node_name}', info.topic_type)
+                    )
+        self.present = sorted(
+            set(present), key=lambda item: (item.topic, item.node, item.msg_type)
+        )
+        new = [item for item in self.present if item not in self.seen]
+        self.seen.update(new)
+        return new
+
+    def types_seen(self, topic: str) -> list[str]:
+        """The foreign types ever found on a topic, sorted."""
+        return sorted({item.msg_type for item in self.seen if item.topic == topic})
