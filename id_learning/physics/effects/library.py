@@ -100,21 +100,17 @@ class ViscousFriction(JointEffect):
         return {'exponent': exponent} | ({'linear': True} if exponent > 1.0 else {})
 
 
-class CoulombFriction(JointEffect):
-    """F_c tanh(v / v_eps)."""
+class _SignedFriction(JointEffect):
+    """A friction law that turns with the sign of v through tanh(v / v_eps).
 
-    name = 'coulomb_friction'
-    parameters = (Parameter('level', 'N*m'),)
+    Only motion in both directions shows it; at most half the joint's torque limit, never
+    driving the joint; one candidate per joint at the grid's smoothing velocity.
+    """
+
     friction_shaped = True
     switching = True
     needs_motion = True
     needs_both_directions = True
-
-    def joint_columns(
-        self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
-        model: NominalModel,
-    ) -> JointColumns:  # fmt: skip
-        return (laws.coulomb(quantities.v[:, joint], settings['smoothing_velocity']),)
 
     def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
         """Dissipative, and at most half the joint's torque limit."""
@@ -128,16 +124,25 @@ class CoulombFriction(JointEffect):
         return [(j, {'smoothing_velocity': eps}) for j in range(model.robot.n_joints)]
 
 
-class StribeckFriction(JointEffect):
+class CoulombFriction(_SignedFriction):
+    """F_c tanh(v / v_eps)."""
+
+    name = 'coulomb_friction'
+    parameters = (Parameter('level', 'N*m'),)
+
+    def joint_columns(
+        self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
+        model: NominalModel,
+    ) -> JointColumns:  # fmt: skip
+        return (laws.coulomb(quantities.v[:, joint], settings['smoothing_velocity']),)
+
+
+class StribeckFriction(_SignedFriction):
     """F_s exp(-(v / v_s)^2) tanh(v / v_eps), one candidate per Stribeck velocity v_s."""
 
     name = 'stribeck_friction'
     parameters = (Parameter('level', 'N*m'),)
-    friction_shaped = True
-    switching = True
     exclusive_variants = True
-    needs_motion = True
-    needs_both_directions = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return [f'v_s={settings["velocity"]:g}']
@@ -156,10 +161,6 @@ class StribeckFriction(JointEffect):
             entry('level', fit.theta[0], fit.low[0], fit.high[0], 'N*m'),
             entry('velocity', v, v_low, v_high, 'rad/s'),
         ]
-
-    def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
-        """Dissipative, and at most half the joint's torque limit."""
-        return trial.first_within(0.0, 0.5 * model.robot.limits.torque[_joint(trial)], 'N*m')
 
     def excitation_problem(self, settings: Mapping[str, Any], motion: JointMotion) -> str:
         """Enough slow motion: the hump lives below v_s."""
@@ -186,7 +187,7 @@ class StribeckFriction(JointEffect):
         ]
 
 
-class LoadDependentFriction(JointEffect):
+class LoadDependentFriction(_SignedFriction):
     """mu |L| tanh(v / v_eps), L the link torque on the joint.
 
     Its 'model' form grows with the whole model's link torque (nominal plus the link-side
@@ -196,11 +197,7 @@ class LoadDependentFriction(JointEffect):
 
     name = 'load_dependent_friction'
     parameters = (Parameter('coefficient', '1'),)
-    friction_shaped = True
-    switching = True
     reads_link_torque = True
-    needs_motion = True
-    needs_both_directions = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return ['model load'] if self.uses_model_load(settings) else []
@@ -218,13 +215,6 @@ class LoadDependentFriction(JointEffect):
     def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
         """Dissipative, and at most half the link torque (a gear's efficiency is above 50 %)."""
         return trial.first_within(0.0, 0.5, '')
-
-    def candidates(
-        self, model: NominalModel, grid: CandidateGrid
-    ) -> list[tuple[int | None, dict[str, Any]]]:
-        """One per joint, at the grid's smoothing velocity."""
-        eps = grid.smoothing_velocity
-        return [(j, {'smoothing_velocity': eps}) for j in range(model.robot.n_joints)]
 
 
 class RotorInertia(JointEffect):
