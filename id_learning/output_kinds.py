@@ -35,6 +35,7 @@ __all__ = [
     'check_kind',
     'folder_holds',
     'foreign_entries',
+    'make_parent',
     'os_reason',
     'read_marker',
     'refuse_any_but_results',
@@ -318,3 +319,17 @@ def check_kind(out: Path, kind: str, *, force: bool, flag: str = '--force') -> N
     raise OutputError(
         f'{out}: holds {held.describe()}; {flag} replaces only {KINDS[kind]}: choose another path'
     )
+
+
+def make_parent(out: Path) -> None:
+    """Create the folder ``out`` goes into.
+
+    Raises:
+        OutputError: it cannot be created (the OS's reason).
+    """
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(
+            f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
+        ) from err

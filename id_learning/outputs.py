@@ -52,6 +52,7 @@ from id_learning.output_kinds import (
     check_kind,
     folder_holds,
     foreign_entries,
+    make_parent,
     os_reason,
     read_marker,
     refuse_any_but_results,
@@ -283,12 +284,7 @@ def bag_output(
             cannot be created.
     """
     out = check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise OutputError(
-            f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
-        ) from err
+    make_parent(out)
     with output_lock(out):
         yield check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag)
 
@@ -528,12 +524,7 @@ def result_folder(
     """
     kind = COMMAND_KINDS.get(command)
     out = check_output(out, force=force, inputs=inputs, kind=kind)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise OutputError(
-            f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
-        ) from err
+    make_parent(out)
     with _locked(out):  # not output_lock: a result has one writer, even in one thread
         out = check_output(out, force=force, inputs=inputs, is_locked=True, kind=kind)  # ours
         try:

@@ -14,7 +14,7 @@ import numpy as np
 from id_learning.dataset.inspect_report import FIELDS, BagReport
 from id_learning.dataset.recording import Recording
 from id_learning.errors import ConfigError
-from id_learning.output_kinds import OutputError, os_reason
+from id_learning.output_kinds import OutputError, make_parent, os_reason
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -155,12 +155,7 @@ def _save(figure: Figure, out: Path) -> None:
     Raises:
         OutputError: creating the folder or writing the image failed (the OS's reason).
     """
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise OutputError(
-            f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
-        ) from err
+    make_parent(out)
     tmp = out.with_name(f'.{out.name}.tmp-{os.getpid()}')
     try:
         figure.savefig(tmp, dpi=100, format=out.suffix[1:].lower())
