@@ -247,20 +247,20 @@ def _closing(
     """Per joint newly closed, the refused candidate that closes it (module doc).
 
     A refused candidate closes its joint when, added to ``current``, it leaves that joint's
-    residual within ``near`` times the noise and its held-out gain is ``REFUSAL_DOMINANCE``
-    times the best plausible candidate's there: it fits what is left almost exactly, in a form
-    the library would have to bend. A wild value that only soaks up several effects at once
-    leaves more than the noise and closes nothing.
+    residual within ``near`` times the noise and its held-out gain on that joint is
+    ``REFUSAL_DOMINANCE`` times that of every plausible candidate able to explain it (those on
+    the joint and the robot-wide ones, such as a payload, that reach every joint): it fits what
+    is left almost exactly, in a form the library would have to bend. A wild value that only
+    soaks up several effects at once leaves more than the noise and closes nothing.
     """
     out: dict[int, GroupEvaluation] = {}
     for e in sorted((e for e in evaluations if e.refused), key=lambda e: -e.held_out_gain):
         joint = joint_of(e.label)
         if joint is None or joint in closed or joint in out:
             continue
-        plausible = [
-            x.held_out_gain for x in evaluations if x.eligible and joint_of(x.label) == joint
-        ]
-        if e.held_out_gain <= REFUSAL_DOMINANCE * max(plausible, default=0.0):
+        rivals = [x for x in evaluations if x.eligible and joint_of(x.label) in (joint, None)]
+        best_rival = max((_joint_gain(design, current, x.label, joint) for x in rivals), default=0)
+        if _joint_gain(design, current, e.label, joint) <= REFUSAL_DOMINANCE * best_rival:
             continue
         _, ratio, _ = noise_consistency(design, design.fit([*current.groups, e.label]), 1.0, 0.0)
         if ratio[joint] <= near:
@@ -273,6 +273,16 @@ def _closing(
                 e.reason,
             )
     return out
+
+
+def _joint_gain(design: Design, current: Fit, label: str, joint: int) -> float:
+    """How much adding ``label`` to ``current`` lowers one joint's held-out weighted RSS."""
+
+    def rss(fit: Fit) -> float:
+        residual = design.residual(fit, 'test')[:, joint]
+        return float(design.weights[joint] * np.sum(residual**2))
+
+    return rss(current) - rss(design.fit([*current.groups, label]))
 
 
 def _evaluate(

@@ -291,6 +291,23 @@ def test_a_refused_candidate_closes_its_joint_only_once_it_fits_what_is_left():
     assert list(selection.refused) == [0]
 
 
+def test_a_refused_candidate_no_better_on_its_joint_than_a_robot_wide_one_closes_nothing():
+    """A payload reaches every joint: what it explains on a joint is no form the library lacks."""
+    t = np.linspace(0, 20, 2 * M)
+    wide = on_joint(np.sin(t), 0) + on_joint(np.cos(2 * t), 1)
+    columns = {'wide': wide, 'true': on_joint(np.sin(t), 0), **_chopped(t)}
+    design = design_with(3.0 * wide[:, :, 0], columns)
+    on_one = _joint({k: v for k, v in columns.items() if k != 'wide'})
+    selection = forward_select(
+        design,
+        list(columns),
+        refusing('true'),
+        joint_of=lambda label: None if label == 'wide' else on_one(label),
+    )
+    assert selection.selected == ['wide']
+    assert selection.refused == {}
+
+
 def test_a_refused_candidate_no_better_than_a_plausible_one_closes_nothing(signals):
     design = design_with(3.0 * signals['a'][:, :, 0], signals)
     selection = forward_select(design, list(signals), refusing('a_copy'), joint_of=_joint(signals))
