@@ -30,16 +30,10 @@ from id_learning.diagnosis.friction_shape import (
 )
 from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.diagnosis.refinement import refine_setting
-from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.effects import REGISTRY, effect
 from id_learning.physics.terms import EffectSpec, whole_model_settings
 
-__all__ = ['LABEL_GAIN_STD', 'ROTOR_INERTIA_STD', 'CandidateSet']
-
-#: Prior std of a label gain (torque-constant error) around 0, as in the identification.
-LABEL_GAIN_STD = 0.05
-#: Relative prior std of a datasheet rotor inertia (brake and gear input stage left out).
-ROTOR_INERTIA_STD = 0.3
+__all__ = ['CandidateSet']
 
 #: Most refits of model-load friction and the link-side terms that load it, and the relative
 #: change of every coefficient at which they have settled (``load_on_model``).
@@ -164,26 +158,15 @@ class CandidateSet:
             spec = self.specs.get(label)
             if spec is None:
                 continue
-            if spec.name == 'inertial_parameter_error':
-                out[label] = self._cad_precision(spec)
-            elif spec.name == 'torque_constant_scale':
-                # A datasheet torque constant's tolerance: it and the link masses trade a
-                # common scale that only the priors settle.
-                out[label] = np.array([[1.0 / LABEL_GAIN_STD**2]])
+            precision = effect(spec.name).prior_precision(
+                spec.joint, spec.settings, self.problem.model, as_datasheet=False
+            )
+            if precision is not None:
+                out[label] = precision
         return out
 
-    def _cad_precision(self, spec: EffectSpec) -> np.ndarray:
-        """Prior precision of the base-direction coefficients of the link parameters' change."""
-        directions = np.asarray(spec.settings['base_directions'])
-        theta0 = self.problem.model.dynamics.inertial_parameters()
-        std = CadPrior().std(theta0)
-        # A change d theta ~ N(0, diag(std^2)) has base coordinates c = pinv(D) d theta.
-        mapping = np.linalg.pinv(directions)
-        covariance = (mapping * std**2) @ mapping.T
-        return np.linalg.inv(covariance)
-
     def setting_sensitivities(self, design: Design, fit: Fit) -> dict[str, dict[str, np.ndarray]]:
-        """Columns of the change of a fit's torque with each Stribeck velocity (log v_s).
+        """Columns of the change of a fit's torque with each hump's tuned velocity (log v_s).
 
         A Stribeck level is fitted at its velocity as refined (or picked) on the same data, and
         the two trade (the hump's area): taken as exact, the velocity leaves the level's
@@ -193,12 +176,16 @@ class CandidateSet:
         out = {}
         for label in fit.groups:
             spec = self.specs[label]
-            if spec.name != 'stribeck_friction':
+            item = effect(spec.name)
+            if not item.hump:
                 continue
+            (axis,) = item.tuned_settings(spec.settings)
             level = design.physical(fit, label)
-            velocity = float(spec.settings['velocity'])
+            velocity = float(spec.settings[axis.name])
             up, down = (
-                self.problem.columns(spec.replace_settings(velocity=velocity * math.exp(step)))[0]
+                self.problem.columns(
+                    spec.replace_settings(**{axis.name: velocity * math.exp(step)})
+                )[0]
                 for step in (_LOG_STEP, -_LOG_STEP)
             )
             out[log_velocity_of(label)] = {
@@ -220,19 +207,18 @@ class CandidateSet:
         """
         model = self.problem.model
         named = {(self.specs[g].name, self.specs[g].joint) for g in selected}
-        kinds = ['inertial_parameter_error']
-        if model.target == 'motor':  # a joint torque sensor's label holds neither
-            kinds += ['torque_constant_scale', 'rotor_inertia']
         labels, priors = [], {}
         for label in self.testable:
             spec = self.specs[label]
-            if spec.name not in kinds or (spec.name, spec.joint) in named:
+            item = effect(spec.name)
+            if not item.datasheet_value or (spec.name, spec.joint) in named:
                 continue
-            if spec.name == 'rotor_inertia':
-                nominal = float(model.robot.drives.rotor_inertia[spec.joint])
-                if nominal <= 0:
-                    continue  # no datasheet value to hold it near
-                priors[label] = np.array([[1.0 / (ROTOR_INERTIA_STD * nominal) ** 2]])
+            if item.motor_side_only and model.target != 'motor':
+                continue  # a joint torque sensor's label holds none
+            precision = item.prior_precision(spec.joint, spec.settings, model, as_datasheet=True)
+            if precision is None:
+                continue  # no datasheet value to hold it near
+            priors[label] = precision
             labels.append(label)
         return labels, priors
 
@@ -286,7 +272,8 @@ class CandidateSet:
             if self._judged_beside_fixed_humps(spec):
                 selected = self._refine_hump(selected, index, y, n_eff)
                 continue
-            if spec.name not in ('stribeck_friction', 'payload_mass', 'gravity_spring'):
+            item = effect(spec.name)
+            if not (item.tuned_settings(spec.settings) or item.fit_sets_settings):
                 continue
             others = {g: self.columns[g] for g in selected if g != label}
             design_of = functools.partial(self.design_over, y, n_eff=n_eff)
@@ -299,7 +286,7 @@ class CandidateSet:
 
     def _judged_beside_fixed_humps(self, spec: EffectSpec) -> bool:
         """Whether a Stribeck hump's joint was given a softer turn or a curved viscous law."""
-        if spec.name != 'stribeck_friction' or spec.joint is None:
+        if not effect(spec.name).hump or spec.joint is None:
             return False
         eps, exponent = self.friction_shapes[spec.joint]
         return eps > self.problem.config.smoothing_velocity or exponent != 1.0

@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from id_learning.diagnosis.config import DiagnosisConfig
-from id_learning.physics.effects import effect
+from id_learning.physics.effects import REGISTRY, effect
 from id_learning.physics.terms import EffectSpec
 
 __all__ = ['SHAPE_EVIDENCE', 'FrictionShape', 'identify_friction_shape', 'reshaped']
@@ -59,19 +59,26 @@ def identify_friction_shape(
     def spec(name: str, **settings: float) -> EffectSpec:
         return EffectSpec(name, joint, joint_name, settings)
 
+    # The joint's friction curve: its turn through zero speed (Coulomb), the humps at fixed
+    # velocities where the library has one, and its speed law (viscous).
+    laws = [item for item in REGISTRY.values() if item.friction_shaped]
+    turns = [i.name for i in laws if i.switching and not (i.hump or i.reads_link_torque)]
+    humps = [i.name for i in laws if i.hump and i.name in config.effects]
+    curves = [i.name for i in laws if not i.switching]
     sign = {
         eps: np.hstack(
-            [columns_of(spec('coulomb_friction', smoothing_velocity=eps))]
+            [columns_of(spec(name, smoothing_velocity=eps)) for name in turns]
             + [
-                columns_of(spec('stribeck_friction', smoothing_velocity=eps, velocity=vs))
+                columns_of(spec(name, smoothing_velocity=eps, velocity=vs))
+                for name in humps
                 for vs in _HUMPS
-                if 'stribeck_friction' in config.effects
             ]
         )
         for eps in eps_grid
     }
     viscous = {
-        d: columns_of(reshaped(spec('viscous_friction'), (default[0], d))) for d in exponent_grid
+        d: np.hstack([columns_of(reshaped(spec(name), (default[0], d))) for name in curves])
+        for d in exponent_grid
     }
 
     def rss(shape: FrictionShape) -> float:

@@ -11,13 +11,13 @@ import numpy as np
 
 from id_learning.dataset.preprocess import Dataset
 from id_learning.dataset.recording import Recording
-from id_learning.diagnosis.candidate_set import LABEL_GAIN_STD, ROTOR_INERTIA_STD
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.locate import LOCATION_VARIABLES
 from id_learning.diagnosis.pipeline import DiagnosisResult, run_diagnosis
 from id_learning.diagnosis.result import FoundEffect
 from id_learning.diagnosis.separation import describe
 from id_learning.physics.augmented import EFFECTS_JSON
+from id_learning.physics.effects import REGISTRY
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['EFFECTS_JSON', 'REPORT_MD', 'diagnose', 'render_summary', 'write_report']
@@ -195,13 +195,8 @@ def _marginalised(result: DiagnosisResult) -> list[str]:
     """Which datasheet values the parameters were estimated with, and which stood in."""
     if not result.marginalised:
         return []
-    tolerances = {
-        'torque_constant_scale': f'torque constants {LABEL_GAIN_STD:.0%}',
-        'rotor_inertia': f'rotor inertias {ROTOR_INERTIA_STD:.0%}',
-        'inertial_parameter_error': 'link parameters the CAD prior',
-    }
-    kinds = [text for name, text in tolerances.items()
-             if any(label.startswith(name) for label in result.marginalised)]  # fmt: skip
+    kinds = [item.tolerance_text() for item in REGISTRY.values() if item.datasheet_value
+             and any(label.startswith(item.name) for label in result.marginalised)]  # fmt: skip
     lines = [
         'Parameters are estimated with these datasheet values free within their tolerances ('
         + ', '.join(kinds)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from id_learning.physics.effects import friction_law
 from id_learning.physics.identification import PRIOR_DOMINATED
 from id_learning.physics.identified import IdentifiedPhysics
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS, RigidBodyDynamics
@@ -152,7 +153,7 @@ def _drives(physics: IdentifiedPhysics, robot: RobotConfig) -> list[str]:
         row.append(_pm(float(physics.offset[j]), std('offset', j), 3))
         for law in physics.laws:
             text = _pm(float(physics.friction[law][j]), std(law, j), 3)
-            if law == 'stribeck':
+            if friction_law(law).hump:
                 text += f' (v_s {_g(float(physics.stribeck_velocity[j]), 3)} rad/s)'
             row.append(text)
         has_balancer = bool(np.any(physics.balancer[j] != 0))

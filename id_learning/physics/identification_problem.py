@@ -24,7 +24,8 @@ from id_learning.physics.balancer import (
     balancer_basis,
 )
 from id_learning.physics.base_parameters import CadPrior
-from id_learning.physics.identified import FRICTION_LAWS, RATE_STEP_S, friction_columns
+from id_learning.physics.effects import FRICTION_LAWS, friction_law
+from id_learning.physics.identified import RATE_STEP_S, friction_columns
 from id_learning.physics.inertial import frame_parameter_map
 from id_learning.physics.nominal import NominalModel
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS, RigidBodyDynamics
@@ -183,6 +184,8 @@ class Problem:
         self.n = robot.n_joints
         self.motor = dataset.target == 'motor'
         self.laws = tuple(law for law in FRICTION_LAWS if law in config.friction)
+        #: The law with a hump velocity per joint (Stribeck), if the model has one.
+        self.hump_law = next((law for law in self.laws if friction_law(law).hump), None)
         self.nominal = RigidBodyDynamics.from_config(robot)
         self.theta0 = self.nominal.inertial_parameters()
         # The noise level from a contiguous stretch: the training part, or under a shuffled
@@ -443,7 +446,7 @@ class Problem:
         """
         out = {}
         for law in laws or self.laws:
-            if law == 'load_dependent':
+            if friction_law(law).reads_link_torque:
                 tau_link = np.einsum('tjp,p->tj', self.regressor, x[self.rigid_block])
                 coefficients = self.balancer_matrix(x)
                 for j, basis in self.balancer_basis.items():
@@ -452,7 +455,7 @@ class Problem:
                     (law,), self.v, tau_link, self.config.smoothing_velocity, stribeck
                 ).values()
                 out[law] = self._filter(column)[self.rows]
-            elif law == 'stribeck':
+            elif law == self.hump_law:
                 out[law] = np.stack(
                     [self._fixed_friction(law, j, float(stribeck[j])) for j in range(self.n)],
                     axis=1,

@@ -27,7 +27,8 @@ def choose_stribeck(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> np
 
     Only the joint's own drive columns are refitted (ordinary least squares), the rest held.
     """
-    if 'stribeck' not in problem.laws:
+    hump = problem.hump_law
+    if hump is None:
         return stribeck
     blocks, n, rows = problem.layout.blocks, problem.n, len(problem.rows)
     best = stribeck.copy()
@@ -43,9 +44,9 @@ def choose_stribeck(problem: Problem, x: np.ndarray, stribeck: np.ndarray) -> np
         for vs in problem.config.stribeck_velocities:
             trial = stribeck.copy()
             trial[j] = vs
-            column = problem.friction(x, trial, ('stribeck',))['stribeck'][:, j]
+            column = problem.friction(x, trial, (hump,))[hump][:, j]
             design = a[j][:, columns].copy()
-            design[:, columns.index(blocks['stribeck'].start + j)] = column * problem.row_weight[j]
+            design[:, columns.index(blocks[hump].start + j)] = column * problem.row_weight[j]
             coefficients, *_ = np.linalg.lstsq(design, target, rcond=None)
             errors.append(float(np.sum((design @ coefficients - target) ** 2)))
         best[j] = problem.config.stribeck_velocities[int(np.argmin(errors))]

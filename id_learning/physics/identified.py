@@ -26,7 +26,7 @@ import pinocchio as pin
 
 from id_learning.errors import CheckpointError
 from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
-from id_learning.physics.friction import coulomb, load_dependent, stribeck, viscous
+from id_learning.physics.effects import FRICTION_LAWS, friction_law
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 
@@ -35,16 +35,10 @@ __all__ = ['FRICTION_LAWS', 'IdentifiedPhysics', 'friction_columns']
 #: Step of the central difference along (v, a) that gives the link torque's rate [s].
 RATE_STEP_S = 1e-4
 
-#: Friction laws per joint, each linear in its coefficient [unit of the coefficient]:
-#: viscous d v [N*m*s/rad]; coulomb F_c tanh(v / v_eps) [N*m]; stribeck
-#: F_s exp(-(v / v_s)^2) tanh(v / v_eps) [N*m]; load_dependent mu |tau_link| tanh(v / v_eps) [-].
-FRICTION_LAWS = ('viscous', 'coulomb', 'stribeck', 'load_dependent')
-FRICTION_UNITS = {
-    'viscous': 'N*m*s/rad',
-    'coulomb': 'N*m',
-    'stribeck': 'N*m',
-    'load_dependent': '1',
-}
+#: Friction laws per joint, each linear in its coefficient (``Effect.law_column``): viscous d v;
+#: coulomb F_c tanh(v / v_eps); stribeck F_s exp(-(v / v_s)^2) tanh(v / v_eps); load_dependent
+#: mu |tau_link| tanh(v / v_eps). Unit of each coefficient: its effect's parameter's.
+FRICTION_UNITS = {law: friction_law(law).parameters[0].unit for law in FRICTION_LAWS}
 
 
 def friction_columns(
@@ -63,13 +57,10 @@ def friction_columns(
         smoothing_velocity: v_eps [rad/s], where the sign turns smoothly through zero.
         stribeck_velocity: (n,) v_s per joint [rad/s].
     """
-    columns = {
-        'viscous': lambda: viscous(v)[0],
-        'coulomb': lambda: coulomb(v, smoothing_velocity),
-        'stribeck': lambda: stribeck(v, stribeck_velocity, smoothing_velocity),
-        'load_dependent': lambda: load_dependent(v, tau_link, smoothing_velocity),
+    return {
+        law: friction_law(law).law_column(v, tau_link, smoothing_velocity, stribeck_velocity)
+        for law in laws
     }
-    return {law: columns[law]() for law in laws}
 
 
 @dataclass(frozen=True, eq=False)

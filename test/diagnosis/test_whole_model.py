@@ -14,7 +14,7 @@ from id_learning.diagnosis import (
     filtered_prediction,
     run_diagnosis,
 )
-from id_learning.diagnosis.candidate_set import LABEL_GAIN_STD
+from id_learning.physics.effects.library import LABEL_GAIN_STD
 from id_learning.physics.terms import EFFECT_NAMES
 from id_learning.twin import simulate
 

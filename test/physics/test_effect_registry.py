@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+import ast
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from id_learning.errors import ConfigError
 from id_learning.physics import NominalModel
-from id_learning.physics.effects import EFFECT_NAMES, REGISTRY, FittedTerm, JointEffect, effect
+from id_learning.physics.effects import (
+    EFFECT_NAMES,
+    FRICTION_LAWS,
+    REGISTRY,
+    FittedTerm,
+    JointEffect,
+    effect,
+    friction_law,
+)
 from id_learning.physics.effects.judgement import CandidateGrid, PlausibilityFacts, Trial
 from id_learning.physics.terms import EffectSpec, effect_columns
 from id_learning.twin.effects import effects_from_dict
@@ -100,3 +111,43 @@ def test_every_effect_judges_a_fit_and_lists_candidates(mabi):
         assert isinstance(reason, str), name
         described = item.describe(FittedTerm(joint, settings, np.zeros(k), np.ones(k)), model)
         assert all({'name', 'value', 'ci', 'unit'} <= set(p) for p in described), name
+
+
+def _name_comparisons(source: str) -> list[str]:
+    """Comparisons in ``source`` against an effect's name (``x == 'payload_mass'``, ``in``)."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Compare):
+            constants = [c.value for c in ast.walk(node) if isinstance(c, ast.Constant)]
+            if any(value in EFFECT_NAMES for value in constants):
+                out.append(ast.unparse(node))
+    return out
+
+
+def test_no_module_outside_the_registry_decides_by_an_effects_name():
+    """What an effect does is asked of its object: a name compared elsewhere is a second home
+    for its behaviour (and the check itself sees one when it is there)."""
+    assert _name_comparisons("if spec.name in ('payload_mass', 'x'):\n    pass") != []
+    package = Path(__file__).resolve().parents[2] / 'id_learning'
+    effects = package / 'physics' / 'effects'
+    found = {
+        str(path.relative_to(package)): hits
+        for path in sorted(package.rglob('*.py'))
+        if effects not in path.parents and (hits := _name_comparisons(path.read_text()))
+    }
+    assert found == {}
+
+
+def test_every_friction_law_of_the_identification_is_an_effects_law():
+    v = np.linspace(-1.0, 1.0, 41)[:, None]
+    load = np.full_like(v, -250.0)
+    for law in FRICTION_LAWS:
+        item = friction_law(law)
+        assert item.law == law
+        assert item.friction_shaped
+        column = item.law_column(v, load, 0.01, np.array([0.05]))
+        # Each law opposes motion: its column has the sign of v, and is odd in v.
+        assert np.all(column * v >= 0)
+        np.testing.assert_allclose(column[::-1], -column, atol=1e-12)
+    with pytest.raises(ConfigError, match='unknown friction law'):
+        friction_law('dry')

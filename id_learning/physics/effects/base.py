@@ -8,6 +8,7 @@ effect's name to decide what to do.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -23,7 +24,7 @@ from id_learning.physics.effects.judgement import (
 )
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 
-__all__ = ['Effect', 'FittedTerm', 'JointEffect', 'Parameter', 'entry']
+__all__ = ['Effect', 'FittedTerm', 'JointEffect', 'Parameter', 'SettingAxis', 'entry']
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,28 @@ class Parameter:
 
     name: str
     unit: str
+
+
+@dataclass(frozen=True)
+class SettingAxis:
+    """One nonlinear setting of a selected effect, tuned on the training part.
+
+    The search runs in its own coordinate (the log of the value when ``log``): the coarse
+    ``grid``, then grids that shrink about the best point, kept within [low, high], to
+    ``step`` / 729.
+    """
+
+    name: str
+    grid: tuple[float, ...]
+    low: float
+    high: float
+    step: float
+    log: bool = False
+
+    def value(self, point: float) -> float:
+        """The setting at a point of the search (5 decimals: labels stay readable)."""
+        x = float(np.clip(point, self.low, self.high))
+        return round(math.exp(x) if self.log else x, 5)
 
 
 def entry(name: str, value: float, low: float, high: float, unit: str) -> dict[str, Any]:
@@ -80,6 +103,16 @@ class Effect:
             it holds back every other term.
         label_offset: a constant the current reading adds (a sensor offset): no gain scales
             it and no delay holds it back.
+        hump: a low-speed hump of the friction curve, which a softer turn through zero speed
+            or a curved viscous law partly makes up (its setting, 'velocity', is judged beside
+            them).
+        fit_sets_settings: its settings follow from its own fitted values
+            (``settings_from_fit``: a payload's centre of mass from its first moments).
+        law: the short name of its friction law in an identified model ('viscous', ...);
+            '' for an effect that is no friction law (``law_column``).
+        datasheet_value: a datasheet or CAD value the nominal model takes as exact; unnamed,
+            it is estimated free within its tolerance (``prior_precision``), which widens the
+            other parameters' intervals by what it leaves unknown.
     """
 
     name: ClassVar[str] = ''
@@ -101,6 +134,10 @@ class Effect:
     scales_the_label: ClassVar[bool] = False
     delays_the_label: ClassVar[bool] = False
     label_offset: ClassVar[bool] = False
+    hump: ClassVar[bool] = False
+    fit_sets_settings: ClassVar[bool] = False
+    datasheet_value: ClassVar[bool] = False
+    law: ClassVar[str] = ''
 
     def candidates(
         self, model: NominalModel, grid: CandidateGrid
@@ -179,6 +216,56 @@ class Effect:
         """The largest plausible size of a one-parameter effect (to judge what is detectable)."""
         del joint, model
         return None
+
+    def law_column(
+        self, v: np.ndarray, load: np.ndarray, smoothing_velocity: float, velocity: Any
+    ) -> np.ndarray:
+        """Its friction law's column per unit coefficient, as an identified model fits it.
+
+        v: joint velocities [rad/s]; load: the link torque the gear transmits [N*m]; velocity:
+        the hump's velocity per joint [rad/s] (arrays broadcast over joints).
+        """
+        raise NotImplementedError(f'{self.name} is no friction law')
+
+    def tuned_settings(self, settings: Mapping[str, Any]) -> tuple[SettingAxis, ...]:
+        """The nonlinear settings the diagnosis tunes once the effect is selected; () if none."""
+        del settings
+        return ()
+
+    def settings_from_fit(
+        self, theta: np.ndarray, settings: Mapping[str, Any]
+    ) -> dict[str, Any] | None:
+        """The settings its fitted values imply (``fit_sets_settings``).
+
+        The same when they have settled; None when the fit gives none (a payload of no mass).
+        """
+        del theta
+        return dict(settings)
+
+    def richer_form(self, settings: Mapping[str, Any]) -> tuple[dict[str, Any], int] | None:
+        """Its settings with more columns the data may call for, and how many it adds."""
+        del settings
+        return None
+
+    def prior_precision(
+        self,
+        joint: int | None,
+        settings: Mapping[str, Any],
+        model: NominalModel,
+        *,
+        as_datasheet: bool,
+    ) -> np.ndarray | None:
+        """(k, k) prior precision of its coefficients (physical units), or None: none.
+
+        ``as_datasheet``: asked for an unnamed datasheet value estimated within its tolerance
+        (``datasheet_value``), not for a candidate the diagnosis may name.
+        """
+        del joint, settings, model, as_datasheet
+        return None
+
+    def tolerance_text(self) -> str:
+        """The report's words for the tolerance a datasheet value is free within."""
+        return ''
 
     def describe(
         self,

@@ -19,6 +19,7 @@ from id_learning.physics.effects.base import (
     JointColumns,
     JointEffect,
     Parameter,
+    SettingAxis,
     entry,
 )
 from id_learning.physics.effects.judgement import (
@@ -37,7 +38,14 @@ from id_learning.physics.effects.links import (
 )
 from id_learning.physics.nominal import NominalModel, NominalQuantities
 
-__all__ = ['LIBRARY']
+__all__ = ['LABEL_GAIN_STD', 'LIBRARY', 'ROTOR_INERTIA_STD']
+
+#: Prior std of a label gain (torque-constant error) around 0: a datasheet's tolerance.
+LABEL_GAIN_STD = 0.05
+#: Relative prior std of a datasheet rotor inertia (brake and gear input stage left out).
+ROTOR_INERTIA_STD = 0.3
+#: A Stribeck velocity is tuned within this factor of the candidate's (``tuned_settings``).
+STRIBECK_SPAN = 2.5
 
 
 class ViscousFriction(JointEffect):
@@ -47,6 +55,12 @@ class ViscousFriction(JointEffect):
     parameters = (Parameter('coefficient', 'N*m*s/rad'),)
     friction_shaped = True
     needs_motion = True
+    law = 'viscous'
+
+    def law_column(
+        self, v: np.ndarray, load: np.ndarray, smoothing_velocity: float, velocity: Any
+    ) -> np.ndarray:
+        return laws.viscous(v)[0]
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         if settings.get('exponent', 1.0) == 1.0:
@@ -129,6 +143,12 @@ class CoulombFriction(_SignedFriction):
 
     name = 'coulomb_friction'
     parameters = (Parameter('level', 'N*m'),)
+    law = 'coulomb'
+
+    def law_column(
+        self, v: np.ndarray, load: np.ndarray, smoothing_velocity: float, velocity: Any
+    ) -> np.ndarray:
+        return laws.coulomb(v, smoothing_velocity)
 
     def joint_columns(
         self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
@@ -143,6 +163,19 @@ class StribeckFriction(_SignedFriction):
     name = 'stribeck_friction'
     parameters = (Parameter('level', 'N*m'),)
     exclusive_variants = True
+    hump = True
+    law = 'stribeck'
+
+    def law_column(
+        self, v: np.ndarray, load: np.ndarray, smoothing_velocity: float, velocity: Any
+    ) -> np.ndarray:
+        return laws.stribeck(v, velocity, smoothing_velocity)
+
+    def tuned_settings(self, settings: Mapping[str, Any]) -> tuple[SettingAxis, ...]:
+        """Its velocity, in log, within ``STRIBECK_SPAN`` of the candidate's."""
+        start, span = math.log(float(settings['velocity'])), math.log(STRIBECK_SPAN)
+        grid = tuple(start + span * k / 4 for k in range(-4, 5))
+        return (SettingAxis('velocity', grid, start - span, start + span, span / 8, log=True),)
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return [f'v_s={settings["velocity"]:g}']
@@ -198,6 +231,12 @@ class LoadDependentFriction(_SignedFriction):
     name = 'load_dependent_friction'
     parameters = (Parameter('coefficient', '1'),)
     reads_link_torque = True
+    law = 'load_dependent'
+
+    def law_column(
+        self, v: np.ndarray, load: np.ndarray, smoothing_velocity: float, velocity: Any
+    ) -> np.ndarray:
+        return laws.load_dependent(v, load, smoothing_velocity)
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return ['model load'] if self.uses_model_load(settings) else []
@@ -224,6 +263,22 @@ class RotorInertia(JointEffect):
     parameters = (Parameter('rotor_inertia_change_motor_side', 'kg*m^2'),)
     special_case_of = 'inertial_parameter_error'
     needs_motion = True
+    datasheet_value = True
+
+    def prior_precision(
+        self, joint: int | None, settings: Mapping[str, Any], model: NominalModel, *,
+        as_datasheet: bool,
+    ) -> np.ndarray | None:  # fmt: skip
+        """A datasheet's value, off by ``ROTOR_INERTIA_STD``, unless named (or none there)."""
+        if not as_datasheet or joint is None or model.target != 'motor':
+            return None
+        nominal = float(model.robot.drives.rotor_inertia[joint])
+        if nominal <= 0:
+            return None  # no datasheet value to hold it near
+        return np.array([[1.0 / (ROTOR_INERTIA_STD * nominal) ** 2]])
+
+    def tolerance_text(self) -> str:
+        return f'rotor inertias {ROTOR_INERTIA_STD:.0%}'
 
     def joint_columns(
         self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
@@ -266,6 +321,21 @@ class TorqueConstantScale(JointEffect):
     motor_side_only = True
     whole_model_key = 'of'
     scales_the_label = True
+    datasheet_value = True
+
+    def prior_precision(
+        self, joint: int | None, settings: Mapping[str, Any], model: NominalModel, *,
+        as_datasheet: bool,
+    ) -> np.ndarray | None:  # fmt: skip
+        """A datasheet torque constant's tolerance.
+
+        It and the link masses trade a common scale that only the priors settle.
+        """
+        del joint, settings, model, as_datasheet
+        return np.array([[1.0 / LABEL_GAIN_STD**2]])
+
+    def tolerance_text(self) -> str:
+        return f'torque constants {LABEL_GAIN_STD:.0%}'
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
         return ['whole model'] if self.is_whole_model(settings) else []

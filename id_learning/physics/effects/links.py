@@ -12,14 +12,20 @@ from typing import Any
 
 import numpy as np
 
-from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
-from id_learning.physics.base_parameters import base_parameters
+from id_learning.physics.balancer import (
+    BALANCER_PHASES,
+    BALANCER_RATIOS,
+    BALANCER_TERMS,
+    balancer_basis,
+)
+from id_learning.physics.base_parameters import CadPrior, base_parameters
 from id_learning.physics.effects.base import (
     Effect,
     FittedTerm,
     JointColumns,
     JointEffect,
     Parameter,
+    SettingAxis,
     entry,
 )
 from id_learning.physics.effects.judgement import CandidateGrid, PlausibilityFacts, Trial, Verdict
@@ -70,6 +76,22 @@ class GravitySpring(JointEffect):
             return tuple(basis[..., k] for k in range(BALANCER_TERMS))
         dq = q - settings['reference_rad']
         return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
+
+    def tuned_settings(self, settings: Mapping[str, Any]) -> tuple[SettingAxis, ...]:
+        """The balancer's geometry: arm ratio and phase, tuned together.
+
+        An encoder zero error shifts the phase by milliradians. The ratio stays in the grid's
+        range: towards 0 the three columns merge into sin and sin 2 of the angle, an ill-posed
+        pair that fits the training part's noise, not a balancer. Terms of the polynomial form
+        have nothing to tune.
+        """
+        if 'ratio' not in settings:
+            return ()
+        low, high = min(BALANCER_RATIOS), max(BALANCER_RATIOS)
+        return (
+            SettingAxis('ratio', BALANCER_RATIOS, low, high, 0.05),
+            SettingAxis('phase_rad', BALANCER_PHASES, -math.inf, math.inf, 0.05),
+        )
 
     def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
         theta, lo, hi = fit.theta, fit.low, fit.high
@@ -124,6 +146,7 @@ class GravitySpring(JointEffect):
 class PayloadMass(Effect):
     """A payload at the payload frame: its mass and first moments (and inertia if asked)."""
 
+    fit_sets_settings = True
     name = 'payload_mass'
     parameters = (
         Parameter('mass', 'kg'),
@@ -190,6 +213,29 @@ class PayloadMass(Effect):
         """One at the robot's payload frame, its centre of mass guessed there (refined)."""
         return [(None, {'frame': model.robot.payload_frame, 'com_guess_m': [0.0, 0.0, 0.0]})]
 
+    def settings_from_fit(
+        self, theta: np.ndarray, settings: Mapping[str, Any]
+    ) -> dict[str, Any] | None:
+        """The centre of mass its first moments give; none for a payload of no mass.
+
+        Refitted until it settles. A weakly determined mass runs away: a centre of mass further
+        out gives the mass column more inertia, the fit a smaller mass, the next centre further
+        out. Beyond ``PAYLOAD_COM_LIMIT_M`` the guess stays where it was.
+        """
+        if theta[0] <= 0:
+            return None
+        com = (np.asarray(theta[1:4]) / theta[0]).tolist()
+        settled = np.allclose(com, settings['com_guess_m'], atol=1e-4)
+        if settled or np.linalg.norm(com) > PAYLOAD_COM_LIMIT_M:
+            return dict(settings)
+        return {**settings, 'com_guess_m': com}
+
+    def richer_form(self, settings: Mapping[str, Any]) -> tuple[dict[str, Any], int] | None:
+        """A body with its own rotational inertia (a spindle, a gripper): six more columns."""
+        if settings.get('inertia'):
+            return None
+        return {**settings, 'inertia': True}, 6
+
 
 class JointOffset(Effect):
     """An encoder offset: the links sit at q + offset, d tau / d q times it."""
@@ -233,6 +279,7 @@ class JointOffset(Effect):
 class InertialParameterError(Effect):
     """The links' inertial parameters off their CAD values, along the base directions given."""
 
+    datasheet_value = True
     name = 'inertial_parameter_error'
     parameters = (Parameter('base_parameter', 'SI'),)
     stands_in_for_hardware = True
@@ -248,6 +295,21 @@ class InertialParameterError(Effect):
             raise ValueError('inertial_parameter_error needs quantities with regressor=True')
         out: np.ndarray = quantities.regressor @ np.asarray(settings['base_directions'])
         return out
+
+    def prior_precision(
+        self, joint: int | None, settings: Mapping[str, Any], model: NominalModel, *,
+        as_datasheet: bool,
+    ) -> np.ndarray | None:  # fmt: skip
+        """CAD's: a change d theta ~ N(0, diag(std^2)) has base coordinates pinv(D) d theta."""
+        del joint, as_datasheet
+        std = CadPrior().std(model.dynamics.inertial_parameters())
+        mapping = np.linalg.pinv(np.asarray(settings['base_directions']))
+        covariance = (mapping * std**2) @ mapping.T
+        out: np.ndarray = np.linalg.inv(covariance)
+        return out
+
+    def tolerance_text(self) -> str:
+        return 'link parameters the CAD prior'
 
     def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
         """The base parameters whose interval excludes the URDF's value, and how many there are.
