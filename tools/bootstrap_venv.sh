@@ -65,4 +65,7 @@ else
 fi
 "${PIP[@]}" "${ROS_PKGS[@]}" -r requirements.txt
 "${PIP[@]}" --no-deps -e .
+# The commit-msg hook (tools/hooks); a checkout without git skips it, and a failure is no reason
+# to refuse the venv.
+bash "$(dirname "${BASH_SOURCE[0]}")/install_hooks.sh" || echo "bootstrap: git hooks not set up" >&2
 echo "bootstrap: $VENV ready"

@@ -2,7 +2,10 @@
 # Usage: source tools/env.sh [.venv]
 _venv=${1:-.venv}
 if [[ -z "${ROS_DISTRO:-}" && -f /opt/ros/jazzy/setup.bash ]]; then
-  set +u; source /opt/ros/jazzy/setup.bash; set -u 2>/dev/null || true
+  # ROS's setup reads unset variables: nounset off while it runs, back as the caller had it.
+  case $- in *u*) _nounset=1;; *) _nounset=;; esac
+  set +u; source /opt/ros/jazzy/setup.bash; [[ -z "$_nounset" ]] || set -u
+  unset _nounset
 fi
 _venv_abs=$(cd "$_venv" && pwd)
 # ament_index_python needs a prefix; the PyPI wheels install their resource index into the venv.
