@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -36,11 +37,32 @@ def tracked_files() -> list[str]:
     return sorted(name for name in names if (REPO / name).is_file())  # not the deleted ones
 
 
+def has_space(path: Path | str) -> bool:
+    return any(character.isspace() for character in str(path))
+
+
+def python_without_spaces(ws: Path) -> Path:
+    """This venv's python by a path without whitespace, for colcon to build with.
+
+    A workspace built by a python under a folder with a space does not run: colcon-bash's
+    local_setup.bash calls the interpreter unquoted, and setuptools writes the executables'
+    shebang quoted, which Linux does not read. A link to the venv's folder keeps it the same
+    venv (python finds pyvenv.cfg beside the link's bin/).
+    """
+    if not has_space(sys.prefix):
+        return Path(sys.executable)
+    link = ws / 'venv'
+    link.symlink_to(sys.prefix, target_is_directory=True)
+    return link / 'bin' / Path(sys.executable).name
+
+
 @pytest.fixture(scope='module')
 def workspace(tmp_path_factory) -> Path:
     if not COLCON.exists():
         pytest.skip(f'colcon is not installed next to {sys.executable} (make test installs it)')
     ws = tmp_path_factory.mktemp('ws')
+    if has_space(ws):
+        pytest.skip(f'colcon cannot make a workspace that runs under {ws} (a space in the path)')
     package = ws / 'src' / 'id_learning'
     for name in tracked_files():
         target = package / name
@@ -48,7 +70,7 @@ def workspace(tmp_path_factory) -> Path:
         shutil.copy2(REPO / name, target)
     env = {**os.environ, 'AMENT_PREFIX_PATH': os.environ.get('AMENT_PREFIX_PATH', sys.prefix)}
     result = subprocess.run(
-        [str(COLCON), 'build', '--base-paths', 'src'],
+        [str(python_without_spaces(ws)), str(COLCON), 'build', '--base-paths', 'src'],
         cwd=ws,
         env=env,
         capture_output=True,
@@ -60,9 +82,14 @@ def workspace(tmp_path_factory) -> Path:
     return ws
 
 
+def q(path: Path) -> str:
+    """``path`` as one shell word."""
+    return shlex.quote(str(path))
+
+
 def run_installed(ws: Path, command: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     """Run a shell command with the workspace's install/setup.bash sourced, as a ROS user would."""
-    script = f'source {ws}/install/setup.bash && {command}'
+    script = f'source {q(ws / "install/setup.bash")} && {command}'
     return subprocess.run(
         ['bash', '-c', script],
         cwd=cwd,
@@ -90,7 +117,7 @@ def installed(workspace, tmp_path_factory) -> tuple[Path, Path, Path]:
     folder = tmp_path_factory.mktemp('installed')
     result = run_installed(
         workspace,
-        f'{lib}/id-learning simulate --config {share}/config/twin_default.yaml'
+        f'{q(lib / "id-learning")} simulate --config {q(share / "config/twin_default.yaml")}'
         ' --out bag --duration 30 --seed 4 --quiet',
         folder,
     )
@@ -107,8 +134,8 @@ def test_the_installed_id_learning_inspects_and_trains_from_the_install_alone(
     # As ``ros2 run`` starts them, outside the checkout; train gets the --ros-args block it adds.
     result = run_installed(
         workspace,
-        f'{lib}/id-learning inspect bag'
-        f' && {lib}/train --bag bag --models rnea_lq --out run --quiet'
+        f'{q(lib / "id-learning")} inspect bag'
+        f' && {q(lib / "train")} --bag bag --models rnea_lq --out run --quiet'
         ' --ros-args -r __node:=train --',
         folder,
     )
@@ -143,7 +170,8 @@ def test_the_installed_nodes_replay_a_bag_and_refuse_bad_parameters(workspace, i
     cycles = int(np.sum(stamps - stamps[0] < 500_000_000))
     replay = run_installed(
         workspace,
-        f'{lib}/replay --ros-args -p bag:=bag -p duration_s:=0.5 -p wait_for_subscribers:=0',
+        f'{q(lib / "replay")} --ros-args -p bag:=bag -p duration_s:=0.5'
+        ' -p wait_for_subscribers:=0',
         folder,
     )
     assert replay.returncode == 0, replay.stderr
@@ -156,6 +184,6 @@ def test_the_installed_nodes_replay_a_bag_and_refuse_bad_parameters(workspace, i
         'recorder': ('output:=bag', 'bag: holds a bag already'),
     }
     for node, (parameter, message) in refusals.items():
-        result = run_installed(workspace, f'{lib}/{node} --ros-args -p {parameter}', folder)
+        result = run_installed(workspace, f'{q(lib / node)} --ros-args -p {parameter}', folder)
         assert result.returncode == 2, f'{node}: {result.stderr}'
         assert message in result.stderr, node

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import ctypes
 import logging
+from collections.abc import Iterable
 
 import torch
 
-__all__ = ['configure_inference_threads', 'set_openblas_threads']
+__all__ = ['configure_inference_threads', 'mapped_libraries', 'set_openblas_threads']
 
 _LOG = logging.getLogger(__name__)
 
@@ -54,8 +55,8 @@ def set_openblas_threads(threads: int) -> bool:
         Whether a setter was found and called.
     """
     try:
-        with open('/proc/self/maps', encoding='utf-8') as maps:
-            paths = {line.split()[-1] for line in maps if 'openblas' in line.lower()}
+        with open('/proc/self/maps', encoding='utf-8', errors='surrogateescape') as maps:
+            paths = mapped_libraries(maps, 'openblas')
     except OSError:
         return False
     found = False
@@ -71,3 +72,17 @@ def set_openblas_threads(threads: int) -> bool:
                 found = True
                 break
     return found
+
+
+def mapped_libraries(maps: Iterable[str], name: str) -> set[str]:
+    """The files of /proc/<pid>/maps lines whose path holds ``name`` (any case).
+
+    A line is address, perms, offset, device, inode and the path, which may hold spaces (a
+    venv under a folder with a space in its name).
+    """
+    paths = set()
+    for line in maps:
+        fields = line.rstrip('\n').split(maxsplit=5)
+        if len(fields) == 6 and name in fields[5].lower():
+            paths.add(fields[5])
+    return paths
