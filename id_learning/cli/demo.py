@@ -1,8 +1,13 @@
 """The ``demo`` subcommand: the main job on a bag, end to end.
 
-Data summary, diagnosis, training with a report, then the online check of the best model through
-the predictor node. It composes the other commands' work (``diagnose_bags``, ``metrics_table``),
-so it sits on top of their modules; the online check is imported only when it runs.
+In order: a data summary with plots; the diagnosis (``--skip-diagnosis`` skips it); the training
+of ``--models`` (default ``DEMO_MODELS``: the study's seven, the identified physics and the
+diagnosed model, nine kinds) with a report; the closed loop on the twin, feedback alone and with
+each model as feed-forward (a bag without a twin config skips it); the online check: a stretch
+of the test part replayed in real time through the predictor node with the best model (skipped
+without rclpy). ``--skip-training`` stops after the diagnosis. It composes the other commands'
+work (``diagnose_bags``, ``metrics_table``, ``closed_loop_run``), so it sits on top of their
+modules; the closed loop and the online check are imported only when they run.
 """
 
 from __future__ import annotations
@@ -19,13 +24,13 @@ from id_learning.errors import DatasetError
 
 __all__ = ['DEMO_MODELS', 'DEMO_SECONDS_PER_MODEL', 'add_demo_command', 'cmd_demo']
 
-#: The demo trains the study's seven, the identified physics and the diagnosed model.
+#: The demo trains the study's seven, the identified physics and the diagnosed model (nine).
 DEMO_MODELS = 'study,rnea_id,rnea_effects'
 #: The identification's and the diagnosis's budget in the demo [s], whatever --train-seconds
 #: gives the networks: on the shipped 10 min bag they take about 20 and 50 s of CPU, and the
 #: demo is where a user first reads them.
 DEMO_PHYSICS_SECONDS = 300.0
-#: Budget per model in ``demo``: seven models on the shipped bag within 10 minutes on 2 cores.
+#: Budget per model in ``demo``: nine models on the shipped bag within 10 minutes on 2 cores.
 DEMO_SECONDS_PER_MODEL = 60.0
 #: The defaults of the options that default to None, so that --skip-training can refuse them.
 _SECONDS_DEFAULTS = {
@@ -196,7 +201,7 @@ def _demo_diagnosis(
 
 def _demo_online_check(args: argparse.Namespace, bag: Path, run: Any, out: Path) -> None:
     """Replay the test part's start through the predictor node with the run's best model."""
-    from id_learning.nodes.online_check import has_ros, online_check
+    from id_learning.online_check import has_ros, online_check
 
     if not has_ros():
         print('online check not run: rclpy (ROS 2 Jazzy) is not installed', flush=True)
@@ -222,7 +227,8 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     """Add ``demo`` to the subcommands ``sub``."""
     p = sub.add_parser(
         'demo',
-        help='the main job on a bag: data summary, then train all seven models with a report',
+        help='the main job on a bag: data summary, diagnosis, training (default: nine model '
+        'kinds) with a report, closed loop on the twin, online check of the best model',
     )
     p.add_argument('--bag', help='bag folder (default: the shipped bags/default)')
     p.add_argument('--out', default='out/demo', help='output folder (the run goes to OUT/run)')
@@ -244,7 +250,12 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         help=f'wall-clock budget per model fit [s] (default {DEMO_SECONDS_PER_MODEL:g}); the '
         f'identification and the diagnosis get at least {DEMO_PHYSICS_SECONDS:g} s',
     )
-    p.add_argument('--skip-training', action='store_true', help='only write the data summary')
+    p.add_argument(
+        '--skip-training',
+        action='store_true',
+        help='stop after the data summary and the diagnosis: no training, closed loop or online '
+        'check',
+    )
     p.add_argument('--skip-diagnosis', action='store_true', help='do not run the diagnosis')
     p.add_argument(
         '--online-seconds',

@@ -1,7 +1,7 @@
 """``id-learning``: the offline tool.
 
-Commands: simulate, import, inspect, bag, diagnose, train, evaluate, sweep, demo; see each
-command's --help.
+Commands: simulate, import, inspect, bag, diagnose, train, evaluate, closed-loop, sweep, demo;
+see each command's --help.
 """
 
 from __future__ import annotations
