@@ -41,7 +41,8 @@ def _nodes(log_dir: Path, *, listen: bool = False) -> Iterator[tuple[Any, Any]]:
     The listener (an in-process subscriber of the reference and tau_u) only when ``listen``;
     every node is stopped and the listener closed afterwards.
     """
-    from id_learning.nodes.online_check_ros import Listener, node_processes
+    from id_learning.nodes.listener import Listener
+    from id_learning.nodes.process import node_processes
 
     log_dir.mkdir(parents=True, exist_ok=True)
     domain = random.SystemRandom().randint(1, 101)  # below Linux's ephemeral ports
@@ -242,7 +243,7 @@ def node_cases(fx: Fixtures) -> Iterator[Case]:
 
     def online_check_on_a_folder() -> Outcome:
         from id_learning.errors import CheckpointError
-        from id_learning.nodes.online_check import online_check
+        from id_learning.online_check import online_check
 
         return raises(lambda: online_check(fx.bag, ROBOT_FILE, fx.path('not_an_artifact'),
                                            seconds=1.0, progress=False),

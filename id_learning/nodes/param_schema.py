@@ -7,7 +7,8 @@ pass) or ``topic`` (a ROS topic name, by the rules rclpy applies, checked withou
 ``config_io.topic_name_problem``). The dataclass's ``__post_init__`` calls ``check_schema`` and
 adds the rules that tie fields together. ``declare_parameters`` declares every field,
 ``read_snapshot`` reads one validated snapshot (errors name the node, the parameter and the
-value), ``validate_change`` checks a runtime change by building a new snapshot, and
+value), ``read_node_config`` reads one before the node is made (to build what the node is
+given), ``validate_change`` checks a runtime change by building a new snapshot, and
 ``load_node_config`` reads a ROS 2 parameter file without ROS.
 
 This module imports rclpy only inside the functions that talk to a node.
@@ -19,7 +20,7 @@ import dataclasses
 import difflib
 import re
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, get_type_hints
@@ -46,6 +47,7 @@ __all__ = [
     'param',
     'params_file_problem',
     'params_files',
+    'read_node_config',
     'read_snapshot',
     'refuse_foreign_params_files',
     'section_matches',
@@ -292,8 +294,13 @@ def refuse_foreign_params_files(node: Node, args: Sequence[str] | None = None) -
 
 
 # -- ROS ----------------------------------------------------------------------------------------
-def declare_parameters(node: Node, cls: type) -> None:
+def declare_parameters(node: Node, cls: type, values: object | None = None) -> None:
     """Declare every field of a node config as a parameter with its description and default.
+
+    Args:
+        values: a snapshot (a ``cls``) read before the node was made (``read_node_config``): its
+            values are declared, in place of the defaults and of the overrides the node was
+            given, which that snapshot already holds.
 
     Raises:
         ConfigError: a params file with no section for the node, a value of the wrong type, or
@@ -302,7 +309,8 @@ def declare_parameters(node: Node, cls: type) -> None:
     from rcl_interfaces.msg import ParameterDescriptor, ParameterType
     from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
-    refuse_foreign_params_files(node)
+    if values is None:
+        refuse_foreign_params_files(node)
     types = _field_types(cls)
     ros_types = {
         bool: ParameterType.PARAMETER_BOOL,
@@ -314,7 +322,7 @@ def declare_parameters(node: Node, cls: type) -> None:
     overrides = getattr(node, '_parameter_overrides', {})
     for item in dataclasses.fields(cls):
         kind = types[item.name]
-        default = item.default
+        default = item.default if values is None else getattr(values, item.name)
         if kind is float and item.name in overrides:  # a YAML '1': declared as the double 1.0
             overrides[item.name] = _as_double(overrides[item.name])
         descriptor = ParameterDescriptor(
@@ -329,7 +337,10 @@ def declare_parameters(node: Node, cls: type) -> None:
         descriptor.additional_constraints = constraints(item)
         try:
             node.declare_parameter(
-                item.name, list(default) if isinstance(default, tuple) else default, descriptor
+                item.name,
+                list(default) if isinstance(default, tuple) else default,
+                descriptor,
+                ignore_override=values is not None,
             )
         except (InvalidParameterTypeException, InvalidParameterValueException) as err:
             given = getattr(node, '_parameter_overrides', {}).get(item.name)
@@ -338,8 +349,42 @@ def declare_parameters(node: Node, cls: type) -> None:
                 f'node {node.get_name()}: {item.name}: {value!r} is no {kind_name(kind)} '
                 f'({item.metadata["description"]})'
             ) from err
-    refuse_unknown(node, cls)
+    if values is None:
+        refuse_unknown(node, cls)
     node.add_pre_set_parameters_callback(lambda changes: _before_set(node, cls, changes))
+
+
+def read_node_config(
+    name: str,
+    cls: type[_T],
+    check: Callable[[Node, _T], None] | None = None,
+    **node_options: Any,
+) -> _T:
+    """A node's parameters, read before the node is made: what it needs can be built first.
+
+    A node named ``name`` lives while they are read: its parameters come from where the real
+    node's will (the command line's ``-p`` and ``--params-file``, ``parameter_overrides`` in
+    ``node_options``), validated as ``read_snapshot`` does, and ``check(node, config)`` runs
+    with the node's names and remappings (e.g. resolving its topics). It starts no parameter
+    services and writes nothing to /rosout. The real node then declares the snapshot it gets
+    (``declare_parameters(node, cls, values=config)``).
+
+    Raises:
+        ConfigError: as ``declare_parameters``, ``read_snapshot`` and ``check``.
+    """
+    from rclpy.node import Node
+
+    node = Node(
+        name, **{**node_options, 'start_parameter_services': False, 'enable_rosout': False}
+    )
+    try:
+        declare_parameters(node, cls)
+        config = read_snapshot(node, cls)
+        if check is not None:
+            check(node, config)
+        return config
+    finally:
+        node.destroy_node()
 
 
 def _as_double(given: Any) -> Any:

@@ -85,11 +85,11 @@ from id_learning.nodes.msg_conversions import (
     trajectory_message,
     trajectory_to_sample,
 )
+from id_learning.nodes.param_schema import read_node_config
 from id_learning.nodes.params import (
     PredictorNodeConfig,
     declare_parameters,
     guard_config,
-    read_snapshot,
     resolve_robot_config,
     validate_change,
 )
@@ -114,44 +114,45 @@ from id_learning.predictor import (
     configure_inference_threads,
 )
 from id_learning.predictor.guards import stamp_problem
-from id_learning.robot.config import load_robot_config
+from id_learning.robot.config import RobotConfig, load_robot_config
 
-__all__ = ['Predictor', 'adaptation_loop', 'main']
+__all__ = ['Predictor', 'adaptation_loop', 'build_core', 'main', 'make_predictor']
 
 NODE_NAME = 'predictor'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 
 
 class Predictor(Node):
-    """Publishes guarded tau_u for every reference sample.
+    """Publishes guarded tau_u for every reference sample, from a ready core.
+
+    The node loads nothing: ``make_predictor`` (what ``main`` runs) reads the parameters, builds
+    the core and makes the node around it.
 
     Args:
+        core: the guarded model (with its adaptation loop when ``config.adaptation`` is on),
+            warmed up.
+        robot: the robot config the core was built for (the guards of a runtime change).
+        config: the parameters, declared as the node's with these values.
         input_qos: QoS of the reference subscription; None: ``reference_qos(input_depth)``.
         output_qos: QoS of the tau_u and command publishers (match the consumer).
-        **kwargs: passed to rclpy's Node (context, parameter_overrides, ...).
+        **kwargs: passed to rclpy's Node (context, namespace, ...).
     """
 
     def __init__(
         self,
+        core: FeedForwardPredictor,
+        robot: RobotConfig,
+        config: PredictorNodeConfig,
         input_qos: QoSProfile | None = None,
         output_qos: QoSProfile = TORQUE_QOS,
         **kwargs: Any,
     ) -> None:
-        """Declare parameters, load the artifact, subscribe and advertise."""
+        """Declare the parameters, advertise, warm the messages up, then subscribe."""
         super().__init__(NODE_NAME, **kwargs)
-        declare_parameters(self, PredictorNodeConfig)
-        self.config = read_snapshot(self, PredictorNodeConfig)
-        config = self.config
-        refuse_clashing_topics(self, config)  # before the artifact is loaded
-        self.robot = load_robot_config(resolve_robot_config(config.robot_config))
-        configure_inference_threads(config.torch_threads)
-        self.core = FeedForwardPredictor.from_artifact(
-            config.artifact,
-            self.robot,
-            guard_config(config, self.robot),
-            inference=config.inference,
-            fallback_artifact=config.fallback_artifact or None,
-        )
+        declare_parameters(self, PredictorNodeConfig, values=config)
+        self.config = config
+        self.robot = robot
+        self.core = core
         self.done: Future = Future()  # never completes: runs until shut down
         self.names = list(self.core.joint_names)
         self.latency_s = RollingStats(config.latency_window)
@@ -201,10 +202,6 @@ class Predictor(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._measured = self._start_adaptation()
         self._warm_up()
-        # torch, the model and rclpy leave ~10^5 tracked objects; a full collection walks them all
-        # (~0.1 s here) when the per-sample allocations trigger one. Frozen, they are never walked.
-        gc.collect()
-        gc.freeze()
         # Subscribed last, once ready to serve: a sender that waits for this subscription starts
         # only then, and nothing it sends queues (and is overwritten, uncounted) while the model
         # warms up. rclpy passes the message info as a second argument to a callback that takes
@@ -245,8 +242,7 @@ class Predictor(Node):
 
     # -- the hot path -----------------------------------------------------------------------------
     def _warm_up(self) -> None:
-        """Pay the first-call costs of the hot path before the first sample (see core warm_up)."""
-        self.core.warm_up()
+        """Pay the first-call costs of the message path (make_predictor warmed the core up)."""
         zeros = np.zeros(len(self.names))
         message = (
             trajectory_message(0, self.names, zeros, zeros, zeros)
@@ -308,11 +304,10 @@ class Predictor(Node):
             )
 
     def _start_adaptation(self) -> Any:
-        """With adaptation on (rls, rls_inertia), the loop and its currents subscription."""
+        """With the core's adaptation loop (rls, rls_inertia), its currents subscription."""
         self._adaptation_file: Path | None = None
-        if self.config.adaptation == 'off':
+        if self.core.adaptation is None:
             return None
-        self.core.adaptation = adaptation_loop(self.config, self.robot, self.core)
         with endpoint(self, 'measured_topic', self.config.measured_topic):
             return self.create_subscription(
                 JointState, self.config.measured_topic, self._on_measured, reference_qos(64)
@@ -534,10 +529,56 @@ class Predictor(Node):
         self.get_logger().info(final_report(self.core, self.counts, self.latency_s.summary()))
 
 
+def build_core(config: PredictorNodeConfig) -> tuple[FeedForwardPredictor, RobotConfig]:
+    """The node's core from its parameters: robot, threads, artifact, adaptation, warmed up.
+
+    Raises:
+        ConfigError, CheckpointError, RobotModelError: the robot config or the artifact is
+            unusable, or adaptation is asked of a model that does not predict tau_u.
+    """
+    robot = load_robot_config(resolve_robot_config(config.robot_config))
+    configure_inference_threads(config.torch_threads)
+    core = FeedForwardPredictor.from_artifact(
+        config.artifact,
+        robot,
+        guard_config(config, robot),
+        inference=config.inference,
+        fallback_artifact=config.fallback_artifact or None,
+    )
+    if config.adaptation != 'off':
+        core.adaptation = adaptation_loop(config, robot, core)
+    core.warm_up()
+    return core, robot
+
+
+def make_predictor(
+    input_qos: QoSProfile | None = None, output_qos: QoSProfile = TORQUE_QOS, **kwargs: Any
+) -> Predictor:
+    """Read the parameters, build the core, freeze the garbage collector, make the node.
+
+    Args:
+        input_qos, output_qos: as ``Predictor``'s.
+        **kwargs: passed to rclpy's Node (context, parameter_overrides, namespace, ...).
+
+    Raises:
+        ConfigError, CheckpointError, RobotModelError: bad parameters (topics that clash are
+            refused before the artifact is loaded), or as ``build_core``.
+    """
+    config = read_node_config(NODE_NAME, PredictorNodeConfig, refuse_clashing_topics, **kwargs)
+    core, robot = build_core(config)
+    # torch, the model and rclpy leave ~10^5 tracked objects; a full collection walks them all
+    # (~0.1 s here) when the per-sample allocations trigger one. Frozen, they are never walked.
+    gc.collect()
+    gc.freeze()
+    node = Predictor(core, robot, config, input_qos, output_qos, **kwargs)
+    gc.freeze()  # the node's objects too: no collection first, so no pause once it subscribed
+    return node
+
+
 def main(args: Sequence[str] | None = None) -> int:
     """Run the predictor until SIGINT/SIGTERM; returns the exit status."""
     return run_node(
-        Predictor,
+        make_predictor,
         lambda node: node.config.executor,  # type: ignore[attr-defined]
         args,
         name='predictor',

@@ -8,12 +8,12 @@ stamp, samples published late, and callback errors. No rclpy here: the node pass
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
-from id_learning.errors import CheckpointError, ConfigError
+from id_learning.errors import ConfigError
 from id_learning.nodes.params import PredictorNodeConfig
 from id_learning.predictor import FeedForwardPredictor, Reject
 from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
+from id_learning.predictor.provenance import incomplete_run
 from id_learning.predictor.timing import StatsSummary
 from id_learning.robot.config import RobotConfig
 
@@ -157,17 +157,12 @@ def setup_warnings(core: FeedForwardPredictor, config: PredictorNodeConfig) -> l
         )
     if config.fallback_artifact and fallback is None:
         warnings.append(f'fallback_artifact ignored: a {core.model.kind} model is physics itself')
-    artifact = Path(config.artifact)
-    if artifact.parent.name == 'models':  # a model of a run: say when the run is not whole
-        from id_learning.training.run_folder import refuse_incomplete_run
-
-        try:
-            refuse_incomplete_run(artifact.parent.parent)
-        except CheckpointError as err:
-            warnings.append(
-                f'the model is complete but its run is not: {err}; its report and the '
-                'physics prior beside it may be missing'
-            )
+    run_problem = incomplete_run(config.artifact)  # a model of a run: is the run whole
+    if run_problem is not None:
+        warnings.append(
+            f'the model is complete but its run is not: {run_problem}; its report and the '
+            'physics prior beside it may be missing'
+        )
     if core.fitting_inputs is None or core.fitting_inputs.name == 'study':
         warnings.append(
             "the model was fitted on inputs low-passed like the labels (the study's "

@@ -2,18 +2,25 @@
 
 A node runs as ``python -m id_learning.nodes.<module> --ros-args -r ... -p ...`` with the given
 environment (the PyPI wheels' bootstrap needs the whole of it: LD_LIBRARY_PATH, AMENT_PREFIX_PATH)
-and its stdout and stderr in a log file.
+and its stdout and stderr in a log file. ``node_processes`` starts nodes in one DDS domain and
+stops every one of them on exit.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
 import signal
 import subprocess
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ['NodeProcess', 'ros_value']
+import id_learning
+
+__all__ = ['NodeProcess', 'StartNode', 'node_environment', 'node_processes', 'ros_value']
 
 
 def ros_value(value: Any) -> str:
@@ -87,3 +94,52 @@ class NodeProcess:
     def wait(self, timeout: float) -> int:
         """Wait for the process to end by itself."""
         return self.process.wait(timeout)
+
+
+#: ``start(module, parameters, remaps)``: start a node process.
+StartNode = Callable[[str, dict[str, object], dict[str, str]], NodeProcess]
+#: Deadline for a node to exit after SIGINT before it is killed [s].
+STOP_S = 15.0
+
+
+def node_environment(domain_id: int) -> dict[str, str]:
+    """The whole environment (the wheels' bootstrap needs LD_LIBRARY_PATH) in our domain."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(domain_id)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+    env['PYTHONUNBUFFERED'] = '1'
+    # The children import this very package, whatever their working directory.
+    package_root = str(Path(id_learning.__file__).resolve().parents[1])
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [package_root, env.get('PYTHONPATH')]))
+    return env
+
+
+@contextmanager
+def node_processes(log_dir: Path, domain_id: int) -> Iterator[StartNode]:
+    """Start nodes with ``start(module, parameters, remaps)``, their logs in ``log_dir``.
+
+    Every node started is stopped on exit, also on an error or Ctrl-C.
+    """
+    started: list[NodeProcess] = []
+    env = node_environment(domain_id)
+
+    def start(module: str, parameters: dict[str, object], remaps: dict[str, str]) -> NodeProcess:
+        node = NodeProcess(module, parameters, log_dir / f'{module}.log', env, remaps)
+        started.append(node)
+        return node
+
+    try:
+        yield start
+    finally:
+        for node in started:  # all at once: each needs a moment to close
+            node.interrupt()
+        for node in started:
+            node.stop(STOP_S)
+        if any(node.was_killed for node in started):
+            # A killed node leaves Fast DDS shared-memory files behind.
+            fastdds = shutil.which('fastdds') or str(Path(sys.executable).parent / 'fastdds')
+            if Path(fastdds).exists():
+                subprocess.run(
+                    [fastdds, 'shm', 'clean'], capture_output=True, timeout=60, check=False
+                )

@@ -13,7 +13,7 @@ pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
 from support import REPO, quick_preprocess
 
 from id_learning.errors import CheckpointError
-from id_learning.nodes.online_check import online_check
+from id_learning.online_check import online_check
 
 pytestmark = pytest.mark.ros
 

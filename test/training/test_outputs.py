@@ -240,7 +240,7 @@ def test_every_reader_refuses_an_interrupted_run_naming_it(small_run, bags, mabi
 
 def test_the_online_check_refuses_a_model_of_an_interrupted_run(small_run, tmp_path, bags):
     pytest.importorskip('rclpy', reason='the online check needs rclpy (ROS 2 Jazzy)')
-    from id_learning.nodes.online_check import online_check
+    from id_learning.online_check import online_check
 
     folder = partial_path(tmp_path / 'run')
     _mark_incomplete(small_run.out, folder)

@@ -11,9 +11,9 @@ import time
 
 import numpy as np
 
-from id_learning.nodes.online_check_plan import CheckSetup, Excerpt
-from id_learning.nodes.online_check_result import NS_PER_S, OnlineCheckError, OnlineCheckResult
-from id_learning.nodes.online_check_ros import Collected
+from id_learning.online_check.plan import CheckSetup, Excerpt
+from id_learning.online_check.result import NS_PER_S, OnlineCheckError, OnlineCheckResult
+from id_learning.online_check.ros import Collected
 
 __all__ = ['score']
 

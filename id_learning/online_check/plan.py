@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from id_learning.errors import DatasetError
-from id_learning.nodes.online_check_result import NS_PER_S
+from id_learning.online_check.result import NS_PER_S
 
 __all__ = ['CheckSetup', 'Excerpt', 'load_setup', 'plan_excerpt']
 

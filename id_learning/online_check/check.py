@@ -34,10 +34,11 @@ states are remapped into it; no /clock), so the check cannot feed a live system 
 DDS domain. The domain is ``ROS_DOMAIN_ID`` from the environment unless given;
 ``ROS_AUTOMATIC_DISCOVERY_RANGE`` defaults to LOCALHOST.
 
-The check is split along its steps: ``online_check_plan`` (the artifact's setup and the
-excerpt, offline), ``online_check_ros`` (node processes, the listener, the replay run),
-``online_check_scoring`` (the comparison) and ``online_check_result`` (the result); this module
-holds the public entry point that runs them in order.
+The check is split along its steps: ``plan`` (the artifact's setup and the excerpt, offline),
+``ros`` (the node processes and the replay run, watched through ``nodes.listener``), ``scoring``
+(the comparison) and ``result`` (the result); this module holds the public entry point that runs
+them in order. It sits beside the ``demo`` command that runs it, above the nodes it starts: the
+nodes themselves import neither the trainer nor the evaluation.
 """
 
 from __future__ import annotations
@@ -50,10 +51,11 @@ import time
 from pathlib import Path
 
 from id_learning.errors import ConfigError
-from id_learning.nodes.online_check_plan import load_setup, plan_excerpt
-from id_learning.nodes.online_check_result import OnlineCheckError, OnlineCheckResult
-from id_learning.nodes.online_check_ros import node_processes, replay_and_collect, start_predictor
-from id_learning.nodes.online_check_scoring import score
+from id_learning.nodes.process import node_processes
+from id_learning.online_check.plan import load_setup, plan_excerpt
+from id_learning.online_check.result import OnlineCheckError, OnlineCheckResult
+from id_learning.online_check.ros import replay_and_collect, start_predictor
+from id_learning.online_check.scoring import score
 from id_learning.training.run_folder import MODELS_DIR, refuse_incomplete_run
 
 __all__ = ['OnlineCheckError', 'OnlineCheckResult', 'has_ros', 'online_check']

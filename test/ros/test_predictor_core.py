@@ -1,0 +1,109 @@
+"""The predictor node serves the core it is given: built in memory, no artifact, no files."""
+
+from __future__ import annotations
+
+import time
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
+
+from id_learning.models.base import InverseDynamicsModel
+from id_learning.nodes.params import PredictorNodeConfig, guard_config
+from id_learning.nodes.predictor import Predictor
+from id_learning.nodes.qos import reference_qos
+from id_learning.predictor import FeedForwardPredictor
+
+pytestmark = pytest.mark.ros
+
+#: Deadline of a wait on discovery or messages within this process [s].
+WAIT_S = 30.0
+
+
+class Linear(InverseDynamicsModel):
+    """tau = 10 q + 2 v + a per joint: a model that is no artifact."""
+
+    kind: ClassVar[str] = 'linear'
+
+    def __init__(self, robot) -> None:
+        self.robot = robot
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(self.robot.joints)
+
+    def fit(self, data, *, progress=False):
+        return self
+
+    def predict(self, q, v, a):
+        return 10.0 * np.asarray(q) + 2.0 * np.asarray(v) + np.asarray(a)
+
+    def state(self):
+        return {}
+
+    def load_state(self, tensors, fitted):
+        pass
+
+
+def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given(mabi, domain_id):
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory
+
+    from id_learning.nodes.msg_conversions import trajectory_message
+
+    config = PredictorNodeConfig(artifact='in-memory', torque_limit_scale=0.5)
+    core = FeedForwardPredictor(Linear(mabi), mabi.limits.torque, guard_config(config, mabi))
+    core.warm_up()
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    executor = SingleThreadedExecutor(context=context)
+    made: list = []
+    try:
+        # An override the config does not hold: the node declares its config, not overrides.
+        overrides = [Parameter('torque_limit_scale', value=0.9)]
+        node = Predictor(core, mabi, config, context=context, parameter_overrides=overrides)
+        sender = rclpy.create_node('sender', context=context)
+        made += [node, sender]
+        for each in made:
+            executor.add_node(each)
+        received: list[JointState] = []
+        publisher = sender.create_publisher(JointTrajectory, 'reference', reference_qos(10))
+        sender.create_subscription(JointState, 'tau_u', received.append, 100)
+
+        def spin_until(condition, what: str) -> None:
+            deadline = time.monotonic() + WAIT_S
+            while not condition():
+                assert time.monotonic() < deadline, f'timed out waiting for {what}'
+                executor.spin_once(timeout_sec=0.05)
+
+        assert node.get_parameter('torque_limit_scale').value == 0.5
+        assert node.get_parameter('artifact').value == 'in-memory'
+        spin_until(
+            lambda: (
+                publisher.get_subscription_count() >= 1 and node.count_subscribers('tau_u') >= 1
+            ),
+            'the node and the sender to match',
+        )
+        q, zeros = np.linspace(0.1, 0.6, 6), np.zeros(6)
+        start_ns, period_ns = time.time_ns(), round(mabi.ipo_period_s * 1e9)
+        stamps = [start_ns + k * period_ns for k in range(5)]
+        for stamp in stamps:
+            publisher.publish(trajectory_message(stamp, mabi.joints, q, zeros, zeros))
+        spin_until(lambda: len(received) >= len(stamps), f'{len(stamps)} tau_u')
+        for msg, stamp in zip(received, stamps, strict=True):
+            assert msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == stamp
+            assert tuple(msg.name) == tuple(mabi.joints)
+            np.testing.assert_allclose(msg.effort, 10.0 * q, rtol=0, atol=1e-12)
+        assert core.counters.published == len(stamps)
+        node.close()
+    finally:
+        executor.shutdown()
+        for each in made:
+            each.destroy_node()
+        context.try_shutdown()
