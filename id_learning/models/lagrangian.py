@@ -191,12 +191,12 @@ class DelanConfig(_LagrangianConfig):
     """DeLaN settings (see _LagrangianConfig for the shared ones).
 
     Defaults differ from the shared ones where the heavy arm showed the need (rigid-body
-    joint-torque twin recording, 10 min, through the filter; see the README): the fully balanced
-    scaling (``energy_balance`` 1, the Cholesky network on the balanced positions too) lets the
-    shoulder's gravity be learned at all, and with it the potential's weights must grow to order
-    one, which a strong weight decay fights (test RMSE on joints 2 / 3: 2690 / 716 N*m with the
-    plain scaling and decay 1e-2; 363 / 108 balanced with decay 1e-4, 325 / 110 without, the
-    wrists slightly better with it); the patience and epoch limit leave room for the slow
+    joint-torque twin recording, 10 min, through the filter; see docs/training.md): the fully
+    balanced scaling (``energy_balance`` 1, the Cholesky network on the balanced positions too)
+    lets the shoulder's gravity be learned at all, and with it the potential's weights must grow
+    to order one, which a strong weight decay fights (test RMSE on joints 2 / 3: 2690 / 716 N*m
+    with the plain scaling and decay 1e-2; 363 / 108 balanced with decay 1e-4, 325 / 110 without,
+    the wrists slightly better with it); the patience and epoch limit leave room for the slow
     balanced fits.
 
     Attributes:

@@ -1,8 +1,8 @@
 """Robot config: URDF, joint order, drives, limits, IPO period and filter cut-offs, from one YAML.
 
-Units are SI throughout. Drive values on the motor side say so in the README's convention:
-``gear_ratio`` is motor turns per joint turn, ``torque_constant`` is in N*m/A at the motor shaft,
-``rotor_inertia`` in kg*m^2 at the motor shaft. Everything else is joint side.
+Units are SI throughout. Drive values on the motor side say so (docs/configuration.md, "Units
+convention"): ``gear_ratio`` is motor turns per joint turn, ``torque_constant`` is in N*m/A at
+the motor shaft, ``rotor_inertia`` in kg*m^2 at the motor shaft. Everything else is joint side.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ DEFAULT_INPUT_SMOOTHING_HZ = 10.0
 
 @dataclass(frozen=True, eq=False)
 class DriveConfig:
-    """Per-joint drive train, in the convention of the README.
+    """Per-joint drive train, in the units convention of docs/configuration.md.
 
     Attributes:
         gear_ratio: (n,) motor turns per joint turn [-].
