@@ -8,17 +8,29 @@ smooth reference at the IPO rate, once as fitted and once with adaptation (``--m
 adaptation each sample also gets its measured currents (``AdaptationLoop.measured``: one RLS
 update), as the node receives them on the same thread. Reported per kind: median and p99 of the
 step alone, and of step plus update, and what adaptation adds to each [ms].
+
+Prints one line per kind, then the JSON document; writes docs/results/adaptation_latency.json and
+.md (not with ``--no-results``; ``--results-folder`` elsewhere).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from common import DEFAULT_ROBOT, emit
+from common import (
+    DEFAULT_ROBOT,
+    add_results_options,
+    emit,
+    markdown_table,
+    number,
+    publish_results,
+    settings_lines,
+)
 from predictor_latency import fit_quick_artifacts
 
 from id_learning.predictor import FeedForwardPredictor, GuardConfig, ReferenceSample
@@ -51,6 +63,7 @@ def main() -> None:
     parser.add_argument('--kinds', nargs='+', default=['rnea_lq', 'mlp', 'lstm'])
     parser.add_argument('--samples', type=int, default=20_000)
     parser.add_argument('--mode', choices=('rls', 'rls_inertia'), default='rls')
+    add_results_options(parser)
     args = parser.parse_args()
     robot = load_robot_config(DEFAULT_ROBOT)
     folders = fit_quick_artifacts(Path(tempfile.mkdtemp()), DEFAULT_ROBOT, args.kinds)
@@ -81,14 +94,53 @@ def main() -> None:
             f'ms with {args.mode} (+{figures["added_p99_ms"]:.3f} ms)',
             flush=True,
         )
-    emit(
-        {
-            'benchmark': 'adaptation_latency',
-            'mode': args.mode,
-            'samples': args.samples,
-            'kinds': out,
-        }
-    )
+    document = {
+        'benchmark': 'adaptation_latency',
+        'mode': args.mode,
+        'samples': args.samples,
+        'kinds': out,
+    }
+    lines = report(document, settings_lines('adaptation_latency', parser, args))
+    print('\n'.join(lines), file=sys.stderr)
+    publish_results('adaptation_latency', document, lines, args)
+    emit(document)
+
+
+def report(document: dict, settings: list[str]) -> list[str]:
+    """The results page's body: per kind the time per sample without and with adaptation."""
+    mode = document['mode']
+    header = [
+        'kind',
+        'off median [ms]',
+        'off p99 [ms]',
+        f'{mode} median [ms]',
+        f'{mode} p99 [ms]',
+        'added median [ms]',
+        'added p99 [ms]',
+    ]
+    rows = [
+        [
+            kind,
+            number(f['off']['median_ms'], '.4f'),
+            number(f['off']['p99_ms'], '.4f'),
+            number(f[mode]['median_ms'], '.4f'),
+            number(f[mode]['p99_ms'], '.4f'),
+            number(f['added_median_ms'], '+.4f'),
+            number(f['added_p99_ms'], '+.4f'),
+        ]
+        for kind, f in document['kinds'].items()
+    ]
+    return [
+        "What online adaptation adds to the predictor core's time per sample (its hot path "
+        'without DDS, `FeedForwardPredictor.step`): a smooth reference served at the IPO rate, '
+        f'{document["samples"]} samples per kind, once as fitted (off) and once with adaptation '
+        f'`{mode}` (the step plus one RLS update from the measured currents); the first 1000 '
+        "samples are left out. Models: one-epoch fits of the study's sizes (time does not "
+        'depend on the fit). No target is set here.',
+        '',
+        *settings,
+        *markdown_table(header, rows),
+    ]
 
 
 if __name__ == '__main__':

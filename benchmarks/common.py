@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import argparse
 import json
+import math
 import os
 import platform
 import subprocess
 import sys
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -105,3 +108,120 @@ def write_results(
     ]
     md_path.write_text('\n'.join([*header, *markdown]).rstrip() + '\n', encoding='utf-8')
     return json_path, md_path
+
+
+# -- the results pages: options, settings, tables -------------------------------------------------
+#: Options that say where the figures go, not how they are measured.
+_OUTPUT_OPTIONS = ('help', 'no_results', 'results_folder')
+
+
+def add_results_options(parser: argparse.ArgumentParser) -> None:
+    """``--no-results`` (print only), ``--results-folder`` (another folder than docs/results)."""
+    parser.add_argument('--no-results', action='store_true', help='do not write docs/results')
+    parser.add_argument(
+        '--results-folder',
+        type=Path,
+        help='write the results page and its JSON here instead of docs/results',
+    )
+
+
+def repo_path(path: str | Path) -> str:
+    """A path as the reader would type it: from the repository, where it is in or beside it."""
+    resolved = Path(path).resolve()
+    if resolved.is_relative_to(REPO):
+        return str(resolved.relative_to(REPO))
+    if resolved.is_relative_to(REPO.parent):
+        return os.path.relpath(resolved, REPO)
+    return str(path)
+
+
+def _option_text(value: Any, separator: str = ' ') -> str:
+    """A setting as typed: paths from the repository, lists by ``separator``."""
+    if isinstance(value, Path):
+        return repo_path(value)
+    if isinstance(value, (list, tuple)):
+        return separator.join(_option_text(v) for v in value)
+    if isinstance(value, float):
+        return f'{value:g}'
+    return str(value)
+
+
+def changed_settings(
+    parser: argparse.ArgumentParser, args: argparse.Namespace
+) -> list[tuple[str, str, str]]:
+    """(option, value, default) of every option whose value is not its default."""
+    changed = []
+    for action in parser._actions:
+        if action.dest in _OUTPUT_OPTIONS or not action.option_strings:
+            continue
+        value, default = getattr(args, action.dest, None), action.default
+        if value == default or (isinstance(value, Path) and default is not None
+                                and Path(default).resolve() == value.resolve()):  # fmt: skip
+            continue
+        option = max(action.option_strings, key=len)
+        # A list from one word (a type that splits it) was typed comma-separated.
+        separator = ' ' if action.nargs in ('+', '*') or isinstance(action.nargs, int) else ','
+        shown = '' if action.nargs == 0 else _option_text(value, separator)
+        shown_default = 'unset' if default is None else _option_text(default, separator)
+        changed.append((option, shown, shown_default))
+    return changed
+
+
+def settings_lines(
+    name: str, parser: argparse.ArgumentParser, args: argparse.Namespace
+) -> list[str]:
+    """The command line of this run and, where it left the defaults, which settings it changed."""
+    changed = changed_settings(parser, args)
+    command = ' '.join(
+        [f'python benchmarks/{name}.py', *(f'{o} {v}'.rstrip() for o, v, _ in changed)]
+    )
+    if not changed:
+        return [f'Run: `{command}`, every setting at its default.', '']
+    differs = ', '.join(f'`{o}` (default {d})' for o, _, d in changed)
+    return [f'Run: `{command}`; not the default run: {differs}.', '']
+
+
+def publish_results(
+    name: str, document: dict[str, Any], markdown: list[str], args: argparse.Namespace
+) -> tuple[Path, Path] | None:
+    """``write_results`` unless ``--no-results``, into ``--results-folder`` where given."""
+    if getattr(args, 'no_results', False):
+        return None
+    paths = write_results(name, document, markdown, getattr(args, 'results_folder', None))
+    print(f'wrote {paths[0]} and {paths[1]}', file=sys.stderr)
+    return paths
+
+
+def number(value: Any, spec: str = '.3g', missing: str = '-') -> str:
+    """A figure as text; None and NaN as ``missing``."""
+    if value is None:
+        return missing
+    try:
+        if math.isnan(float(value)):
+            return missing
+    except (TypeError, ValueError):
+        return str(value)
+    return format(value, spec)
+
+
+def share(value: float | None) -> str:
+    """A fraction as a percentage."""
+    return number(None if value is None else 100.0 * value, '.0f') + (
+        ' %' if value is not None and not math.isnan(value) else ''
+    )
+
+
+def verdict(passed: bool | None) -> str:
+    """pass, fail, or '-' where nothing was judged."""
+    return '-' if passed is None else ('pass' if passed else 'fail')
+
+
+def markdown_table(
+    header: Sequence[str], rows: Iterable[Sequence[Any]], align: str | None = None
+) -> list[str]:
+    """A markdown table; ``align`` one letter per column (l or r; default: first l, rest r)."""
+    align = align or 'l' + 'r' * (len(header) - 1)
+    rule = ['---' if a == 'l' else '---:' for a in align]
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '|'.join(rule) + '|']
+    lines += ['| ' + ' | '.join(str(cell) for cell in row) + ' |' for row in rows]
+    return lines

@@ -8,7 +8,9 @@ seed: one robot, its hidden effects drawn once). For each duration D the D minut
 a common held-out tail make one bag whose training part they are (train fraction
 D / (D + test)), so every model is judged on the same last minutes. Trains each kind through the
 label filter (the default) and prints its test RMSE as a multiple of the label-noise floor per
-joint and duration; plots it (one panel per joint) and ends with one JSON line.
+joint and duration; plots it (one panel per joint) and ends with one JSON line; writes
+docs/results/data_scaling.json and .md (not with ``--no-results``; ``--results-folder``
+elsewhere).
 """
 
 from __future__ import annotations
@@ -23,7 +25,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from common import DEFAULT_ROBOT, REPO, environment
+from common import (
+    DEFAULT_ROBOT,
+    REPO,
+    add_results_options,
+    environment,
+    markdown_table,
+    number,
+    publish_results,
+    repo_path,
+    settings_lines,
+)
 
 from id_learning.dataset.preprocess import PreprocessConfig
 from id_learning.models.registry import MODEL_KINDS
@@ -98,6 +110,7 @@ def main() -> None:
     parser.add_argument('--seconds-per-model', type=float, default=120.0)
     parser.add_argument('--out', type=Path, help='keep the bags and the runs here')
     parser.add_argument('--plot', type=Path, default=REPO / 'out/benchmarks/data_scaling.png')
+    add_results_options(parser)
     args = parser.parse_args()
     minutes = sorted(float(m) for m in args.minutes.split(','))
     kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
@@ -160,9 +173,45 @@ def main() -> None:
         'ratio_to_floor': {k: v.tolist() for k, v in ratios.items()},
         'train_seconds': seconds,
         'wall_s': time.monotonic() - began,
-        'environment': environment(),
+        'plot': str(args.plot),
     }
-    print(json.dumps(document))
+    lines = report(document, settings_lines('data_scaling', parser, args))
+    publish_results('data_scaling', document, lines, args)
+    print(json.dumps({**document, 'environment': environment()}))
+
+
+def report(document: dict[str, Any], settings: list[str]) -> list[str]:
+    """The results page's body: the floor per duration, then per joint each kind's ratio."""
+    minutes, joints = document['minutes'], document['joints']
+    columns = [f'{m:g} min' for m in minutes]
+    lines = [
+        'Test RMSE against the length of the training data, on one twin robot '
+        f'(config/twin_default.yaml, seed {document["seed"]}): for each duration the minutes '
+        f'just before a common {document["test_minutes"]:g} min held-out tail make the training '
+        'part, so every model is judged on the same last minutes. Each kind is trained through '
+        f'the label filter (at most {document["seconds_per_model"]:g} s per model); its test '
+        'RMSE through the filter is given as a multiple of the label-noise floor (1: as good '
+        f'as the labels allow). Plot: `{repo_path(document["plot"])}`. Wall time '
+        f'{document["wall_s"] / 60:.1f} min. No target is set here.',
+        '',
+        *settings,
+        'Label-noise floor [N*m] per training duration:',
+        '',
+        *markdown_table(
+            ['joint', *columns],
+            [
+                [joint, *(number(floor[j], '.3g') for floor in document['label_noise_floor_nm'])]
+                for j, joint in enumerate(joints)
+            ],
+        ),
+    ]
+    for j, joint in enumerate(joints):
+        rows = [
+            [kind, *(number(ratio[i][j], '.3g') for i in range(len(minutes)))]
+            for kind, ratio in document['ratio_to_floor'].items()
+        ]
+        lines += ['', f'{joint}: test RMSE / floor', '', *markdown_table(['kind', *columns], rows)]
+    return lines
 
 
 if __name__ == '__main__':

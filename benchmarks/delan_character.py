@@ -22,8 +22,9 @@ and within the same epochs the LNN fits the training set about half as well (tra
 
     python benchmarks/delan_character.py --data ../shared/data/delan_character [--seeds 5]
 
-Prints one JSON document; with no data at the path it prints {"skipped": reason} and exits 0.
-Progress goes to stderr.
+Prints one JSON document and writes docs/results/delan_character.json and .md (not with
+``--no-results``; ``--results-folder`` elsewhere); with no data at the path it prints
+{"skipped": reason}, writes nothing and exits 0. Progress and the table go to stderr.
 """
 
 from __future__ import annotations
@@ -37,7 +38,17 @@ from typing import Any
 
 import numpy as np
 import torch
-from common import REPO, environment
+from common import (
+    REPO,
+    add_results_options,
+    environment,
+    markdown_table,
+    number,
+    publish_results,
+    repo_path,
+    settings_lines,
+    verdict,
+)
 
 from id_learning.models.fitting import OptimConfig, configure_torch, train_module
 from id_learning.models.lagrangian import (
@@ -241,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         '--threads', type=int, default=1, help='torch threads (the networks are too small to gain)'
     )
+    add_results_options(parser)
     args = parser.parse_args(argv)
     kinds = args.models.split(',')
     for kind in kinds:
@@ -251,7 +263,9 @@ def main(argv: list[str] | None = None) -> int:
 
     path = args.data / DATA_FILE if args.data.is_dir() else args.data
     if not path.is_file():
-        print(json.dumps({'skipped': f'no benchmark data at {path}'}))
+        reason = f'no benchmark data at {path}'
+        print(f'delan_character: skipped, {reason}; nothing written', file=sys.stderr)
+        print(json.dumps({'skipped': reason}))
         return 0
     configure_torch(args.threads)
     split = load_split(path)
@@ -280,9 +294,71 @@ def main(argv: list[str] | None = None) -> int:
                 flush=True,
             )
         results['models'][kind] = summarise(kind, runs, seeds)
+    lines = report(results, settings_lines('delan_character', parser, args))
+    print('\n'.join(lines), file=sys.stderr)
+    publish_results('delan_character', results, lines, args)
     results.update(environment())
     print(json.dumps(results, indent=2))
     return 0
+
+
+def report(results: dict[str, Any], settings: list[str]) -> list[str]:
+    """The results page's body: per model the median test MSE and wall time, and the reference."""
+    rows = []
+    for kind, model in results['models'].items():
+        reference = model['reference']
+        rows.append(
+            [
+                kind,
+                len(model['seeds']),
+                number(model['test_mse_sum_joints_median'], '.2e'),
+                number(reference['test_mse_sum_joints_median'], '.2e'),
+                number(model['ratio_to_reference_mse'], '.3g'),
+                verdict(model['beats_reference_mse']),
+                number(model['wall_s_median'], '.1f'),
+                number(reference['timed_run']['wall_s'], '.0f'),
+                verdict(model['beats_reference_time']),
+            ]
+        )
+    schedules = '; '.join(
+        f'{kind}: {settings_used["epochs"]} epochs, init {settings_used["init"]}, '
+        f'{settings_used["activation"]}, energy balance {settings_used["energy_balance"]:g}, '
+        'learning rate '
+        + ' / '.join(f'{rate:g} x {n}' for rate, n in settings_used['learning_rate_steps'])
+        for kind, settings_used in results['settings'].items()
+        if kind in results['models']
+    )
+    return [
+        'Our DeLaN and LNN on the DeLaN "character" benchmark (a simulated 2-DoF planar arm '
+        f"writing characters; data `{repo_path(results['data'])}`), with the reference's split "
+        f'(test on {", ".join(TEST_CHARACTERS)}, {results["test_samples"]} samples; train on '
+        f'the other characters, {results["train_samples"]} samples) and metric: the squared '
+        'torque error summed over the two joints, averaged over the test samples [(N*m)^2], '
+        'median over the seeds. Wall '
+        'time: one seed (build, train, evaluate), median over the seeds, against the '
+        "reference's timed single run on a 2-core CPU machine. Batch "
+        f'{results["settings"]["batch_size"]}, {results["settings"]["threads"]} torch '
+        f'thread(s); {schedules}.',
+        '',
+        *settings,
+        'Target: strictly better than the reference (its shipped 10-seed median; its timed run).',
+        '',
+        *markdown_table(
+            [
+                'model',
+                'seeds',
+                'test MSE median [(N*m)^2]',
+                'reference [(N*m)^2]',
+                'ratio',
+                'MSE target',
+                'wall median [s]',
+                'reference [s]',
+                'time target',
+            ],
+            rows,
+            'lrrrrlrrl',
+        ),
+    ]
 
 
 if __name__ == '__main__':

@@ -12,7 +12,9 @@ the twin's linear one: it is counted apart.
     python benchmarks/diagnosis_coverage.py [--seeds 7,8,9] [--duration 300] [--jobs 2]
         [--out out/benchmarks/diagnosis_coverage.json]
 
-Prints the rates per effect and overall, and writes the per-parameter details.
+Prints the rates per effect and overall, and writes the per-parameter details to ``--out``;
+writes docs/results/diagnosis_coverage.json and .md (not with ``--no-results``;
+``--results-folder`` elsewhere).
 """
 
 from __future__ import annotations
@@ -36,6 +38,15 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from common import (  # noqa: E402
+    add_results_options,
+    markdown_table,
+    publish_results,
+    settings_lines,
+    share,
+    verdict,
+)
+
 from id_learning.diagnosis import run_diagnosis  # noqa: E402
 from id_learning.twin import load_twin_config, simulate  # noqa: E402
 
@@ -50,6 +61,10 @@ JUDGED = (
     'payload_mass',
     'rotor_inertia',
 )
+#: The targets, as shares of the judged parameters: within 15 % of the truth, and the 95 %
+#: intervals holding it as often as their level says.
+TARGET_WITHIN = 0.95
+TARGET_COVERED = 0.95
 
 
 def truth_of(name: str, joint: int | None, effects: dict[str, Any], rotor: Any) -> float:
@@ -113,6 +128,7 @@ def main() -> int:
     parser.add_argument(
         '--out', type=Path, default=REPO / 'out' / 'benchmarks' / 'diagnosis_coverage.json'
     )
+    add_results_options(parser)
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(',')]
     start = time.perf_counter()
@@ -146,7 +162,60 @@ def main() -> int:
         )
     curved = sum(not r['judged'] for r in rows)
     print(f'{curved} curved viscous laws not judged (no linear coefficient to compare)')
+    lines = report(document, curved, settings_lines('diagnosis_coverage', parser, args))
+    publish_results('diagnosis_coverage', document, lines, args)
     return 0
+
+
+def report(document: dict[str, Any], curved: int, settings: list[str]) -> list[str]:
+    """The results page's body: per effect the shares within 15 % and covered, then overall."""
+    rows = []
+    for name, entry in document['summary'].items():
+        n = entry['parameters']
+        within, covered = entry['within_15pc'] / n, entry['covered'] / n
+        judged = name == 'all'
+        rows.append(
+            [
+                '**all**' if judged else name,
+                n,
+                f'{entry["within_15pc"]} ({share(within)})',
+                f'{entry["covered"]} ({share(covered)})',
+                verdict(within >= TARGET_WITHIN) if judged else '',
+                verdict(covered >= TARGET_COVERED) if judged else '',
+            ]
+        )
+    settings_used = document['settings']
+    return [
+        "The diagnosis' parameters and their 95 % intervals on fresh twin recordings with every "
+        f'effect of config/twin_default.yaml on: seed(s) '
+        f'{", ".join(str(seed) for seed in settings_used["seeds"])}, '
+        f'{settings_used["duration_s"]:g} s each. Each friction, torque-constant scale, delay, '
+        'payload-mass and rotor-inertia parameter of the refit model (named, or kept for an '
+        "alias set) against the twin's true value (torque constant as the scale s, rotor "
+        'inertia motor-side). Wall time '
+        f'{document["wall_s"] / 60:.1f} min.',
+        '',
+        *settings,
+        f'Target: every parameter within 15 % of the truth and a 95 % interval that holds it, '
+        f'judged over all parameters at >= {share(TARGET_WITHIN)} within 15 % and '
+        f">= {share(TARGET_COVERED)} covered (the intervals' level).",
+        '',
+        *markdown_table(
+            [
+                'effect',
+                'parameters',
+                'within 15 %',
+                '95 % interval holds the truth',
+                'within 15 %: target',
+                'covered: target',
+            ],
+            rows,
+            'lrrrll',
+        ),
+        '',
+        f'{curved} curved viscous law(s) not judged (no linear coefficient to compare with the '
+        "twin's).",
+    ]
 
 
 if __name__ == '__main__':

@@ -10,7 +10,8 @@ torque on a controller's inputs (recorded q, recorded v smoothed at the robot's 
 a by central differences) along the whole recording, low-passed like the labels (scipy), against
 the labels and against the noise-free torque on the test part. Prints per kind and way the test
 RMSE through the filter and against the truth as multiples of the label-noise floor, checks
-metrics.json against the independent scoring, and ends with one JSON line.
+metrics.json against the independent scoring, and ends with one JSON line; writes docs/results/
+filter_consistency.json and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
 """
 
 from __future__ import annotations
@@ -25,7 +26,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from common import DEFAULT_ROBOT, REPO, environment
+from common import (
+    DEFAULT_ROBOT,
+    REPO,
+    add_results_options,
+    environment,
+    markdown_table,
+    number,
+    publish_results,
+    settings_lines,
+    verdict,
+)
 
 from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
 from id_learning.dataset.recording import load_recording
@@ -36,6 +47,9 @@ from id_learning.training import train_run
 from id_learning.twin import load_twin_config, simulate, write_twin_output
 
 WAYS = ('through_filter', 'study')
+#: metrics.json's RMSE through the filter and the independent scoring agree within this
+#: (relative, worst joint).
+AGREEMENT = 1e-3
 
 
 def rms(x: np.ndarray) -> np.ndarray:
@@ -84,6 +98,7 @@ def main() -> None:
     )
     parser.add_argument('--seconds-per-model', type=float, default=60.0)
     parser.add_argument('--out', type=Path, help='keep the bag and the runs here')
+    add_results_options(parser)
     args = parser.parse_args()
     kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
     began = time.monotonic()
@@ -157,9 +172,66 @@ def main() -> None:
         'metrics_agreement_max_relative': agreement,
         'train_seconds': train_seconds,
         'wall_s': time.monotonic() - began,
-        'environment': environment(),
     }
-    print(json.dumps(result))
+    lines = report(result, settings_lines('filter_consistency', parser, args))
+    publish_results('filter_consistency', result, lines, args)
+    print(json.dumps({**result, 'environment': environment()}))
+
+
+def report(result: dict[str, Any], settings: list[str]) -> list[str]:
+    """The results page's body: the floor, both ratios per kind and way, the agreement."""
+    joints = result['joints']
+    kinds = list(result['train_seconds'][WAYS[0]])
+    lines = [
+        'Every kind trained both ways on one fresh twin recording (config/twin_default.yaml, '
+        f'seed {result["seed"]}, {result["duration_s"]:g} s, at most '
+        f'{result["seconds_per_model"]:g} s per model): through the label filter (the default) '
+        "and the study's way. Every model is scored alike and independently of the run's own "
+        "metrics: its torque on a controller's inputs along the whole recording, low-passed like "
+        'the labels, against the labels and against the noise-free torque on the test part, as '
+        'multiples of the label-noise floor (1: as good as the labels allow). Wall time '
+        f'{result["wall_s"] / 60:.1f} min.',
+        '',
+        *settings,
+        *markdown_table(
+            ['', *joints],
+            [
+                [
+                    'label-noise floor [N*m]',
+                    *(number(x, '.3g') for x in result['label_noise_floor_nm']),
+                ]
+            ],
+        ),
+    ]
+    for key, title in (
+        ('ratio_through_filter', 'Test RMSE through the filter against the labels / floor'),
+        ('ratio_truth_through_filter', 'Test RMSE through the filter against the truth / floor'),
+    ):
+        rows = [
+            [f'{kind} ({way})', *(number(x, '.3g') for x in result[key][way][kind])]
+            for kind in kinds
+            for way in WAYS
+        ]
+        lines += ['', f'{title}:', '', *markdown_table(['kind (way)', *joints], rows)]
+    agreement = result['metrics_agreement_max_relative']
+    rows = []
+    for kind in kinds:
+        worst = max(agreement[way][kind] for way in WAYS)
+        rows.append(
+            [
+                kind,
+                *(number(agreement[way][kind], '.1e') for way in WAYS),
+                verdict(worst <= AGREEMENT),
+            ]
+        )
+    lines += [
+        '',
+        "metrics.json's RMSE through the filter against this independent scoring, largest "
+        f'relative difference over the joints; target: within {AGREEMENT:g}.',
+        '',
+        *markdown_table(['kind', *WAYS, 'target'], rows, 'lrrl'),
+    ]
+    return lines
 
 
 if __name__ == '__main__':

@@ -10,11 +10,15 @@ A sequence model (LSTM) is timed on one window, the call the online predictor ma
 ``numpy_median_ms`` / ``numpy_p99_ms`` time the float64 one-sample path the predictor node runs
 by default (``sample_predictor``; the LSTM's ``sequence_predictor``, one sample pushed per call)
 over the same samples, in the same process and thread settings.
+
+Prints the table on stderr and the JSON document on stdout; writes docs/results/
+inference_latency.json and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -22,7 +26,16 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from common import DEFAULT_ROBOT, REPO, emit
+from common import (
+    DEFAULT_ROBOT,
+    REPO,
+    add_results_options,
+    emit,
+    markdown_table,
+    number,
+    publish_results,
+    settings_lines,
+)
 
 from id_learning.dataset.preprocess import prepare_dataset
 from id_learning.dataset.recording import load_recording
@@ -104,6 +117,7 @@ def main() -> None:
     parser.add_argument('--robot', type=Path, help='robot config (default: the run one)')
     parser.add_argument('--calls', type=int, default=1000, help='timed calls per model')
     parser.add_argument('--threads', type=int, default=1, help='torch threads for the calls')
+    add_results_options(parser)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as scratch:
         run_dir = args.run or quick_run(Path(scratch), args.robot or DEFAULT_ROBOT)
@@ -132,17 +146,58 @@ def main() -> None:
                 'batched_us_per_sample': 1e6 * timing['inference_seconds_per_sample'],
                 'window_samples': timing['latency_window_samples'],
             }
-        emit(
-            {
-                'benchmark': 'inference_latency',
-                'run': str(args.run) if args.run else 'quick set (2 epochs, 60 s twin bag)',
-                'calls': args.calls,
-                'latency_threads': args.threads,
-                'batched_threads': torch.get_num_threads(),
-                'ipo_period_ms': 1e3 * robot.ipo_period_s,
-                'models': results,
-            }
-        )
+        document = {
+            'benchmark': 'inference_latency',
+            'run': str(args.run) if args.run else 'quick set (2 epochs, 60 s twin bag)',
+            'calls': args.calls,
+            'latency_threads': args.threads,
+            'batched_threads': torch.get_num_threads(),
+            'ipo_period_ms': 1e3 * robot.ipo_period_s,
+            'models': results,
+        }
+    lines = report(document, settings_lines('inference_latency', parser, args))
+    print('\n'.join(lines), file=sys.stderr)
+    publish_results('inference_latency', document, lines, args)
+    emit(document)
+
+
+def report(document: dict, settings: list[str]) -> list[str]:
+    """The results page's body: what was timed, then one row per model."""
+    header = [
+        'model',
+        'torch median [ms]',
+        'torch p99 [ms]',
+        'numpy median [ms]',
+        'numpy p99 [ms]',
+        'batched [us/sample]',
+        'window [samples]',
+    ]
+    rows = [
+        [
+            kind,
+            number(m['median_ms'], '.3f'),
+            number(m['p99_ms'], '.3f'),
+            number(m['numpy_median_ms'], '.3f'),
+            number(m['numpy_p99_ms'], '.3f'),
+            number(m['batched_us_per_sample'], '.2f'),
+            m['window_samples'],
+        ]
+        for kind, m in document['models'].items()
+    ]
+    return [
+        "One-sample prediction time of each model, in process (no DDS): torch is the model's "
+        'own one-sample call, numpy the float64 path the predictor node runs by default (the '
+        'LSTM: one sample pushed into its window per call); median and p99 of '
+        f'{document["calls"]} timed calls per model (torch threads: '
+        f"{document['latency_threads']}) on the test part of the run's first bag; batched: "
+        'the whole test part in one call, per sample (torch threads: '
+        f'{document["batched_threads"]}). Models: {document["run"]}. For scale: the IPO period '
+        f"is {document['ipo_period_ms']:g} ms (no target is set here; the node's own is in "
+        'predictor_latency).',
+        '',
+        *settings,
+        *markdown_table(header, rows),
+    ]
 
 
 if __name__ == '__main__':

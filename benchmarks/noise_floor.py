@@ -9,15 +9,28 @@ inputs, low-passed like the labels, against the labels on the test part; the flo
 filtered label minus the filtered noise-free torque on the same rows. A ratio near 1 means the
 model is as good as the labels allow. The best model is the one with the lowest mean normalised
 test RMSE (the per-joint best is reported too).
+
+Prints the table on stderr and the JSON document on stdout; writes docs/results/noise_floor.json
+and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
-from common import REPO, emit
+from common import (
+    REPO,
+    add_results_options,
+    emit,
+    markdown_table,
+    number,
+    publish_results,
+    repo_path,
+    settings_lines,
+)
 
 from id_learning.errors import DatasetError
 from id_learning.evaluation.scoring import label_noise_floor, score_model
@@ -34,6 +47,7 @@ from id_learning.training.trainer import (
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--run', type=Path, default=REPO / 'out/demo/run')
+    add_results_options(parser)
     args = parser.parse_args()
     run = read_run(args.run)
     robot = load_robot_config(run['robot_config'])
@@ -50,24 +64,71 @@ def main() -> None:
         rmse[kind] = np.asarray(score_model(model, dataset, scale).metrics['rmse_nm'])
     best = min(rmse, key=lambda k: float(np.mean(rmse[k] / scale)))
     per_joint_best = [min(rmse, key=lambda k, j=j: rmse[k][j]) for j in range(robot.n_joints)]
-    emit(
-        {
-            'benchmark': 'noise_floor',
-            'run': str(args.run),
-            'target': config.target,
-            'preprocessing': config.mode,
-            'joints': list(robot.joints),
-            'label_noise_rms_nm': floor.tolist(),
-            'best_model': best,
-            'best_rmse_through_filter_nm': rmse[best].tolist(),
-            'best_ratio_to_noise': (rmse[best] / floor).tolist(),
-            'per_joint_best_model': per_joint_best,
-            'per_joint_best_ratio_to_noise': [
-                float(rmse[k][j] / floor[j]) for j, k in enumerate(per_joint_best)
+    document = {
+        'benchmark': 'noise_floor',
+        'run': str(args.run),
+        'target': config.target,
+        'preprocessing': config.mode,
+        'joints': list(robot.joints),
+        'label_noise_rms_nm': floor.tolist(),
+        'best_model': best,
+        'best_rmse_through_filter_nm': rmse[best].tolist(),
+        'best_ratio_to_noise': (rmse[best] / floor).tolist(),
+        'per_joint_best_model': per_joint_best,
+        'per_joint_best_ratio_to_noise': [
+            float(rmse[k][j] / floor[j]) for j, k in enumerate(per_joint_best)
+        ],
+        'ratio_to_noise_by_model': {k: (v / floor).tolist() for k, v in rmse.items()},
+        'bags': [str(bag) for bag in bags],
+    }
+    lines = report(document, settings_lines('noise_floor', parser, args))
+    print('\n'.join(lines), file=sys.stderr)
+    publish_results('noise_floor', document, lines, args)
+    emit(document)
+
+
+def report(document: dict, settings: list[str]) -> list[str]:
+    """The results page's body: the floor per joint, each model's ratio, the best ones."""
+    joints = document['joints']
+    rows = [
+        [f'**{kind}**' if kind == document['best_model'] else kind]
+        + [number(x, '.3g') for x in ratios]
+        for kind, ratios in document['ratio_to_noise_by_model'].items()
+    ]
+    return [
+        "Each model's test RMSE through the label filter as a multiple of the twin's "
+        f'label-noise floor, for the run `{repo_path(document["run"])}` (target '
+        f'`{document["target"]}`, preprocessing `{document["preprocessing"]}`; bags '
+        + ', '.join(f'`{repo_path(bag)}`' for bag in document['bags'])
+        + '), recomputed from the bags and the saved models: the floor is the filtered label '
+        'minus the filtered noise-free torque on the test rows. 1 means as good as the labels '
+        'allow. The best model (lowest mean normalised test RMSE) is in bold. No target is set '
+        'here.',
+        '',
+        *settings,
+        *markdown_table(
+            ['', *joints],
+            [
+                [
+                    'label-noise floor [N*m]',
+                    *(number(x, '.3g') for x in document['label_noise_rms_nm']),
+                ],
+                [
+                    f'best model ({document["best_model"]}) RMSE [N*m]',
+                    *(number(x, '.3g') for x in document['best_rmse_through_filter_nm']),
+                ],
+                ['best per joint', *document['per_joint_best_model']],
+                [
+                    'per-joint best / floor',
+                    *(number(x, '.3g') for x in document['per_joint_best_ratio_to_noise']),
+                ],
             ],
-            'ratio_to_noise_by_model': {k: (v / floor).tolist() for k, v in rmse.items()},
-        }
-    )
+        ),
+        '',
+        'Test RMSE through the filter / floor, per model:',
+        '',
+        *markdown_table(['model', *joints], rows),
+    ]
 
 
 if __name__ == '__main__':

@@ -26,6 +26,9 @@ running feed-forward.
 
 Without ``--artifacts`` a set of all seven kinds with the study's network sizes is fitted for one
 epoch on a short synthetic recording: latency does not depend on how well a model is trained.
+
+Prints the table on stderr and the JSON document on stdout; writes docs/results/
+predictor_latency.json and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
 """
 
 from __future__ import annotations
@@ -41,9 +44,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from common import DEFAULT_ROBOT, REPO, emit
+from common import (
+    DEFAULT_ROBOT,
+    REPO,
+    add_results_options,
+    emit,
+    markdown_table,
+    number,
+    publish_results,
+    settings_lines,
+    verdict,
+)
 
 STUDY_SIZE_QUICK = {'max_epochs': 1, 'device': 'cpu', 'stride': 16}
+#: The target: at this rate the node's p99 receive-to-publish under 1 ms and no cycle missed.
+TARGET_RATE_HZ = 125.0
+TARGET_P99_MS = 1.0
 
 
 def fit_quick_artifacts(folder: Path, robot_path: Path, kinds: list[str]) -> dict[str, Path]:
@@ -236,6 +252,7 @@ def main() -> None:
         help='reference sent before each measured phase and left out of its figures [s]',
     )
     parser.add_argument('--domain', type=int, default=int(time.time()) % 100 + 120)
+    add_results_options(parser)
     args = parser.parse_args()
     robot = load_robot_config(args.robot)
     results: dict[str, Any] = {}
@@ -263,16 +280,90 @@ def main() -> None:
                     print(kind, results[kind][-1], file=sys.stderr)
         finally:
             bench.close()
-    emit(
-        {
-            'benchmark': 'predictor_latency',
-            'executor': args.executor,
-            'inference': args.inference,
-            'warm_up_seconds': args.warm_up_seconds,
-            'target': 'p99 receive-to-publish < 1 ms at 125 Hz, no missed cycle',
-            'results': results,
-        }
+    document = {
+        'benchmark': 'predictor_latency',
+        'executor': args.executor,
+        'inference': args.inference,
+        'warm_up_seconds': args.warm_up_seconds,
+        'artifacts': str(args.artifacts) if args.artifacts else 'quick set (one epoch)',
+        'target': 'p99 receive-to-publish < 1 ms at 125 Hz, no missed cycle',
+        'results': results,
+    }
+    lines = report(document, settings_lines('predictor_latency', parser, args))
+    print('\n'.join(lines), file=sys.stderr)
+    publish_results('predictor_latency', document, lines, args)
+    emit(document)
+
+
+def meets_target(phase: dict[str, Any]) -> bool | None:
+    """At the target's rate: p99 receive-to-publish under 1 ms, nothing missed; else None."""
+    if phase['rate_hz'] != TARGET_RATE_HZ:
+        return None
+    p99 = phase['node_receive_to_publish_ms']['p99']
+    return bool(p99 < TARGET_P99_MS) and phase['missed'] == 0
+
+
+def report(document: dict[str, Any], settings: list[str]) -> list[str]:
+    """The results page's body: what was measured, then one row per kind and rate."""
+    froms = sorted({str(p['latency_from']) for ps in document['results'].values() for p in ps})
+    lines = [
+        'Latency of the predictor node per model kind over loopback DDS: this process publishes '
+        'one-point JointTrajectory references at each rate (absolute deadlines) to a predictor '
+        'node in its own process and listens to its tau_u. Executor '
+        f'`{document["executor"]}`, inference `{document["inference"]}`, models: '
+        f'{document["artifacts"]}; the first {document["warm_up_seconds"]:g} s of each phase '
+        "are a warm-up outside the figures. Receive-to-publish is the node's own figure "
+        f'(from {", ".join(froms)} to just after tau_u is published); the round trip is this '
+        "process's publish to its receipt of tau_u (two DDS hops). Missed: no tau_u at all; "
+        'late: round trip over one period.',
+        '',
+        *settings,
+        f'Target: at {TARGET_RATE_HZ:g} Hz a p99 receive-to-publish under {TARGET_P99_MS:g} ms '
+        'and no missed cycle (other rates are not judged).',
+        '',
+    ]
+    rows = []
+    for kind, phases in document['results'].items():
+        for phase in phases:
+            node, trip = phase['node_receive_to_publish_ms'], phase['round_trip_ms']
+            rows.append(
+                [
+                    kind,
+                    f'{phase["rate_hz"]:g}',
+                    phase['sent'],
+                    phase['missed'],
+                    phase['late'],
+                    number(node['median'], '.3f'),
+                    number(node['p99'], '.3f'),
+                    number(node['max'], '.3f'),
+                    number(phase['node_compute_ms']['p99'], '.3f'),
+                    number(trip['median'], '.3f'),
+                    number(trip['p99'], '.3f'),
+                    verdict(meets_target(phase)),
+                ]
+            )
+    header = [
+        'kind',
+        'rate [Hz]',
+        'sent',
+        'missed',
+        'late',
+        'receive-to-publish median [ms]',
+        'p99 [ms]',
+        'max [ms]',
+        'compute p99 [ms]',
+        'round trip median [ms]',
+        'round trip p99 [ms]',
+        'target',
+    ]
+    judged = [meets_target(phase) for phases in document['results'].values() for phase in phases]
+    judged = [ok for ok in judged if ok is not None]
+    summary = (
+        f'Target met in {sum(judged)} of {len(judged)} kinds at {TARGET_RATE_HZ:g} Hz.'
+        if judged
+        else f'No phase at {TARGET_RATE_HZ:g} Hz: the target was not judged.'
     )
+    return [*lines, *markdown_table(header, rows, 'l' + 'r' * 10 + 'l'), '', summary]
 
 
 def measure(

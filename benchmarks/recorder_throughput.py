@@ -10,6 +10,9 @@ message or stop changing, stops it with SIGINT and counts the messages in the fi
 Zero loss means every sent message is in the bag. The recorder's CPU use is its user + system time
 over the streaming span (from /proc), in percent of one core. The sweep stops at the first rate
 with a loss; the highest zero-loss rate is reported.
+
+Prints the table on stderr and the JSON document on stdout; writes docs/results/
+recorder_throughput.json and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
 """
 
 from __future__ import annotations
@@ -23,9 +26,20 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common import REPO, emit
+from common import (
+    REPO,
+    add_results_options,
+    emit,
+    markdown_table,
+    number,
+    publish_results,
+    settings_lines,
+    verdict,
+)
 
 TOPICS = ('/joint_states', '/motor_currents')
+#: The target: every message kept at this rate per topic.
+TARGET_HZ = 2000.0
 
 
 def node_environment(domain_id: int) -> dict[str, str]:
@@ -163,6 +177,7 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=5.0)
     parser.add_argument('--executor', default='single_threaded')
     parser.add_argument('--domain', type=int, default=int(time.time()) % 100 + 120)
+    add_results_options(parser)
     args = parser.parse_args()
     steps = []
     bench = Publisher(args.domain)
@@ -177,18 +192,80 @@ def main() -> None:
         bench.close()
     zero_loss = [s['rate_hz_per_topic'] for s in steps if s['zero_loss']]
     at_125 = next((s for s in steps if s['rate_hz_per_topic'] == 125.0), None)
-    emit(
-        {
-            'benchmark': 'recorder_throughput',
-            'executor': args.executor,
-            'target': '>= 2000 Hz per topic without loss',
-            'highest_zero_loss_rate_hz_per_topic': max(zero_loss) if zero_loss else None,
-            'cpu_percent_of_one_core_at_125_hz': at_125['recorder_cpu_percent_of_one_core']
-            if at_125
-            else None,
-            'steps': steps,
-        }
+    document = {
+        'benchmark': 'recorder_throughput',
+        'executor': args.executor,
+        'seconds_per_rate': args.seconds,
+        'target': '>= 2000 Hz per topic without loss',
+        'highest_zero_loss_rate_hz_per_topic': max(zero_loss) if zero_loss else None,
+        'cpu_percent_of_one_core_at_125_hz': at_125['recorder_cpu_percent_of_one_core']
+        if at_125
+        else None,
+        'steps': steps,
+    }
+    lines = report(document, settings_lines('recorder_throughput', parser, args))
+    print('\n'.join(lines), file=sys.stderr)
+    publish_results('recorder_throughput', document, lines, args)
+    emit(document)
+
+
+def meets_target(document: dict[str, Any]) -> bool | None:
+    """Zero loss at 2000 Hz or above: True; a loss below it: False; neither reached: None."""
+    highest = document['highest_zero_loss_rate_hz_per_topic']
+    if highest is not None and highest >= TARGET_HZ:
+        return True
+    if any(not step['zero_loss'] for step in document['steps']):
+        return False
+    return None
+
+
+def report(document: dict[str, Any], settings: list[str]) -> list[str]:
+    """The results page's body: the sweep, one row per rate, and the verdict."""
+    header = [
+        'rate per topic [Hz]',
+        'sent per topic',
+        *(f'in bag {topic}' for topic in TOPICS),
+        'lost (both topics)',
+        'achieved rate [Hz]',
+        'recorder CPU [% of one core]',
+        'zero loss',
+    ]
+    rows = [
+        [
+            f'{step["rate_hz_per_topic"]:g}',
+            step['sent_per_topic'],
+            *(step['in_bag'].get(topic, 0) for topic in TOPICS),
+            sum(step['lost'].values()),
+            number(step['achieved_rate_hz'], '.0f'),
+            number(step['recorder_cpu_percent_of_one_core'], '.1f'),
+            'yes' if step['zero_loss'] else 'no',
+        ]
+        for step in document['steps']
+    ]
+    highest = document['highest_zero_loss_rate_hz_per_topic']
+    cpu = document['cpu_percent_of_one_core_at_125_hz']
+    passed = meets_target(document)
+    tried = max((step['rate_hz_per_topic'] for step in document['steps']), default=0.0)
+    judged = (
+        verdict(passed)
+        if passed is not None
+        else f'not judged (no loss up to {tried:g} Hz, the highest rate tried)'
     )
+    cpu_text = f'{cpu:.1f} % of one core' if cpu is not None else 'not measured (no 125 Hz step)'
+    return [
+        'Recorder throughput: this process publishes 6-joint JointStates on '
+        f'{" and ".join(TOPICS)} at each rate per topic for {document["seconds_per_rate"]:g} s '
+        f'to a recorder node (executor `{document["executor"]}`) in its own process, stops it '
+        'with SIGINT and counts the messages in its bag; the sweep stops at the first rate '
+        "with a loss. CPU: the recorder's user + system time over the streaming span.",
+        '',
+        *settings,
+        *markdown_table(header, rows, 'r' * (len(header) - 1) + 'l'),
+        '',
+        f'Highest rate without loss: {number(highest, "g")} Hz per topic; target '
+        f'>= {TARGET_HZ:g} Hz per topic without loss: {judged}. Recorder CPU at 125 Hz: '
+        f'{cpu_text}.',
+    ]
 
 
 if __name__ == '__main__':

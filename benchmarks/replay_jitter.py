@@ -10,6 +10,10 @@ its own process. Reported:
 - ``arrival_ms``: in this process, each /joint_states arrival minus the ideal grid
   ``t_first + k * period / rate`` (DDS and this process's executor included), after removing the
   median offset, as absolute values; and the arrival-to-arrival interval minus the period.
+
+Prints the table on stderr and the JSON document on stdout; writes docs/results/
+replay_jitter.json and .md (not with ``--no-results``; ``--results-folder`` elsewhere), only when
+the replay finished.
 """
 
 from __future__ import annotations
@@ -25,7 +29,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from common import DEFAULT_BAG, REPO, emit
+from common import (
+    DEFAULT_BAG,
+    REPO,
+    add_results_options,
+    emit,
+    markdown_table,
+    number,
+    publish_results,
+    repo_path,
+    settings_lines,
+)
 
 from id_learning.bag import bag_info
 
@@ -67,6 +81,7 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=1.0)
     parser.add_argument('--executor', default='single_threaded')
     parser.add_argument('--domain', type=int, default=int(time.time()) % 100 + 120)
+    add_results_options(parser)
     args = parser.parse_args()
 
     context = Context()
@@ -135,27 +150,56 @@ def main() -> None:
     ideal = arrived[0] + (stamps - stamps[0]) / args.rate
     offset = arrived - ideal
     offset -= np.median(offset)
-    emit(
-        {
-            'benchmark': 'replay_jitter',
-            'bag': str(args.bag),
-            'bag_topics': {t.name: t.count for t in bag_info(args.bag).topics},
-            'rate': args.rate,
-            'cycles': int(diagnostics.get('cycles_published', 0)),
-            'late_cycles_over_one_period': int(diagnostics.get('late_cycles', 0)),
-            'node_lateness_ms': {
-                'median': float(diagnostics.get('lateness_median_ms', 'nan')),
-                'p99': float(diagnostics.get('lateness_p99_ms', 'nan')),
-                'max': float(diagnostics.get('lateness_max_ms', 'nan')),
-            },
-            'arrival_vs_grid_ms': summary_ms(offset),
-            'arrival_interval_error_ms': summary_ms(
-                np.diff(arrived) - np.diff(stamps) / args.rate
-            ),
-            'received_joint_states': len(arrivals),
-            'period_ms': period_ns * 1e-6,
-        }
-    )
+    document = {
+        'benchmark': 'replay_jitter',
+        'bag': str(args.bag),
+        'bag_topics': {t.name: t.count for t in bag_info(args.bag).topics},
+        'rate': args.rate,
+        'cycles': int(diagnostics.get('cycles_published', 0)),
+        'late_cycles_over_one_period': int(diagnostics.get('late_cycles', 0)),
+        'node_lateness_ms': {
+            'median': float(diagnostics.get('lateness_median_ms', 'nan')),
+            'p99': float(diagnostics.get('lateness_p99_ms', 'nan')),
+            'max': float(diagnostics.get('lateness_max_ms', 'nan')),
+        },
+        'arrival_vs_grid_ms': summary_ms(offset),
+        'arrival_interval_error_ms': summary_ms(np.diff(arrived) - np.diff(stamps) / args.rate),
+        'received_joint_states': len(arrivals),
+        'period_ms': period_ns * 1e-6,
+        'seconds': args.seconds,
+        'executor': args.executor,
+    }
+    lines = report(document, settings_lines('replay_jitter', parser, args))
+    print('\n'.join(lines), file=sys.stderr)
+    publish_results('replay_jitter', document, lines, args)
+    emit(document)
+
+
+def report(document: dict[str, Any], settings: list[str]) -> list[str]:
+    """The results page's body: the replay's lateness and the arrivals against the grid."""
+    header = ['figure', 'median [ms]', 'p99 [ms]', 'max [ms]']
+    rows = [
+        [title, *(number(document[key][s], '.3f') for s in ('median', 'p99', 'max'))]
+        for key, title in (
+            ('node_lateness_ms', 'replay lateness (publish minus deadline, its own figure)'),
+            ('arrival_vs_grid_ms', '/joint_states arrival vs the ideal grid (abs.)'),
+            ('arrival_interval_error_ms', 'arrival interval minus the period (abs.)'),
+        )
+    ]
+    return [
+        f'Replay jitter: a replay node in its own process plays {document["seconds"]:g} s of '
+        f'`{repo_path(document["bag"])}` at rate {document["rate"]:g} (executor '
+        f'`{document["executor"]}`, period {document["period_ms"]:g} ms); this process '
+        'receives its /joint_states over loopback DDS. Arrivals are compared with the ideal '
+        'grid after removing their median offset.',
+        '',
+        *settings,
+        *markdown_table(header, rows),
+        '',
+        f'Cycles published: {document["cycles"]}; later than one period: '
+        f'{document["late_cycles_over_one_period"]}; /joint_states received here: '
+        f'{document["received_joint_states"]}. No target is set for the jitter.',
+    ]
 
 
 if __name__ == '__main__':

@@ -71,6 +71,7 @@ def test_tiny_run_reports_per_seed_and_median(bench, tmp_path, capsys):
     arrays = {key: rng.normal(size=(n, 2)) for key in ('qp', 'qv', 'qa', 'tau')}
     np.savez(tmp_path / bench.DATA_FILE, labels=labels, lengths=lengths, **arrays)
     argv = ['--data', str(tmp_path), '--seeds', '2', '--delan-epochs', '2', '--lnn-epochs', '2']
+    argv += ['--no-results']
     assert bench.main(argv) == 0
     result = json.loads(capsys.readouterr().out)
     assert result['test_samples'] == 24
