@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    'STRIBECK_SHAPES',
     'coulomb',
     'load_dependent',
     'load_slope',
@@ -54,13 +55,32 @@ def viscous(v: Any, exponent: Any = 1.0, *, linear: bool = False) -> tuple[np.nd
     return (v, power) if linear else (power,)
 
 
-def stribeck(v: Any, stribeck_velocity: Any, smoothing_velocity: Any) -> np.ndarray:
-    """Stribeck friction per unit level F_s [N*m]: exp(-(v / v_s)^2) tanh(v / v_eps).
+#: How a Stribeck hump fades with speed, x = |v| / v_s: 'gaussian' exp(-x^2) (the common
+#: model), 'exponential' exp(-x) (Tustin's), 'lorentzian' 1 / (1 + x^2) (a slow, long tail).
+STRIBECK_SHAPES = ('gaussian', 'exponential', 'lorentzian')
 
-    The breakaway torque above Coulomb friction that fades as the lubricant film builds up.
+
+def stribeck(
+    v: Any, stribeck_velocity: Any, smoothing_velocity: Any, shape: str = 'gaussian'
+) -> np.ndarray:
+    """Stribeck friction per unit level F_s [N*m]: hump(|v| / v_s) tanh(v / v_eps).
+
+    The breakaway torque above Coulomb friction that fades as the lubricant film builds up;
+    ``shape`` says how it fades (``STRIBECK_SHAPES``).
+
+    Raises:
+        ValueError: an unknown shape.
     """
     v = np.asarray(v)
-    hump: np.ndarray = np.exp(-((v / stribeck_velocity) ** 2))
+    x = np.abs(v / stribeck_velocity)
+    if shape == 'gaussian':
+        hump: np.ndarray = np.exp(-(x**2))
+    elif shape == 'exponential':
+        hump = np.exp(-x)
+    elif shape == 'lorentzian':
+        hump = 1.0 / (1.0 + x**2)
+    else:
+        raise ValueError(f'unknown Stribeck shape {shape!r}; known: {list(STRIBECK_SHAPES)}')
     return hump * smooth_sign(v, smoothing_velocity)
 
 

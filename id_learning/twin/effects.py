@@ -16,7 +16,14 @@ import numpy as np
 from id_learning.config_io import check_keys, float_vector
 from id_learning.errors import ConfigError
 from id_learning.physics.effects import EFFECT_NAMES
-from id_learning.physics.friction import coulomb, load_dependent, stribeck, viscous, warm_up
+from id_learning.physics.friction import (
+    STRIBECK_SHAPES,
+    coulomb,
+    load_dependent,
+    stribeck,
+    viscous,
+    warm_up,
+)
 
 __all__ = [
     'EFFECT_NAMES',
@@ -95,17 +102,21 @@ class CoulombFriction(Effect):
 
 @dataclass(frozen=True, eq=False)
 class StribeckFriction(Effect):
-    """tau = F_s * exp(-(v / v_s)^2) * tanh(v / v_eps): extra static friction at low speed."""
+    """tau = F_s * hump(|v| / v_s) * tanh(v / v_eps): extra static friction at low speed.
+
+    ``shape``: how the hump fades with speed (``physics.friction.STRIBECK_SHAPES``).
+    """
 
     name: ClassVar[str] = 'stribeck_friction'
     vector_fields: ClassVar[tuple[str, ...]] = ('level', 'velocity')
     level: np.ndarray = field(default_factory=lambda: np.zeros(0))
     velocity: np.ndarray = field(default_factory=lambda: np.ones(0))
     smoothing_velocity: float = 0.005
+    shape: str = 'gaussian'
 
     def torque(self, v: np.ndarray) -> np.ndarray:
         """Friction torque (..., n) [N*m]."""
-        return self.level * stribeck(v, self.velocity, self.smoothing_velocity)
+        return self.level * stribeck(v, self.velocity, self.smoothing_velocity, self.shape)
 
 
 @dataclass(frozen=True, eq=False)
@@ -303,6 +314,12 @@ def _parse_effect(cls: type[Effect], data: dict[str, Any], n: int, where: str) -
             kwargs[item.name] = value
         elif item.name in {'com_m', 'inertia_kgm2'}:
             kwargs[item.name] = tuple(float_vector(value, f'{where}.{item.name}', 3).tolist())
+        elif item.name == 'shape':
+            if value not in STRIBECK_SHAPES:
+                raise ConfigError(
+                    f'{where}.shape: expected one of {list(STRIBECK_SHAPES)}, got {value!r}'
+                )
+            kwargs[item.name] = value
         elif item.name == 'joint':
             if not isinstance(value, str):
                 raise ConfigError(f'{where}.joint: expected a joint name, got {value!r}')
