@@ -5,12 +5,17 @@ parameter files) goes through ``load_yaml_mapping`` or ``parse_yaml``, which ref
 twice in one mapping (YAML's last-one-wins would drop the first silently). Numbers from configs
 go through ``finite_number`` or ``float_vector``: NaN and inf are refused with the key, the value
 and the allowed range, since NaN slips through comparisons such as ``x < 0``.
+
+Files are read through ``read_capped``: a device (``/dev/zero`` never ends) is refused, and a
+file over ``MAX_CONFIG_BYTES`` too, before it is read into memory.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -22,6 +27,7 @@ import yaml
 from id_learning.errors import ConfigError
 
 __all__ = [
+    'MAX_CONFIG_BYTES',
     'check_keys',
     'describe_range',
     'finite_number',
@@ -29,6 +35,7 @@ __all__ = [
     'load_yaml_mapping',
     'parse_yaml',
     'range_problem',
+    'read_capped',
     'readonly',
     'topic_name_problem',
 ]
@@ -97,24 +104,71 @@ def parse_yaml(text: str, where: str) -> Any:
         raise ConfigError(f'{where}: YAML nested too deeply to read') from None
 
 
+#: The largest config file read [bytes]. A robot, twin, mapping or parameter YAML is a few KiB
+#: and a URDF a few hundred KiB (the largest of example-robot-data, TIAGo dual, 0.2 MiB): a file
+#: a hundred times larger is a wrong path (a log, a bag), read whole it could fill the memory.
+MAX_CONFIG_BYTES = 16 * 2**20
+
+#: What ``stat`` calls a file that is no regular file, for messages.
+_FILE_KINDS = (
+    (stat.S_ISCHR, 'a character device'),
+    (stat.S_ISBLK, 'a block device'),
+    (stat.S_ISSOCK, 'a socket'),
+)
+
+
+def read_capped(
+    path: Path | str, what: str = 'config file', limit: int = MAX_CONFIG_BYTES
+) -> bytes:
+    """The bytes of a file of at most ``limit`` bytes; a device or a larger file is refused.
+
+    A pipe (``--robot <(...)``, a FIFO) is read as it comes, up to the limit; a device such as
+    ``/dev/zero`` is refused before a byte is read (it never ends, or is no file at all).
+
+    Args:
+        path: the file.
+        what: what the file is, for messages ('config file', 'URDF').
+        limit: the most bytes read.
+
+    Raises:
+        ConfigError: the file is missing or unreadable, a device or socket, or over ``limit``
+            bytes; the message names the file.
+    """
+    try:
+        mode = os.stat(path).st_mode
+        for is_kind, kind in _FILE_KINDS:
+            if is_kind(mode):
+                raise ConfigError(f'{path}: cannot read {what}: {kind}, not a regular file')
+        with open(path, 'rb') as stream:
+            data = stream.read(limit + 1)
+    except OSError as err:
+        raise ConfigError(f'{path}: cannot read {what}: {err.strerror or err}') from err
+    if len(data) > limit:
+        raise ConfigError(
+            f'{path}: cannot read {what}: larger than {limit / 2**20:g} MiB, which no {what} '
+            'is: is this the right file?'
+        )
+    return data
+
+
 def load_yaml_mapping(path: Path) -> dict[str, Any]:
     """Read a YAML file whose top level is a mapping; a key given twice is refused.
 
     Raises:
-        ConfigError: the file is missing, is not valid YAML, repeats a key (names the key and
-            both lines), or is not a mapping.
+        ConfigError: the file is missing, a device, over ``MAX_CONFIG_BYTES``, not UTF-8, not
+            valid YAML, repeats a key (names the key and both lines), or is not a mapping.
     """
+    data = read_capped(path)
     try:
-        text = Path(path).read_text(encoding='utf-8')
-    except (OSError, UnicodeDecodeError) as err:
-        reason = err.strerror if isinstance(err, OSError) else str(err)
-        raise ConfigError(f'{path}: cannot read config file: {reason}') from err
-    data = parse_yaml(text, str(path))
-    if not isinstance(data, dict):
+        text = data.decode('utf-8')
+    except UnicodeDecodeError as err:
+        raise ConfigError(f'{path}: cannot read config file: {err}') from err
+    mapping = parse_yaml(text, str(path))
+    if not isinstance(mapping, dict):
         raise ConfigError(
-            f'{path}: expected a mapping at the top level, got {type(data).__name__}'
+            f'{path}: expected a mapping at the top level, got {type(mapping).__name__}'
         )
-    return data
+    return mapping
 
 
 def _number_text(value: float) -> str:

@@ -15,20 +15,30 @@ import pinocchio as pin
 
 from id_learning.errors import RobotModelError
 from id_learning.robot.config import RobotConfig
-from id_learning.robot.urdf_inertials import check_urdf_inertials
+from id_learning.robot.urdf_checks import check_urdf
+from id_learning.robot.urdf_inertials import parse_urdf
 
-__all__ = ['RigidBodyDynamics', 'build_pinocchio_model']
+__all__ = ['IMPLAUSIBLE_LOAD', 'RigidBodyDynamics', 'build_pinocchio_model']
 
 N_INERTIAL_PARAMETERS = 10  # m, m*c (3), inertia at the joint frame (6): pinocchio's order
+#: A joint whose gravity torque, or whose torque to accelerate its own inertia at its limit
+#: acceleration, exceeds its torque limit this many times cannot be the robot: no drive holds
+#: it, so a mass or an inertia of the URDF is off (a unit, a typo). The shipped arms reach 0.65
+#: at most (the Panda's joint_2 holding the arm out).
+IMPLAUSIBLE_LOAD = 100.0
+#: Poses, drawn across the config's joint ranges, at which the loads are weighed.
+LOAD_POSES = 64
 
 
 def build_pinocchio_model(config: RobotConfig) -> pin.Model:
     """Build the pinocchio model of the config's URDF, locking the config's locked joints.
 
     Raises:
-        RobotModelError: the URDF cannot be parsed, or its movable joints differ from the config.
+        RobotModelError: the URDF cannot be parsed or cannot be the robot
+            (``urdf_checks.check_urdf``), its movable joints differ from the config, or its
+            masses load a joint beyond ``IMPLAUSIBLE_LOAD`` times its torque limit.
     """
-    check_urdf_inertials(config.urdf_path)
+    check_urdf(config.urdf_path, config.joints, config.locked_joints, config.source)
     try:
         renamed = _unique_frame_names(config.urdf_path)
         full = (
@@ -87,7 +97,74 @@ def build_pinocchio_model(config: RobotConfig) -> pin.Model:
         raise RobotModelError(
             f'{config.urdf_path}: payload_frame {config.payload_frame!r} is not a URDF frame'
         )
+    _check_loads(model, config)
     return model
+
+
+def _check_loads(model: pin.Model, config: RobotConfig) -> None:
+    """Refuse masses or inertias that load a joint beyond ``IMPLAUSIBLE_LOAD`` x its torque limit.
+
+    The loads are weighed at ``LOAD_POSES`` fixed poses across the joint ranges: the gravity
+    torque, and the torque that accelerates the joint's own inertia (the mass matrix' diagonal)
+    at its limit acceleration. The torque limit is the URDF's effort where it gives one (the
+    vendor's figure beside its masses), else the config's.
+    """
+    joint_ids = [model.getJointId(name) for name in config.joints]
+    index_q = [model.joints[j].idx_q for j in joint_ids]
+    index_v = [model.joints[j].idx_v for j in joint_ids]
+    urdf_effort = np.asarray(model.effortLimit)[index_v]
+    from_urdf = np.isfinite(urdf_effort) & (urdf_effort > 0)
+    reference = np.where(from_urdf, urdf_effort, config.limits.torque)
+    lower, upper = config.limits.position_lower, config.limits.position_upper
+    poses = np.vstack(
+        [
+            np.clip(0.0, lower, upper),
+            np.random.default_rng(0).uniform(lower, upper, (LOAD_POSES - 1, len(lower))),
+        ]
+    )
+    data, q = model.createData(), pin.neutral(model)
+    # The worst (ratio, joint, load, pose) of each kind; gravity is said first, being plainer.
+    worst: dict[str, tuple[float, int, float, np.ndarray]] = {}
+    with np.errstate(all='ignore'):
+        for pose in poses:
+            q[index_q] = pose
+            gravity = np.abs(pin.computeGeneralizedGravity(model, data, q)[index_v])
+            own = np.diag(pin.crba(model, data, q))[index_v] * config.limits.acceleration
+            for what, load in (('gravity', gravity), ('inertia', own)):
+                ratios = np.where(np.isnan(load), np.inf, load / reference)
+                joint = int(np.argmax(ratios))
+                if ratios[joint] > max(IMPLAUSIBLE_LOAD, worst.get(what, (0.0,))[0]):
+                    worst[what] = (float(ratios[joint]), joint, float(load[joint]), pose)
+    if not worst:
+        return
+    what = 'gravity' if 'gravity' in worst else 'inertia'
+    ratio, joint, load, at = worst[what]
+    name = config.joints[joint]
+    needs = (
+        'gravity alone loads it with'
+        if what == 'gravity'
+        else f'accelerating it at its limit {config.limits.acceleration[joint]:g} rad/s^2 needs'
+    )
+    limit = 'its URDF effort' if from_urdf[joint] else 'limits.torque of the robot config'
+    heaviest, mass = _heaviest_body(model, joint_ids[joint])
+    raise RobotModelError(
+        f'{config.urdf_path}: joint {name}: {needs} {load:.3g} N*m at q = '
+        f'{np.round(at, 2).tolist()} rad, {ratio:.3g} times {limit} {reference[joint]:g} N*m; '
+        f'beyond {IMPLAUSIBLE_LOAD:g} times no drive could move the arm, so a mass or an inertia '
+        f'of the URDF (kg, kg*m^2) or the limit is off: the heaviest link it moves is '
+        f'{heaviest} ({mass:.4g} kg)'
+    )
+
+
+def _heaviest_body(model: pin.Model, joint_id: int) -> tuple[str, float]:
+    """The link of the heaviest body that joint ``joint_id`` moves, and that body's mass [kg]."""
+    body = max(model.subtrees[joint_id], key=lambda i: model.inertias[i].mass)
+    names = [
+        frame.name
+        for frame in model.frames
+        if frame.parentJoint == body and frame.type == pin.FrameType.BODY
+    ]
+    return (names[0] if names else model.names[body]), float(model.inertias[body].mass)
 
 
 def frame_id(model: pin.Model, name: str, what: str = 'frame') -> int:
@@ -115,11 +192,7 @@ def _unique_frame_names(urdf: Path | str) -> str | None:
     never names them: renaming them leaves the dynamics and every name the package uses as they
     were, and the link keeps its name.
     """
-    try:
-        tree = ElementTree.parse(urdf)
-    except (OSError, ElementTree.ParseError) as err:
-        raise RobotModelError(f'{urdf}: cannot read the URDF: {err}') from err
-    root = tree.getroot()
+    root = parse_urdf(urdf)
     links = {link.get('name') for link in root.iter('link')}
     names = {joint.get('name') for joint in root.iter('joint')} | links
     changed = False

@@ -14,6 +14,7 @@ from id_learning.robot.drives import (
     motor_torque_from_current,
     rotor_inertia_torque,
 )
+from id_learning.robot.urdf_checks import check_urdf
 from id_learning.robot.urdf_inertials import check_urdf_inertials
 
 __all__ = [
@@ -21,6 +22,7 @@ __all__ = [
     'JointLimits',
     'RobotConfig',
     'TopicConfig',
+    'check_urdf',
     'check_urdf_inertials',
     'current_from_motor_torque',
     'load_robot_config',

@@ -26,7 +26,7 @@ from id_learning.config_io import (
     topic_name_problem,
 )
 from id_learning.errors import ConfigError
-from id_learning.robot.urdf_inertials import check_urdf_inertials
+from id_learning.robot.urdf_checks import check_urdf
 
 __all__ = [
     'DriveConfig',
@@ -206,7 +206,9 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
 
     Raises:
         ConfigError: a key is unknown or missing, or a value is out of range (names key and value).
-        RobotModelError: a URDF link no rigid body can be (``check_urdf_inertials``).
+        RobotModelError: a URDF that cannot be the robot (``urdf_checks.check_urdf``): a link no
+            rigid body can be, an axis of zero length, a driven joint that mimics another, no
+            moving link with mass.
     """
     check_keys(
         data,
@@ -268,7 +270,7 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
     if not isinstance(name, str) or not name:
         raise ConfigError(f'{where}: name must be a non-empty string')
     urdf_path = resolve_urdf(str(data['urdf']), base_dir, where)
-    check_urdf_inertials(urdf_path)
+    check_urdf(urdf_path, joints, locked, where)
     return RobotConfig(
         name=name,
         urdf_path=urdf_path,

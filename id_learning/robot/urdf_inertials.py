@@ -11,8 +11,11 @@ Real URDFs bend these rules where it does not matter: a 0.1 mg gripper frame wit
 the triangle inequality (Allegro, PR2): of the 69 URDFs of example-robot-data, 29 do. So only a
 link that carries weight, at least ``SIGNIFICANT_KG`` or ``SIGNIFICANT_SHARE`` of the robot's
 mass, is refused for an all-zero or indefinite inertia (3 of the 69: iCub's 1.3 kg head without
-inertia, Romeo's 5 kg body with a negative moment); everything else is said once, as a warning
-naming the links, and the robot is loaded.
+inertia, Romeo's 5 kg body with a negative moment); everything else is said, one warning line
+per link saying what the model gets wrong, and the robot is loaded.
+
+``urdf_checks.check_urdf`` adds what needs the robot config (which links move, which joints are
+driven); this module looks at each link alone.
 """
 
 from __future__ import annotations
@@ -24,9 +27,19 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from id_learning.errors import RobotModelError
+from id_learning.config_io import read_capped
+from id_learning.errors import ConfigError, RobotModelError
 
-__all__ = ['SIGNIFICANT_KG', 'SIGNIFICANT_SHARE', 'check_urdf_inertials']
+__all__ = [
+    'SIGNIFICANT_KG',
+    'SIGNIFICANT_SHARE',
+    'Inertial',
+    'check_urdf_inertials',
+    'inertia_problems',
+    'link_inertials',
+    'parse_urdf',
+    'read_urdf',
+]
 
 _LOG = logging.getLogger(__name__)
 #: A link this heavy, or this share of the robot's mass, carries weight: its inertia must be one.
@@ -39,8 +52,35 @@ _TOLERANCE = 1e-9
 #: Principal moments below this are zero [kg*m^2] (a hand-written URDF's rounding).
 _ZERO = 1e-12
 
+#: A link's mass [kg] and rotational inertia about its centre of mass [kg*m^2].
+Inertial = tuple[float, np.ndarray]
 
-def _link_inertial(link: ElementTree.Element, urdf: Path) -> tuple[float, np.ndarray] | None:
+
+def read_urdf(urdf: Path | str) -> bytes:
+    """The URDF's bytes, read through the capped reader (``config_io.read_capped``).
+
+    Raises:
+        RobotModelError: the file is missing, a device or over ``MAX_CONFIG_BYTES``.
+    """
+    try:
+        return read_capped(urdf, 'URDF')
+    except ConfigError as err:
+        raise RobotModelError(str(err)) from None
+
+
+def parse_urdf(urdf: Path | str, text: bytes | None = None) -> ElementTree.Element:
+    """The URDF's root element; ``text``: its bytes, when already read (``read_urdf``).
+
+    Raises:
+        RobotModelError: the file is missing, a device, over ``MAX_CONFIG_BYTES``, or no XML.
+    """
+    try:
+        return ElementTree.fromstring(read_urdf(urdf) if text is None else text)
+    except ElementTree.ParseError as err:
+        raise RobotModelError(f'{urdf}: cannot read the URDF: {err}') from err
+
+
+def _link_inertial(link: ElementTree.Element, urdf: Path | str) -> Inertial | None:
     """The link's mass [kg] and inertia matrix [kg*m^2], or None when it has no <inertial>."""
     inertial = link.find('inertial')
     if inertial is None:
@@ -57,48 +97,74 @@ def _link_inertial(link: ElementTree.Element, urdf: Path) -> tuple[float, np.nda
     return mass, np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
 
 
+def link_inertials(root: ElementTree.Element, urdf: Path | str) -> dict[str, Inertial | None]:
+    """Each link's mass and inertia (None: no <inertial>), by name, in the URDF's order.
+
+    Raises:
+        RobotModelError: an unreadable <inertial>; a mass that is not finite and >= 0 or an
+            inertia that is not finite.
+    """
+    links: dict[str, Inertial | None] = {}
+    for link in root.iter('link'):
+        name, found = link.get('name', '?'), _link_inertial(link, urdf)
+        if found is not None:
+            mass, inertia = found
+            if not (math.isfinite(mass) and mass >= 0 and np.isfinite(inertia).all()):
+                raise RobotModelError(
+                    f'{urdf}: link {name}: mass {mass:g} kg and inertia must be finite, '
+                    'the mass >= 0'
+                )
+        links[name] = found
+    return links
+
+
+def inertia_problems(links: dict[str, Inertial | None], urdf: Path | str) -> list[tuple[str, str]]:
+    """(link, message line) for each link whose inertia is off but is loaded anyway.
+
+    Raises:
+        RobotModelError: a link of significant mass whose inertia is all zero or has a negative
+            principal moment.
+    """
+    total = sum(found[0] for found in links.values() if found is not None)
+    threshold = min(SIGNIFICANT_KG, SIGNIFICANT_SHARE * total)
+    problems = []
+    for name, found in links.items():
+        if found is None:
+            continue
+        mass, inertia = found
+        problem = _problem(mass, inertia)
+        if problem is None:
+            continue
+        refused, text = problem
+        line = f'{urdf}: link {name}: {text}'
+        if refused and mass >= threshold:
+            raise RobotModelError(line)
+        if refused:
+            line += (
+                f'; loaded, as a link this light (under {threshold:.3g} kg, the lesser of '
+                f'{SIGNIFICANT_KG:g} kg and {SIGNIFICANT_SHARE:.0%} of the robot) barely moves '
+                'the torques'
+            )
+        problems.append((name, line))
+    return problems
+
+
 def check_urdf_inertials(urdf: Path | str) -> list[str]:
     """Refuse a link no rigid body can be that carries weight; what else is off, as warnings.
 
+    The URDF alone: ``urdf_checks.check_urdf`` is the full check of a robot config's URDF.
+
     Returns:
-        One line per link whose inertia is off but does not matter (also logged as a warning).
+        One line per link whose inertia is off but is loaded (each also logged as a warning).
 
     Raises:
         RobotModelError: the URDF is unreadable; a mass that is not finite and >= 0; a link of
             significant mass whose inertia is all zero or has a negative principal moment.
     """
-    urdf = Path(urdf)
-    try:
-        root = ElementTree.parse(urdf).getroot()
-    except (OSError, ElementTree.ParseError) as err:
-        raise RobotModelError(f'{urdf}: cannot read the URDF: {err}') from err
-    links = []
-    for link in root.iter('link'):
-        found = _link_inertial(link, urdf)
-        if found is None:
-            continue
-        name, (mass, inertia) = link.get('name', '?'), found
-        if not (math.isfinite(mass) and mass >= 0 and np.isfinite(inertia).all()):
-            raise RobotModelError(
-                f'{urdf}: link {name}: mass {mass:g} kg and inertia must be finite, the mass >= 0'
-            )
-        links.append((name, mass, inertia))
-    total = sum(mass for _, mass, _ in links)
-    warnings = []
-    for name, mass, inertia in links:
-        problem = _problem(mass, inertia)
-        if problem is None:
-            continue
-        significant = mass >= min(SIGNIFICANT_KG, SIGNIFICANT_SHARE * total) and problem[0]
-        text = f'{urdf}: link {name}: {problem[1]}'
-        if significant:
-            raise RobotModelError(text)
-        warnings.append(text)
-    if warnings:
-        _LOG.warning('%d URDF link(s) whose inertia bends the rigid-body rules where it cannot '
-                     'mislead (too light, a thin rod, the triangle inequality): %s',
-                     len(warnings), '; '.join(warnings))  # fmt: skip
-    return warnings
+    lines = [line for _, line in inertia_problems(link_inertials(parse_urdf(urdf), urdf), urdf)]
+    for line in lines:
+        _LOG.warning('%s', line)
+    return lines
 
 
 def _problem(mass: float, inertia: np.ndarray) -> tuple[bool, str] | None:
@@ -108,7 +174,11 @@ def _problem(mass: float, inertia: np.ndarray) -> tuple[bool, str] | None:
     shown = np.round(moments, 9).tolist()
     if mass == 0:
         if largest > 0:
-            return False, f'a massless link with inertia {shown} kg*m^2 (a frame has none)'
+            return False, (
+                f'mass 0 with principal moments {shown} kg*m^2: a mass typed as 0? A frame has '
+                'neither; the model keeps the rotational inertia but not the weight nor the '
+                "mass's share of the inertia"
+            )
         return None
     if largest <= _ZERO:
         return True, (
@@ -122,10 +192,14 @@ def _problem(mass: float, inertia: np.ndarray) -> tuple[bool, str] | None:
             'semi-definite); give its inertia about the centre of mass'
         )
     if moments[0] <= _TOLERANCE * largest:
-        return False, f'mass {mass:g} kg with principal moments {shown} kg*m^2 (a thin rod)'
+        return False, (
+            f'mass {mass:g} kg with principal moments {shown} kg*m^2 (a thin rod: no '
+            'inertia about one axis); loaded as it is'
+        )
     if moments[0] + moments[1] < moments[2] * (1 - _TOLERANCE):
         return False, (
-            f'principal moments {shown} kg*m^2 break the triangle inequality I1 + I2 >= I3 of '
-            'a rigid body'
+            f'principal moments {shown} kg*m^2 break the triangle inequality I1 + I2 >= I3: no '
+            'mass distribution has this inertia, so the inertia torques the model predicts for '
+            'this link are off; give its inertia about the centre of mass'
         )
     return None

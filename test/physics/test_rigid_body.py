@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -455,3 +456,79 @@ def test_a_urdf_whose_fixed_joints_are_named_like_their_links_builds_reduces_and
     full = pin.buildModelFromXML(renamed)
     reduced = pin.buildReducedModel(full, [full.getJointId('joint_6')], pin.neutral(full))
     assert reduced.nv == 5
+
+
+# -- masses and inertias no drive could move -----------------------------------------------------
+def _mabi_with(tmp_path: Path, mabi: RobotConfig, old: str, new: str) -> RobotConfig:
+    text = MABI_URDF.read_text()
+    assert text.count(old) == 1
+    urdf = tmp_path / 'edited.urdf'
+    urdf.write_text(text.replace(old, new))
+    return replace(mabi, urdf_path=urdf)
+
+
+def test_a_mass_gravity_loads_beyond_100_times_the_torque_limit_is_refused_in_one_line(
+    tmp_path: Path, mabi: RobotConfig
+) -> None:
+    huge = _mabi_with(tmp_path, mabi, '<mass value="150"/>', '<mass value="1e30"/>')
+    with pytest.raises(RobotModelError) as err:
+        build_pinocchio_model(huge)
+    message = str(err.value)
+    assert re.match(
+        rf'{re.escape(str(huge.urdf_path))}: joint joint_2: gravity alone loads it with '
+        r'[0-9.e+]+ N\*m at q = \[.*\] rad, [0-9.e+]+ times its URDF effort 15000 N\*m; '
+        r'beyond 100 times no drive could move the arm',
+        message,
+    )
+    assert message.endswith('the heaviest link it moves is link_3 (1e+30 kg)')
+    assert '\n' not in message
+
+
+def test_an_inertia_no_drive_could_accelerate_is_refused(
+    tmp_path: Path, mabi: RobotConfig
+) -> None:
+    link_3 = 'ixx="4.9964" ixy="0" ixz="-1.0061333" iyy="7.07" iyz="0" izz="5.6256"'
+    huge = _mabi_with(
+        tmp_path, mabi, link_3, 'ixx="1e9" ixy="0" ixz="0" iyy="1e9" iyz="0" izz="1e9"'
+    )
+    with pytest.raises(
+        RobotModelError,
+        match=r'joint joint_\d: accelerating it at its limit [0-9.]+ rad/s\^2 needs .* times its '
+        r'URDF effort',
+    ):
+        build_pinocchio_model(huge)
+
+
+@pytest.mark.parametrize('scale', [0.01, 1.0, 20.0])
+def test_masses_within_a_hundred_times_what_the_drives_hold_are_accepted(
+    tmp_path: Path, mabi: RobotConfig, scale: float
+) -> None:
+    """Every link mass and inertia scaled: up to 20 x the MABI stays below the 100 x bound."""
+    root = ET.parse(MABI_URDF).getroot()
+    for inertial in root.iter('inertial'):
+        mass, inertia = inertial.find('mass'), inertial.find('inertia')
+        mass.set('value', repr(scale * float(mass.get('value'))))
+        for key, value in inertia.attrib.items():
+            inertia.set(key, repr(scale * float(value)))
+    urdf = tmp_path / 'scaled.urdf'
+    urdf.write_text(ET.tostring(root, encoding='unicode'))
+    model = build_pinocchio_model(replace(mabi, urdf_path=urdf))
+    shipped = build_pinocchio_model(mabi)
+    assert sum(model.inertias[i].mass for i in range(1, model.njoints)) == pytest.approx(
+        scale * sum(shipped.inertias[i].mass for i in range(1, shipped.njoints))
+    )
+
+
+def test_the_torque_limit_weighed_against_is_the_urdfs_effort_else_the_configs(
+    tmp_path: Path, mabi: RobotConfig
+) -> None:
+    tiny = replace(mabi, limits=replace(mabi.limits, torque=np.full(6, 1.0)))
+    build_pinocchio_model(tiny)  # the URDF's efforts hold the arm: its config's limit is no mass
+    no_effort = MABI_URDF.read_text().replace(' effort="15000"', ' effort="0"')
+    urdf = tmp_path / 'no_effort.urdf'
+    urdf.write_text(no_effort)
+    build_pinocchio_model(replace(mabi, urdf_path=urdf))  # the config's 15000 N*m hold it too
+    with pytest.raises(
+        RobotModelError, match=r'joint joint_2: .* times limits\.torque of the robot config 1 N\*m'
+    ):
+        build_pinocchio_model(replace(tiny, urdf_path=urdf))

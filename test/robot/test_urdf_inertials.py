@@ -50,16 +50,26 @@ def test_a_heavy_link_with_an_impossible_inertia_is_refused_naming_link_and_file
     [
         (LINK_3, 'ixx="0" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', 'a thin rod'),
         (LINK_3, 'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"', 'triangle inequality'),
-        ('<mass value="150"/>', '<mass value="0"/>', 'a massless link with inertia'),
+        ('<mass value="150"/>', '<mass value="0"/>', 'mass 0 with principal moments'),
     ],
     ids=['rod', 'triangle', 'massless'],
 )
-def test_an_inertia_that_bends_the_rules_without_harm_is_said_not_refused(
+def test_an_inertia_that_bends_the_rules_is_said_not_refused(
     tmp_path: Path, old: str, new: str, said: str, caplog
 ) -> None:
     path = _edited(tmp_path, old, new)
-    assert any(said in line for line in check_urdf_inertials(path))
-    assert said in caplog.text
+    lines = check_urdf_inertials(path)
+    assert len(lines) == 1
+    assert lines[0].startswith(f'{path}: link link_3: ')
+    assert said in lines[0]
+    assert caplog.messages == lines  # one warning line per link, no summary around it
+
+
+def test_a_massive_link_typed_massless_is_not_said_to_be_harmless(tmp_path: Path) -> None:
+    (line,) = check_urdf_inertials(_edited(tmp_path, '<mass value="150"/>', '<mass value="0"/>'))
+    assert 'a mass typed as 0?' in line
+    assert 'not the weight' in line
+    assert 'cannot mislead' not in line
 
 
 def test_a_light_link_with_a_zero_inertia_is_said_not_refused(tmp_path: Path) -> None:
@@ -69,6 +79,7 @@ def test_a_light_link_with_a_zero_inertia_is_said_not_refused(tmp_path: Path) ->
     said = check_urdf_inertials(light)
     assert len(said) == 1
     assert 'link_3: mass 0.0001 kg' in said[0]
+    assert 'loaded, as a link this light (under 1 kg' in said[0]
 
 
 @pytest.mark.parametrize('name', ['mabi_max100', 'ur5', 'panda'])
