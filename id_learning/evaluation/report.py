@@ -12,14 +12,23 @@ Exhibits (after Trinh et al. 2025, see evaluation/study.py):
     component, where the model separates one);
 (d) the share of the label torque per joint from inertia, gravity, Coriolis, rotor inertia and
     friction (nominal split, and the RNEA+LQ split when that model was trained);
-(e) per label case, whether the study's findings hold, by explicit rules (``check_findings``).
+(e) per label case, whether the study's findings hold, by explicit rules (``check_findings``);
+
+and what a controls engineer looks at beside them (``report_signals``):
+
+(f) per model, its torque against the label per joint on the window of the test part where the
+    motion is richest;
+(g) per joint, the amplitude spectral density of each model's test error, with the label-noise
+    floor drawn as white noise through the label filter;
+(h) the closed loop on the twin (``closed_loop_report``), added by ``closed-loop`` when it is
+    given this report.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -35,6 +44,7 @@ from id_learning.evaluation.findings import (
     check_findings,
     friction_share,
     high_friction_axes,
+    model_label,
 )
 from id_learning.evaluation.metrics import absolute_errors
 from id_learning.evaluation.physics_report import identified_physics_section
@@ -44,6 +54,15 @@ from id_learning.evaluation.report_figures import (
     plot_rmse,
     plot_shares,
     torque_splits,
+)
+from id_learning.evaluation.report_signals import (
+    OVERLAY_SECONDS,
+    LabelFloor,
+    label_floor,
+    plot_error_spectra,
+    plot_torque_overlay,
+    richest_window,
+    stretches_of,
 )
 from id_learning.evaluation.report_tables import (
     MODES,
@@ -61,10 +80,12 @@ from id_learning.robot.config import RobotConfig
 
 __all__ = [
     'DISSIPATION_FREE_SHARE',
+    'ERROR_SPECTRA_PNG',
     'FRICTION_SMOOTHING_VELOCITY',
     'GAP_RECOVERED_FRACTION',
     'HIGH_FRICTION_SHARE',
     'LAGRANGIAN_COMPETITIVE_RATIO',
+    'OVERLAYS_DIR',
     'Finding',
     'ReportInput',
     'check_findings',
@@ -72,6 +93,19 @@ __all__ = [
     'high_friction_axes',
     'write_report',
 ]
+
+#: The folder of the torque overlays, one PNG per model kind (figure (f)).
+OVERLAYS_DIR = 'torque_overlays'
+#: The error spectra (figure (g)).
+ERROR_SPECTRA_PNG = 'error_spectra.png'
+
+
+class Figure(NamedTuple):
+    """A figure of the report: its file (relative to report.md), heading and what it shows."""
+
+    name: str
+    caption: str
+    sentence: str
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,21 +156,44 @@ def _figures(
     rmse_norm: dict[str, np.ndarray],
     components: dict[str, np.ndarray],
     out: Path,
-) -> list[tuple[str, str]]:
-    """Write the PNG figures (a)-(d) into ``out``; returns their file names and captions."""
+) -> list[Figure]:
+    """Write the PNG figures (a)-(g) into ``out``; returns their files, captions and sentences."""
     ds = report.dataset
     joints, kinds = ds.joints, list(report.models)
-    figures: list[tuple[str, str]] = []
+    figures: list[Figure] = []
+    floor = label_floor(ds, _evaluated_index(report), report.noise_floor)
     if kinds:
         target = ds.tau[_evaluated_index(report)]
-        plot_rmse(joints, rmse_norm, out / 'rmse_per_joint.png')
-        figures.append(('rmse_per_joint.png', '(a) Test RMSE per joint, normalised scale'))
+        scaled = None if floor is None else floor.rms_nm / report.target_scale
+        plot_rmse(
+            joints, rmse_norm, out / 'rmse_per_joint.png', scaled, floor.label if floor else ''
+        )
+        figures.append(
+            Figure(
+                'rmse_per_joint.png',
+                '(a) Test RMSE per joint, normalised scale',
+                "Each model's test RMSE through the label filter, per joint"
+                + (
+                    f'; the dashed line is the {floor.label}: a bar on it has nothing left '
+                    'to learn.'
+                    if floor
+                    else '.'
+                ),
+            )
+        )
         plot_boxes(
             joints,
             {k: absolute_errors(predictions[k], target) for k in kinds},
             out / 'abs_error_boxplot.png',
         )
-        figures.append(('abs_error_boxplot.png', '(b) Absolute test errors per joint and model'))
+        figures.append(
+            Figure(
+                'abs_error_boxplot.png',
+                '(b) Absolute test errors per joint and model',
+                'How the errors spread: a long upper whisker is an error concentrated in few '
+                'moments (a friction flip, a fast reversal), not a uniform offset.',
+            )
+        )
     if kinds and not ds.is_shuffled:  # a shuffled split's test samples form no stretch
         dissipative_figure(
             robot=report.robot,
@@ -147,10 +204,87 @@ def _figures(
             path=out / 'dissipative_axis1.png',
         )
         figures.append(
-            ('dissipative_axis1.png', f'(c) Dissipative torque on {joints[0]}, test stretch')
+            Figure(
+                'dissipative_axis1.png',
+                f'(c) Dissipative torque on {joints[0]}, test stretch',
+                'What each model adds to the nominal rigid body against what the label holds '
+                'beyond it: friction and what the URDF misses.',
+            )
         )
     plot_shares(joints, torque_splits(ds, components, report.models), out / 'torque_shares.png')
-    figures.append(('torque_shares.png', '(d) Share of the label torque per joint'))
+    figures.append(
+        Figure(
+            'torque_shares.png',
+            '(d) Share of the label torque per joint',
+            'Which physical effect carries the label on each joint, so that an error can be '
+            'weighed against the effect it belongs to.',
+        )
+    )
+    if kinds and not ds.is_shuffled:
+        figures += _signal_figures(report, predictions, floor, out)
+    return figures
+
+
+def _signal_figures(
+    report: ReportInput,
+    predictions: dict[str, np.ndarray],
+    floor: LabelFloor | None,
+    out: Path,
+) -> list[Figure]:
+    """Figures (f) and (g): torque overlays per model, and the error spectra per joint."""
+    ds = report.dataset
+    index = _evaluated_index(report)
+    start, stop = richest_window(ds.controller, report.rows, round(OVERLAY_SECONDS / ds.period_s))
+    # The window's place in the concatenated evaluated rows, where the predictions are.
+    head = int(np.flatnonzero(index == start)[0])
+    window = slice(head, head + stop - start)
+    first = next(a for a, b in report.rows if a <= start < b)  # the evaluated range it is in
+    t = (np.arange(start, stop) - first) * ds.period_s
+    (out / OVERLAYS_DIR).mkdir(exist_ok=True)
+    figures: list[Figure] = []
+    for kind in report.models:
+        name = f'{OVERLAYS_DIR}/{kind}.png'
+        plot_torque_overlay(
+            t=t,
+            label=ds.tau[start:stop],
+            prediction=predictions[kind][window],
+            joints=ds.joints,
+            kind=kind,
+            target=ds.target,
+            path=out / name,
+        )
+        figures.append(
+            Figure(
+                name,
+                f'(f) {model_label(kind)}: predicted against measured torque',
+                f'{model_label(kind)} (dashed, through the label filter) against the filtered '
+                f'label (black) over {(stop - start) * ds.period_s:.0f} s from {t[0]:.0f} s '
+                f'into the test part (rows {start}-{stop}), where the joints move and '
+                'accelerate most.',
+            )
+        )
+    target = ds.tau[index]
+    plot_error_spectra(
+        errors={k: predictions[k] - target for k in report.models},
+        stretches=stretches_of(report.rows),
+        dataset=ds,
+        floor=floor,
+        path=out / ERROR_SPECTRA_PNG,
+    )
+    figures.append(
+        Figure(
+            ERROR_SPECTRA_PNG,
+            '(g) Spectra of the test errors per joint',
+            'Where in frequency each error lies: below the dotted cut-off, what the model gets '
+            'wrong in the motion; '
+            + (
+                f'the dashed line is the {floor.label} as white noise through the label filter: '
+                'an error at the line is noise the labels carry.'
+                if floor
+                else 'no label-noise floor is known here.'
+            ),
+        )
+    )
     return figures
 
 
@@ -175,10 +309,10 @@ def _header(report: ReportInput) -> list[str]:
     ]
 
 
-def _figures_section(figures: list[tuple[str, str]]) -> list[str]:
+def _figures_section(figures: list[Figure]) -> list[str]:
     lines = ['## Figures', '']
-    for name, caption in figures:
-        lines += [f'### {caption}', '', f'![{caption}]({name})', '']
+    for name, caption, sentence in figures:
+        lines += [f'### {caption}', '', sentence, '', f'![{caption}]({name})', '']
     return lines
 
 

@@ -1,8 +1,10 @@
-"""The report's PNG figures (a)-(d), and the numbers only they show.
+"""The report's PNG figures (a)-(d), the numbers only they show, and what all figures share.
 
 Plotting is kept apart from the markdown (``report_tables``) and the findings (``findings``)
 because it alone needs matplotlib (imported on first use, headless) and reads the models'
-torque components; ``evaluation.report`` calls these functions and links the files.
+torque components; ``evaluation.report`` calls these functions and links the files. The other
+figure modules (``report_signals``, ``closed_loop_report``) draw with the same helpers, so that
+a model has one colour in every figure.
 """
 
 from __future__ import annotations
@@ -24,11 +26,15 @@ from id_learning.robot.config import RobotConfig
 __all__ = [
     'TRAJECTORY_SECONDS',
     'dissipative_figure',
+    'model_colours',
+    'model_styles',
     'plot_boxes',
     'plot_dissipative',
     'plot_rmse',
     'plot_shares',
+    'pyplot',
     'rnea_lq_split',
+    'save_figure',
     'torque_splits',
 ]
 
@@ -36,7 +42,8 @@ __all__ = [
 TRAJECTORY_SECONDS = 60.0
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """Matplotlib's pyplot on the headless Agg back end (imported on first use)."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -45,7 +52,7 @@ def _pyplot() -> Any:
     return plt
 
 
-def _save(fig: Any, path: Path) -> None:
+def save_figure(fig: Any, path: Path) -> None:
     """Save and close ``fig``; a write that fails (disk full) leaves no partial PNG at ``path``.
 
     Raises:
@@ -57,21 +64,63 @@ def _save(fig: Any, path: Path) -> None:
         Path(path).unlink(missing_ok=True)
         raise
     finally:
-        _pyplot().close(fig)
+        pyplot().close(fig)
 
 
-def _colours(kinds: list[str]) -> dict[str, Any]:
-    order = list(MODEL_LABELS)
-    plt = _pyplot()
-    cmap = plt.get_cmap('tab10')
-    return {k: cmap(order.index(k) if k in order else 7 + i % 3) for i, k in enumerate(kinds)}
+#: Colours of the kinds beyond the study's seven (which take tab10's first seven): none grey,
+#: which the figures keep for labels and feedback alone.
+_EXTRA_COLOURS = {
+    'rnea_id': 'tab:cyan',
+    'rnea_effects': 'tab:olive',
+    'rnea_id_mlp': '#1f3f8f',
+    'rnea_effects_mlp': '#8b6914',
+}
+_SPARE_COLOURS = ('#2f4f4f', '#daa520', '#800000')
+#: Line styles cycled over the models, so that lines of the same level stay told apart.
+_LINE_STYLES: tuple[Any, ...] = ('-', (0, (5, 2)), (0, (3, 1, 1, 1)), (0, (1, 1)))
 
 
-def plot_rmse(joints: tuple[str, ...], errors: dict[str, np.ndarray], path: Path) -> None:
-    """Figure (a): bars of the per-joint normalised test RMSE, one per model."""
-    plt = _pyplot()
+def model_colours(kinds: list[str]) -> dict[str, Any]:
+    """A fixed colour per model kind, the same in every figure."""
+    study = list(MODEL_LABELS)[:7]
+    cmap = pyplot().get_cmap('tab10')
+    colours: dict[str, Any] = {}
+    spare = 0
+    for kind in kinds:
+        if kind in study:
+            colours[kind] = cmap(study.index(kind))
+        elif kind in _EXTRA_COLOURS:
+            colours[kind] = _EXTRA_COLOURS[kind]
+        else:
+            colours[kind] = _SPARE_COLOURS[spare % len(_SPARE_COLOURS)]
+            spare += 1
+    return colours
+
+
+def model_styles(kinds: list[str]) -> dict[str, dict[str, Any]]:
+    """Per model, the colour and line style of its line: overlapping models stay visible."""
+    colours = model_colours(kinds)
+    return {
+        kind: {'color': colours[kind], 'ls': _LINE_STYLES[i % len(_LINE_STYLES)]}
+        for i, kind in enumerate(kinds)
+    }
+
+
+def plot_rmse(
+    joints: tuple[str, ...],
+    errors: dict[str, np.ndarray],
+    path: Path,
+    floor: np.ndarray | None = None,
+    floor_label: str = 'label-noise floor',
+) -> None:
+    """Figure (a): bars of the per-joint normalised test RMSE, one per model.
+
+    ``floor`` (n,), on the same normalised scale, is drawn as a line across each joint's bars:
+    the error no model can go below, so that a bar near it has nothing left to learn.
+    """
+    plt = pyplot()
     kinds = list(errors)
-    colours = _colours(kinds)
+    colours = model_colours(kinds)
     fig, ax = plt.subplots(figsize=(11, 4.2), constrained_layout=True)
     width = 0.8 / max(len(kinds), 1)
     x = np.arange(len(joints))
@@ -83,23 +132,36 @@ def plot_rmse(joints: tuple[str, ...], errors: dict[str, np.ndarray], path: Path
             label=model_label(kind),
             color=colours[kind],
         )
+    values = [np.asarray(e, dtype=float) for e in errors.values()]
+    if floor is not None:
+        ax.hlines(
+            floor,
+            x - 0.45,
+            x + 0.45,
+            colors='k',
+            linestyles='--',
+            lw=1.6,
+            zorder=3,
+            label=floor_label,
+        )
+        values.append(np.asarray(floor, dtype=float))
     ax.set_xticks(x, joints)
-    values = np.concatenate([np.asarray(e, dtype=float) for e in errors.values()])
-    positive = values[values > 0]
+    flat = np.concatenate(values) if values else np.zeros(0)
+    positive = flat[flat > 0]
     if positive.size and positive.max() / positive.min() > 30:  # one bad model hides the rest
         ax.set_yscale('log')
     ax.set_ylabel('test RMSE, normalised [-1, 1] scale [-]')
     ax.set_title('Test RMSE per joint and model (lower is better)')
     ax.grid(axis='y', alpha=0.3)
-    ax.legend(ncol=min(len(kinds), 7), fontsize=8, loc='upper left')
-    _save(fig, path)
+    ax.legend(ncol=min(len(kinds) + (floor is not None), 5), fontsize=8, loc='upper left')
+    save_figure(fig, path)
 
 
 def plot_boxes(joints: tuple[str, ...], abs_errors: dict[str, np.ndarray], path: Path) -> None:
     """Figure (b): box plots of the absolute test errors, one panel per joint."""
-    plt = _pyplot()
+    plt = pyplot()
     kinds = list(abs_errors)
-    colours = _colours(kinds)
+    colours = model_colours(kinds)
     n = len(joints)
     cols = 3 if n > 3 else n
     rows = int(np.ceil(n / cols))
@@ -129,7 +191,7 @@ def plot_boxes(joints: tuple[str, ...], abs_errors: dict[str, np.ndarray], path:
         ax.set_ylabel('|error| [N·m]')
         ax.grid(axis='y', alpha=0.3)
     fig.suptitle('Absolute test errors per joint and model (box: quartiles, whiskers: 5-95 %)')
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_dissipative(
@@ -143,9 +205,9 @@ def plot_dissipative(
     path: Path,
 ) -> None:
     """Figure (c): per model, its torque beyond the nominal RNEA against the measured one."""
-    plt = _pyplot()
+    plt = pyplot()
     kinds = list(estimates)
-    colours = _colours(kinds)
+    colours = model_colours(kinds)
     cols = 2
     rows = int(np.ceil(len(kinds) / cols))
     fig, axes = plt.subplots(
@@ -188,14 +250,14 @@ def plot_dissipative(
         f'{joint}: torque beyond the nominal rigid body (RNEA, URDF parameters) on a test '
         'stretch: measured vs each model'
     )
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_shares(
     joints: tuple[str, ...], splits: dict[str, dict[str, np.ndarray]], path: Path
 ) -> None:
     """Figure (d): stacked shares of the label torque per joint, one panel per split."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(
         1, len(splits), figsize=(6.5 * len(splits), 5.0), squeeze=False, constrained_layout=True
     )
@@ -218,7 +280,7 @@ def plot_shares(
         ax.set_title(title, fontsize=10)
         ax.legend(fontsize=8, loc='upper center', bbox_to_anchor=(0.5, -0.09), ncol=3)
     fig.suptitle('Where the label torque comes from, per joint')
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def torque_splits(

@@ -4,7 +4,9 @@ The reference is the test part of the run's first training bag (its last share i
 controller sends it (``Dataset.controller``); the plant is the twin robot that bag was recorded
 from (the ``twin_config.yaml`` the twin wrote beside it, or ``twin_config``). Writes
 closed_loop.json (per run and joint the RMS and largest tracking error, and
-``improvement_best``) and closed_loop.png (the tracking errors over time).
+``improvement_best``), closed_loop.png (the tracking errors over time),
+closed_loop_feed_forward.png (the feed-forwards against the torque limits) and report.md (the
+section ``evaluation.closed_loop_report`` writes; it is added to a run's report when given one).
 """
 
 from __future__ import annotations
@@ -17,14 +19,21 @@ from typing import Any
 
 import numpy as np
 
+from id_learning.dataset.preprocess import Dataset, PreprocessConfig
 from id_learning.errors import CheckpointError, ConfigError
 from id_learning.evaluation.closed_loop import (
-    FEEDBACK_ONLY,
     TRUE_DYNAMICS,
     Tracking,
     compare_feed_forward,
     improvement,
     reference_gains,
+)
+from id_learning.evaluation.closed_loop_report import (
+    RMS_WINDOW_S,
+    add_section,
+    closed_loop_section,
+    plot_feed_forward,
+    plot_tracking,
 )
 from id_learning.models.registry import load_model
 from id_learning.outputs import check_output, result_folder
@@ -39,6 +48,9 @@ __all__ = ['CLOSED_LOOP_JSON', 'ClosedLoopResult', 'closed_loop_run']
 
 CLOSED_LOOP_JSON = 'closed_loop.json'
 CLOSED_LOOP_PNG = 'closed_loop.png'
+FEED_FORWARD_PNG = 'closed_loop_feed_forward.png'
+#: The closed-loop section on its own, beside the results.
+CLOSED_LOOP_MD = 'report.md'
 
 
 @dataclass(frozen=True)
@@ -51,6 +63,8 @@ class ClosedLoopResult:
     document: dict[str, Any]
     json_path: Path
     plot_path: Path
+    feed_forward_plot_path: Path
+    report_path: Path
 
     def summary(self) -> str:
         """The RMS tracking error per run and joint [mrad], and the improvement, as a table."""
@@ -78,6 +92,19 @@ def _twin_config_path(bag: Path, twin_config: Path | None) -> Path:
     )
 
 
+def _reference_rows(
+    dataset: Dataset, config: PreprocessConfig, samples: int
+) -> tuple[int, int, str]:
+    """The rows [start, stop) of the reference (at most ``samples``), and which part they are."""
+    if dataset.is_shuffled:  # its test samples are scattered: the last share in time
+        start, end = round(config.train_fraction * len(dataset.q)), len(dataset.q)
+        part = 'the last share in time (a shuffled split: it holds training samples too)'
+    else:
+        start, end = segment_rows(dataset, 'test')[0]
+        part = 'the test part'
+    return start, min(end, start + samples), part
+
+
 def closed_loop_run(
     run_dir: Path,
     robot: RobotConfig,
@@ -89,12 +116,15 @@ def closed_loop_run(
     progress: bool = True,
     force: bool = False,
     run_name: Path | None = None,
+    report: Path | None = None,
 ) -> ClosedLoopResult:
     """Track the run's test motion on the twin with each model's feed-forward; write the results.
 
     ``out`` is written whole or not at all (``id_learning.outputs``); ``force`` replaces an
     earlier result there, never the run itself. ``run_name``: the run's path as closed_loop.json
     records it, where ``run_dir`` is read inside another command's partial folder (the demo's).
+    ``report``: a report.md to add the closed-loop section to once ``out`` is complete (the
+    demo's run report, inside its own partial folder), its links pointing into ``out``.
 
     Raises:
         CheckpointError: the run is incomplete, or it or a model does not fit the robot.
@@ -121,13 +151,7 @@ def closed_loop_run(
         raise ConfigError(f'{run_dir}: no model(s) {unknown} in the run; it has {run["kinds"]}')
     config = preprocess_from_dict(run['preprocessing'])
     dataset = load_datasets([bag], robot, config, progress=False)[0]
-    if dataset.is_shuffled:  # its test samples are scattered: the last share in time
-        start, end = round(config.train_fraction * len(dataset.q)), len(dataset.q)
-        part = 'the last share in time (a shuffled split: it holds training samples too)'
-    else:
-        start, end = segment_rows(dataset, 'test')[0]
-        part = 'the test part'
-    stop = min(end, start + round(duration_s / robot.ipo_period_s))
+    start, stop, part = _reference_rows(dataset, config, round(duration_s / robot.ipo_period_s))
     if stop - start < 2:
         raise ConfigError(f'{bag}: {stop - start} samples of the test part to track')
     reference = dataset.controller.take(slice(start, stop))
@@ -180,36 +204,71 @@ def closed_loop_run(
         'improvement_best': ratio.tolist(),
     }
     with result_folder(out, command='closed-loop', force=force, inputs=[run_dir]) as folder:
-        (folder.work / CLOSED_LOOP_JSON).write_text(
-            json.dumps(document, indent=2), encoding='utf-8'
+        _write(
+            folder.work,
+            document,
+            runs=runs,
+            feed_forward=feed_forward,
+            limits=plant.robot.limits.torque,
+            robot=robot,
         )
-        _plot(runs, best, robot, folder.work / CLOSED_LOOP_PNG)
     out = folder.out
+    if report is not None:
+        add_section(report, _section(document), out)
     return ClosedLoopResult(
-        runs, best, ratio, document, out / CLOSED_LOOP_JSON, out / CLOSED_LOOP_PNG
+        runs,
+        best,
+        ratio,
+        document,
+        out / CLOSED_LOOP_JSON,
+        out / CLOSED_LOOP_PNG,
+        out / FEED_FORWARD_PNG,
+        out / CLOSED_LOOP_MD,
     )
 
 
-def _plot(runs: dict[str, Tracking], best: str, robot: RobotConfig, path: Path) -> Path:
-    """Tracking error over time per joint: feedback alone, the best model, true dynamics."""
-    import matplotlib
+def _section(document: dict[str, Any]) -> list[str]:
+    """The closed-loop section of a report, its figure links relative to the results' folder."""
+    seconds = f'{RMS_WINDOW_S:g} s'
+    figures = [
+        (
+            CLOSED_LOOP_PNG,
+            'Tracking error over time per joint',
+            f'The moving RMS ({seconds}) of the tracking error of every run on a log scale: '
+            'feedback alone wide and grey, the true inverse dynamics dashed black on top, each '
+            'model in its colour and line style (one under the truth shows through its dashes).',
+        ),
+        (
+            FEED_FORWARD_PNG,
+            'Feed-forward per joint against the torque limits',
+            "Left: each model's feed-forward tau_u along the reference with the true inverse "
+            'dynamics, the torque limits in red where they come into reach and ticks at the '
+            'cycles where a command sat on them. Right: each feed-forward minus the true one, '
+            'what the loop has to correct.',
+        ),
+    ]
+    return closed_loop_section(document, figures)
 
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
 
-    n = robot.n_joints
-    fig, axes = plt.subplots(n, 1, figsize=(9, 1.6 * n), sharex=True)
-    t = np.arange(len(runs[FEEDBACK_ONLY].error)) * robot.ipo_period_s
-    for j, ax in enumerate(np.atleast_1d(axes)):
-        for name in (FEEDBACK_ONLY, best, TRUE_DYNAMICS):
-            ax.plot(t, 1e3 * runs[name].error[:, j], lw=0.7, label=name)
-        ax.set_ylabel(f'{robot.joints[j]}\n[mrad]', fontsize=8)
-    np.atleast_1d(axes)[0].legend(fontsize=7, loc='upper right')
-    np.atleast_1d(axes)[-1].set_xlabel('time [s]')
-    fig.suptitle("Tracking error in the twin's loop (reference minus true position)")
-    fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=110)
-    finally:
-        plt.close(fig)
-    return path
+def _write(
+    folder: Path,
+    document: dict[str, Any],
+    *,
+    runs: dict[str, Tracking],
+    feed_forward: dict[str, np.ndarray],
+    limits: np.ndarray,
+    robot: RobotConfig,
+) -> None:
+    """Write closed_loop.json, the two figures and the section on its own into ``folder``."""
+    (folder / CLOSED_LOOP_JSON).write_text(json.dumps(document, indent=2), encoding='utf-8')
+    plot_tracking(runs, robot.joints, robot.ipo_period_s, folder / CLOSED_LOOP_PNG)
+    plot_feed_forward(
+        feed_forward,
+        runs,
+        limits=limits,
+        joints=robot.joints,
+        period_s=robot.ipo_period_s,
+        path=folder / FEED_FORWARD_PNG,
+    )
+    lines = [f'# Closed loop of run `{document["run"]}`', '', *_section(document)]
+    (folder / CLOSED_LOOP_MD).write_text('\n'.join(lines), encoding='utf-8')

@@ -9,16 +9,21 @@ from typing import Any, ClassVar, Self
 import numpy as np
 import pytest
 
+from id_learning.dataset.inputs import Motion
 from id_learning.dataset.preprocess import prepare_dataset
 from id_learning.errors import ConfigError
+from id_learning.evaluation import report as report_module
 from id_learning.evaluation.report import (
+    ERROR_SPECTRA_PNG,
     HIGH_FRICTION_SHARE,
+    OVERLAYS_DIR,
     ReportInput,
     check_findings,
     friction_share,
     high_friction_axes,
     write_report,
 )
+from id_learning.evaluation.report_signals import label_floor, richest_window, stretches_of
 from id_learning.evaluation.scoring import label_noise_floor, score_model
 from id_learning.evaluation.study import load_study_table
 from id_learning.models.base import InverseDynamicsModel, ModelConfig, TorqueComponents
@@ -194,7 +199,7 @@ def report_input(mabi, short_twin):
     )
 
 
-def test_the_report_has_both_rmse_tables_timings_findings_and_four_png_figures(
+def test_the_report_has_both_rmse_tables_timings_findings_and_its_png_figures(
     report_input, tmp_path
 ):
     path, findings = write_report(report_input, tmp_path)
@@ -213,16 +218,65 @@ def test_the_report_has_both_rmse_tables_timings_findings_and_four_png_figures(
     # Two models cannot decide the motor-label findings: they are listed as not checked.
     assert [f['holds'] for f in findings] == [None, None]
     assert 'not checked' in text
-    for name in (
+    figures = (
         'rmse_per_joint.png',
         'abs_error_boxplot.png',
         'dissipative_axis1.png',
         'torque_shares.png',
-    ):
+        f'{OVERLAYS_DIR}/rnea_lq.png',
+        f'{OVERLAYS_DIR}/rnea_mlp.png',
+        ERROR_SPECTRA_PNG,
+    )
+    section = text.split('## Figures')[1]
+    for name in figures:
         data = (tmp_path / name).read_bytes()
         assert data[:8] == b'\x89PNG\r\n\x1a\n'
         assert len(data) > 20_000
-        assert f']({name})' in text
+        # Linked under its heading, after a sentence saying what it shows.
+        heading, sentence, link = _figure_block(section, name)
+        assert heading.startswith('### (')
+        assert sentence.endswith('.')
+        assert len(sentence) > 60
+        assert link.startswith('![')
+    assert 'RNEA+MLP: predicted against measured torque' in section
+    assert 'the dashed line is the label-noise floor as white noise through the label filter' in (
+        section
+    )
+
+
+def _figure_block(section: str, name: str) -> tuple[str, str, str]:
+    """The heading, sentence and link of the figure ``name`` in the figures section."""
+    lines = [line for line in section.splitlines() if line]
+    (k,) = [i for i, line in enumerate(lines) if line.endswith(f']({name})')]
+    return lines[k - 2], lines[k - 1], lines[k]
+
+
+def test_without_the_noise_free_torque_the_floor_is_estimated_from_the_raw_labels(report_input):
+    rows = report_input.dataset.test_rows
+    measured = label_floor(report_input.dataset, rows, report_input.noise_floor)
+    assert measured.label == 'label-noise floor'
+    np.testing.assert_array_equal(measured.rms_nm, report_input.noise_floor)
+    estimated = label_floor(replace(report_input.dataset, tau_clean=None), rows, None)
+    assert 'estimate' in estimated.label
+    # The twin's noise is white in the raw label: the estimate finds the floor's order.
+    ratio = estimated.rms_nm / report_input.noise_floor
+    assert np.all((ratio > 0.3) & (ratio < 3.0)), ratio
+
+
+def test_the_overlay_window_is_where_all_joints_move_most():
+    n, period = 3000, 0.008
+    t = np.arange(n) * period
+    v = np.tile(0.01 * np.sin(t)[:, None], (1, 2))
+    burst = slice(2200, 2500)  # in the second evaluated range, a fast stretch on both joints
+    v[burst] += np.sin(2 * np.pi * 2.0 * t[burst])[:, None]
+    motion = Motion(np.zeros_like(v), v, np.gradient(v, period, axis=0))
+    rows = [(0, 1000), (1500, 3000)]
+    start, stop = richest_window(motion, rows, 300)
+    assert stop - start == 300
+    assert abs(start - 2200) <= 10
+    # No range holds the window: the longest range whole.
+    assert richest_window(motion, rows, 2000) == (1500, 3000)
+    assert stretches_of(rows) == [(0, 1000), (1000, 2500)]
 
 
 def write_table(path, rows, joints=None, **extra):
@@ -240,7 +294,19 @@ def test_the_report_places_the_study_table_beside_ours(report_input, tmp_path):
         findings=['placeholder finding'],
     )
     table = load_study_table(path, n_joints=6)
-    out, _ = write_report(replace(report_input, study_table=table), tmp_path / 'report')
+    drawn, draw = {}, report_module.plot_rmse
+
+    def plot_rmse(joints, errors, path, floor=None, floor_label=''):
+        drawn.update(floor=floor, label=floor_label)
+        return draw(joints, errors, path, floor, floor_label)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(report_module, 'plot_rmse', plot_rmse)
+        out, _ = write_report(replace(report_input, study_table=table), tmp_path / 'report')
+    # The RMSE figure draws the table's label-noise floor, on its normalised scale.
+    expected = report_input.noise_floor / report_input.target_scale
+    np.testing.assert_allclose(drawn['floor'], expected)
+    assert drawn['label'] == 'label-noise floor'
     text = out.read_text()
     assert 'not given' not in text
     assert 'joint_1 ours / study' in text
