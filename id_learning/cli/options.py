@@ -36,6 +36,7 @@ __all__ = [
     'positive_float',
     'preprocessing_option',
     'refuse_contradictions',
+    'refuse_two_budgets',
     'robot_option',
     'split_seed',
     'target_option',
@@ -276,6 +277,32 @@ def hyper_parameters(items: Sequence[str] | None) -> dict[str, dict[str, Any]]:
             )
         given[key] = parsed
     return hyper
+
+
+def refuse_two_budgets(
+    hyper: dict[str, dict[str, Any]], max_seconds: float | None, given_as: str
+) -> None:
+    """Refuse a kind's ``max_seconds`` hyper-parameter that disagrees with --max-seconds-per-model.
+
+    Both set one fit's budget; neither silently wins. An equal value is no contradiction.
+
+    Args:
+        hyper: per kind, hyper-parameters.
+        max_seconds: --max-seconds-per-model, or None when not given.
+        given_as: how the hyper-parameter was given, with ``{kind}`` and ``{value}`` fields.
+
+    Raises:
+        ConfigError: names both options and their values.
+    """
+    if max_seconds is None:
+        return
+    for kind, values in hyper.items():
+        value = values.get('max_seconds')
+        if 'max_seconds' in values and value != max_seconds:
+            raise ConfigError(
+                f'{given_as.format(kind=kind, value=value)} contradicts --max-seconds-per-model '
+                f'{max_seconds:g}: both set the time budget of each {kind} fit; give one'
+            )
 
 
 def hyper_file(path: str | None) -> dict[str, dict[str, Any]]:

@@ -158,9 +158,25 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
 
 
 def _merged_hyper(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
-    """--hyper-file, then the --hyper items on top."""
-    merged = options.hyper_file(getattr(args, 'hyper_file', None))
-    for kind, values in options.hyper_parameters(args.hyper).items():
+    """--hyper-file, then the --hyper items on top.
+
+    Raises:
+        ConfigError: a kind's max_seconds in either disagrees with --max-seconds-per-model
+            (``options.refuse_two_budgets``).
+    """
+    path = getattr(args, 'hyper_file', None)
+    from_file = options.hyper_file(path)
+    items = options.hyper_parameters(args.hyper)
+    budget = getattr(args, 'max_seconds_per_model', None)
+    options.refuse_two_budgets(items, budget, '--hyper {kind}.max_seconds={value}')
+    overridden = {kind for kind, values in items.items() if 'max_seconds' in values}
+    options.refuse_two_budgets(
+        {kind: values for kind, values in from_file.items() if kind not in overridden},
+        budget,
+        f'--hyper-file {path} ({{kind}}.max_seconds: {{value}})',
+    )
+    merged = from_file
+    for kind, values in items.items():
         merged.setdefault(kind, {}).update(values)
     return merged
 

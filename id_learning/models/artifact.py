@@ -4,7 +4,10 @@ Loading checks that the file is what it claims (format, kind, tensor names and s
 belongs to the robot it is used with (name, joints and order, URDF hash, drives, units), that
 every number a prediction uses is finite, and that nothing changed since it was written: the
 weights match ``weights_sha256`` and the whole of model.json (that hash included) matches
-``artifact_sha256``. Artifacts from before the whole-artifact hash load with a warning.
+``artifact_sha256``. Artifacts from before the whole-artifact hash load with a warning. Since a
+hash written again after an edit proves nothing, what the metadata says must also make sense
+(``metadata_checks``): each key once, scalers of the right length and width, one target, physical
+parameters of the sign physics gives them.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from safetensors.numpy import load_file, save_file
 from id_learning import __version__
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import CheckpointError
+from id_learning.models.metadata_checks import DuplicateKeyError, check_metadata, loads_unique
 from id_learning.outputs import replace_folder
 from id_learning.robot.config import RobotConfig
 
@@ -98,6 +102,8 @@ def write_artifact(
 
     Raises:
         OSError: a write failed (the hidden sibling is removed).
+        CheckpointError: the metadata would be refused when read (``metadata_checks``: a
+            degenerate scaler, a physical parameter of the wrong sign); nothing is written.
     """
     folder = Path(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
@@ -138,6 +144,9 @@ def _write_files(
         'git_commit': _git_commit(),
         **metadata,
     }
+    # Nothing is written that a load would refuse.
+    paths = (folder / METADATA_FILE, folder / WEIGHTS_FILE)
+    check_metadata(document, contiguous, *paths, tuple(robot.joints))
     document[ARTIFACT_HASH] = document_digest(document)
     (folder / METADATA_FILE).write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
 
@@ -214,7 +223,8 @@ def read_metadata(meta_path: Path) -> dict[str, Any]:
 
     Raises:
         CheckpointError: the file is unreadable, larger than ``MAX_METADATA_BYTES``, not valid
-            JSON, nested deeper than ``MAX_METADATA_DEPTH``, or not a JSON object; names it.
+            JSON, holds a key twice in one object, nested deeper than ``MAX_METADATA_DEPTH``, or
+            not a JSON object; names it (and the key).
     """
     meta_path = Path(meta_path)
     try:
@@ -228,7 +238,9 @@ def read_metadata(meta_path: Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as err:
         raise CheckpointError(f'{meta_path}: cannot read it: {err}') from err
     try:
-        metadata = json.loads(text)
+        metadata = loads_unique(text)
+    except DuplicateKeyError as err:
+        raise CheckpointError(f'{meta_path}: {err}; the file was edited or is corrupt') from err
     except json.JSONDecodeError as err:
         raise CheckpointError(f'{meta_path}: not valid JSON: {err}') from err
     except RecursionError:
@@ -250,9 +262,11 @@ def read_artifact(
     """Read and verify an artifact; returns (metadata, tensors).
 
     Raises:
-        CheckpointError: missing files, wrong format or kind, a tensor list or hash that does not
-            match the metadata, wrong units, a robot/joint/drive mismatch, a non-finite number,
-            or a model.json changed after it was written.
+        CheckpointError: missing files, wrong format or kind, a key given twice, a tensor list or
+            hash that does not match the metadata, wrong units, a robot/joint/drive mismatch, a
+            non-finite number, a scaler of the wrong length or of zero width, targets that
+            disagree, a physical parameter of the wrong sign (``metadata_checks``), or a
+            model.json changed after it was written. A newer package version is warned of.
     """
     folder = Path(folder)
     meta_path, weights_path = folder / METADATA_FILE, folder / WEIGHTS_FILE
@@ -289,6 +303,8 @@ def read_artifact(
     for key in ('fitted', 'target_scaler'):
         _check_finite(metadata.get(key), key, meta_path)
     _check_robot(metadata.get('robot', {}), robot, folder)
+    # Scalers, targets, the signs of physical parameters, the package version.
+    check_metadata(metadata, tensors, meta_path, weights_path, tuple(robot.joints))
     # Last, so that a specific fault (another robot, a NaN field) is named as such.
     _check_unchanged(metadata, meta_path)
     return metadata, tensors

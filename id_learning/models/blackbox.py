@@ -243,6 +243,7 @@ class MlpModel(TorchModel[NormalisedMlp]):
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Fit on the training part of ``data`` with early stopping on its validation tail."""
+        data.require_varied(self.kind)
         ds, c = data.dataset, self.config
         device = select_device(c.device)
         network = self._build(ds.input_scaler, ds.target_scaler)
@@ -343,6 +344,7 @@ class LstmModel(TorchModel[NormalisedLstm]):
         window, filtered like the labels. Validation windows may start in the fit part (inputs
         only; their targets lie in the validation part).
         """
+        data.require_varied(self.kind)
         ds, c = data.dataset, self.config
         device = select_device(c.device)
         network = self._build(ds.input_scaler, ds.target_scaler)

@@ -8,7 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from id_learning.dataset.preprocess import Dataset
+from id_learning.dataset.preprocess import Dataset, MinMaxScaler
+from id_learning.errors import DatasetError
 from id_learning.physics.augmented import AugmentedModel
 from id_learning.physics.identification import IdentificationConfig, identify
 from id_learning.physics.identified import IdentifiedPhysics
@@ -82,6 +83,40 @@ class TrainingData:
                 self.dataset, self.robot, config, deadline=deadline
             )
         return self.identifications[key]
+
+    def require_varied(self, kind: str, *, inputs: bool = True) -> None:
+        """Refuse to fit a model whose artifact would hold a scaler of zero width.
+
+        A model stores the training part's range of each label column, and the kinds that
+        scale their inputs the range of each of q, v and a per joint; loading refuses a range
+        of zero width (``metadata_checks``), so a column constant on the training part (a joint
+        that never moved, a robot standing still) is refused here, before the fit.
+
+        Args:
+            kind: the model kind, for the message.
+            inputs: whether the kind stores the inputs' ranges (all but rnea_lq).
+
+        Raises:
+            DatasetError: names the columns that never varied.
+        """
+        ds = self.dataset
+        checked: list[tuple[MinMaxScaler, tuple[str, ...]]] = [(ds.target_scaler, ('tau',))]
+        if inputs:
+            checked.insert(0, (ds.input_scaler, ('q', 'v', 'a')))
+        constant: list[str] = []
+        for scaler, quantities in checked:
+            if scaler.low_ is None or scaler.high_ is None:
+                continue
+            names = [f'{x} of {joint}' for x in quantities for joint in ds.joints]
+            flat = np.flatnonzero(np.asarray(scaler.high_) == np.asarray(scaler.low_))
+            constant += [names[k] for k in flat if k < len(names)]
+        if constant:
+            raise DatasetError(
+                f'{kind}: {", ".join(constant)} never varied in the training part (constant): '
+                'a model stores the range of each column it was fitted on, and a column '
+                'without one cannot be scaled nor the model loaded; record the joints moving'
+                + ('' if not inputs else ' (rnea_lq stores no input ranges)')
+            )
 
     @cached_property
     def physics(self) -> PhysicsFeatures:

@@ -36,6 +36,7 @@ from id_learning.models.base import (
 )
 from id_learning.models.blackbox import check_kind
 from id_learning.models.data import TrainingData
+from id_learning.models.metadata_checks import DuplicateKeyError, loads_unique
 from id_learning.models.network_common import NumpyNormalisedMlp
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
 from id_learning.physics.augmented import EFFECTS_JSON, AugmentedModel
@@ -59,15 +60,18 @@ def load_effects_file(path: str | Path) -> dict[str, Any]:
     """The JSON of a diagnosis' effects.json, given the file or the diagnosis' output folder.
 
     Raises:
-        ConfigError: the file is missing or is not a diagnosis' effects.json.
+        ConfigError: the file is missing, holds a key twice in one object, or is not a
+            diagnosis' effects.json.
     """
     path = Path(path)
     if path.is_dir():
         path = path / EFFECTS_JSON
     try:
-        data = json.loads(path.read_text(encoding='utf-8'))
+        data = loads_unique(path.read_text(encoding='utf-8'))
     except FileNotFoundError as err:
         raise ConfigError(f'effects: {path} does not exist (run `id-learning diagnose`)') from err
+    except DuplicateKeyError as err:
+        raise ConfigError(f'effects: {path}: {err}; the file was edited or is corrupt') from err
     except json.JSONDecodeError as err:
         raise ConfigError(f'effects: {path} is not valid JSON: {err}') from err
     if not isinstance(data, dict) or 'effects' not in data or 'joints' not in data:
@@ -187,6 +191,7 @@ class RneaEffectsModel(InverseDynamicsModel):
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Take the effects of a diagnosis, or diagnose the training part."""
+        data.require_varied(self.kind)
         del progress  # the diagnosis prints nothing; it takes seconds to a minute
         self.model_, self.diagnosis_ = _effects_model(self.config.effects, data, self.robot)
         self.input_range_ = data.dataset.input_scaler.to_dict()

@@ -152,6 +152,7 @@ class RneaIdModel(InverseDynamicsModel):
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Identify on the training part of ``data``."""
+        data.require_varied(self.kind)
         del progress  # seconds
         budget = self.config.max_seconds
         deadline = None if budget is None else time.perf_counter() + budget

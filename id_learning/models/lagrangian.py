@@ -298,6 +298,7 @@ class _LagrangianModel(TorchModel[LagrangianNetwork]):
         Raises:
             DatasetError: the dataset's joints are not the robot's.
         """
+        data.require_varied(self.kind)
         dataset = data.dataset
         if tuple(dataset.joints) != tuple(self.joint_names):
             raise DatasetError(

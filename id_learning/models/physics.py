@@ -3,7 +3,9 @@
 Both models start from the manufacturer's model, RNEA_URDF(q, v, a), and the rotor inertia seen
 through the gearbox, I_M * gear_ratio**2 * a (I_M motor side [kg*m^2]):
 
-- RNEA+LQ (``rnea_lq``) fits I_M and a friction model per joint by linear least squares;
+- RNEA+LQ (``rnea_lq``) fits I_M and a friction model per joint by linear least squares, I_M
+  and the friction coefficients held >= 0 (a drive has no negative inertia, and its friction
+  dissipates);
 - RNEA+MLP (``rnea_mlp``, the study's Newtonian network) keeps the datasheet I_M and learns the
   rest with an MLP h(q, v).
 """
@@ -63,6 +65,8 @@ LQ_PARAMETERS = {
     'coulomb': 'N*m',
     'offset': 'N*m',
 }
+#: The RNEA+LQ parameters physics gives a sign: an inertia, and friction that dissipates.
+LQ_NON_NEGATIVE = ('rotor_inertia_motor_side', 'viscous', 'coulomb')
 
 
 class _NominalPhysics(InverseDynamicsModel):
@@ -149,6 +153,10 @@ class RneaLqModel(_NominalPhysics):
         tau_j = RNEA_URDF(q, v, a)_j + I_M,j * gear_ratio_j**2 * a_j + friction_j(v_j)
         friction_j = theta_D,j * v_j [+ F_c,j * tanh(v_j / v_eps)] [+ offset_j]
 
+    with I_M, theta_D and F_c >= 0 (``_solve``): where the unconstrained least squares would
+    make one negative (non-physical: loading refuses such a model), it is held at zero, with a
+    warning naming the joint and the value the data wanted.
+
     The study's viscous-only friction leaves most friction unexplained: real gearboxes add
     Coulomb (and Stribeck, load-dependent) friction that a linear viscous term cannot follow,
     so 'viscous_coulomb' or 'viscous_coulomb_offset' are offered as options. The rigid-body
@@ -180,6 +188,7 @@ class RneaLqModel(_NominalPhysics):
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Solve the per-joint least-squares problems on the training part of ``data``."""
+        data.require_varied(self.kind, inputs=False)
         del progress  # a few small solves
         ds, physics, rows = data.dataset, data.physics, data.train_rows
         columns = self._columns(ds.v, physics.rotor_basis)
@@ -199,12 +208,7 @@ class RneaLqModel(_NominalPhysics):
         rmse = np.zeros(n)
         for j in range(n):
             regressor = np.stack([columns[name][rows, j] for name in names], axis=1)
-            # Scale columns to unit RMS so that rotor (~1e4 * a) and offset columns are
-            # equally well conditioned.
-            norm = np.sqrt(np.mean(regressor**2, axis=0))
-            norm = np.where(norm > 0, norm, 1.0)
-            solution, *_ = np.linalg.lstsq(regressor / norm, target[:, j], rcond=None)
-            theta[:, j] = solution / norm
+            theta[:, j] = self._solve(regressor, target[:, j], names, j)
             rmse[j] = np.sqrt(np.mean((regressor @ theta[:, j] - target[:, j]) ** 2))
         self.parameters_ = {name: np.zeros(n) for name in LQ_PARAMETERS}
         for name, values in zip(names, theta, strict=True):
@@ -212,6 +216,48 @@ class RneaLqModel(_NominalPhysics):
         self.training_rmse_ = rmse
         _LOG.info('rnea_lq: %s, training RMSE %s N*m', self.parameters_, np.round(rmse, 3))
         return self
+
+    def _solve(
+        self, regressor: np.ndarray, target: np.ndarray, names: list[str], joint: int
+    ) -> np.ndarray:
+        """One joint's parameters: least squares, the physically signed ones held >= 0.
+
+        A rotor inertia below zero, or viscous or Coulomb friction that drives the joint, is no
+        drive; where the unconstrained solution wants one (the URDF's model of what the joint
+        moves is off, and the term soaks that up), the parameter is held at zero, with a warning,
+        and the others are fitted around it. Columns that are zero on the training rows (a joint
+        that never moved) get zero.
+        """
+        # Columns scaled to unit RMS, so that rotor (~1e4 * a) and offset columns are equally
+        # well conditioned.
+        norm = np.sqrt(np.mean(regressor**2, axis=0))
+        used = norm > 0
+        out = np.zeros(len(names))
+        if not used.any():
+            return out
+        scaled = regressor[:, used] / norm[used]
+        free, *_ = np.linalg.lstsq(scaled, target, rcond=None)
+        signed = np.array([name in LQ_NON_NEGATIVE for name in names])[used]
+        if np.any(free[signed] < 0):
+            from scipy.optimize import lsq_linear
+
+            wanted = free / norm[used]
+            lower = np.where(signed, 0.0, -np.inf)
+            free = lsq_linear(scaled, target, bounds=(lower, np.inf), method='bvls').x
+            held = [
+                f'{name} at {value:.4g} {LQ_PARAMETERS[name]} '
+                + ('(a negative inertia)' if name.startswith('rotor') else '(driving friction)')
+                for name, value, bounded in zip(np.array(names)[used], wanted, signed, strict=True)
+                if bounded and value < 0
+            ]
+            _LOG.warning(
+                'rnea_lq: %s: least squares put %s, non-physical: held at 0; the URDF model of '
+                'what this joint moves is likely off, and rnea_lq cannot absorb that',
+                self.robot.joints[joint],
+                ', '.join(held),
+            )
+        out[used] = free / norm[used]
+        return out
 
     def _parameters(self) -> dict[str, np.ndarray]:
         require_fitted(self, self.parameters_)
@@ -403,6 +449,7 @@ class RneaMlpModel(_NominalPhysics, TorchModel[NormalisedMlp]):
         Through the label filter (the default), the residual is the label minus the physics
         part filtered like it, and h's torque is filtered before it meets that residual.
         """
+        data.require_varied(self.kind)
         ds, c, n = data.dataset, self.config, self.robot.n_joints
         device = select_device(c.device)
         self.target_ = ds.target

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from id_learning.errors import CheckpointError, ConfigError
-from id_learning.models.artifact import read_artifact, write_artifact
+from id_learning.models.artifact import artifact_target, read_artifact, write_artifact
 from id_learning.models.base import InverseDynamicsModel, ModelConfig
 from id_learning.models.blackbox import LstmConfig, LstmModel, MlpConfig, MlpModel
 from id_learning.models.effects import (
@@ -89,13 +89,25 @@ def save_model(
     return write_artifact(Path(folder), model.kind, model.robot, model.state(), metadata)
 
 
-def load_model(folder: Path, robot: RobotConfig, kind: str | None = None) -> InverseDynamicsModel:
+def load_model(
+    folder: Path, robot: RobotConfig, kind: str | None = None, *, target: str | None = None
+) -> InverseDynamicsModel:
     """Load and verify an artifact for a robot.
 
+    ``target``: the torque the caller's data holds ('motor' or 'joint'; a run's
+    ``preprocessing.target``); a model that predicts the other one is refused.
+
     Raises:
-        CheckpointError: the folder is not a valid artifact of this robot (see read_artifact).
+        CheckpointError: the folder is not a valid artifact of this robot (see read_artifact),
+            or its model predicts another target than ``target``.
     """
     metadata, tensors = read_artifact(Path(folder), robot, kind)
+    if target is not None and artifact_target(metadata) != target:
+        raise CheckpointError(
+            f'{folder}: its model.json says the model predicts the '
+            f"{artifact_target(metadata)!r} torque, but the run's preprocessing.target is "
+            f'{target!r}: the model does not belong to this run'
+        )
     found = metadata['kind']
     if found not in MODEL_KINDS:
         raise CheckpointError(f'{folder}: unknown model kind {found!r}')

@@ -20,6 +20,7 @@ import torch
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler
 from id_learning.errors import CheckpointError
 from id_learning.models.artifact import _git_commit, robot_fingerprint
+from id_learning.models.metadata_checks import DuplicateKeyError, loads_unique
 from id_learning.outputs import incomplete_reason, partial_path, write_text_atomic
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import bag_sha256
@@ -85,8 +86,8 @@ def _models_held(run_dir: Path, document: dict[str, Any] | None) -> str:
 
 def _read_document(path: Path) -> dict[str, Any] | None:
     try:
-        document = json.loads(path.read_text(encoding='utf-8'))
-    except (OSError, ValueError):
+        document = loads_unique(path.read_text(encoding='utf-8'))
+    except (OSError, ValueError):  # a key given twice too: read_run names it
         return None
     return document if isinstance(document, dict) else None
 
@@ -124,14 +125,17 @@ def read_run(run_dir: Path) -> dict[str, Any]:
     """Read a complete run folder's run.json.
 
     Raises:
-        CheckpointError: missing, not JSON, not a run document, or an incomplete run.
+        CheckpointError: missing, not JSON, a key given twice, not a run document, or an
+            incomplete run.
     """
     refuse_incomplete_run(run_dir)
     path = Path(run_dir) / RUN_FILE
     if not path.is_file():
         raise CheckpointError(f'{run_dir}: not a training run folder (no {RUN_FILE})')
     try:
-        document = json.loads(path.read_text(encoding='utf-8'))
+        document = loads_unique(path.read_text(encoding='utf-8'))
+    except DuplicateKeyError as err:
+        raise CheckpointError(f'{path}: {err}; the file was edited or is corrupt') from err
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise CheckpointError(f'{path}: not valid JSON: {err}') from err
     if not isinstance(document, dict) or document.get('format') != RUN_FORMAT:

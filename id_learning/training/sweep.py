@@ -7,7 +7,8 @@ package, as the mean normalised RMSE over joints. The test part stays unseen, so
 of ``train --hyper-file DIR/best.yaml`` is honest. Networks report their validation loss every
 epoch, and the median pruner stops trials that fall behind. The storage is any Optuna URL:
 SQLite by default; PostgreSQL (``postgresql+psycopg://...``) lets workers on several machines
-share one study.
+share one study. A study holds trials of one kind, target, robot, preprocessing and set of bags
+(``study_settings``, recorded in the study): a worker with other settings is refused.
 """
 
 from __future__ import annotations
@@ -18,8 +19,9 @@ import math
 import os
 import time
 import warnings
-from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,7 +30,7 @@ import yaml
 
 from id_learning.config_io import finite_number
 from id_learning.dataset.preprocess import PreprocessConfig, Target
-from id_learning.errors import ConfigError
+from id_learning.errors import ConfigError, IdLearningError
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import configure_torch
 from id_learning.models.registry import MODEL_KINDS, make_model
@@ -40,7 +42,15 @@ from id_learning.training.datasets import combine_datasets, load_datasets
 if TYPE_CHECKING:
     import optuna
 
-__all__ = ['SEARCH_SPACES', 'SweepResult', 'lost_schema_race', 'run_sweep', 'validation_error']
+__all__ = [
+    'SEARCH_SPACES',
+    'SETTINGS_ATTR',
+    'SweepResult',
+    'lost_schema_race',
+    'run_sweep',
+    'study_settings',
+    'validation_error',
+]
 
 _LOG = logging.getLogger(__name__)
 
@@ -175,11 +185,17 @@ def run_sweep(
     ``storage_timeout_s`` bounds the wait for a locked or unreachable storage, when opening it
     and at each later access.
 
+    The study records what its trials are run on (``study_settings``: kind, target, robot, the
+    bags' SHA-256, preprocessing) when it is made; a study that records other settings is
+    refused, so that its best trial is always one of this kind on this data.
+
     Raises:
-        ConfigError: unknown or unsweepable kind, trials < 1, a bad timeout or budget, or an
-            unusable, locked or unreachable storage (names it); ``out`` holds other than a sweep
-            (``OutputError``: another command's result is never written into).
-        DatasetError, BagError: a bag is unusable.
+        ConfigError: unknown or unsweepable kind, trials < 1, a bad timeout or budget, an
+            unusable, locked or unreachable storage (names it), or a study of other settings
+            (names both); ``out`` holds other than a sweep (``OutputError``: another
+            command's result is never written into).
+        DatasetError, BagError: a bag is unusable, or a trial's fit fails on it (one line
+            naming the trial; Optuna's own report of the failure is left out).
     """
     import optuna
     from sqlalchemy.exc import SQLAlchemyError
@@ -208,11 +224,15 @@ def run_sweep(
         progress=progress,
         trim_unpaired_tail=trim_unpaired_tail,
     )
+    # Before any trial: a study of another kind, data, target or robot is refused.
+    settings = study_settings(kind, target, robot, bags, config)
+    _claim_study(study, settings, storage)
     data = TrainingData(combine_datasets(datasets), robot)
     configure_torch(1)
     names = {f.name for f in fields(make_model(kind, robot).config)}
 
     def objective(trial: optuna.Trial) -> float:
+        _claim_study(study, settings, storage)  # a worker that raced this one to the study
         params = {name: _suggest(trial, name, s) for name, s in space.items() if name in names}
         if max_seconds_per_trial is not None and 'max_seconds' in names:
             params['max_seconds'] = max_seconds_per_trial
@@ -234,7 +254,8 @@ def run_sweep(
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     try:
-        study.optimize(objective, n_trials=trials, show_progress_bar=progress)
+        with _failed_trials_said_once() as said:
+            study.optimize(said(objective), n_trials=trials, show_progress_bar=progress)
         complete = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
     except SQLAlchemyError as err:  # locked or gone after it was opened
         raise ConfigError(f'sweep: the storage {storage!r} failed: {_reason(err)}') from err
@@ -260,6 +281,123 @@ def run_sweep(
         best_file=best_file,
         figures=_plots(study, out),
     )
+
+
+#: The study's user attribute that records what its trials are run on (``study_settings``).
+SETTINGS_ATTR = 'id_learning.sweep'
+
+
+def study_settings(
+    kind: str,
+    target: str,
+    robot: RobotConfig,
+    bags: Sequence[Path],
+    preprocess: PreprocessConfig,
+) -> dict[str, Any]:
+    """What a study's trials must share to be compared: kind, target, robot, data, preprocessing.
+
+    Trials fitted on other bags, for another target or robot, or preprocessed otherwise score
+    on another validation part; trials of another kind hold other hyper-parameters (best.yaml
+    would give one kind's under another's name). JSON-ready (a study's user attribute).
+    """
+    from id_learning.models.artifact import robot_fingerprint
+    from id_learning.training.datasets import bag_sha256
+
+    fingerprint = robot_fingerprint(robot)
+    settings = {
+        'kind': kind,
+        'target': target,
+        'robot': {key: fingerprint[key] for key in ('name', 'joints', 'urdf_sha256')},
+        'bags_sha256': [bag_sha256(Path(bag)) for bag in bags],
+        'preprocessing': {k: v for k, v in asdict(preprocess).items() if k != 'target'},
+    }
+    normalised: dict[str, Any] = json.loads(json.dumps(settings))  # tuples as lists
+    return normalised
+
+
+#: How ``_claim_study`` names each setting.
+_SETTING_LABELS = {'kind': 'model kind', 'bags_sha256': 'bags'}
+
+
+def _shown(key: str, value: Any) -> str:
+    if key == 'robot' and isinstance(value, dict):
+        return f'{value.get("name")!r} (URDF {str(value.get("urdf_sha256"))[:12]})'
+    if key == 'bags_sha256' and isinstance(value, list):
+        return '[' + ', '.join(f'SHA-256 {str(sha)[:12]}' for sha in value) + ']'
+    return repr(value)
+
+
+def _claim_study(study: optuna.Study, settings: dict[str, Any], storage: str) -> None:
+    """Record ``settings`` in a new study; refuse a study recorded with others.
+
+    Raises:
+        ConfigError: the study records other settings (names the first that differs, both
+            values), or holds trials without a record (made before sweeps recorded one).
+    """
+    saved = study.user_attrs.get(SETTINGS_ATTR)
+    if saved is None:
+        held = len(study.get_trials(deepcopy=False))
+        if held:
+            raise ConfigError(
+                f'sweep: study {study.study_name!r} in {storage!r} holds {held} trial(s) but '
+                'no record of the kind, data and target they were run on (made before sweeps '
+                "recorded them): they cannot be told from this sweep's; name another "
+                '--study-name'
+            )
+        study.set_user_attr(SETTINGS_ATTR, settings)
+        saved = study.user_attrs.get(SETTINGS_ATTR)  # a worker starting with this one may win
+    for key, value in settings.items():
+        theirs, ours = (saved.get(key) if isinstance(saved, dict) else None), value
+        if theirs == ours:
+            continue
+        if isinstance(theirs, dict) and isinstance(ours, dict):  # the items that differ
+            keys = [k for k in {**theirs, **ours} if theirs.get(k) != ours.get(k)]
+            theirs, ours = ({k: d.get(k) for k in keys} for d in (theirs, ours))
+        label = _SETTING_LABELS.get(key, key)
+        raise ConfigError(
+            f'sweep: study {study.study_name!r} in {storage!r} holds trials for {label} '
+            f'{_shown(key, theirs)}; this sweep is for {_shown(key, ours)}: a study compares '
+            'trials of one kind, target, robot, preprocessing and data; name another '
+            '--study-name'
+        )
+
+
+@contextmanager
+def _failed_trials_said_once() -> Iterator[Callable[[Callable[..., float]], Callable[..., float]]]:
+    """Say a failed trial once: as the error the sweep raises, without Optuna's traceback.
+
+    Optuna logs a trial that raised (the exception and its traceback) and then raises it
+    again; the sweep names the trial in the error instead (a package error is one line, a bug
+    keeps its one traceback). Yields the wrapper of the objective that does so.
+    """
+    failed: set[int] = set()
+
+    class _Filter(logging.Filter):
+        def filter(self, record: logging.LogRecord) -> bool:
+            text = record.getMessage()
+            return not any(text.startswith(f'Trial {number} failed') for number in failed)
+
+    def said(objective: Callable[[optuna.Trial], float]) -> Callable[[optuna.Trial], float]:
+        def wrapped(trial: optuna.Trial) -> float:
+            try:
+                return objective(trial)
+            except IdLearningError as err:
+                failed.add(trial.number)
+                if str(err).startswith('sweep:'):  # says what failed already
+                    raise
+                raise type(err)(f'sweep: trial {trial.number} failed: {err}') from err
+            except Exception:
+                failed.add(trial.number)
+                raise
+
+        return wrapped
+
+    logger, only = logging.getLogger('optuna.study._optimize'), _Filter()
+    logger.addFilter(only)
+    try:
+        yield said
+    finally:
+        logger.removeFilter(only)
 
 
 def _engine_options(storage: str, timeout_s: float) -> dict[str, Any]:

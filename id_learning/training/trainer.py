@@ -22,7 +22,6 @@ the report) and ``training.run_folder`` (the files). Their public names are re-e
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -389,9 +388,11 @@ def _load_models(run_dir: Path, run: dict[str, Any], robot: RobotConfig) -> dict
     results: dict[str, ModelResult] = {}
     # An interrupted run lists its models in the order they were fitted: report them as asked.
     order = {kind: k for k, kind in enumerate(run.get('requested_kinds', run['kinds']))}
+    target = (run.get('preprocessing') or {}).get('target')
     for kind in sorted(run['kinds'], key=lambda kind: order.get(kind, len(order))):
         folder = run_dir / MODELS_DIR / kind
-        results[kind] = ModelResult(kind, load_model(folder, robot, kind), folder, {})
+        model = load_model(folder, robot, kind, target=target)
+        results[kind] = ModelResult(kind, model, folder, {})
     _say_what_does_not_belong(run_dir, run, results)
     return results
 
@@ -455,8 +456,10 @@ def _unseen_parts(
 
 def _add_training_numbers(results: dict[str, ModelResult]) -> None:
     """Copy each model's training time and history from its model.json into its metrics."""
+    from id_learning.models.artifact import METADATA_FILE, read_metadata
+
     for result in results.values():
-        trained = json.loads((result.folder / 'model.json').read_text(encoding='utf-8'))
+        trained = read_metadata(result.folder / METADATA_FILE)
         result.metrics['train_seconds'] = trained.get('metrics', {}).get('train_seconds')
         result.metrics['history'] = trained.get('train_history')
 
