@@ -5,13 +5,15 @@ A result folder says its kind by one document (``RESULT_KINDS``); once complete 
 in ``metadata.yaml``; the twin's ground-truth files are known (``BAG_EXTRAS``). ``--force``
 replaces a folder of its own kind only when it holds nothing else: an entry neither listed nor
 known is foreign, and a folder holding one is never replaced. A result written before manifests
-existed is judged by its kind alone.
+existed is judged by its kind alone. An output's names must fit the file system
+(``refuse_long_names``), the last with room for the names made from it (``NAME_RESERVE``).
 """
 
 from __future__ import annotations
 
 import errno
 import json
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +29,7 @@ __all__ = [
     'INCOMPLETE_FILE',
     'KINDS',
     'MANIFEST_FILE',
+    'NAME_RESERVE',
     'RESULT_KINDS',
     'SWEEP_FILES',
     'WRITTEN_ENTRIES',
@@ -39,6 +42,7 @@ __all__ = [
     'os_reason',
     'read_marker',
     'refuse_any_but_results',
+    'refuse_long_names',
     'refuse_unwritten',
     'write_manifest',
 ]
@@ -47,6 +51,13 @@ INCOMPLETE_FILE = 'incomplete.json'
 #: The manifest of a complete result folder: its command, kind and top-level entries.
 MANIFEST_FILE = '.id_learning.json'
 MANIFEST_FORMAT = 'id_learning.manifest/1'
+#: Bytes the last name of an output must leave free for the names made from it: the longest
+#: is ``<name>.replaced-<pid>`` (a replaced result; 7 digits: Linux's largest pid) and a bag's
+#: ``<name>_<k>.mcap.damaged``; ``<name>.partial``, ``<name>.lock`` and a file's
+#: ``.<name>.tmp-<pid>`` are shorter.
+NAME_RESERVE = 20
+#: Where the file system cannot be asked (no pathconf): Linux's limits [bytes].
+_DEFAULT_NAME_MAX, _DEFAULT_PATH_MAX = 255, 4096
 #: The kinds of output, with how messages name them.
 KINDS = {
     'run': 'a train run',
@@ -81,7 +92,8 @@ WRITTEN_ENTRIES = frozenset({
     'run', 'closed_loop', 'effects.json', 'summary.json', 'summary.md', 'online_check.json',
     'closed_loop.json', 'closed_loop.png', 'rmse_per_joint.png', 'abs_error_boxplot.png',
     'dissipative_axis1.png', 'torque_shares.png', 'torque_timeseries.png', 'excitation.png',
-    'waterfall.png', 'residual_location.png', 'residual_time.png',
+    'waterfall.png', 'residual_location.png', 'residual_time.png', 'error_spectra.png',
+    'torque_overlays', 'closed_loop_feed_forward.png',
 })  # fmt: skip
 #: What a bag folder may hold besides its .mcap files: the twin's ground truth and config.
 BAG_EXTRAS = frozenset({'metadata.yaml', 'ground_truth.json', 'ground_truth.npz',
@@ -254,26 +266,31 @@ def _refuse_foreign(folder: Path, kind: str, flag: str) -> None:
         )
 
 
-def refuse_any_but_results(folder: Path, force: bool) -> None:
-    """Without a kind to match: any result is replaced with ``force``, nothing else ever."""
+def refuse_any_but_results(folder: Path, force: bool, option: str = '--out') -> None:
+    """Without a kind to match: any result is replaced with ``force``, nothing else ever.
+
+    ``option``: the option that gave ``folder``, as messages name it.
+    """
     held = folder_holds(folder)
     if held.kind == 'empty':
         return
     if held.kind not in COMMAND_KINDS.values():
         raise OutputError(
             f'{folder}: holds {held.describe()}; it is never replaced, not even with '
-            '--force: choose another --out'
+            f'--force: choose another {option}'
         )
     if not force:
         raise OutputError(
             f'{folder}: holds {KINDS[held.kind]} already ({held.evidence}); choose another '
-            '--out, or pass --force to replace it'
+            f'{option}, or pass --force to replace it'
         )
     _refuse_foreign(folder, held.kind, '--force')
 
 
-def refuse_unwritten(work: Path) -> None:
+def refuse_unwritten(work: Path, option: str = '--out') -> None:
     """Refuse removing an interrupted ``.partial`` that holds entries no command writes.
+
+    ``option``: the option that gave the result's path, as the message names it.
 
     Raises:
         OutputError: names the folder and the entries (``WRITTEN_ENTRIES`` are ours).
@@ -284,7 +301,7 @@ def refuse_unwritten(work: Path) -> None:
         raise OutputError(
             f'{work}: an incomplete result that also holds {_shown(stray)}, which no '
             'id_learning command writes; --force never deletes them: move them out, or '
-            'choose another --out'
+            f'choose another {option}'
         )
 
 
@@ -333,3 +350,66 @@ def make_parent(out: Path) -> None:
         raise OutputError(
             f'{out.parent}: {os_reason(err)} (creating the folder of {out})'
         ) from err
+
+
+def _limits(out: Path) -> tuple[int, int]:
+    """(NAME_MAX, PATH_MAX) [bytes] of the file system ``out`` would be written to."""
+    existing = Path(os.path.abspath(out))
+    while True:
+        try:
+            if existing.is_dir():
+                break
+        except OSError:
+            pass
+        if existing == existing.parent:
+            break
+        existing = existing.parent
+    limits = []
+    for name, default in (('PC_NAME_MAX', _DEFAULT_NAME_MAX), ('PC_PATH_MAX', _DEFAULT_PATH_MAX)):
+        try:
+            value = os.pathconf(existing, name)
+        except (OSError, ValueError):
+            value = -1
+        limits.append(value if value > 0 else default)
+    return limits[0], limits[1]
+
+
+def _shorten(name: str, keep: int = 24) -> str:
+    return name if len(name) <= keep + 3 else f'{name[:keep]}...'
+
+
+def refuse_long_names(out: Path, option: str = '--out') -> None:
+    """Refuse an output path the file system cannot hold, before anything touches it.
+
+    Every name in it at most ``NAME_MAX`` bytes (the file system's), the last at most
+    ``NAME_MAX - NAME_RESERVE`` (the names made from it: ``.partial``, ``.lock``, ...), and the
+    whole path, absolute, at most ``PATH_MAX - NAME_RESERVE``.
+
+    Raises:
+        OutputError: one line naming the path, the name, its length and the limit, and
+            ``option``.
+    """
+    out = Path(out)
+    name_max, path_max = _limits(out)
+    parts = [part for part in out.parts if part not in ('/', '.', '..')]
+    for k, part in enumerate(parts):
+        size = len(os.fsencode(part))
+        last = k == len(parts) - 1
+        limit = name_max - NAME_RESERVE if last else name_max
+        if size > limit:
+            beside = (
+                f' (the file system takes {name_max}; {NAME_RESERVE} are kept for the '
+                'names made from it, such as .partial and .lock)'
+                if last
+                else ''
+            )
+            raise OutputError(
+                f'{out}: file name too long: {_shorten(part)!r} is {size} bytes, at most '
+                f'{limit} can be written there{beside}; choose a shorter {option}'
+            )
+    size = len(os.fsencode(os.path.abspath(out)))
+    if size > path_max - NAME_RESERVE:
+        raise OutputError(
+            f'{out}: path too long: {size} bytes as an absolute path, at most '
+            f'{path_max - NAME_RESERVE} can be written there; choose a shorter {option}'
+        )

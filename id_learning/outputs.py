@@ -16,8 +16,13 @@ Every command that writes a result folder (``train``, ``evaluate``, ``closed-loo
   nor a folder holding or inside one. Only a ``.partial`` folder holding the marker is ours.
 
 Bags (``check_bag_output``), sweep folders (``check_kind``) and single files such as plots
-(``check_file_output``) pass the same rule before any work starts. A bag is locked the same way
-while it is written (``bag_output``, ``BagWriter``): a second writer is refused naming the first.
+(``check_file_output``) pass the same rule before any work starts (``check_target``): there a
+name longer than the file system takes (``NAME_MAX``, less ``NAME_RESERVE`` for the last, which
+gets suffixes) or a path longer than ``PATH_MAX`` is one line naming the path, and so is any
+error of the operating system while the path is looked at. Messages name the option or
+parameter that gave the path (``option``: ``--out``, ``--plot``, the recorder's ``output``).
+A bag is locked the same way while it is written (``bag_output``, ``BagWriter``): a second
+writer is refused naming the first.
 
 A failure while writing (disk full, a file size limit, no permission) raises ``OutputError``
 naming the path and the operating system's reason; nothing is left under ``<out>``, and the
@@ -47,6 +52,7 @@ from id_learning.output_kinds import (
     INCOMPLETE_FILE,
     KINDS,
     MANIFEST_FILE,
+    NAME_RESERVE,
     Holding,
     OutputError,
     check_kind,
@@ -56,6 +62,7 @@ from id_learning.output_kinds import (
     os_reason,
     read_marker,
     refuse_any_but_results,
+    refuse_long_names,
     refuse_unwritten,
     write_manifest,
 )
@@ -66,6 +73,7 @@ __all__ = [
     'KINDS',
     'LOCK_SUFFIX',
     'MANIFEST_FILE',
+    'NAME_RESERVE',
     'PARTIAL_SUFFIX',
     'Holding',
     'OutputError',
@@ -82,6 +90,7 @@ __all__ = [
     'os_reason',
     'output_lock',
     'partial_path',
+    'refuse_long_names',
     'replace_folder',
     'result_folder',
     'write_text_atomic',
@@ -185,7 +194,7 @@ def incomplete_reason(folder: Path) -> str | None:
     return None
 
 
-def _probe_parent(out: Path) -> None:
+def _probe_parent(out: Path, option: str) -> None:
     """Refuse an ``out`` whose parent cannot be created or written (the OS's reason)."""
     parent = out.parent
     while not parent.exists():
@@ -193,7 +202,7 @@ def _probe_parent(out: Path) -> None:
             break
         parent = parent.parent
     if parent.exists() and not parent.is_dir():
-        raise OutputError(f'{out}: {parent} is a file, not a folder; choose another path')
+        raise OutputError(f'{out}: {parent} is a file, not a folder; choose another {option}')
     try:
         fd, probe = tempfile.mkstemp(prefix='.id_learning-probe-', dir=parent)
     except OSError as err:
@@ -202,7 +211,7 @@ def _probe_parent(out: Path) -> None:
     os.unlink(probe)
 
 
-def _refuse_inputs(out: Path, inputs: Sequence[Path]) -> None:
+def _refuse_inputs(out: Path, inputs: Sequence[Path], option: str) -> None:
     """Refuse an ``out`` that is, holds or lies inside an input of the command."""
     resolved = out.resolve()
     for given in inputs:
@@ -217,18 +226,32 @@ def _refuse_inputs(out: Path, inputs: Sequence[Path]) -> None:
             continue
         raise OutputError(
             f'{out}: {where} an input of this command; it is never replaced or written into, '
-            'not even with --force: choose another --out'
+            f'not even with --force: choose another {option}'
         )
 
 
-def check_target(out: Path, *, inputs: Sequence[Path] = (), folder: bool = True) -> Path:
+def check_target(
+    out: Path, *, inputs: Sequence[Path] = (), folder: bool = True, option: str = '--out'
+) -> Path:
     """What every output path passes before any work: returns the path to write.
 
+    ``option``: the option or parameter that gave ``out``, as messages name it.
+
     Raises:
-        OutputError: a dangling link; a file where a folder is expected (``folder``) or the
-            reverse; ``out`` is, holds or lies inside an input; its parent cannot be written.
+        OutputError: a name or the path too long for the file system (``refuse_long_names``);
+            a dangling link; a file where a folder is expected (``folder``) or the reverse;
+            ``out`` is, holds or lies inside an input; its parent cannot be written; the
+            operating system refuses to look at it (its reason).
     """
     out = Path(out)
+    refuse_long_names(out, option)
+    try:
+        return _check_target(out, inputs, folder, option)
+    except OSError as err:  # e.g. a name this file system takes shorter than it says
+        raise OutputError(f'{out}: {os_reason(err)}; choose another {option}') from err
+
+
+def _check_target(out: Path, inputs: Sequence[Path], folder: bool, option: str) -> Path:
     if '..' in out.parts:  # 'a/../b' is b: never create a, then leave it
         out = out.resolve()
     if out.is_symlink():
@@ -239,30 +262,38 @@ def check_target(out: Path, *, inputs: Sequence[Path] = (), folder: bool = True)
             )
         out = out.resolve()
     if folder and out.exists() and not out.is_dir():
-        raise OutputError(f'{out}: exists and is not a folder but a file; name a folder to write')
+        raise OutputError(
+            f'{out}: exists and is not a folder but a file; name a folder for {option}'
+        )
     if not folder and out.is_dir():
-        raise OutputError(f'{out}: is a folder; name a file to write')
-    _refuse_inputs(out, inputs)
-    _probe_parent(out)
+        raise OutputError(f'{out}: is a folder; name a file for {option}')
+    _refuse_inputs(out, inputs, option)
+    _probe_parent(out, option)
     return out
 
 
 def check_bag_output(
-    out: Path, *, overwrite: bool = False, inputs: Sequence[Path] = (), flag: str = '--force'
+    out: Path,
+    *,
+    overwrite: bool = False,
+    inputs: Sequence[Path] = (),
+    flag: str = '--force',
+    option: str = '--out',
 ) -> Path:
     """Refuse a bag folder that cannot or must not be written; returns the folder to write.
 
     A bag replaces only a bag (``metadata.yaml`` and ``.mcap`` files, nothing foreign) or an
-    empty folder, and only with ``overwrite`` (``flag`` names it in messages). A bag another
-    process is writing (its ``<out>.lock`` held) is refused naming that process: in progress, it
-    looks torn. Probing takes the lock for a moment (a disk already full is refused here).
+    empty folder, and only with ``overwrite`` (``flag`` names it in messages, ``option`` the
+    option or parameter that gave ``out``). A bag another process is writing (its
+    ``<out>.lock`` held) is refused naming that process: in progress, it looks torn. Probing
+    takes the lock for a moment (a disk already full is refused here).
 
     Raises:
         OutputError: as ``check_target`` and ``check_kind`` say; another process writes ``out``.
     """
-    out = check_target(out, inputs=inputs)
+    out = check_target(out, inputs=inputs, option=option)
     if out.parent.is_dir():
-        with output_lock(out):
+        with output_lock(out, option=option):
             pass
     check_kind(out, 'bag', force=overwrite, flag=flag)
     return out
@@ -270,7 +301,12 @@ def check_bag_output(
 
 @contextlib.contextmanager
 def bag_output(
-    out: Path, *, overwrite: bool = False, inputs: Sequence[Path] = (), flag: str = '--force'
+    out: Path,
+    *,
+    overwrite: bool = False,
+    inputs: Sequence[Path] = (),
+    flag: str = '--force',
+    option: str = '--out',
 ) -> Iterator[Path]:
     """Hold ``<out>.lock`` while a bag is written to ``out``; yields the folder to write.
 
@@ -283,10 +319,10 @@ def bag_output(
         OutputError: as ``check_bag_output`` says; another process writes ``out``; the lock
             cannot be created.
     """
-    out = check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag)
+    out = check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag, option=option)
     make_parent(out)
-    with output_lock(out):
-        yield check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag)
+    with output_lock(out, option=option):
+        yield check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag, option=option)
 
 
 def _refuse_inside_results(out: Path) -> None:
@@ -314,20 +350,22 @@ def check_file_output(
     force: bool = False,
     inputs: Sequence[Path] = (),
     suffixes: Sequence[str] = (),
+    option: str = '--plot',
 ) -> Path:
     """Refuse a file that cannot or must not be written; returns the file to write.
 
     ``suffixes``: the ones accepted (lower case, with the dot), when given. An existing file is
     replaced only with ``force``; never one inside a result folder or a bag (another command's).
+    ``option``: the option that gave ``out`` (the tool's one file output is ``inspect --plot``).
     """
-    out = check_target(Path(out), inputs=inputs, folder=False)
+    out = check_target(Path(out), inputs=inputs, folder=False, option=option)
     if suffixes and out.suffix.lower() not in suffixes:
         raise OutputError(
             f'{out}: not a file type that can be written here; use one of {", ".join(suffixes)}'
         )
     _refuse_inside_results(out)
     if out.exists() and not force:
-        raise OutputError(f'{out}: exists; choose another path, or pass --force to replace it')
+        raise OutputError(f'{out}: exists; choose another {option}, or pass --force to replace it')
     return out
 
 
@@ -338,6 +376,7 @@ def check_output(
     inputs: Sequence[Path] = (),
     is_locked: bool = False,
     kind: str | None = None,
+    option: str = '--out',
 ) -> Path:
     """Refuse an ``out`` that cannot or must not be written; returns the folder to write.
 
@@ -351,34 +390,34 @@ def check_output(
         OutputError: as ``check_target`` and ``check_kind`` say; or an interrupted result is
             beside it and ``force`` is not set.
     """
-    out = check_target(out, inputs=inputs)
+    out = check_target(out, inputs=inputs, option=option)
     try:
         if kind is not None:
             check_kind(out, kind, force=force)
         elif out.is_dir():
-            refuse_any_but_results(out, force)
+            refuse_any_but_results(out, force, option)
     except OSError as err:
         raise OutputError(f'{out}: {os_reason(err)}') from err
     partial = partial_path(out)
     if not (partial.exists() or partial.is_symlink()):
         return out
-    marker = _partial_marker(partial)
+    marker = _partial_marker(partial, option)
     if not force and (is_locked or not _is_alive(marker.get('pid'))):
         raise OutputError(
             f'{partial}: an incomplete result is there ({_describe_marker(marker)}); pass '
-            '--force to replace it, or choose another --out'
+            f'--force to replace it, or choose another {option}'
         )
     return out
 
 
-def _partial_marker(partial: Path) -> dict[str, Any]:
+def _partial_marker(partial: Path, option: str = '--out') -> dict[str, Any]:
     """The marker of ``partial``; refuses a ``.partial`` that is not a folder holding one."""
     marker = None if partial.is_symlink() or not partial.is_dir() else read_marker(partial)
     if marker is None:
         what = 'a folder without ' + INCOMPLETE_FILE if partial.is_dir() else 'not a folder'
         raise OutputError(
             f'{partial}: exists and is not an incomplete result of id_learning ({what}); it is '
-            'never replaced, not even with --force: move it, or choose another --out'
+            f'never replaced, not even with --force: move it, or choose another {option}'
         )
     return marker
 
@@ -399,8 +438,8 @@ class ResultFolder:
 
 
 @contextlib.contextmanager
-def _locked(out: Path) -> Iterator[None]:
-    """Hold ``<out>.lock`` (flock, not waiting); removed on release.
+def _locked(out: Path, option: str = '--out') -> Iterator[None]:
+    """Hold ``<out>.lock`` (flock, not waiting); removed on release (``option``: for messages).
 
     Raises:
         OutputError: another process holds it (named by its pid), or it cannot be created.
@@ -418,7 +457,7 @@ def _locked(out: Path) -> Iterator[None]:
             os.close(fd)
             raise OutputError(
                 f'{out}: another process (pid {holder}) is writing it ({path} is locked); '
-                'wait for it to finish, or choose another --out'
+                f'wait for it to finish, or choose another {option}'
             ) from None
         try:
             same = os.fstat(fd).st_ino == os.stat(path).st_ino
@@ -447,8 +486,10 @@ def _held_key(out: Path) -> Path:
 
 
 @contextlib.contextmanager
-def output_lock(out: Path) -> Iterator[None]:
+def output_lock(out: Path, *, option: str = '--out') -> Iterator[None]:
     """Hold ``<out>.lock`` (flock, not waiting) while writing ``out``; its parent must exist.
+
+    ``option``: the option or parameter that gave ``out``, as the refusal names it.
 
     Taken again by the thread holding it, it goes on (a command holds it, the writer it calls
     takes it too); another thread or process is refused, naming the holder's pid.
@@ -461,7 +502,7 @@ def output_lock(out: Path) -> Iterator[None]:
     if _HELD.get(key) == me:
         yield
         return
-    with _locked(out):
+    with _locked(out, option):
         _HELD[key] = me
         try:
             yield
@@ -469,13 +510,13 @@ def output_lock(out: Path) -> Iterator[None]:
             del _HELD[key]
 
 
-def _start(out: Path, command: str) -> Path:
+def _start(out: Path, command: str, option: str) -> Path:
     """A fresh ``<out>.partial`` with its marker (an interrupted one is removed first)."""
     work = partial_path(out)
     if work.exists() or work.is_symlink():
-        _partial_marker(work)  # never remove what is not ours
-        refuse_any_but_results(work, force=True)
-        refuse_unwritten(work)
+        _partial_marker(work, option)  # never remove what is not ours
+        refuse_any_but_results(work, True, option)
+        refuse_unwritten(work, option)
         shutil.rmtree(work)
     work.mkdir()
     marker = {
@@ -508,6 +549,7 @@ def result_folder(
     command: str,
     force: bool = False,
     inputs: Sequence[Path] = (),
+    option: str = '--out',
 ) -> Iterator[ResultFolder]:
     """Write a result folder whole or not at all; yields where to write (``.work``).
 
@@ -517,18 +559,22 @@ def result_folder(
         force: replace an existing result of the kind ``command`` writes (``COMMAND_KINDS``;
             any result for another command), never an input, never what is not a result.
         inputs: folders and files the command reads; ``out`` may not be, hold or lie in one.
+        option: the option that gave ``out``, as messages name it.
 
     Raises:
         OutputError: ``out`` is refused (``check_output``), another process writes it, or a
             write failed (the path and the OS's reason).
     """
     kind = COMMAND_KINDS.get(command)
-    out = check_output(out, force=force, inputs=inputs, kind=kind)
+    out = check_output(out, force=force, inputs=inputs, kind=kind, option=option)
     make_parent(out)
-    with _locked(out):  # not output_lock: a result has one writer, even in one thread
-        out = check_output(out, force=force, inputs=inputs, is_locked=True, kind=kind)  # ours
+    with _locked(out, option):  # not output_lock: a result has one writer, even in one thread
+        out = check_output(  # ours
+            out, force=force, inputs=inputs, is_locked=True, kind=kind, option=option
+        )
         try:
-            folder = ResultFolder(out, _start(out, command))  # ours from here: removed on failure
+            # Ours from here: removed on failure.
+            folder = ResultFolder(out, _start(out, command, option))
         except OSError as err:
             raise OutputError(f'{partial_path(out)}: {os_reason(err)} (starting {out})') from err
         try:
@@ -539,6 +585,8 @@ def result_folder(
         except BaseException as err:
             if not folder.keep:
                 shutil.rmtree(folder.work, ignore_errors=True)
-            if isinstance(err, OSError):
+            # A closed standard output (``| head``) is no failure of the folder: the command
+            # ends quietly (``cli.main``).
+            if isinstance(err, OSError) and not isinstance(err, BrokenPipeError):
                 raise _failed(folder, err) from err
             raise

@@ -3,7 +3,8 @@
 In order: a data summary with plots; the diagnosis (``--skip-diagnosis`` skips it); the training
 of ``--models`` (default ``DEMO_MODELS``: the study's seven, the identified physics and the
 diagnosed model, nine kinds) with a report; the closed loop on the twin, feedback alone and with
-each model as feed-forward (a bag without a twin config skips it); the online check: a stretch
+each model as feed-forward (the twin config beside the bag, or ``--twin``; a bag of a real
+robot without one skips it, saying so); the online check: a stretch
 of the test part replayed in real time through the predictor node with the best model (skipped
 without rclpy). ``--skip-training`` stops after the diagnosis. It composes the other commands'
 work (``diagnose_bags``, ``metrics_table``, ``closed_loop_run``), so it sits on top of their
@@ -57,18 +58,43 @@ def cmd_demo(args: argparse.Namespace) -> int:
                 '--online-seconds',
                 '--closed-loop-seconds',
                 '--study-table',
+                '--twin',
             )
-        ],
+        ]
+        + [('--twin', '--closed-loop-seconds=0.0', 'the closed loop is skipped')],
     )
     for key, default in _SECONDS_DEFAULTS.items():  # None marks an option not given
         if getattr(args, key) is None:
             setattr(args, key, default)
     robot = options.load_robot(args)
     options.model_kinds(args.models)  # unknown kinds refused even with --skip-training
+    if args.twin:  # refused before the work, not after the training
+        _check_twin(Path(args.twin), robot)
     bag = Path(args.bag or default_bag())
-    with result_folder(Path(args.out), command='demo', force=args.force, inputs=[bag]) as folder:
+    inputs = [bag, *([Path(args.twin)] if args.twin else [])]
+    with result_folder(Path(args.out), command='demo', force=args.force, inputs=inputs) as folder:
         _demo_into(args, robot, bag, folder)
     return 0
+
+
+def _check_twin(path: Path, robot: Any) -> None:
+    """Refuse a ``--twin`` that cannot be the plant: unreadable, or of another robot.
+
+    Raises:
+        ConfigError: names --twin, the file and why.
+    """
+    from id_learning.errors import ConfigError
+    from id_learning.twin import load_twin_config
+
+    try:
+        twin = load_twin_config(path)
+    except ConfigError as err:
+        raise ConfigError(f'--twin {path}: {err}') from err
+    if twin.robot.name != robot.name or twin.robot.joints != robot.joints:
+        raise ConfigError(
+            f'--twin {path}: twin robot {twin.robot.name} is not robot {robot.name} of the demo '
+            '(--robot)'
+        )
 
 
 def _demo_into(args: argparse.Namespace, robot: Any, bag: Path, folder: Any) -> None:
@@ -141,7 +167,8 @@ def _demo_closed_loop(
 ) -> None:
     """Track the test motion on the twin with each model as feed-forward.
 
-    A bag of a real robot (no twin config beside it) skips this step.
+    The plant is ``--twin``, else the twin config beside the bag; a bag of a real robot (no twin
+    config beside it, none given) skips this step.
     """
     from id_learning.errors import ConfigError
     from id_learning.training.closed_loop_run import closed_loop_run
@@ -156,16 +183,20 @@ def _demo_closed_loop(
             run.out,
             robot,
             out / 'closed_loop',
+            twin_config=Path(args.twin) if args.twin else None,
             duration_s=args.closed_loop_seconds,
             run_name=shown / 'run',
+            report=run.out / 'report.md',
         )
     except ConfigError as err:
         print(f'closed loop not run: {err}', flush=True)
         return
     print(result.summary())
     print(
-        f'closed loop: {shown / "closed_loop" / result.json_path.name}; plot: '
-        f'{shown / "closed_loop" / result.plot_path.name}',
+        f'closed loop: {shown / "closed_loop" / result.json_path.name}; plots: '
+        f'{shown / "closed_loop" / result.plot_path.name}, '
+        f'{shown / "closed_loop" / result.feed_forward_plot_path.name}; section (h) of '
+        f'{shown / "run" / "report.md"}',
         flush=True,
     )
 
@@ -266,6 +297,12 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         '--closed-loop-seconds',
         type=options.finite(0.0, 86400.0),
         help="seconds of the test part tracked in the twin's closed loop (default 60; 0: skip)",
+    )
+    p.add_argument(
+        '--twin',
+        metavar='CONFIG',
+        help="twin config of the closed loop's plant (default: the twin_config.yaml beside the "
+        'bag; a bag of a real robot has none, and the closed loop is skipped without one)',
     )
     p.add_argument('--device', choices=('auto', 'cpu', 'cuda'), default='auto')
     options.study_table_option(p)

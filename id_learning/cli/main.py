@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import logging
 import os
 import signal
@@ -25,7 +26,7 @@ from id_learning.cli.sweep import add_sweep_command
 from id_learning.cli.train import add_train_commands
 from id_learning.errors import IdLearningError
 
-__all__ = ['Terminated', 'build_parser', 'main', 'train_main']
+__all__ = ['Terminated', 'build_parser', 'main', 'stdout_closed', 'train_main']
 
 _LOG = logging.getLogger('id_learning.cli')
 
@@ -148,12 +149,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def stdout_closed() -> int:
+    """After a write to a closed standard output (``| head``): exit quietly, with 141.
+
+    The Python documentation's way (signal, 'Note on SIGPIPE'): what is left to write goes to
+    /dev/null, so that the flush at exit raises nothing more. 141 is 128 + SIGPIPE, the status a
+    shell gives a program a closed pipe ended.
+    """
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no file descriptor behind sys.stdout (a test's capture)
+        pass
+    finally:
+        os.close(devnull)
+    return 128 + signal.SIGPIPE
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; package errors print one clear line and exit with status 2.
 
     Ctrl-C (SIGINT) and SIGTERM print one line saying what is left where and exit with
-    130 and 143 (128 + the signal's number): the writers clean up as for any failure.
+    130 and 143 (128 + the signal's number): the writers clean up as for any failure. A closed
+    standard output (``id-learning inspect BAG | head -1``, also under ``--help``) ends the
+    command quietly with 141 (``stdout_closed``); the writers clean up alike.
     """
+    try:
+        try:
+            return _run(argv)
+        finally:  # a closed pipe raises here, not at the interpreter's exit (after --help too)
+            sys.stdout.flush()
+    except BrokenPipeError:
+        return stdout_closed()
+
+
+def _run(argv: Sequence[str] | None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING,
@@ -165,6 +195,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             return int(args.func(args))
     except IdLearningError as err:
         print(f'id-learning {args.command}: error: {err}', file=sys.stderr)
+        return 2
+    except OSError as err:
+        if err.errno != errno.ENAMETOOLONG:
+            raise
+        # Outputs are refused so before any work (outputs.check_target); this is the net for a
+        # path a command looks at before that, or an input's.
+        where = f'{err.filename}: ' if err.filename is not None else ''
+        print(
+            f'id-learning {args.command}: error: {where}{err.strerror}; choose a shorter path',
+            file=sys.stderr,
+        )
         return 2
     except KeyboardInterrupt as err:
         number = signal.SIGTERM if isinstance(err, Terminated) else signal.SIGINT

@@ -5,13 +5,18 @@
 - ``endpoint``: a publisher or subscription that rcl refuses ends the start with one line naming
   the parameter and the topic, not a traceback.
 - ``ForeignPublishers``: a publisher of another message type on a topic the node takes in is
-  never matched (DDS delivers nothing of it, silently); it is looked for, and named once.
+  never matched (DDS delivers nothing of it, silently); it is looked for, and named once. The
+  same look counts the publishers of the right type: several on a topic whose samples must
+  follow one another (the predictor's reference) interleave two motions, which the node then
+  names once per episode (``newly_shared``, ``shared_text``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import re
+import time
+from collections import Counter
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -27,8 +32,12 @@ from id_learning.nodes.params import (
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ['Foreign', 'ForeignPublishers', 'endpoint', 'refuse_clashing_topics']
+__all__ = ['Foreign', 'ForeignPublishers', 'endpoint', 'refuse_clashing_topics', 'shared_text']
 
+#: Part of the name the graph gives a publisher before discovery has brought its node's.
+UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
+#: How long several publishers wait for such a name before they are said without it [s].
+NAME_WAIT_S = 3.0
 #: rcl's source locations at the end of its error text.
 _WHERE = re.compile(r',\s*at\s+\S+:\d+')
 
@@ -97,17 +106,25 @@ class ForeignPublishers:
         self.seen: set[Foreign] = set()
         #: Those present at the last look.
         self.present: list[Foreign] = []
+        #: Per topic, the nodes of its publishers of the expected type at the last look (a node
+        #: once per publisher, sorted).
+        self.matching: dict[str, list[str]] = {}
+        #: Per topic shared now: since when (time.monotonic() [s]), or None once said.
+        self._shared: dict[str, float | None] = {}
 
     def look(self) -> list[Foreign]:
         """Look at the graph; returns the publishers found for the first time."""
         present = []
+        matching: dict[str, list[str]] = {}
         for topic, expected in self.expected.items():
+            matching[topic] = []
             for info in self._node.get_publishers_info_by_topic(topic):
+                node = f'{info.node_namespace.rstrip("/")}/{info.node_name}'
                 if info.topic_type != expected:
-                    namespace = info.node_namespace.rstrip('/')
-                    present.append(
-                        Foreign(topic, f'{namespace}/{info.node_name}', info.topic_type)
-                    )
+                    present.append(Foreign(topic, node, info.topic_type))
+                else:
+                    matching[topic].append(node)
+        self.matching = {topic: sorted(nodes) for topic, nodes in matching.items()}
         self.present = sorted(
             set(present), key=lambda item: (item.topic, item.node, item.msg_type)
         )
@@ -118,3 +135,41 @@ class ForeignPublishers:
     def types_seen(self, topic: str) -> list[str]:
         """The foreign types ever found on a topic, sorted."""
         return sorted({item.msg_type for item in self.seen if item.topic == topic})
+
+    def shared(self, topic: str) -> list[str]:
+        """The nodes of several publishers of the expected type on ``topic``, else [].
+
+        As at the last look; a node once per publisher.
+        """
+        nodes = self.matching.get(topic, [])
+        return nodes if len(nodes) > 1 else []
+
+    def newly_shared(self, topic: str) -> bool:
+        """Whether ``topic`` has several publishers now, not yet said: call once per look.
+
+        What is said once: again only after it had one publisher or none in between. A
+        publisher whose node name discovery has not brought yet waits ``NAME_WAIT_S`` for it.
+        """
+        nodes = self.shared(topic)
+        if not nodes:
+            self._shared.pop(topic, None)
+            return False
+        since = self._shared.setdefault(topic, time.monotonic())
+        if since is None:
+            return False
+        unnamed = any(UNKNOWN_NODE in node for node in nodes)
+        if unnamed and time.monotonic() - since < NAME_WAIT_S:
+            return False
+        self._shared[topic] = None
+        return True
+
+
+def shared_text(topic: str, nodes: list[str], consequence: str) -> str:
+    """'2 publishers on /reference (node /a, node /b twice): ...' for several publishers."""
+    counts = Counter(nodes)
+    named = ', '.join(
+        ('a node not discovered yet' if UNKNOWN_NODE in node else f'node {node}')
+        + ('' if n == 1 else ' twice' if n == 2 else f' {n} times')
+        for node, n in sorted(counts.items())
+    )
+    return f'{len(nodes)} publishers on {topic} ({named}): {consequence}'

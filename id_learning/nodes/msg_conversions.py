@@ -36,6 +36,7 @@ __all__ = [
     'ns_to_time',
     'ros_type_name',
     'serialize_exact',
+    'time_from_start_ns',
     'time_to_ns',
     'torque_command',
     'trajectory_message',
@@ -117,6 +118,14 @@ def trajectory_to_sample(msg: JointTrajectory) -> ReferenceSample:
         v=_floats(point.velocities),
         a=a if len(a) else None,
     )
+
+
+def time_from_start_ns(msg: JointTrajectory) -> int:
+    """The first point's time_from_start [ns] (0 without points): when it is meant for."""
+    if not msg.points:
+        return 0
+    offset = msg.points[0].time_from_start
+    return int(offset.sec) * NS_PER_S + int(offset.nanosec)
 
 
 # -- messages out ---------------------------------------------------------------------------------

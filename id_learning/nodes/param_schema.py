@@ -31,6 +31,7 @@ from id_learning.config_io import (
     describe_range,
     load_yaml_mapping,
     range_problem,
+    read_capped,
     topic_name_problem,
 )
 from id_learning.errors import ConfigError
@@ -285,8 +286,8 @@ def refuse_foreign_params_files(node: Node, args: Sequence[str] | None = None) -
     """
     for path in params_files(COMMAND_LINE if args is None else args):
         try:
-            data = yaml.safe_load(path.read_text(encoding='utf-8'))
-        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            data = yaml.safe_load(read_capped(path, 'parameter file').decode('utf-8'))
+        except (ConfigError, OSError, UnicodeDecodeError, yaml.YAMLError):
             continue  # rcl read it before the node started; nothing to add here
         problem = params_file_problem(path, data, node.get_name(), node.get_namespace())
         if problem:

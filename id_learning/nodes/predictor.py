@@ -20,7 +20,9 @@ negative ``sec``: ``invalid_stamp``, refused here before the core); inputs outsi
 range are counted and warned about. When no valid sample has arrived for ``stale_after_cycles``
 IPO cycles the reference is stale: a watchdog says so (throttled), nothing is published, and with
 ``command_topic`` one zero command is sent (a forward command controller holds its last command).
-The history is reset when the reference resumes.
+The history is reset when the reference resumes. Said once: a trajectory point whose
+time_from_start is not 0 (taken as the current cycle's; ``points_ahead`` on /diagnostics), several
+publishers on the input (``input_publishers``), torch_threads beyond the CPU cores it may use.
 
 Diagnostics (/diagnostics, every ``diagnostics_period_s``): input rate, receive-to-publish
 latency and compute latency (median, p99, max), counts of predictions, clamps per joint, rejects
@@ -69,10 +71,10 @@ from trajectory_msgs.msg import JointTrajectory
 
 from id_learning.errors import ConfigError
 from id_learning.nodes.endpoints import (
-    Foreign,
     ForeignPublishers,
     endpoint,
     refuse_clashing_topics,
+    shared_text,
 )
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
@@ -80,6 +82,7 @@ from id_learning.nodes.msg_conversions import (
     joint_state_message,
     joint_state_to_sample,
     serialize_exact,
+    time_from_start_ns,
     time_to_ns,
     torque_command,
     trajectory_message,
@@ -95,11 +98,14 @@ from id_learning.nodes.params import (
 )
 from id_learning.nodes.predictor_report import (
     INPUT_TYPES,
+    SHARED_INPUT,
     TROUBLES,
     NodeCounts,
     adaptation_loop,
+    ahead_text,
     count_values,
     final_report,
+    foreign_text,
     setup_warnings,
     troubles,
 )
@@ -214,7 +220,8 @@ class Predictor(Node):
                 input_qos or reference_qos(config.input_depth),
             )
         taken = {kind: msg_type for msg_type, kind in INPUT_TYPES.items()}[config.input_type]
-        expected = {self._subscription.topic_name: taken}
+        self._input_topic = self._subscription.topic_name
+        expected = {self._input_topic: taken}
         if self._measured is not None:
             expected[self._measured.topic_name] = JOINT_STATE
         self.foreign = ForeignPublishers(self, expected)
@@ -266,6 +273,8 @@ class Predictor(Node):
                 self._refuse_stamp(problem)
                 return
             sample = self._convert(msg)
+            if self._convert is trajectory_to_sample:
+                self._check_ahead(msg)
             result = self.core.step(sample, receive_ns)
             if result.reject is not None:
                 self._log_reject(result)
@@ -339,6 +348,14 @@ class Predictor(Node):
             f'({self.counts.invalid_stamps} so far)',
             throttle_duration_sec=self.config.log_throttle_s,
         )
+
+    def _check_ahead(self, msg: JointTrajectory) -> None:
+        """A point with a time_from_start: counted, and said once (taken as the current one)."""
+        ahead_ns = time_from_start_ns(msg)
+        if ahead_ns:
+            self.counts.points_ahead += 1
+            if self.counts.points_ahead == 1:
+                self.get_logger().warning(ahead_text(self._input_topic, ahead_ns))
 
     def _log_reject(self, result: StepResult) -> None:
         throttle = self.config.log_throttle_s
@@ -437,6 +454,7 @@ class Predictor(Node):
             'compute_p99_ms': compute.p99 * 1e3,
             'compute_max_ms': compute.max * 1e3,
         }
+        values['input_publishers'] = len(self.foreign.matching.get(self._input_topic, []))
         if self.foreign.present:
             values['wrong_type_publishers'] = '; '.join(
                 f'{item.node} {item.msg_type} on {item.topic}' for item in self.foreign.present
@@ -450,38 +468,29 @@ class Predictor(Node):
             )
         return values
 
-    def _check_publisher_types(self) -> str:
-        """Name each new publisher of another type on the input (or measured) topic, once.
+    def _check_publishers(self) -> str:
+        """Name new publishers of another type once, several on the input once per episode.
 
         Returns:
-            The ones there now, in words ('' if none).
+            What is there now, in words ('' if nothing).
         """
-        texts = []
-        for item in self.foreign.look():
-            self.get_logger().warning(self._foreign_text(item))
-        for item in self.foreign.present:
-            texts.append(self._foreign_text(item))
+        topic, foreign = self._input_topic, self.foreign
+        for item in foreign.look():
+            self.get_logger().warning(foreign_text(item, foreign, topic, self.config.input_type))
+        is_new, shared = foreign.newly_shared(topic), foreign.shared(topic)
+        texts = [
+            foreign_text(item, foreign, topic, self.config.input_type) for item in foreign.present
+        ]
+        if shared:
+            texts.append(shared_text(topic, shared, SHARED_INPUT))
+            if is_new:
+                self.get_logger().warning(texts[-1])
         return '; '.join(texts)
 
-    def _foreign_text(self, item: Foreign) -> str:
-        expected = self.foreign.expected[item.topic]
-        text = (
-            f'node {item.node} publishes {item.msg_type} on {item.topic}, which takes '
-            f'{expected}: none of it arrives'
-        )
-        if item.topic != self._subscription.topic_name:
-            return f'{text} (measured_topic)'
-        accepting = INPUT_TYPES.get(item.msg_type)
-        return text + (
-            f'; input_type {accepting} would take it (now {self.config.input_type})'
-            if accepting
-            else f'; no input_type takes it (now {self.config.input_type})'
-        )
-
     def _publish_diagnostics(self) -> None:
+        foreign = self._check_publishers()  # first: the values show this look
         values = self.report_values()
         counters = self.core.counters
-        foreign = self._check_publisher_types()
         now_troubles = troubles(self.core, self.counts)
         if self.core.is_stale:
             silence_s = (self.core.silence_ns(time.monotonic_ns()) or 0) * 1e-9

@@ -10,20 +10,25 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from id_learning.errors import ConfigError
+from id_learning.nodes.endpoints import Foreign, ForeignPublishers
 from id_learning.nodes.params import PredictorNodeConfig
 from id_learning.predictor import FeedForwardPredictor, Reject
 from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
 from id_learning.predictor.provenance import incomplete_run
+from id_learning.predictor.threads import oversubscription
 from id_learning.predictor.timing import StatsSummary
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
     'INPUT_TYPES',
+    'SHARED_INPUT',
     'TROUBLES',
     'NodeCounts',
     'adaptation_loop',
+    'ahead_text',
     'count_values',
     'final_report',
+    'foreign_text',
     'setup_warnings',
     'skipped_cycles',
     'troubles',
@@ -40,12 +45,20 @@ TROUBLES = (
     'with the physics prior',
     'cycles skipped',
     'late',
+    'points ahead',
 )
 #: The input_type that takes each message type.
 INPUT_TYPES = {
     'trajectory_msgs/msg/JointTrajectory': 'trajectory',
     'sensor_msgs/msg/JointState': 'joint_state',
 }
+
+
+#: What several publishers on the input topic do to the predictor (``endpoints.shared_text``).
+SHARED_INPUT = (
+    'the predictor takes one reference, so their samples interleave, and those that do not '
+    'follow from the one before are rejected (inconsistent): leave one publisher on it'
+)
 
 
 @dataclass
@@ -57,6 +70,9 @@ class NodeCounts:
     callback_errors: int = 0
     #: Refused before the core: a header stamp with nanosec >= 1e9 or a negative sec.
     invalid_stamps: int = 0
+    #: Trajectory samples whose point has a time_from_start other than 0 (taken as the current
+    #: cycle's all the same; said once, ``ahead_text``).
+    points_ahead: int = 0
 
 
 def skipped_cycles(core: FeedForwardPredictor) -> tuple[int, int]:
@@ -83,6 +99,7 @@ def troubles(core: FeedForwardPredictor, counts: NodeCounts) -> tuple[int, ...]:
         counters.fallback_samples,
         skipped_cycles(core)[0],
         counts.late_samples,
+        counts.points_ahead,
     )
 
 
@@ -118,6 +135,7 @@ def count_values(core: FeedForwardPredictor, counts: NodeCounts) -> dict[str, ob
             'skipped_cycles': skipped,
             'skipped_cycles_in_holes': in_holes,
             'late_samples': counts.late_samples,
+            'points_ahead': counts.points_ahead,
             'callback_errors': counts.callback_errors,
         }
     )
@@ -146,8 +164,11 @@ def final_report(core: FeedForwardPredictor, counts: NodeCounts, latency: StatsS
 
 
 def setup_warnings(core: FeedForwardPredictor, config: PredictorNodeConfig) -> list[str]:
-    """What in the artifact's setup will cost accuracy, to be said once at start."""
+    """What in the artifact's setup will cost accuracy or cycles, to be said once at start."""
     warnings = []
+    threads = oversubscription(config.torch_threads)
+    if threads is not None:
+        warnings.append(threads)
     fallback = core.fallback
     if core.out_of_range_action == 'fallback' and fallback and 'nominal' in fallback.source:
         warnings.append(
@@ -190,4 +211,33 @@ def adaptation_loop(
     settings = AdaptationConfig(time_constant_s=config.adaptation_time_constant_s)
     return AdaptationLoop.for_robot(
         robot, core.joint_names, settings, inertia=config.adaptation == 'rls_inertia'
+    )
+
+
+def ahead_text(topic: str, ahead_ns: int) -> str:
+    """The one warning about a trajectory point whose time_from_start is not 0."""
+    ahead_s = ahead_ns * 1e-9
+    return (
+        f'{topic}: points[0].time_from_start is {ahead_s:.9g} s, not 0: the predictor takes the '
+        'first point as the reference of the cycle in header.stamp, so a point meant for '
+        f"{ahead_s:.9g} s later gives tau_u for the wrong moment; send the current cycle's "
+        'reference with time_from_start 0 (said once; counted as points_ahead on /diagnostics)'
+    )
+
+
+def foreign_text(
+    item: Foreign, publishers: ForeignPublishers, input_topic: str, input_type: str
+) -> str:
+    """A publisher of another type on the input (or measured) topic, in words."""
+    text = (
+        f'node {item.node} publishes {item.msg_type} on {item.topic}, which takes '
+        f'{publishers.expected[item.topic]}: none of it arrives'
+    )
+    if item.topic != input_topic:
+        return f'{text} (measured_topic)'
+    accepting = INPUT_TYPES.get(item.msg_type)
+    return text + (
+        f'; input_type {accepting} would take it (now {input_type})'
+        if accepting
+        else f'; no input_type takes it (now {input_type})'
     )

@@ -39,6 +39,7 @@ Usage: ``ros2 run id_learning recorder --ros-args -p output:=runs/excitation_01`
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -65,10 +66,13 @@ from id_learning.nodes.params import (
 )
 from id_learning.nodes.qos import DIAGNOSTICS_QOS, sensor_qos
 from id_learning.nodes.runtime import run_node
+from id_learning.outputs import bag_output
 
 __all__ = ['Recorder', 'TopicCounts', 'main']
 
 NODE_NAME = 'recorder'
+#: How messages name the parameters that give the bag and let it be replaced.
+OUTPUT_OPTION, OVERWRITE_FLAG = 'output:=PATH', 'overwrite:=true'
 MIB = 1 << 20
 #: Messages taken from a subscription's queue per callback, beyond the one the executor hands.
 DRAIN_LIMIT = 256
@@ -145,15 +149,30 @@ class Recorder(Node):
                     raw=True,
                     event_callbacks=events,
                 )
-        self.path = config.bag_path()
-        self.writer = BagWriter(
-            self.path,
-            overwrite=config.overwrite,
-            flag='overwrite:=true',
-            chunk_bytes=config.chunk_kib * 1024,
-            split_duration_ns=round(config.split_duration_s * 1e9) or None,
-            split_bytes=round(config.split_size_mib * MIB) or None,
-        ).open()
+        # The bag's lock is held from here to close(), taken first under the parameter's name
+        # (a second recorder on the same output is refused naming 'output'); the writer takes
+        # it again and goes on.
+        self._output = contextlib.ExitStack()
+        self.path = self._output.enter_context(
+            bag_output(
+                config.bag_path(),
+                overwrite=config.overwrite,
+                flag=OVERWRITE_FLAG,
+                option=OUTPUT_OPTION,
+            )
+        )
+        try:
+            self.writer = BagWriter(
+                self.path,
+                overwrite=config.overwrite,
+                flag=OVERWRITE_FLAG,
+                chunk_bytes=config.chunk_kib * 1024,
+                split_duration_ns=round(config.split_duration_s * 1e9) or None,
+                split_bytes=round(config.split_size_mib * MIB) or None,
+            ).open()
+        except BaseException:
+            self._output.close()
+            raise
         self.path = self.writer.path  # normalised: "a/../b" is b
         for topic, msg_type in typed:
             self.writer.add_topic(topic, msg_type)
@@ -341,6 +360,8 @@ class Recorder(Node):
             self.writer.close()
         except BagError as err:
             self._stop(err)
+        finally:
+            self._output.close()
         self._count_written()
         total = self.totals()
         lines = [

@@ -24,6 +24,9 @@ A header stamp that is no time (``nanosec`` >= 1e9 or a negative ``sec``) refuse
 naming the message, wherever the replay reads stamps (every topic with ``timing: stamp``, the
 reference source always): folded into nanoseconds it would be another time. Topics that are only
 played (``timing: log_time``) go out as recorded; the predictor refuses such stamps itself.
+The stamps read pass train's timing checks first, in the bag's order (``replay_span``): one that
+repeats or goes backwards, or a hole inside the span in the reference source, refuses the bag,
+naming it (never re-sorted silently, never left to show up as an impossible acceleration).
 
 Jitter: for every cycle the lateness (publish time minus its deadline) is recorded; the median,
 99th percentile and maximum [ms] and the number of cycles later than one IPO period are logged at
@@ -54,7 +57,6 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from id_learning.bag import JOINT_STATE, bag_info, decode_joint_state, iter_raw
-from id_learning.bag.messages import typestore
 from id_learning.dataset.consistency import KinematicConsistency, gap_starts
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import check_accelerations, check_motion
@@ -77,9 +79,14 @@ from id_learning.nodes.params import (
     validate_change,
 )
 from id_learning.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, reference_qos, sensor_qos
-from id_learning.nodes.replay_span import check_topics_play, unpaired_tail
+from id_learning.nodes.replay_span import (
+    check_topics_order,
+    check_topics_play,
+    header_stamp_ns,
+    source_stretch,
+    unpaired_tail,
+)
 from id_learning.nodes.runtime import run_node
-from id_learning.predictor.guards import stamp_problem
 from id_learning.predictor.reference import reference_from_states
 from id_learning.predictor.timing import RollingStats
 from id_learning.robot.config import RobotConfig, load_robot_config
@@ -130,30 +137,6 @@ class ReplayPlan:
     def message_count(self) -> int:
         """Messages of the bag's topics (without /clock and the reference)."""
         return sum(1 for cycle in self.cycles for index, _ in cycle.messages if index >= 0)
-
-
-def _stamp_ns(data: bytes, msgtype: str, where: str) -> int | None:
-    """The header stamp of one message [ns], None when its type has no header.
-
-    Raises:
-        BagError: the bytes are no message of the topic's type, or its stamp is invalid
-            (``nanosec`` >= 1e9 or ``sec`` < 0; names ``where``).
-    """
-    try:
-        msg = typestore().deserialize_cdr(data, msgtype)
-    except Exception as err:  # rosbags raises SerdeError and others on foreign bytes
-        raise BagError(f'{where}: not a valid {msgtype} ({type(err).__name__}: {err})') from err
-    header = getattr(msg, 'header', None)
-    if header is None:
-        return None
-    sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
-    problem = stamp_problem(sec, nanosec)
-    if problem is not None:  # folded in, it would be another time: refused, as the predictor does
-        raise BagError(
-            f'{where}: invalid header stamp: {problem}; nothing is played from a bag whose '
-            'stamps cannot be placed (recorded by a sender with a broken clock?)'
-        )
-    return sec * NS_PER_S + nanosec
 
 
 def _reference_bytes(
@@ -275,7 +258,8 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     index = {topic: k for k, topic in enumerate(config.topics)}
     pad = round(REFERENCE_PAD_S * NS_PER_S) if has_reference else 0
     keyed: list[tuple[int, int, bytes]] = []  # (key, topic index, bytes) inside the span
-    states: list[tuple[int, bytes]] = []  # (key, bytes) of the source, span plus padding
+    states: list[tuple[int, bytes, int]] = []  # (key, bytes, stamp): the source, span + padding
+    firsts: dict[str, int] = {}  # the message number of each topic's first kept message
     start = stop = None
     log_to_key = 0
     counts: dict[str, int] = {}  # messages of each topic read so far (for messages)
@@ -288,7 +272,7 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
         key = log_ns
         is_source = has_reference and topic == config.reference_source
         if config.timing == 'stamp' or is_source:  # the reference carries the source's stamps
-            stamp = _stamp_ns(data, types[topic], f'{path}: {topic} message {counts[topic]}')
+            stamp = header_stamp_ns(data, types[topic], f'{path}: {topic} message {counts[topic]}')
             if stamp is None:
                 raise BagError(
                     f'{path}: {topic} ({types[topic]}) has no header stamp; use timing:=log_time'
@@ -302,8 +286,11 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
         if stop is not None and key > stop + pad + NS_PER_S:
             break  # the bag is in log-time order: nothing later belongs to the span
         if is_source and start - pad <= key and (stop is None or key <= stop + pad):
-            states.append((key, data))
+            firsts.setdefault('', counts[topic])
+            assert stamp is not None  # a source's stamp is always read, above
+            states.append((key, data, stamp))
         if topic in index and key >= start and (stop is None or key <= stop):
+            firsts.setdefault(topic, counts[topic])
             keyed.append((key, index[topic], data))
     if start is None:
         raise ConfigError(f'{path}: no messages on {needed}')
@@ -322,14 +309,24 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     def inside(key: int) -> bool:
         return key >= start and (stop is None or key <= stop)
 
+    if has_reference and states:  # train's timing checks first, in the bag's order
+        stretch = source_stretch(
+            f'{path}: {config.reference_source}',
+            [(key, stamp, inside(key)) for key, _, stamp in states],
+            period_s=robot.ipo_period_s,
+            origin_ns=start - round(config.start_offset_s * NS_PER_S),
+            first=firsts[''],
+        )
+        states = sorted(states[stretch], key=lambda item: item[0])
+    if config.timing == 'stamp':
+        check_topics_order(path, config.topics, [item[:2] for item in keyed], firsts)
     by_key: dict[int, Cycle] = {}
     for key, topic_index, data in sorted(keyed, key=lambda item: item[0]):
         by_key.setdefault(key, Cycle(0, key)).messages.append((topic_index, data))
     if has_reference and states:
-        states.sort(key=lambda item: item[0])
-        keep = [inside(key) for key, _ in states]
-        references = _reference_bytes(config, robot, [data for _, data in states], keep)
-        for (key, _), reference in zip(states, references, strict=True):
+        keep = [inside(key) for key, _, _ in states]
+        references = _reference_bytes(config, robot, [data for _, data, _ in states], keep)
+        for (key, _, _), reference in zip(states, references, strict=True):
             if reference is not None:
                 by_key.setdefault(key, Cycle(0, key)).messages.append((-1, reference))
     if not by_key:

@@ -1,16 +1,190 @@
-"""Checks of the replay's span: every requested topic plays, and an unpaired tail is named.
+"""Checks of the replay's span: its timing, every requested topic plays, an unpaired tail.
 
-Kept apart from ``replay.py`` (no rclpy here): the checks see only keys, topic indices and counts.
+Timing (``check_stamp_order``, ``source_stretch``): the stamps the replay reads pass train's
+check first (``dataset.plausibility.check_stamps``), in the bag's order: a stamp that repeats or
+goes backwards refuses the bag, naming the sample (the replay never re-sorts a topic silently),
+and the reference source must be one stretch without holes (longer than ``MAX_GAP_PERIODS`` IPO
+periods, as train) across the played span: a hole in it is named, with the spans before and after
+it to play instead; a hole in the padding read around the span only ends the padding there.
+Without that, a hole or a swapped stamp shows up later as an acceleration or a consistency error
+that names neither.
+
+Kept apart from ``replay.py`` (no rclpy here): the checks see only header stamps (read with
+``header_stamp_ns``), keys, topic indices and counts.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from id_learning.errors import BagError
+import numpy as np
 
-__all__ = ['check_topics_play', 'unpaired_tail']
+from id_learning.bag.messages import typestore
+from id_learning.dataset.plausibility import check_stamps
+from id_learning.errors import BagError, DatasetError
+from id_learning.predictor.guards import stamp_problem
+
+__all__ = [
+    'MAX_GAP_PERIODS',
+    'check_stamp_order',
+    'check_topics_order',
+    'check_topics_play',
+    'header_stamp_ns',
+    'source_stretch',
+    'unpaired_tail',
+]
+
+#: The longest silence within a played stretch [IPO periods]: train's (``load_recording``).
+MAX_GAP_PERIODS = 3.0
+NS_PER_S = 1_000_000_000
+
+
+def header_stamp_ns(data: bytes, msgtype: str, where: str) -> int | None:
+    """The header stamp of one message [ns], None when its type has no header.
+
+    Raises:
+        BagError: the bytes are no message of the topic's type, or its stamp is invalid
+            (``nanosec`` >= 1e9 or ``sec`` < 0; names ``where``).
+    """
+    try:
+        msg = typestore().deserialize_cdr(data, msgtype)
+    except Exception as err:  # rosbags raises SerdeError and others on foreign bytes
+        raise BagError(f'{where}: not a valid {msgtype} ({type(err).__name__}: {err})') from err
+    header = getattr(msg, 'header', None)
+    if header is None:
+        return None
+    sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
+    problem = stamp_problem(sec, nanosec)
+    if problem is not None:  # folded in, it would be another time: refused, as the predictor does
+        raise BagError(
+            f'{where}: invalid header stamp: {problem}; nothing is played from a bag whose '
+            'stamps cannot be placed (recorded by a sender with a broken clock?)'
+        )
+    return sec * NS_PER_S + nanosec
+
+
+def _counted_from(first: int) -> str:
+    return f' (samples counted from its message {first}, the first read for the span)' * (
+        first > 0
+    )
+
+
+def check_topics_order(
+    path: Path,
+    topics: Sequence[str],
+    keyed: Sequence[tuple[int, int]],
+    firsts: Mapping[str, int],
+) -> None:
+    """``check_stamp_order`` for each played topic whose cycles its header stamps make.
+
+    Args:
+        path: the bag (for messages).
+        topics: the played topics.
+        keyed: (stamp [ns], topic index) of each message in the span, as read.
+        firsts: each topic's message number of its first message in the span.
+
+    Raises:
+        BagError: names the topic, the sample and both stamps.
+    """
+    for k, topic in enumerate(topics):
+        stamps = [key for key, index in keyed if index == k]
+        remedy = '; timing:=log_time plays it in log-time order'
+        check_stamp_order(f'{path}: {topic}', stamps, first=firsts.get(topic, 0), remedy=remedy)
+
+
+def check_stamp_order(
+    where: str, stamps_ns: Sequence[int] | np.ndarray, *, first: int = 0, remedy: str = ''
+) -> None:
+    """Refuse stamps that repeat or go backwards in the bag's order (train's check).
+
+    Args:
+        where: the bag and topic, for the message.
+        stamps_ns: the topic's header stamps as read (log-time order) [ns].
+        first: the topic's message number of ``stamps_ns[0]`` (for the message).
+        remedy: what plays such a bag, appended to the message.
+
+    Raises:
+        BagError: names the sample and both stamps (``check_stamps``).
+    """
+    try:
+        check_stamps(
+            np.asarray(stamps_ns, dtype=np.int64), 1.0, np.inf, where + _counted_from(first)
+        )
+    except DatasetError as err:
+        raise BagError(
+            f'{err}: nothing is played (the replay never re-sorts stamps){remedy}'
+        ) from err
+
+
+def source_stretch(
+    where: str,
+    read: Sequence[tuple[int, int, bool]],
+    *,
+    period_s: float,
+    origin_ns: int,
+    first: int = 0,
+) -> slice:
+    """The stretch of the reference source, as read, that the reference is built from.
+
+    The stamps must increase (``check_stamp_order``). A hole (a step longer than
+    ``MAX_GAP_PERIODS`` periods) before the span's first sample or after its last ends the
+    padding there; one inside the span refuses the bag.
+
+    Args:
+        where: the bag and topic, for messages.
+        read: per message of the source as read (the span and the padding around it): its key
+            (its stamp, or its log time with ``timing: log_time``) [ns], its header stamp [ns],
+            and whether it is in the played span.
+        period_s: the IPO period [s].
+        origin_ns: the key start_offset_s counts from [ns].
+        first: the topic's message number of ``stamps_ns[0]`` (for messages).
+
+    Raises:
+        BagError: a stamp repeats or goes backwards; a hole lies inside the span (named as train
+            names it, with the start offset or duration that plays around it).
+    """
+    remedy = (
+        '; timing:=log_time with reference_mode:=none plays the bag as recorded, without a '
+        'reference'
+    )
+    keys_ns = [key for key, _, _ in read]
+    stamps = np.array([stamp for _, stamp, _ in read], dtype=np.int64)
+    check_stamp_order(where, stamps, first=first, remedy=remedy)
+    inside = np.flatnonzero([is_in for _, _, is_in in read])
+    if not len(inside):
+        return slice(0, len(stamps))
+    after_holes = np.flatnonzero(np.diff(stamps) > MAX_GAP_PERIODS * period_s * NS_PER_S) + 1
+    begin, end = 0, len(stamps)
+    for k in after_holes.tolist():
+        if k <= inside[0]:  # everything before the hole is padding
+            begin = k
+        elif k > inside[-1]:  # everything after it
+            end = k
+            break
+        else:
+            before_s, after_s = ((keys_ns[j] - origin_ns) / NS_PER_S for j in (k - 1, k))
+            offset_s = (keys_ns[inside[0]] - origin_ns) / NS_PER_S
+            instead = f'start_offset_s {after_s:.3f} or more plays the part after it'
+            if before_s > offset_s:
+                instead = (
+                    f'duration_s {before_s - offset_s:.3f} or less plays the part before it, '
+                    + instead
+                )
+            try:
+                check_stamps(
+                    stamps[begin : k + 1],
+                    period_s,
+                    MAX_GAP_PERIODS,
+                    where + _counted_from(first + begin),
+                )
+            except DatasetError as err:
+                raise BagError(
+                    f'{err}; the played span holds this hole (from {before_s:.3f} s to '
+                    f"{after_s:.3f} s after the bag's start), across which no reference can be "
+                    f'built: {instead}'
+                ) from err
+    return slice(begin, end)
 
 
 def check_topics_play(

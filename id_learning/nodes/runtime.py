@@ -10,6 +10,7 @@ final report.
 from __future__ import annotations
 
 import logging
+import os
 import signal
 import sys
 import threading
@@ -141,7 +142,14 @@ def run_node(
         missing files), with the reason logged.
     """
     if config_class is not None and wants_help(args):
-        print_usage(name, config_class)
+        try:
+            print_usage(name, config_class)
+            sys.stdout.flush()
+        except BrokenPipeError:  # '--help | head': quietly, as the Python docs say
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.close(devnull)
+            return 128 + signal.SIGPIPE
         return 0
     try:
         rclpy.init(

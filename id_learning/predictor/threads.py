@@ -1,18 +1,26 @@
 """Thread counts of torch and numpy's BLAS for one-sample inference.
 
 One sample per call gains nothing from more threads, and on a loaded machine the extra threads
-wait for each other.
+wait for each other; more threads than the CPU cores the process may run on
+(``oversubscription``) wait for each other even on an idle one.
 """
 
 from __future__ import annotations
 
 import ctypes
 import logging
-from collections.abc import Iterable
+import os
+from collections.abc import Collection, Iterable
 
 import torch
 
-__all__ = ['configure_inference_threads', 'mapped_libraries', 'set_openblas_threads']
+__all__ = [
+    'configure_inference_threads',
+    'cpu_cores',
+    'mapped_libraries',
+    'oversubscription',
+    'set_openblas_threads',
+]
 
 _LOG = logging.getLogger(__name__)
 
@@ -86,3 +94,45 @@ def mapped_libraries(maps: Iterable[str], name: str) -> set[str]:
         if len(fields) == 6 and name in fields[5].lower():
             paths.add(fields[5])
     return paths
+
+
+def cpu_cores() -> set[int]:
+    """The CPU cores this process may run on (its affinity; all of them where it has none)."""
+    try:
+        return set(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return set(range(os.cpu_count() or 1))
+
+
+def _ranges(cores: Collection[int]) -> str:
+    """'0-3, 6' for the cores {0, 1, 2, 3, 6}."""
+    spans: list[list[int]] = []
+    for core in sorted(cores):
+        if spans and core == spans[-1][1] + 1:
+            spans[-1][1] = core
+        else:
+            spans.append([core, core])
+    return ', '.join(f'{a}' if a == b else f'{a}-{b}' for a, b in spans)
+
+
+def oversubscription(threads: int, cores: Collection[int] | None = None) -> str | None:
+    """Why ``threads`` inference threads are too many for the cores, or None when they fit.
+
+    More threads than cores cannot all run at once: in every sample's torch call they wait for
+    each other, and the executor's own thread waits for them (a real-time node misses cycles).
+
+    Args:
+        threads: the torch and BLAS threads asked for.
+        cores: the CPU cores the process may run on (default: ``cpu_cores()``).
+    """
+    cores = cpu_cores() if cores is None else cores
+    if threads <= len(cores):
+        return None
+    count, plural = len(cores), 's' * (len(cores) != 1)
+    return (
+        f'torch_threads {threads} oversubscribes the {count} CPU core{plural} this process may '
+        f'run on (core{plural} {_ranges(cores)}): the threads of every sample wait for each '
+        'other and the executor waits for them, so IPO cycles can be missed; one sample gains '
+        'nothing from more threads: set torch_threads 1'
+        + (f' (at most {count})' if count > 1 else '')
+    )
