@@ -98,11 +98,18 @@ class Inconsistency:
     expected: float
     tolerance: float
     window_s: float
+    recorded: bool = True
 
     def describe(self) -> str:
         """One line: what moved, what the other signal says, and the tolerance."""
         unit = 'rad' if self.quantity == 'position' else 'rad/s'
         other = 'velocities' if self.quantity == 'position' else 'accelerations'
+        if not self.recorded:
+            return (
+                f'{self.quantity} of {self.joint} changed by {self.change:.6g} {unit} in '
+                f'{self.window_s * 1e3:.3g} ms, more than the acceleration limits allow (the '
+                f'samples carry no {other}; tolerance {self.tolerance:.3g} {unit})'
+            )
         return (
             f'{self.quantity} of {self.joint} changed by {self.change:.6g} {unit} in '
             f'{self.window_s * 1e3:.3g} ms where its {other} say {self.expected:.6g} {unit} '
@@ -127,6 +134,8 @@ class KinematicConsistency:
         if not (math.isfinite(scale) and scale > 0):
             raise ValueError(f'scale must be a finite value > 0, got {scale}')
         self.joints = joints
+        self.limits = limits
+        self.scale = scale
         self.period_s = period_s
         #: The long window [samples].
         self.window = max(2, math.ceil(WINDOW_S / period_s - 1e-9))
@@ -246,7 +255,7 @@ class KinematicConsistency:
             expected = 0.0 if a is None else 0.5 * float(a[k, j] + a[k0, j]) * span
             _, tolerance = self.velocity_terms(span, np.full(len(self.joints), dv), expected)
             return Inconsistency(
-                self.joints[j], 'velocity', dv, expected, float(tolerance[j]), span
+                self.joints[j], 'velocity', dv, expected, float(tolerance[j]), span, a is not None
             )
         t = (np.asarray(stamps_ns[k0 : k + 1], dtype=np.int64) - int(stamps_ns[k0])) * 1e-9
         expected = float(np.sum(0.5 * (v[k0 + 1 : k + 1, j] + v[k0:k, j]) * np.diff(t)))
@@ -293,6 +302,17 @@ class KinematicConsistency:
         if found is None:
             return
         sample, count, worst = found
+        if self.scale < 1.0:
+            derived = KinematicConsistency(self.joints, self.limits, self.period_s)
+            if derived.first_failure(stamps_ns, q, v, a, starts=starts) is None:
+                raise DatasetError(
+                    f"{where}: the robot config's consistency_scale {self.scale:g} makes every "
+                    f'tolerance of the kinematic consistency check {1 / self.scale:.4g} x '
+                    'tighter than derived from the limits and the IPO period, and only so do '
+                    f'{count} sample(s) fail (the first: sample {sample}, {worst.describe()}); '
+                    'at consistency_scale 1 every sample passes: raise it to 1 (below 1 it '
+                    'refuses even clean recordings)'
+                )
         raise DatasetError(
             f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns) does not follow from '
             f'the samples before it: {worst.describe()}; {count} such sample(s) in all. '
@@ -353,8 +373,11 @@ class ConsistencyStream:
         j = int(np.argmax(ratios[kind]))
         tolerance = float((pair, window, velocity)[kind][1][j])
         if kind == 2:
+            recorded = not isinstance(half_a, float)
             expected = 0.0 if isinstance(half_a, float) else float(half_a[j])
-            return Inconsistency(gate.joints[j], 'velocity', float(dv[j]), expected, tolerance, dt)
+            return Inconsistency(
+                gate.joints[j], 'velocity', float(dv[j]), expected, tolerance, dt, recorded
+            )
         change, expected, over = (
             (dq[j], step[j], dt) if kind == 0 else (dq_window[j], integral[j], span)
         )

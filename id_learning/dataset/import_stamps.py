@@ -84,7 +84,10 @@ def grid_period_s(
     median_s = float(np.median(np.diff(times_s)))
     if robot is not None:
         ipo_s = robot.ipo_period_s
-        if policy.method == 'interpolate' or abs(median_s - ipo_s) <= _ROBOT_PERIOD_MATCH * ipo_s:
+        if abs(median_s - ipo_s) <= _ROBOT_PERIOD_MATCH * ipo_s:
+            return ipo_s
+        _refuse_time_unit(median_s, ipo_s, mapping, robot.name, where)
+        if policy.method == 'interpolate':
             return ipo_s
         raise DatasetError(
             f'{where}: the log steps {median_s * 1e3:.4g} ms (median), the IPO period of robot '
@@ -99,6 +102,35 @@ def grid_period_s(
             'are estimated to 0.1 ms); check the time column and its unit'
         )
     return period_ns * 1e-9
+
+
+def _refuse_time_unit(
+    median_s: float, ipo_s: float, mapping: ImportMapping, robot: str, where: Path
+) -> None:
+    """Refuse a time column whose median step is the IPO period in another time unit.
+
+    A log in ms declared as s steps 1000 x the IPO period: no resampling mends that.
+
+    Raises:
+        DatasetError: names the declared unit, the unit that fits, and the key to set.
+    """
+    spec = mapping.time
+    if spec is None:
+        return
+    declared = UNITS['time'][spec.unit]
+    for unit, factor in UNITS['time'].items():
+        if unit == spec.unit:
+            continue
+        as_unit = median_s * factor / declared
+        if abs(as_unit - ipo_s) <= _ROBOT_PERIOD_MATCH * ipo_s:
+            raise DatasetError(
+                f'{where}: the time column {spec.column!r}, declared in {spec.unit}, steps '
+                f'{median_s:.4g} s (median), {median_s / ipo_s:.4g} x the {ipo_s * 1e3:g} ms '
+                f'IPO period of robot {robot}; read in {unit} it steps {as_unit * 1e3:.4g} ms, '
+                f'the IPO period: the column is in {unit}, not {spec.unit}: a unit problem of '
+                f'the time column, which no resampling mends; set time.unit: {unit} in the '
+                'mapping'
+            )
 
 
 def snap_to_grid(

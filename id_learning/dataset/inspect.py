@@ -32,6 +32,7 @@ from id_learning.bag import (
 )
 from id_learning.config_io import parse_yaml
 from id_learning.dataset.consistency import KinematicConsistency, gap_starts
+from id_learning.dataset.content import label_findings, motion_findings
 from id_learning.dataset.inspect_plot import plot_report
 from id_learning.dataset.inspect_report import (
     FIELDS,
@@ -46,6 +47,7 @@ from id_learning.dataset.inspect_report import (
     TopicReport,
 )
 from id_learning.dataset.inspect_text import render_report
+from id_learning.dataset.plausibility import effort_bound
 from id_learning.errors import ConfigError
 from id_learning.robot.config import RobotConfig, TopicConfig
 
@@ -118,14 +120,21 @@ def _field_stats(values: np.ndarray) -> FieldStats:
     )
 
 
-def _joint_reports(series: JointStateSeries, robot: RobotConfig | None) -> tuple[JointReport, ...]:
+def _joint_reports(
+    series: JointStateSeries, robot: RobotConfig | None, effort: str | None = None
+) -> tuple[JointReport, ...]:
+    """Per joint: statistics and, with a robot, the shares beyond its limits.
+
+    ``effort``: what the topic's effort is, 'current' or 'torque' (checked against the torque
+    limits as ``load_recording`` checks it), or None (not checked).
+    """
     reports = []
     for column, name in enumerate(series.names):
         stats: dict[str, FieldStats | None] = {}
         for key in FIELDS:
             array = getattr(series, key)
             stats[key] = None if array is None else _field_stats(array[:, column])
-        position_out = velocity_out = None
+        position_out = velocity_out = effort_out = effort_peak = None
         if robot is not None and name in robot.joints:
             joint = robot.joints.index(name)
             limits = robot.limits
@@ -137,6 +146,10 @@ def _joint_reports(series: JointStateSeries, robot: RobotConfig | None) -> tuple
             if series.velocity is not None and len(series.velocity):
                 v = series.velocity[:, column]
                 velocity_out = float(np.mean(np.abs(v) > limits.velocity[joint]))
+            if effort is not None and series.effort is not None and len(series.effort):
+                effort_out, effort_peak = _beyond_drive(
+                    series.effort[:, column], robot, joint, effort
+                )
         reports.append(
             JointReport(
                 name=name,
@@ -145,9 +158,58 @@ def _joint_reports(series: JointStateSeries, robot: RobotConfig | None) -> tuple
                 effort=stats['effort'],
                 position_outside_limits=position_out,
                 velocity_outside_limits=velocity_out,
+                effort_outside_limits=effort_out,
+                effort_peak_ratio=effort_peak,
+                effort_kind=None if effort_out is None else effort,
             )
         )
     return tuple(reports)
+
+
+def _beyond_drive(
+    values: np.ndarray, robot: RobotConfig, joint: int, effort: str
+) -> tuple[float, float | None]:
+    """(share beyond, largest |value| / bound) of one joint's efforts against its drive.
+
+    The bound is ``load_recording``'s (``plausibility.effort_bound``): currents times gear ratio
+    and torque constant, or joint torques, within ``TORQUE_FACTOR`` x the torque limit.
+    """
+    drives = robot.drives
+    per_nm = None
+    if effort == 'current':
+        per_nm = 1.0 / (drives.gear_ratio[joint] * drives.torque_constant[joint])
+    bound = float(effort_bound(robot.limits.torque[joint : joint + 1], per_nm)[0])
+    finite = np.abs(values[np.isfinite(values)])
+    if not finite.size:
+        return 0.0, None
+    return float(np.mean(finite > bound)), float(finite.max() / bound)
+
+
+def _content(
+    series: JointStateSeries, label: str | None, motion: bool, robot: RobotConfig | None
+) -> tuple[str, ...]:
+    """``dataset.content``'s findings on a contract topic, one line each.
+
+    ``label``: what the effort is ('motor current', 'joint torque') when it is the label, else
+    None; ``motion``: judge the positions. With a robot only its joints are judged (a gripper's
+    finger may stand still). Refusals say so.
+    """
+    stamps = series.stamps_ns
+    duration = float(stamps.max() - stamps.min()) * 1e-9 if stamps.size > 1 else None
+    columns = [k for k, name in enumerate(series.names) if robot is None or name in robot.joints]
+    names = [series.names[k] for k in columns]
+    findings = []
+    if motion and series.position is not None and len(series.position) > 1 and names:
+        findings += motion_findings(series.position[:, columns], names, duration_s=duration)
+    if label is not None and series.effort is not None and len(series.effort) and names:
+        unit = 'A' if label == 'motor current' else 'N*m'
+        findings += label_findings(
+            series.effort[:, columns], names, quantity=label, unit=unit, duration_s=duration
+        )
+    return tuple(
+        finding.text + ('; train and diagnose refuse the bag' if finding.refuses else '')
+        for finding in findings
+    )
 
 
 @dataclass
@@ -242,7 +304,32 @@ def _contradictions(series: JointStateSeries, robot: RobotConfig | None) -> tupl
     begin = max(start for start in starts if start <= k)  # explained within its segment
     part = slice(begin, None)
     worst = gate.explain(k - begin, stamps[part], clean_q[part], clean_v[part], None)
-    return int(failing.sum()), f'sample {k} (stamp {int(stamps[k])} ns): {worst.describe()}'
+    text = f'sample {k} (stamp {int(stamps[k])} ns): {worst.describe()}'
+    if gate.scale < 1.0 and not (
+        KinematicConsistency(gate.joints, gate.limits, gate.period_s)
+        .failing(stamps, clean_q, clean_v, starts=starts)
+        .any()
+    ):
+        text += (
+            f"; only the robot config's consistency_scale {gate.scale:g} makes them fail (every "
+            f'tolerance {1 / gate.scale:.4g} x tighter): at 1 none does'
+        )
+    return int(failing.sum()), text
+
+
+def _effort_kind(
+    name: str, topics: TopicConfig, decoded: Mapping[str, _JointStateTopic]
+) -> tuple[str | None, str | None]:
+    """What a topic's effort is ('current', 'torque' or None) and its label's name, if a label.
+
+    The motor currents' effort is the label; the joint states' effort (joint torques) is one
+    only when the bag has no motor currents (a recording for ``--target joint``).
+    """
+    if name == topics.motor_currents:
+        return 'current', 'motor current'
+    if name == topics.joint_states:
+        return 'torque', None if topics.motor_currents in decoded else 'joint torque'
+    return None, None
 
 
 def _iso_utc(stamp_ns: int) -> str:
@@ -373,6 +460,7 @@ def inspect_bag(
         name: JOINT_STATE if JOINT_STATE in kind else kind[0] for name, kind in types.items()
     }
     names = list(types)
+    topics = robot.topics if robot else TopicConfig()
     decoded = {
         name: _JointStateTopic(name) for name, kind in msgtypes.items() if kind == JOINT_STATE
     }
@@ -402,18 +490,20 @@ def inspect_bag(
             )
             series[name] = acc.series()
             contradictions, first = _contradictions(series[name], robot)
+            effort, label = _effort_kind(name, topics, decoded)
             reports.append(
                 TopicReport(
                     name=name,
                     msgtype=JOINT_STATE,
                     count=count,
                     timing=timing,
-                    joints=_joint_reports(series[name], robot),
+                    joints=_joint_reports(series[name], robot, effort),
                     undecodable=acc.undecodable,
                     inconsistent=acc.inconsistent,
                     first_inconsistent=acc.first_inconsistent,
                     contradictions=contradictions,
                     first_contradiction=first,
+                    content=_content(series[name], label, name == topics.joint_states, robot),
                 )
             )
         else:
@@ -434,7 +524,7 @@ def inspect_bag(
         robot_name=robot.name if robot else None,
         topics=tuple(reports),
         contract=_contract(
-            robot.topics if robot else TopicConfig(),
+            topics,
             msgtypes,
             decoded,
             tuple(name for name, _ in several_types),

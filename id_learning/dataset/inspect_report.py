@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Literal
 
 from id_learning.bag import JOINT_STATE, JointStateSeries
+from id_learning.dataset.plausibility import SCALE_PEAK_FACTOR, TORQUE_FACTOR
 from id_learning.dataset.recording import joint_name_mismatch
 from id_learning.errors import BagError
 
@@ -112,6 +113,12 @@ class JointReport:
         position_outside_limits: fraction of samples outside the robot's position limits [-];
             None without a robot, a position field, or a joint of that name in the robot.
         velocity_outside_limits: fraction of samples with |velocity| above the robot's limit [-].
+        effort_outside_limits: fraction of samples whose |effort| (a current on the motor
+            currents, a joint torque on the joint states) lies beyond what train lets pass:
+            ``TORQUE_FACTOR`` x what the torque limit needs (``plausibility.effort_bound``) [-].
+        effort_peak_ratio: the largest |effort| over that bound [-] (above 1 train refuses).
+        effort_kind: what the effort was checked as: 'current' [A] or 'torque' [N*m]; None
+            when it was not.
     """
 
     name: str
@@ -120,6 +127,9 @@ class JointReport:
     effort: FieldStats | None
     position_outside_limits: float | None = None
     velocity_outside_limits: float | None = None
+    effort_outside_limits: float | None = None
+    effort_peak_ratio: float | None = None
+    effort_kind: str | None = None
 
 
 @dataclass(frozen=True)
@@ -139,6 +149,8 @@ class TopicReport:
         contradictions: samples whose positions, velocities and the samples before them do not
             describe one motion (``dataset.consistency``; with a robot, finite samples only).
         first_contradiction: the first of them, described (sample, joint, mismatch), or None.
+        content: what the signal lacks (``dataset.content``: a constant or clipped label, a
+            joint that does not move), one line each, the refusals marked.
     """
 
     name: str
@@ -151,6 +163,7 @@ class TopicReport:
     first_inconsistent: int | None = None
     contradictions: int = 0
     first_contradiction: str | None = None
+    content: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -375,4 +388,24 @@ def _topic_problems(topic: TopicReport) -> list[str]:
                     f'{topic.name}: {joint.name} {key} outside the robot limits in '
                     f'{100 * fraction:.2f} % of samples'
                 )
+        if joint.effort_outside_limits:
+            lines.append(_effort_problem(topic.name, joint))
+    lines += [f'{topic.name}: {line}' for line in topic.content]
     return lines
+
+
+def _effort_problem(topic: str, joint: JointReport) -> str:
+    """The line of a joint whose efforts exceed what the robot's torque limits need."""
+    fraction = joint.effort_outside_limits or 0.0
+    peak = joint.effort_peak_ratio or 0.0
+    line = (
+        f'{topic}: {joint.name} effort beyond {TORQUE_FACTOR:g} x what the torque limit needs in '
+        f'{100 * fraction:.2f} % of samples, up to {peak:.3g} x that bound (train refuses the bag)'
+    )
+    if peak >= SCALE_PEAK_FACTOR:
+        line += '; far beyond any limit question: ' + (
+            "check the currents' unit (A, not mA) and the drives' gear_ratio and torque_constant"
+            if joint.effort_kind == 'current'
+            else 'check the unit and scale of the torques (N*m)'
+        )
+    return line

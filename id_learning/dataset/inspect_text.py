@@ -143,6 +143,7 @@ def _joint_lines(topic: TopicReport) -> list[str]:
             limit = {
                 'position': joint.position_outside_limits,
                 'velocity': joint.velocity_outside_limits,
+                'effort': joint.effort_outside_limits,
             }.get(key)
             rows.append(
                 [

@@ -9,10 +9,19 @@ joint, the value and how far it lies beyond the limit. One rule (``reads_as_degr
 ``beyond_hint``), shared with import, tells what such a value is: a position column is named as
 degrees only when its spread in radians is far wider than the joint's range while read as degrees
 it fits; a value just beyond a limit is a limit question (the config's limit, an encoder offset,
-an arm past a soft limit), never a unit question.
+an arm past a soft limit), never a unit question. What a column is, is judged on its worst sample
+(and, for rates, on every joint: one unit serves them all), not on the first beyond: a rate column
+whose peak lies over ``RATE_DEGREES_FACTOR`` x its bound while read as degrees it fits is in
+degrees (``rate_in_degrees``); a position column that breaks the config's limits but fits the
+URDF's names the config's limits, not degrees; a current or torque over ``SCALE_PEAK_FACTOR`` x
+its bound is a unit or scale question.
 """
 
 from __future__ import annotations
+
+import math
+from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 
@@ -24,6 +33,8 @@ __all__ = [
     'DEGREES_SPREAD_FACTOR',
     'NEAR_LIMIT_SHARE',
     'POSITION_MARGIN_RAD',
+    'RATE_DEGREES_FACTOR',
+    'SCALE_PEAK_FACTOR',
     'TORQUE_FACTOR',
     'VELOCITY_FACTOR',
     'SampleGate',
@@ -36,8 +47,11 @@ __all__ = [
     'check_limits',
     'check_motion',
     'check_stamps',
+    'effort_bound',
     'farthest_position',
+    'rate_in_degrees',
     'reads_as_degrees',
+    'urdf_position_limits',
 ]
 
 #: Where a refusal sends a user whose arm really moves there.
@@ -56,9 +70,15 @@ TORQUE_FACTOR = 2.0
 #: A position column is named as degrees only when its spread in radians is more than this multiple
 #: of its joint's range (no motion of that joint) while read as degrees every value fits.
 DEGREES_SPREAD_FACTOR = 2.0
+#: A rate column is named as degrees only when its peak exceeds this multiple of its bound (in
+#: degrees the motion then reaches 10 / 57 of the bound) while read as degrees every value fits.
+RATE_DEGREES_FACTOR = 10.0
 #: A value beyond a limit by at most this share of the joint's range (positions) or of the limit
 #: (velocities, currents, torques) is a limit question, not a unit question.
 NEAR_LIMIT_SHARE = 0.1
+#: A torque or current whose largest |value| is this multiple of what ``check_efforts`` lets
+#: pass is a unit or scale problem (mA for A, a wrong gear ratio), not a limit question.
+SCALE_PEAK_FACTOR = 10.0
 #: The remedies for a value just beyond a limit.
 LIMIT_QUESTION_HINT = (
     "just beyond the limit, a limit question rather than a unit one: check the robot config's "
@@ -119,18 +139,26 @@ def beyond_rate(value: float, limit: float, factor: float, unit: str) -> tuple[f
     )
 
 
-def beyond_hint(share: float, degrees: bool, unit_remedy: str) -> str:
+def beyond_hint(share: float, degrees: bool, unit_remedy: str, *, what: str = 'degrees') -> str:
     """What a value past the gate most likely is, and its remedy.
 
     Args:
-        share: how far it lies beyond (``beyond_position``, ``beyond_rate``).
-        degrees: ``reads_as_degrees`` of its column (False for other quantities).
+        share: how far it lies beyond (``beyond_position``, ``beyond_rate``), best the farthest
+            value of its column's.
+        degrees: ``reads_as_degrees`` of its column (``rate_in_degrees`` of a rate's; False for
+            other quantities).
         unit_remedy: what to do when the column is in degrees.
+        what: the degree unit for the text ('degrees', 'deg/s').
     """
-    if degrees:
+    if degrees and what == 'degrees':
         return (
             f'read as degrees every value fits the limits, and in radians the values span over '
             f"{DEGREES_SPREAD_FACTOR:g} x the joint's range: {unit_remedy}"
+        )
+    if degrees:
+        return (
+            f'a unit question, not a limit one: read as {what} every value fits, and in radians '
+            f'the largest lies over {RATE_DEGREES_FACTOR:g} x the bound: {unit_remedy}'
         )
     if share <= NEAR_LIMIT_SHARE:
         return LIMIT_QUESTION_HINT
@@ -274,17 +302,48 @@ def check_limits(
     *,
     limits: JointLimits,
     where: str,
+    urdf: Path | None = None,
 ) -> None:
     """The limit part of ``check_motion`` for finite values (positions, then velocities).
+
+    Args:
+        urdf: the robot's URDF: a position column that breaks the config's limits but fits the
+            URDF's is named as a config question, not as degrees.
 
     Raises:
         DatasetError: the first position outside the limits plus the margin, or velocity beyond
             the factor, named as the module docstring says.
     """
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    _check_positions(joints, stamps, np.asarray(q, float), limits, where)
+    _check_positions(joints, stamps, np.asarray(q, float), limits, where, urdf=urdf)
     if v is not None:
         _check_velocities(joints, stamps, np.asarray(v, float), limits, where)
+
+
+def urdf_position_limits(urdf: Path, joint: str) -> tuple[float, float] | None:
+    """The URDF's finite position limits [rad] of ``joint``, or None (none stated, unreadable)."""
+    try:
+        root = ElementTree.parse(urdf).getroot()
+    except (OSError, ElementTree.ParseError):
+        return None
+    for element in root.iter('joint'):
+        limit = element.find('limit')
+        if element.get('name') != joint or limit is None:
+            continue
+        if element.get('type') not in ('revolute', 'prismatic'):
+            return None
+        try:
+            lower, upper = float(limit.get('lower', 'nan')), float(limit.get('upper', 'nan'))
+        except ValueError:
+            return None
+        if math.isfinite(lower) and math.isfinite(upper) and upper > lower:
+            return lower, upper
+    return None
+
+
+def _fits(q: np.ndarray, lower: float, upper: float) -> bool:
+    """Every value of q lies within [lower, upper] plus ``POSITION_MARGIN_RAD``."""
+    return bool(((q >= lower - POSITION_MARGIN_RAD) & (q <= upper + POSITION_MARGIN_RAD)).all())
 
 
 def _first(outside: np.ndarray) -> tuple[int, int]:
@@ -293,7 +352,13 @@ def _first(outside: np.ndarray) -> tuple[int, int]:
 
 
 def _check_positions(
-    joints: tuple[str, ...], stamps: np.ndarray, q: np.ndarray, limits: JointLimits, where: str
+    joints: tuple[str, ...],
+    stamps: np.ndarray,
+    q: np.ndarray,
+    limits: JointLimits,
+    where: str,
+    *,
+    urdf: Path | None = None,
 ) -> None:
     low = limits.position_lower - POSITION_MARGIN_RAD
     high = limits.position_upper + POSITION_MARGIN_RAD
@@ -307,14 +372,24 @@ def _check_positions(
     farthest, _ = beyond_position(farthest_position(q[:, column], lower, upper), lower, upper)
     if farthest > share:
         excess += f'; the farthest sample of this joint lies {100 * farthest:.3g} % beyond'
-    degrees = reads_as_degrees(q[:, column], lower, upper)
-    remedy = 'the log is in degrees, positions must be in radians'
-    raise DatasetError(
+    message = (
         f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
         f'position {value:.6g} rad is outside the limits [{lower:.4g}, {upper:.4g}] rad plus '
         f'{POSITION_MARGIN_RAD:g} rad: {excess} ({int(outside[:, column].sum())} samples of this '
-        f'joint); {beyond_hint(max(share, farthest), degrees, remedy)}'
+        'joint); '
     )
+    reference = None if urdf is None else urdf_position_limits(urdf, joints[column])
+    column_q = q[:, column]
+    if reference is not None and _fits(column_q, *reference):
+        raise DatasetError(
+            f"{message}every value of this joint fits the URDF's limits [{reference[0]:.4g}, "
+            f"{reference[1]:.4g}] rad ({urdf}): the robot config's limits are narrower than the "
+            f"URDF's and than the recorded motion; correct limits.position_lower/position_upper "
+            f'of {joints[column]} in the robot config (--robot)'
+        )
+    degrees = reads_as_degrees(column_q, lower, upper)
+    remedy = 'the log is in degrees, positions must be in radians'
+    raise DatasetError(message + beyond_hint(max(share, farthest), degrees, remedy))
 
 
 def _check_velocities(
@@ -330,18 +405,67 @@ def _check_rate(
     bound: tuple[np.ndarray, float, str, str],
     where: str,
 ) -> None:
-    """Refuse |values| beyond factor x limit; ``bound`` is (limit, factor, name, unit)."""
+    """Refuse |values| beyond factor x limit; ``bound`` is (limit, factor, name, unit).
+
+    What the values are is judged on the joint's worst sample, and on every joint: a column
+    whose peak lies far beyond while read as degrees it fits is in degrees (``rate_in_degrees``).
+    """
     limit, factor, name, unit = bound
     found = _beyond(values, factor * limit)
-    if found is not None:
-        sample, column, count = found
-        value = values[sample, column]
-        share, excess = beyond_rate(value, limit[column], factor, unit)
-        raise DatasetError(
-            f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
-            f'{name} {value:.6g} {unit} exceeds {factor:g} x its limit: {excess} ({count} '
-            f'samples of this joint); {beyond_hint(share, False, "")}'
+    if found is None:
+        return
+    sample, column, count = found
+    value = values[sample, column]
+    peak = float(np.max(np.abs(values[:, column])))
+    share, excess = beyond_rate(value, limit[column], factor, unit)
+    worst, _ = beyond_rate(peak, limit[column], factor, unit)
+    if worst > share:
+        excess += (
+            f'; the largest |{name}| of this joint, {peak:.6g} {unit}, lies {100 * worst:.3g} % '
+            'beyond'
         )
+    beyond = np.abs(values) > factor * limit
+    joints_beyond = [joints[j] for j in range(len(joints)) if beyond[:, j].any()]
+    degrees = rate_in_degrees(values[:, column], factor * limit[column]) or rate_in_degrees(
+        values, factor * limit
+    )
+    others = ''
+    if len(joints_beyond) > 1:
+        others = f'; {len(joints_beyond)} joints exceed ({", ".join(joints_beyond)})'
+    degree_unit = unit.replace('rad', 'deg')
+    plural = 'velocities' if name == 'velocity' else f'{name}s'
+    raise DatasetError(
+        f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
+        f'{name} {value:.6g} {unit} exceeds {factor:g} x its limit: {excess} ({count} '
+        f'samples of this joint){others}; '
+        + beyond_hint(
+            max(share, worst),
+            degrees,
+            f'the {plural} are in {degree_unit}, they must be in {unit}',
+            what=degree_unit,
+        )
+    )
+
+
+def rate_in_degrees(values: np.ndarray, bound: np.ndarray | float) -> bool:
+    """Whether rate columns (velocities, accelerations) taken as radians are clearly in degrees.
+
+    Read as degrees every finite value is within its ``bound`` (factor x its limit), and the
+    largest peak |value| lies more than ``RATE_DEGREES_FACTOR`` x beyond its bound. (A column a
+    few times its bound fits read as degrees too, but only as a motion at a few per cent of the
+    limit.) ``values`` (N,) with a scalar bound, or (N, n) with (n,) bounds: the columns share
+    their unit, so a slow joint is judged with the others.
+    """
+    values = np.abs(np.asarray(values, float))
+    if values.size == 0:
+        return False
+    values = values.reshape(len(values), -1)
+    bound = np.broadcast_to(np.asarray(bound, float), values.shape[1:])
+    finite = np.where(np.isfinite(values), values, 0.0)
+    peaks = finite.max(axis=0)
+    if not (peaks / bound).max() > RATE_DEGREES_FACTOR:
+        return False
+    return bool((np.radians(peaks) <= bound).all())
 
 
 def _beyond(values: np.ndarray, bound: np.ndarray) -> tuple[int, int, int] | None:
@@ -375,17 +499,39 @@ def check_efforts(
     Raises:
         DatasetError: the first value beyond the bound, naming sample, stamp, joint and value.
     """
-    needed = np.asarray(torque_limit, float)
-    if unit_per_nm is not None:
-        needed = needed * np.asarray(unit_per_nm, float)
-    found = _beyond(torque, TORQUE_FACTOR * needed)
+    bound = effort_bound(torque_limit, unit_per_nm)
+    needed = bound / TORQUE_FACTOR
+    found = _beyond(torque, bound)
     if found is not None:
         sample, column, count = found
+        peak = float(np.max(np.abs(torque[:, column]))) / bound[column]
+        hint = ''
+        if peak >= SCALE_PEAK_FACTOR:
+            check = (
+                'the unit and scale of the torques'
+                if unit_per_nm is None
+                else "the currents' unit (mA for A?) and the drives' gear_ratio and "
+                'torque_constant'
+            )
+            hint = f'; its largest is {peak:.3g} x that bound, a unit question: check {check}'
         raise DatasetError(
             f'{where}: sample {sample} (stamp {int(stamps_ns[sample])} ns), joint '
             f'{joints[column]}: {what} {torque[sample, column]:.6g} exceeds {TORQUE_FACTOR:g} x '
-            f'what the torque limit needs ({needed[column]:.4g}; {count} samples of this joint)'
+            f'what the torque limit needs ({needed[column]:.4g}; {count} samples of this '
+            f'joint){hint}'
         )
+
+
+def effort_bound(torque_limit: np.ndarray, unit_per_nm: np.ndarray | None = None) -> np.ndarray:
+    """(n,) the largest |torque| or |current| ``check_efforts`` lets pass, in recorded units.
+
+    ``TORQUE_FACTOR`` x the torque limits [N*m], times ``unit_per_nm`` (for currents
+    ``1 / (gear_ratio * torque_constant)``) when given.
+    """
+    needed = np.asarray(torque_limit, float)
+    if unit_per_nm is not None:
+        needed = needed * np.asarray(unit_per_nm, float)
+    return TORQUE_FACTOR * needed
 
 
 def check_accelerations(

@@ -31,6 +31,7 @@ from id_learning.bag import (
     read_joint_states,
 )
 from id_learning.dataset.consistency import KinematicConsistency
+from id_learning.dataset.content import check_content
 from id_learning.dataset.plausibility import (
     check_efforts,
     check_finite,
@@ -46,6 +47,7 @@ __all__ = [
     'SEGMENTS_KEY',
     'Recording',
     'check_finite',
+    'check_recording_content',
     'check_stamps',
     'joint_name_mismatch',
     'load_recording',
@@ -237,7 +239,9 @@ def load_recording(
         DatasetError: joint names differ, NaN/Inf samples, stamps backwards/repeated/gapped,
             positions or velocities beyond the robot's limits, currents or joint torques beyond
             what its torque limits need, or the two topics' stamps do not match (each names
-            topic, joint and sample; ``dataset.plausibility``).
+            topic, joint and sample; ``dataset.plausibility``); a label (currents, else joint
+            torques) constant in every sample, or no joint moving (``dataset.content``, which
+            also logs a warning for a joint that does not move or a clipped label).
     """
     path = Path(path)
     topics = robot.topics
@@ -266,12 +270,7 @@ def load_recording(
             where=f'{where_js} effort',
             what='joint torque [N*m]',
         )
-    check_limits(
-        robot.joints, states.stamps_ns, position, velocity, limits=robot.limits, where=where_js
-    )
-    KinematicConsistency.for_robot(robot).check(
-        states.stamps_ns, position, velocity, where=where_js, starts=starts
-    )
+    _check_motion(robot, states.stamps_ns, position, velocity, where=where_js, starts=starts)
 
     current = None
     if require_current:
@@ -319,7 +318,7 @@ def load_recording(
             what='current [A]',
             unit_per_nm=1.0 / (drives.gear_ratio * drives.torque_constant),
         )
-    return Recording(
+    recording = Recording(
         joints=robot.joints,
         stamps_ns=states.stamps_ns,
         position=position,
@@ -328,6 +327,61 @@ def load_recording(
         joint_torque=joint_torque,
         source=str(path),
         segment_starts=tuple(start for start in starts if start < len(states.stamps_ns)),
+    )
+    check_recording_content(recording)
+    return recording
+
+
+def check_recording_content(
+    recording: Recording, target: str | None = None, *, warn: bool = True
+) -> tuple[str, ...]:
+    """``content.check_content`` of a recording: its positions and its label.
+
+    Args:
+        target: 'motor' (the currents are the label), 'joint' (the measured joint torques), or
+            None: the currents when the recording has them, else the joint torques.
+        warn: log the warnings (they are returned either way).
+
+    Raises:
+        DatasetError: the label is constant in every sample of a joint, or no joint moves.
+    """
+    if target == 'motor' or (target is None and recording.current is not None):
+        label, quantity, unit = recording.current, 'motor current', 'A'
+    else:
+        label, quantity, unit = recording.joint_torque, 'joint torque', 'N*m'
+    return check_content(
+        recording.position,
+        label,
+        recording.joints,
+        where=recording.source,
+        quantity=quantity,
+        unit=unit,
+        duration_s=recording.duration_s,
+        warn=warn,
+    )
+
+
+def _check_motion(
+    robot: RobotConfig,
+    stamps_ns: np.ndarray,
+    position: np.ndarray,
+    velocity: np.ndarray,
+    *,
+    where: str,
+    starts: tuple[int, ...],
+) -> None:
+    """The robot's limits (and its URDF's, to name a narrow config) and the consistency gate."""
+    check_limits(
+        robot.joints,
+        stamps_ns,
+        position,
+        velocity,
+        limits=robot.limits,
+        where=where,
+        urdf=robot.urdf_path,
+    )
+    KinematicConsistency.for_robot(robot).check(
+        stamps_ns, position, velocity, where=where, starts=starts
     )
 
 

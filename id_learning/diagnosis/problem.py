@@ -16,7 +16,7 @@ import numpy as np
 from scipy import signal
 
 from id_learning.dataset.preprocess import Dataset, prepare_dataset
-from id_learning.dataset.recording import Recording
+from id_learning.dataset.recording import Recording, check_recording_content
 from id_learning.dataset.signals import butterworth, differentiate, time_shifted
 from id_learning.dataset.statistics import (
     NoiseEstimate,
@@ -94,7 +94,12 @@ def as_datasets(
     robot: RobotConfig,
     config: DiagnosisConfig,
 ) -> list[Dataset]:
-    """Preprocess recordings; check datasets."""
+    """Preprocess recordings; check datasets.
+
+    Raises:
+        DatasetError: a recording of other joints, a label constant in every sample, no joint
+            moving (``dataset.content``), mixed targets or modes.
+    """
     items = [data] if isinstance(data, (Recording, Dataset)) else list(data)
     if not items:
         raise DatasetError('diagnosis: no recordings given')
@@ -108,6 +113,9 @@ def as_datasets(
                 'recording was made with'
             )
         if isinstance(item, Recording):
+            # The refusals of load_recording for recordings made in code (its warnings were
+            # logged when a bag was loaded).
+            check_recording_content(item, config.preprocess.target, warn=False)
             datasets.extend(
                 prepare_dataset(segment, robot, config.preprocess, segment=k)
                 for k, segment in enumerate(item.segments())

@@ -310,7 +310,7 @@ def test_period_is_the_robots_ipo_period_when_the_median_step_is_close(
     )
     n = 10
     time_ms = 8.3 * np.arange(n)  # 0.1 ms rounding would give 8.3 ms; the robot says 8 ms
-    rows = np.column_stack([time_ms, np.zeros((n, 6))])
+    rows = np.column_stack([time_ms, np.outer(np.arange(n), np.full(6, 0.002))])  # a slow ramp
     csv = write_csv(tmp_path / 'log.csv', ['t', *robot.joints], rows)
     without_robot = import_log(csv, mapping, tmp_path / 'plain')
     with_robot = import_log(csv, mapping, tmp_path / 'bag', robot=robot)

@@ -47,7 +47,7 @@ def contract_bag(
             v = 0.1 * np.cos(t + np.arange(len(names_js)))
             data = encode_joint_state(stamp, names_js, q, v if velocity else empty, empty)
             writer.write('/joint_states', stamp, data)
-            current = np.full(len(names_mc), 0.5) if effort else empty
+            current = 0.5 * np.sin(5 * t + np.arange(len(names_mc))) if effort else empty
             data = encode_joint_state(stamp, names_mc, empty, empty, current)
             writer.write('/motor_currents', stamp, data)
     return path
