@@ -84,16 +84,17 @@ def _check_twin(path: Path, robot: Any) -> None:
         ConfigError: names --twin, the file and why.
     """
     from id_learning.errors import ConfigError
+    from id_learning.robot.config import how_robots_differ
     from id_learning.twin import load_twin_config
 
     try:
         twin = load_twin_config(path)
     except ConfigError as err:
         raise ConfigError(f'--twin {path}: {err}') from err
-    if twin.robot.name != robot.name or twin.robot.joints != robot.joints:
+    difference = how_robots_differ(robot, twin.robot)
+    if difference:
         raise ConfigError(
-            f'--twin {path}: twin robot {twin.robot.name} is not robot {robot.name} of the demo '
-            '(--robot)'
+            f"--twin {path}: the twin is not the demo's robot (--robot): it has {difference}"
         )
 
 

@@ -33,6 +33,7 @@ __all__ = [
     'JointLimits',
     'RobotConfig',
     'TopicConfig',
+    'how_robots_differ',
     'load_robot_config',
     'resolve_urdf',
 ]
@@ -421,3 +422,30 @@ def load_robot_config(path: Path | str) -> RobotConfig:
     data = load_yaml_mapping(path)
     config = robot_config_from_dict(data, path.parent, str(path))
     return RobotConfig(**{**config.__dict__, 'source': path.resolve()})
+
+
+def how_robots_differ(a: RobotConfig, b: RobotConfig) -> str:
+    """What tells robot ``b`` from robot ``a`` by name and joints; '' when they agree.
+
+    Names the name, the joints one has and the other lacks, or the same joints in another
+    order, so that a refusal says more than two equal names.
+    """
+    out = []
+    if a.name != b.name:
+        out.append(f'robot {b.name!r}, not {a.name!r}')
+    if a.joints != b.joints:
+        if sorted(a.joints) == sorted(b.joints):
+            out.append(
+                f'the same joints in another order ({list(b.joints)}, not {list(a.joints)})'
+            )
+        else:
+            lacks = [j for j in a.joints if j not in b.joints]
+            extra = [j for j in b.joints if j not in a.joints]
+            out.append(
+                'other joints ('
+                + '; '.join(
+                    [*([f'lacks {lacks}'] if lacks else []), *([f'adds {extra}'] if extra else [])]
+                )
+                + ')'
+            )
+    return ', '.join(out)

@@ -37,7 +37,7 @@ from id_learning.evaluation.closed_loop_report import (
 )
 from id_learning.models.registry import load_model
 from id_learning.outputs import check_output, result_folder
-from id_learning.robot.config import RobotConfig
+from id_learning.robot.config import RobotConfig, how_robots_differ
 from id_learning.training.datasets import load_datasets, preprocess_from_dict, segment_rows
 from id_learning.training.run_folder import MODELS_DIR, read_run, training_bag
 from id_learning.twin import load_twin_config
@@ -141,10 +141,9 @@ def closed_loop_run(
     bag = training_bag(run, run_dir)
     twin_path = _twin_config_path(bag, twin_config)
     twin = load_twin_config(twin_path)
-    if twin.robot.name != robot.name or twin.robot.joints != robot.joints:
-        raise ConfigError(
-            f'{twin_path}: twin robot {twin.robot.name} is not robot {robot.name} of the run'
-        )
+    difference = how_robots_differ(robot, twin.robot)
+    if difference:
+        raise ConfigError(f"{twin_path}: the twin is not the run's robot: it has {difference}")
     kinds = list(kinds or run['kinds'])
     unknown = sorted(set(kinds) - set(run['kinds']))
     if unknown:

@@ -452,3 +452,20 @@ def test_unreadable_or_non_mapping_file_is_refused(tmp_path: Path) -> None:
     broken.write_text('name: [unclosed\n', encoding='utf-8')
     with pytest.raises(ConfigError, match='not valid YAML'):
         load_robot_config(broken)
+
+
+def test_how_two_robots_differ_names_name_order_and_joints(
+    robot_configs: dict[str, RobotConfig],
+) -> None:
+    from dataclasses import replace
+
+    from id_learning.robot.config import how_robots_differ
+
+    mabi = robot_configs['mabi_max100']
+    assert how_robots_differ(mabi, mabi) == ''
+    swapped = replace(mabi, joints=(mabi.joints[1], mabi.joints[0], *mabi.joints[2:]))
+    assert how_robots_differ(mabi, swapped).startswith('the same joints in another order')
+    fewer = replace(mabi, name='other', joints=mabi.joints[:5])
+    text = how_robots_differ(mabi, fewer)
+    assert text.startswith("robot 'other', not 'mabi_max100'")
+    assert f"lacks ['{mabi.joints[5]}']" in text
