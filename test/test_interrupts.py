@@ -61,7 +61,8 @@ def test_an_interrupted_train_says_in_one_line_that_its_partial_run_is_left(
     out = tmp_path / 'run'
     # RNEA+LQ is fitted first and saved at once; the MLP would take minutes.
     process = _cli('train', '--bag', str(bag), '--out', str(out), '--quiet', '--device', 'cpu',
-                   '--models', 'rnea_lq,mlp', '--hyper', 'mlp.max_epochs=100000')  # fmt: skip
+                   '--models', 'rnea_lq,mlp', '--hyper', 'mlp.max_epochs=100000',
+                   '--hyper', 'mlp.patience=100000')  # fmt: skip
     try:
         _wait_for(process, 'rnea_lq: fitted')
     except BaseException:
