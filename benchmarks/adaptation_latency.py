@@ -16,7 +16,6 @@ Prints one line per kind, then the JSON document; writes docs/results/adaptation
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -25,10 +24,9 @@ import numpy as np
 from common import (
     DEFAULT_ROBOT,
     add_results_options,
-    emit,
+    finish,
     markdown_table,
     number,
-    publish_results,
     settings_lines,
 )
 from predictor_latency import fit_quick_artifacts
@@ -101,9 +99,7 @@ def main() -> None:
         'kinds': out,
     }
     lines = report(document, settings_lines('adaptation_latency', parser, args))
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('adaptation_latency', document, lines, args)
-    emit(document)
+    finish('adaptation_latency', document, lines, args)
 
 
 def report(document: dict, settings: list[str]) -> list[str]:

@@ -192,6 +192,15 @@ def publish_results(
     return paths
 
 
+def finish(
+    name: str, document: dict[str, Any], markdown: list[str], args: argparse.Namespace
+) -> None:
+    """The end of a run: the page on stderr, written (``publish_results``), the JSON on stdout."""
+    print('\n'.join(markdown), file=sys.stderr)
+    publish_results(name, document, markdown, args)
+    emit(document)
+
+
 def number(value: Any, spec: str = '.3g', missing: str = '-') -> str:
     """A figure as text; None and NaN as ``missing``."""
     if value is None:

@@ -22,7 +22,6 @@ writes docs/results/drift_adaptation.json and .md (not with ``--no-results``;
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -33,10 +32,9 @@ import yaml
 from common import (
     REPO,
     add_results_options,
-    emit,
+    finish,
     markdown_table,
     number,
-    publish_results,
     settings_lines,
 )
 
@@ -145,9 +143,7 @@ def main() -> None:
         },
     }
     lines = report(document, settings_lines('drift_adaptation', parser, args))
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('drift_adaptation', document, lines, args)
-    emit(document)
+    finish('drift_adaptation', document, lines, args)
 
 
 def report(document: dict, settings: list[str]) -> list[str]:

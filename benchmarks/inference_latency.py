@@ -18,7 +18,6 @@ inference_latency.json and .md (not with ``--no-results``; ``--results-folder`` 
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -30,10 +29,9 @@ from common import (
     DEFAULT_ROBOT,
     REPO,
     add_results_options,
-    emit,
+    finish,
     markdown_table,
     number,
-    publish_results,
     settings_lines,
 )
 
@@ -156,9 +154,7 @@ def main() -> None:
             'models': results,
         }
     lines = report(document, settings_lines('inference_latency', parser, args))
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('inference_latency', document, lines, args)
-    emit(document)
+    finish('inference_latency', document, lines, args)
 
 
 def report(document: dict, settings: list[str]) -> list[str]:

@@ -14,7 +14,6 @@ and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -24,10 +23,9 @@ from typing import Any
 from common import (
     REPO,
     add_results_options,
-    emit,
+    finish,
     markdown_table,
     number,
-    publish_results,
     settings_lines,
 )
 
@@ -95,9 +93,7 @@ def main() -> None:
         'cases': cases,
     }
     lines = report(document, settings_lines('label_cases', parser, args))
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('label_cases', document, lines, args)
-    emit(document)
+    finish('label_cases', document, lines, args)
 
 
 HOLDS = {True: 'holds', False: 'does NOT hold', None: 'not checked'}

@@ -17,17 +17,15 @@ and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 from common import (
     REPO,
     add_results_options,
-    emit,
+    finish,
     markdown_table,
     number,
-    publish_results,
     repo_path,
     settings_lines,
 )
@@ -82,9 +80,7 @@ def main() -> None:
         'bags': [str(bag) for bag in bags],
     }
     lines = report(document, settings_lines('noise_floor', parser, args))
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('noise_floor', document, lines, args)
-    emit(document)
+    finish('noise_floor', document, lines, args)
 
 
 def report(document: dict, settings: list[str]) -> list[str]:

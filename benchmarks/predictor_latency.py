@@ -48,10 +48,9 @@ from common import (
     DEFAULT_ROBOT,
     REPO,
     add_results_options,
-    emit,
+    finish,
     markdown_table,
     number,
-    publish_results,
     settings_lines,
     verdict,
 )
@@ -290,9 +289,7 @@ def main() -> None:
         'results': results,
     }
     lines = report(document, settings_lines('predictor_latency', parser, args))
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('predictor_latency', document, lines, args)
-    emit(document)
+    finish('predictor_latency', document, lines, args)
 
 
 def meets_target(phase: dict[str, Any]) -> bool | None:

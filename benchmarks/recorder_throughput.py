@@ -29,10 +29,9 @@ from typing import Any
 from common import (
     REPO,
     add_results_options,
-    emit,
+    finish,
     markdown_table,
     number,
-    publish_results,
     settings_lines,
     verdict,
 )
@@ -204,9 +203,7 @@ def main() -> None:
         'steps': steps,
     }
     lines = report(document, settings_lines('recorder_throughput', parser, args))
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('recorder_throughput', document, lines, args)
-    emit(document)
+    finish('recorder_throughput', document, lines, args)
 
 
 def meets_target(document: dict[str, Any]) -> bool | None:
