@@ -592,12 +592,11 @@ def run_plan(args: argparse.Namespace) -> tuple[list[dict[str, Any]], float]:
     return runs, time.perf_counter() - start
 
 
-def main() -> int:
-    parser = build_parser(__doc__.split('\n')[0])
-    args = parser.parse_args()
+def scored(name: str, args: argparse.Namespace) -> dict[str, Any]:
+    """Run the plan of ``args`` and write its JSON document to ``--out``; the document."""
     runs, wall = run_plan(args)
     document = {
-        'benchmark': 'diagnosis_scoring',
+        'benchmark': name,
         'settings': vars(args) | {'out': str(args.out)},
         'machine': machine(),
         'wall_s': wall,
@@ -606,11 +605,24 @@ def main() -> int:
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(document, indent=1, default=str) + '\n', encoding='utf-8')
-    lines = report(document, settings_lines('diagnosis_scoring', parser, args))
+    return document
+
+
+def published(name: str, document: dict[str, Any], lines: list[str], args: Any) -> int:
+    """The page on stderr and written (``publish_results``), the summary on stdout; 0."""
     print('\n'.join(lines), file=sys.stderr)
-    publish_results('diagnosis_scoring', document, lines, args)
-    print(json.dumps({'wall_s': round(wall, 1), 'summary': document['summary']}, indent=1))
+    publish_results(name, document, lines, args)
+    summary = {'wall_s': round(document['wall_s'], 1), 'summary': document['summary']}
+    print(json.dumps(summary, indent=1))
     return 0
+
+
+def main() -> int:
+    parser = build_parser(__doc__.split('\n')[0])
+    args = parser.parse_args()
+    document = scored('diagnosis_scoring', args)
+    lines = report(document, settings_lines('diagnosis_scoring', parser, args))
+    return published('diagnosis_scoring', document, lines, args)
 
 
 # -- the results page -----------------------------------------------------------------------------

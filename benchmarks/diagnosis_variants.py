@@ -48,15 +48,13 @@ import os
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 os.environ.setdefault('OMP_NUM_THREADS', '1')
 
-import json
-import sys
 import time
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import yaml
-from common import markdown_table, number, publish_results, settings_lines, share, verdict
+from common import markdown_table, number, settings_lines, share, verdict
 from diagnosis_scoring import (
     REPO,
     SINGLE,
@@ -64,10 +62,9 @@ from diagnosis_scoring import (
     alias_members,
     build_parser,
     filtered,
-    machine,
     named_set,
-    run_plan,
-    summarise,
+    published,
+    scored,
     twin,
 )
 from scipy.signal import lfilter
@@ -419,17 +416,8 @@ def main() -> int:
         out=REPO / 'out' / 'benchmarks' / 'diagnosis_variants.json', scenarios='variant'
     )
     args = parser.parse_args()
-    runs, wall = run_plan(args)
-    document = {
-        'benchmark': 'diagnosis_variants',
-        'settings': vars(args) | {'out': str(args.out)},
-        'machine': machine(),
-        'wall_s': wall,
-        'summary': summarise(runs),
-        'runs': runs,
-    }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(document, indent=1, default=str) + '\n', encoding='utf-8')
+    document = scored('diagnosis_variants', args)
+    runs, wall = document['runs'], document['wall_s']
     options = document['settings']
     base = options.get('base_frequency')
     lines = [
@@ -444,10 +432,7 @@ def main() -> int:
         *settings_lines('diagnosis_variants', parser, args),
         *variant_report(document['summary'], runs),
     ]
-    print('\n'.join(lines), file=sys.stderr)
-    publish_results('diagnosis_variants', document, lines, args)
-    print(json.dumps({'wall_s': round(wall, 1), 'summary': document['summary']}, indent=1))
-    return 0
+    return published('diagnosis_variants', document, lines, args)
 
 
 if __name__ == '__main__':
