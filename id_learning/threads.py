@@ -24,7 +24,7 @@ def single_blas_thread(function: Callable[_P, _R]) -> Callable[_P, _R]:
     @wraps(function)
     def limited(*args: _P.args, **kwargs: _P.kwargs) -> _R:
         # threadpoolctl ships no type information.
-        from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+        from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=1, user_api='blas'):
             return function(*args, **kwargs)

@@ -31,3 +31,18 @@ def test_code_is_ruff_clean(mode):
         check=False,
     )
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_every_type_ignore_names_its_code_and_reason():
+    """A silenced type error says which error and why (mypy checks the code, not the reason)."""
+    bare = []
+    for path in sorted((REPO / 'id_learning').rglob('*.py')):
+        for number, line in enumerate(path.read_text(encoding='utf-8').splitlines(), 1):
+            if 'type: ignore' not in line:
+                continue
+            after = line.split('type: ignore', 1)[1]
+            has_code = after.startswith('[') and ']' in after
+            reason = after.split(']', 1)[1].strip() if has_code else ''
+            if not (has_code and reason.startswith('#') and len(reason.lstrip('# ')) >= 10):
+                bare.append(f'{path.relative_to(REPO)}:{number}: {line.strip()}')
+    assert not bare, 'type: ignore without a code and a reason:\n' + '\n'.join(bare)

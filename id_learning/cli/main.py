@@ -104,7 +104,8 @@ def _written(args: argparse.Namespace) -> Path | None:
 def _left(args: argparse.Namespace, before: tuple[int, int] | None) -> str:
     """What a command stopped by a signal leaves, and where: the rest of its one line."""
     if args.command in _RESULT_COMMANDS:
-        from id_learning.outputs import partial_path, read_marker
+        from id_learning.output_kinds import read_marker
+        from id_learning.outputs import partial_path
 
         out = Path(args.out)
         for partial in dict.fromkeys((partial_path(out), partial_path(out.resolve()))):

@@ -156,8 +156,7 @@ def finite(
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
-        bounds = {'low': low, 'high': high, 'low_open': low_open, 'high_open': high_open}
-        problem = range_problem(value, **bounds)  # type: ignore[arg-type]
+        problem = range_problem(value, low=low, high=high, low_open=low_open, high_open=high_open)
         if problem:
             raise argparse.ArgumentTypeError(f'{problem}, got {text}')
         return value
@@ -191,7 +190,7 @@ positive_float = finite(0.0, low_open=True)
 seed = integer(0, SEED_MAX)
 
 
-def load_robot(args: argparse.Namespace):
+def load_robot(args: argparse.Namespace) -> RobotConfig:
     """The robot config of ``--robot``, else the shipped one, checked against its URDF.
 
     Every command makes the checks ``train`` makes (joints, limits within the URDF's, payload

@@ -57,7 +57,8 @@ def relative_times(
             f'{where}: {label} {positions[i + 1]} {what}; time stamps must increase (a repeated '
             'or out-of-order row, or a time column that wraps)'
         )
-    return times
+    out: np.ndarray = times
+    return out
 
 
 def grid_period_s(

@@ -149,12 +149,14 @@ class MinMaxScaler:
     def transform(self, x: np.ndarray) -> np.ndarray:
         """Map to the normalised scale."""
         centre, half = self._centre_half_range()
-        return (x - centre) / half
+        out: np.ndarray = (x - centre) / half
+        return out
 
     def inverse_transform(self, z: np.ndarray) -> np.ndarray:
         """Map back to physical units."""
         centre, half = self._centre_half_range()
-        return z * half + centre
+        out: np.ndarray = z * half + centre
+        return out
 
     def scale(self) -> np.ndarray:
         """Half ranges: an error e in physical units is e / half on the normalised scale."""

@@ -55,7 +55,8 @@ def lowpass(x: np.ndarray, cutoff_hz: np.ndarray, period_s: float, order: int = 
 
 def differentiate(x: np.ndarray, period_s: float) -> np.ndarray:
     """Time derivative of uniformly sampled columns by central differences (second-order edges)."""
-    return np.gradient(np.asarray(x, dtype=float), period_s, axis=0, edge_order=2)
+    out: np.ndarray = np.gradient(np.asarray(x, dtype=float), period_s, axis=0, edge_order=2)
+    return out
 
 
 def time_shifted(x: np.ndarray, delay_s: float, period_s: float) -> np.ndarray:

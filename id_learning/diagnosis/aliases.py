@@ -189,7 +189,8 @@ def _inverse(gram: np.ndarray) -> np.ndarray:
         return gram
     values, vectors = np.linalg.eigh(gram)
     keep = values > 1e-10 * max(values.max(), 1e-300)
-    return (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
+    out: np.ndarray = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
+    return out
 
 
 def _mimic(

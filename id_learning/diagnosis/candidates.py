@@ -88,7 +88,8 @@ class ExcitationFacts:
 
 
 def _moving(v: np.ndarray, eps: float) -> np.ndarray:
-    return np.abs(v) > 2.0 * eps
+    out: np.ndarray = np.abs(v) > 2.0 * eps
+    return out
 
 
 def testability(

@@ -253,7 +253,8 @@ class Design:
         norm = self.column_norm[self.slices[group]]
         source = fit.noise_covariance if noise_only else fit.covariance
         block = source[position : position + k, position : position + k]
-        return block / np.outer(norm, norm)
+        out: np.ndarray = block / np.outer(norm, norm)
+        return out
 
     def sandwich_covariance(self, fit: Fit, blocks: np.ndarray) -> np.ndarray:
         """Covariance of a fit's coefficients from its training residual, blocks of time apart.
@@ -274,20 +275,23 @@ class Design:
         per_block = np.zeros((int(labels.max()) + 1, len(idx)))
         np.add.at(per_block, labels, scores)
         bread = fit.noise_covariance
-        return bread @ (per_block.T @ per_block) @ bread
+        out: np.ndarray = bread @ (per_block.T @ per_block) @ bread
+        return out
 
     def residual(self, fit: Fit, part: str) -> np.ndarray:
         """(M, n) residual torque [N*m] (unweighted) of a fit on one part."""
         idx = self.indices(fit.groups)
         root = np.sqrt(self.weights)
         prediction = (self.matrix[part][:, idx] @ fit.theta).reshape(self.y[part].shape)
-        return self._explained[part] - prediction / root
+        out: np.ndarray = self._explained[part] - prediction / root
+        return out
 
     def contribution(self, fit: Fit, group: str, part: str) -> np.ndarray:
         """(M, n) filtered torque [N*m] one group adds in a fit."""
         root = np.sqrt(self.weights)
         prediction = self.matrix[part][:, self.slices[group]] @ self.coefficients(fit, group)
-        return prediction.reshape(self.y[part].shape) / root
+        out: np.ndarray = prediction.reshape(self.y[part].shape) / root
+        return out
 
     def weighted_columns(self, group: str, part: str = 'train') -> np.ndarray:
         """A group's weighted, normalised columns (rows = joint-samples)."""

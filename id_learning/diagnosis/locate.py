@@ -47,7 +47,11 @@ class JointLocation:
         return max(self.explained_share, key=lambda key: self.explained_share[key])
 
 
-def _binned(x: np.ndarray, r: np.ndarray, n_bins: int) -> tuple[float, tuple]:
+#: A residual's mean against a variable: bin centres, means and standard deviations.
+BinnedCurve = tuple[list[float], list[float], list[float]]
+
+
+def _binned(x: np.ndarray, r: np.ndarray, n_bins: int) -> tuple[float, BinnedCurve]:
     total = float(np.sum((r - r.mean()) ** 2))
     if x.size < 2 * n_bins or np.ptp(x) == 0 or total == 0:  # nothing to organise
         return 0.0, ([], [], [])
@@ -58,7 +62,9 @@ def _binned(x: np.ndarray, r: np.ndarray, n_bins: int) -> tuple[float, tuple]:
     else:
         edges = np.unique(np.quantile(x, np.linspace(0, 1, n_bins + 1)))
         which = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, len(edges) - 2)
-    centres, means, stds = [], [], []
+    centres: list[float] = []
+    means: list[float] = []
+    stds: list[float] = []
     fitted = np.empty_like(r)
     for b in range(len(edges) - 1):
         inside = which == b

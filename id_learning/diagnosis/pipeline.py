@@ -533,7 +533,8 @@ def _after(design: Design, final: Fit, part: str, fallback: list[int]) -> np.nda
 
 
 def _rmse(x: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.mean(np.square(x), axis=0))
+    out: np.ndarray = np.sqrt(np.mean(np.square(x), axis=0))
+    return out
 
 
 def _remainder(

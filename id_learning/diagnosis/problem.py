@@ -223,7 +223,10 @@ class ResidualProblem:
         share = lengths / lengths.sum()
 
         def pooled(values: list[np.ndarray]) -> np.ndarray:
-            return np.sqrt(np.sum([s * x**2 for s, x in zip(share, values, strict=True)], axis=0))
+            out: np.ndarray = np.sqrt(
+                np.sum([s * x**2 for s, x in zip(share, values, strict=True)], axis=0)
+            )
+            return out
 
         raw = pooled([e.raw_std_nm for e in estimates])
         filtered = pooled([e.filtered_std_nm for e in estimates])

@@ -87,14 +87,16 @@ class Tracking:
         """(n,) RMS tracking error [rad] (inf when the loop diverged)."""
         if self.diverged_at is not None:
             return np.full(self.error.shape[1], np.inf)
-        return np.sqrt(np.mean(self.error**2, axis=0))
+        out: np.ndarray = np.sqrt(np.mean(self.error**2, axis=0))
+        return out
 
     @property
     def max(self) -> np.ndarray:
         """(n,) largest tracking error [rad] (inf when the loop diverged)."""
         if self.diverged_at is not None:
             return np.full(self.error.shape[1], np.inf)
-        return np.max(np.abs(self.error), axis=0)
+        out: np.ndarray = np.max(np.abs(self.error), axis=0)
+        return out
 
 
 def track(

@@ -68,12 +68,13 @@ def _moving_rms(x: np.ndarray, samples: int) -> np.ndarray:
     k = np.arange(len(x))
     lo = np.clip(k - samples // 2, 0, len(x))
     hi = np.clip(k + samples - samples // 2, 0, len(x))
-    return np.sqrt((sums[hi] - sums[lo]) / (hi - lo)[:, None])
+    out: np.ndarray = np.sqrt((sums[hi] - sums[lo]) / (hi - lo)[:, None])
+    return out
 
 
 def _panels(n: int, cols: int, width: float, height: float) -> tuple[Any, Any]:
     """A figure of n rows by ``cols`` panels sharing the time axis."""
-    return pyplot().subplots(
+    figure_and_axes: tuple[Any, Any] = pyplot().subplots(
         n,
         cols,
         figsize=(width, height * n + 1.0),
@@ -81,6 +82,7 @@ def _panels(n: int, cols: int, width: float, height: float) -> tuple[Any, Any]:
         squeeze=False,
         constrained_layout=True,
     )
+    return figure_and_axes
 
 
 def _legend(fig: Any, ax: Any) -> None:
@@ -132,7 +134,8 @@ def _saturated(run: Tracking, j: int, limit: float) -> np.ndarray:
     hit = np.abs(run.command[:, j]) >= limit * (1 - 1e-9)
     if run.diverged_at is not None:  # the command after it was never written
         hit[run.diverged_at + 1 :] = False
-    return hit
+    out: np.ndarray = hit
+    return out
 
 
 def _limit_marks(

@@ -45,7 +45,8 @@ def nominal_components(dataset: Dataset, robot: RobotConfig) -> dict[str, np.nda
 
 def rms(x: np.ndarray) -> np.ndarray:
     """Root mean square per column."""
-    return np.sqrt(np.mean(np.square(x), axis=0))
+    out: np.ndarray = np.sqrt(np.mean(np.square(x), axis=0))
+    return out
 
 
 def shares(components: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

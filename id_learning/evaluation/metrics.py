@@ -42,18 +42,21 @@ def _check(prediction: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.n
 def absolute_errors(prediction: np.ndarray, target: np.ndarray) -> np.ndarray:
     """|prediction - target|, (N, n) [N*m]."""
     prediction, target = _check(prediction, target)
-    return np.abs(prediction - target)
+    out: np.ndarray = np.abs(prediction - target)
+    return out
 
 
 def mse(prediction: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Mean squared error per joint, (n,) [(N*m)^2]."""
     prediction, target = _check(prediction, target)
-    return np.mean(np.square(prediction - target), axis=0)
+    out: np.ndarray = np.mean(np.square(prediction - target), axis=0)
+    return out
 
 
 def rmse(prediction: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Root mean squared error per joint, (n,) [N*m]."""
-    return np.sqrt(mse(prediction, target))
+    out: np.ndarray = np.sqrt(mse(prediction, target))
+    return out
 
 
 def normalised_rmse(prediction: np.ndarray, target: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -64,12 +67,14 @@ def normalised_rmse(prediction: np.ndarray, target: np.ndarray, scale: np.ndarra
         target: (N, n) label torque [N*m].
         scale: (n,) half range of each joint's training labels [N*m] (``MinMaxScaler.scale()``).
     """
-    return rmse(prediction, target) / _positive_scale(scale)
+    out: np.ndarray = rmse(prediction, target) / _positive_scale(scale)
+    return out
 
 
 def normalised_mse(prediction: np.ndarray, target: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """MSE on the study's [-1, 1] scale (the networks' training loss per joint), (n,) [-]."""
-    return mse(prediction, target) / np.square(_positive_scale(scale))
+    out: np.ndarray = mse(prediction, target) / np.square(_positive_scale(scale))
+    return out
 
 
 def nmse(prediction: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -21,8 +21,9 @@ import os
 import re
 import shutil
 import subprocess
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict, cast
 
 import numpy as np
 from safetensors import SafetensorError
@@ -41,6 +42,9 @@ __all__ = [
     'METADATA_FILE',
     'UNITS',
     'WEIGHTS_FILE',
+    'ArtifactExtra',
+    'ModelDocument',
+    'RobotFingerprint',
     'artifact_inputs',
     'artifact_target',
     'document_digest',
@@ -58,17 +62,83 @@ WEIGHTS_FILE = 'weights.safetensors'
 UNITS = {'q': 'rad', 'v': 'rad/s', 'a': 'rad/s^2', 'tau': 'N*m joint side', 'current': 'A'}
 
 
-def robot_fingerprint(robot: RobotConfig) -> dict[str, Any]:
+class DriveFingerprint(TypedDict):
+    """The drives a model's torques were converted with (motor side, per joint)."""
+
+    gear_ratio: list[float]
+    torque_constant_nm_per_a: list[float]
+    rotor_inertia_motor_side_kgm2: list[float]
+
+
+class RobotFingerprint(TypedDict):
+    """What ties a model to a robot."""
+
+    name: str
+    joints: list[str]
+    urdf_sha256: str
+    drives: DriveFingerprint
+
+
+class ArtifactExtra(TypedDict, total=False):
+    """What a run stores beside a model: how its data were made, and how the model scored."""
+
+    #: ``PreprocessConfig`` as a dict, with the input definitions (``preprocessing.target``).
+    preprocessing: dict[str, Any]
+    #: The run's torque scaler (``MinMaxScaler.to_dict``).
+    target_scaler: dict[str, Any]
+    #: The bags (path, SHA-256) and splits the model was fitted on.
+    training_data: dict[str, Any]
+    #: Test metrics per joint, as in the run's metrics table.
+    metrics: dict[str, Any]
+    #: Loss per epoch of the network kinds; None for closed-form fits.
+    train_history: Any
+    #: The diagnosis that built an ``rnea_effects`` model: the sources it read.
+    diagnosis: dict[str, Any]
+
+
+class ModelDocument(ArtifactExtra):
+    """model.json: the artifact's header, the model's settings and fitted values, the run's.
+
+    The file also holds ``ARTIFACT_HASH``, the SHA-256 of the rest (absent in artifacts from
+    before it).
+    """
+
+    format: str
+    kind: str
+    robot: RobotFingerprint
+    units: dict[str, str]
+    #: Tensor name -> shape, as in weights.safetensors.
+    tensors: dict[str, list[int]]
+    weights_sha256: str
+    package_version: str
+    git_commit: str | None
+    #: The model config (``ModelConfig.to_dict``).
+    hyperparameters: dict[str, Any]
+    #: ``InverseDynamicsModel.fitted_metadata``: scalers, identified parameters, fit summaries.
+    fitted: dict[str, Any]
+
+
+def robot_fingerprint(robot: RobotConfig) -> RobotFingerprint:
     """What ties a model to a robot: name, joints in order, URDF hash, drives."""
+    drives = _drive_values(robot)
     return {
         'name': robot.name,
         'joints': list(robot.joints),
         'urdf_sha256': robot.urdf_sha256(),
         'drives': {
-            'gear_ratio': robot.drives.gear_ratio.tolist(),
-            'torque_constant_nm_per_a': robot.drives.torque_constant.tolist(),
-            'rotor_inertia_motor_side_kgm2': robot.drives.rotor_inertia.tolist(),
+            'gear_ratio': drives['gear_ratio'],
+            'torque_constant_nm_per_a': drives['torque_constant_nm_per_a'],
+            'rotor_inertia_motor_side_kgm2': drives['rotor_inertia_motor_side_kgm2'],
         },
+    }
+
+
+def _drive_values(robot: RobotConfig) -> dict[str, list[float]]:
+    """The robot's drives by their fingerprint names."""
+    return {
+        'gear_ratio': robot.drives.gear_ratio.tolist(),
+        'torque_constant_nm_per_a': robot.drives.torque_constant.tolist(),
+        'rotor_inertia_motor_side_kgm2': robot.drives.rotor_inertia.tolist(),
     }
 
 
@@ -92,7 +162,10 @@ def write_artifact(
     kind: str,
     robot: RobotConfig,
     tensors: dict[str, np.ndarray],
-    metadata: dict[str, Any],
+    *,
+    settings: dict[str, Any],
+    fitted: dict[str, Any],
+    extra: ArtifactExtra | None = None,
 ) -> Path:
     """Write ``weights.safetensors`` and ``model.json`` into ``folder``, whole or not at all.
 
@@ -111,7 +184,7 @@ def write_artifact(
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir()
     try:
-        _write_files(tmp, kind, robot, tensors, metadata)
+        _write_files(tmp, kind, robot, tensors, (settings, fitted, extra or {}))
         replace_folder(tmp, folder)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -123,9 +196,9 @@ def _write_files(
     kind: str,
     robot: RobotConfig,
     tensors: dict[str, np.ndarray],
-    metadata: dict[str, Any],
+    contents: tuple[dict[str, Any], dict[str, Any], ArtifactExtra],
 ) -> None:
-    """The two files of an artifact, into ``folder``."""
+    """The two files of an artifact, into ``folder``: contents are (settings, fitted, extra)."""
     contiguous = {name: np.ascontiguousarray(value) for name, value in tensors.items()}
     try:
         save_file(contiguous, str(folder / WEIGHTS_FILE))
@@ -133,29 +206,32 @@ def _write_files(
         found = re.search(r'os error (\d+)', str(err))
         code = int(found.group(1)) if found else errno.EIO
         raise OSError(code, os.strerror(code), str(folder / WEIGHTS_FILE)) from err
-    document = {
-        'format': ARTIFACT_FORMAT,
-        'kind': kind,
-        'robot': robot_fingerprint(robot),
-        'units': UNITS,
-        'tensors': {name: list(value.shape) for name, value in contiguous.items()},
-        'weights_sha256': hashlib.sha256((folder / WEIGHTS_FILE).read_bytes()).hexdigest(),
-        'package_version': __version__,
-        'git_commit': _git_commit(),
-        **metadata,
-    }
+    settings, fitted, extra = contents
+    document = ModelDocument(
+        **extra,
+        format=ARTIFACT_FORMAT,
+        kind=kind,
+        robot=robot_fingerprint(robot),
+        units=UNITS,
+        tensors={name: list(value.shape) for name, value in contiguous.items()},
+        weights_sha256=hashlib.sha256((folder / WEIGHTS_FILE).read_bytes()).hexdigest(),
+        package_version=__version__,
+        git_commit=_git_commit(),
+        hyperparameters=settings,
+        fitted=fitted,
+    )
     # Nothing is written that a load would refuse.
     paths = (folder / METADATA_FILE, folder / WEIGHTS_FILE)
     check_metadata(document, contiguous, *paths, tuple(robot.joints))
-    document[ARTIFACT_HASH] = document_digest(document)
-    (folder / METADATA_FILE).write_text(json.dumps(document, indent=1) + '\n', encoding='utf-8')
+    written = {**document, ARTIFACT_HASH: document_digest(document)}
+    (folder / METADATA_FILE).write_text(json.dumps(written, indent=1) + '\n', encoding='utf-8')
 
 
 #: model.json's key for the hash of its own contents (which include the weights' hash).
 ARTIFACT_HASH = 'artifact_sha256'
 
 
-def document_digest(document: dict[str, Any]) -> str:
+def document_digest(document: Mapping[str, Any]) -> str:
     """SHA-256 of model.json's contents without its own hash, in a canonical JSON form.
 
     A tool that edits model.json on purpose (a migration) stores this again as ``ARTIFACT_HASH``.
@@ -165,7 +241,7 @@ def document_digest(document: dict[str, Any]) -> str:
     return hashlib.sha256(canonical.encode('utf-8')).hexdigest()
 
 
-def _check_unchanged(metadata: dict[str, Any], meta_path: Path) -> None:
+def _check_unchanged(metadata: Mapping[str, Any], meta_path: Path) -> None:
     """Refuse a model.json changed after it was written; warn for one from before the hash."""
     saved = metadata.get(ARTIFACT_HASH)
     if saved is None:
@@ -182,7 +258,9 @@ def _check_unchanged(metadata: dict[str, Any], meta_path: Path) -> None:
         )
 
 
-def _check_robot(saved: dict[str, Any], robot: RobotConfig, folder: Path) -> None:
+def _check_robot(saved: Any, robot: RobotConfig, folder: Path) -> None:
+    if not isinstance(saved, dict):
+        raise CheckpointError(f'{folder}: model.json has no robot object, got {saved!r}')
     current = robot_fingerprint(robot)
     if saved.get('joints') != current['joints']:
         raise CheckpointError(
@@ -195,7 +273,7 @@ def _check_robot(saved: dict[str, Any], robot: RobotConfig, folder: Path) -> Non
                 f'{folder}: model was trained for robot {key} {saved.get(key)!r}, '
                 f'not {current[key]!r}'
             )
-    for key, values in current['drives'].items():
+    for key, values in _drive_values(robot).items():
         if not np.allclose(saved.get('drives', {}).get(key, []), values, rtol=1e-12, atol=0):
             raise CheckpointError(f'{folder}: drive parameter {key} differs from the robot config')
 
@@ -258,8 +336,8 @@ def read_metadata(meta_path: Path) -> dict[str, Any]:
 
 def read_artifact(
     folder: Path, robot: RobotConfig, kind: str | None = None
-) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Read and verify an artifact; returns (metadata, tensors).
+) -> tuple[ModelDocument, dict[str, np.ndarray]]:
+    """Read and verify an artifact; returns (model.json, tensors).
 
     Raises:
         CheckpointError: missing files, wrong format or kind, a key given twice, a tensor list or
@@ -307,7 +385,14 @@ def read_artifact(
     check_metadata(metadata, tensors, meta_path, weights_path, tuple(robot.joints))
     # Last, so that a specific fault (another robot, a NaN field) is named as such.
     _check_unchanged(metadata, meta_path)
-    return metadata, tensors
+    for key in ('hyperparameters', 'fitted'):
+        if not isinstance(metadata.setdefault(key, {}), dict):
+            raise CheckpointError(
+                f'{meta_path}: model.json has no {key} object, got {metadata[key]!r}'
+            )
+    # Its header is verified above (format, kind, units, tensors, hashes, robot, the fitted
+    # values' numbers); the model's own loader checks its settings and fitted values.
+    return cast(ModelDocument, metadata), tensors
 
 
 #: Summaries in the fitted metadata that describe the fit and never enter a prediction (a loss
@@ -332,7 +417,7 @@ def _check_finite(value: Any, where: str, path: Path) -> None:
             _check_finite(item, f'{where}[{index}]', path)
 
 
-def artifact_target(metadata: dict[str, Any]) -> str:
+def artifact_target(metadata: Mapping[str, Any]) -> str:
     """What an artifact's model predicts: 'motor' (tau_u) or 'joint' torques.
 
     From the run's preprocessing (``train`` writes it), else from what the model itself keeps;
@@ -346,7 +431,7 @@ def artifact_target(metadata: dict[str, Any]) -> str:
 
 
 def artifact_inputs(
-    metadata: dict[str, Any],
+    metadata: Mapping[str, Any],
 ) -> tuple[InputDefinition | None, InputDefinition | None]:
     """The input definitions an artifact stores: what it is served on, what it was fitted on.
 

@@ -11,17 +11,53 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Protocol, Self, runtime_checkable
 
 import numpy as np
 
 from id_learning.models.data import TrainingData
 from id_learning.robot.config import RobotConfig
 
-__all__ = ['InverseDynamicsModel', 'ModelConfig', 'SamplePredictor', 'TorqueComponents']
+__all__ = [
+    'InverseDynamicsModel',
+    'ModelConfig',
+    'SamplePredictor',
+    'SequenceModel',
+    'SequenceStream',
+    'TorqueComponents',
+    'as_sequence_model',
+]
 
 #: One sample's torque: q, v, a (n,) [rad, rad/s, rad/s^2] -> tau (n,) [N*m], float64.
 SamplePredictor = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+class SequenceStream(Protocol):
+    """The online form of a sequence model: one input row in, that sample's torque out."""
+
+    def reset(self) -> None:
+        """Forget the past samples (the next push starts a new window)."""
+
+    def prepare(self) -> None:
+        """Do ahead of the next push what does not depend on its row."""
+
+    def push(self, row: np.ndarray) -> np.ndarray:
+        """Torque (n,) [N*m] for the input row (3n,) = (q, v, a), given the rows before it."""
+
+
+@runtime_checkable
+class SequenceModel(Protocol):
+    """What a model whose torque depends on a window of past samples offers besides predict()."""
+
+    @property
+    def sequence_length(self) -> int:
+        """Samples per window, at the recording's rate."""
+
+    def predict_window(self, window: np.ndarray) -> np.ndarray:
+        """Torque (n,) [N*m] of the last row of one window (T, 3n) of (q, v, a) rows."""
+
+    def sequence_predictor(self) -> SequenceStream:
+        """A stream built once from the fitted state, for the online predictor."""
 
 
 @dataclass(frozen=True)
@@ -113,3 +149,16 @@ class InverseDynamicsModel(ABC):
     def fitted_metadata(self) -> dict[str, Any]:
         """JSON-ready fitted values that are not tensors (scalers, identified parameters)."""
         return {}
+
+
+def as_sequence_model(model: InverseDynamicsModel) -> SequenceModel | None:
+    """The model as a sequence model, or None for a model of one sample.
+
+    Raises:
+        TypeError: the model says it is a sequence model but lacks the protocol's methods.
+    """
+    if not model.is_sequence_model:
+        return None
+    if not isinstance(model, SequenceModel):
+        raise TypeError(f'{model.kind}: is_sequence_model is set but it is not a SequenceModel')
+    return model

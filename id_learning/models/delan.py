@@ -169,7 +169,8 @@ class DelanNetwork(LagrangianNetwork):
     def potential(self, q: torch.Tensor) -> torch.Tensor:
         """V(q) (B,) [J]."""
         x = (q - self.q_centre) / self.lagrangian_q_half
-        return self.lagrangian_energy * self.potential_net(x).squeeze(-1)
+        out: torch.Tensor = self.lagrangian_energy * self.potential_net(x).squeeze(-1)
+        return out
 
     def gravity(self, q: torch.Tensor) -> torch.Tensor:
         """dV/dq (B, n) [N*m]."""

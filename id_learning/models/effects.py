@@ -257,7 +257,7 @@ class RneaEffectsMlpConfig(RneaMlpConfig):
         effects: as in ``RneaEffectsConfig``.
     """
 
-    kind: Literal['rnea_effects_mlp'] = 'rnea_effects_mlp'  # type: ignore[assignment]
+    kind: Literal['rnea_effects_mlp'] = 'rnea_effects_mlp'
     effects: str = ''
 
 

@@ -98,7 +98,8 @@ class LagrangianScaling:
 
     def joint_energies(self) -> np.ndarray:
         """e_i = h_tau,i * h_q,i (n,) [J]."""
-        return self.torque.scale() * self.position.scale()
+        out: np.ndarray = self.torque.scale() * self.position.scale()
+        return out
 
     def balanced(self) -> tuple[np.ndarray, float]:
         """The scalar nets' input gains ``r`` (n,) and energy scale ``E_b`` [J]."""
@@ -189,7 +190,8 @@ class LagrangianNetwork(nn.Module):
         def centre(scaler: MinMaxScaler) -> np.ndarray:
             assert scaler.low_ is not None
             assert scaler.high_ is not None
-            return 0.5 * (scaler.low_ + scaler.high_)
+            out: np.ndarray = 0.5 * (scaler.low_ + scaler.high_)
+            return out
 
         buffers = {
             'q_centre': centre(scaling.position),

@@ -137,11 +137,13 @@ class LnnMlpNetwork(LagrangianNetwork):
     def dissipation(self, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
         """Dissipative (friction) torque h(q, v) (B, n) [N*m]."""
         q_s, v_s = self.scaled_state(q, v)
-        return self.tau_half * self.dissipation_net(torch.cat([q_s, v_s], dim=1))
+        out: torch.Tensor = self.tau_half * self.dissipation_net(torch.cat([q_s, v_s], dim=1))
+        return out
 
     def forward(self, q: torch.Tensor, v: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         """Torque (B, n) [N*m]: the LNN's plus the dissipative torque."""
-        return self.lnn(q, v, a) + self.dissipation(q, v)
+        out: torch.Tensor = self.lnn(q, v, a) + self.dissipation(q, v)
+        return out
 
     def sample_predictor(self) -> SamplePredictor:
         """forward() for one sample, q, v, a (n,) -> tau (n,), in float64 numpy."""

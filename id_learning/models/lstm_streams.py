@@ -49,12 +49,10 @@ class LstmStreams:
             return float64_array(getattr(lstm, name))[order].T.astype(dtype)
 
         def bias(layer: int) -> np.ndarray:
-            return (
-                (
-                    float64_array(getattr(lstm, f'bias_ih_l{layer}'))
-                    + float64_array(getattr(lstm, f'bias_hh_l{layer}'))
-                )[order]
-            ).astype(dtype)
+            both: np.ndarray = float64_array(getattr(lstm, f'bias_ih_l{layer}')) + float64_array(
+                getattr(lstm, f'bias_hh_l{layer}')
+            )
+            return both[order].astype(dtype)
 
         # Layer 0's input projection of one sample (numpy); per layer b and W_hh^T (the part
         # ``prepare`` computes ahead), and W_ih^T of the layers above the first.

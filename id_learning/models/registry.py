@@ -6,7 +6,12 @@ from pathlib import Path
 from typing import Any
 
 from id_learning.errors import CheckpointError, ConfigError
-from id_learning.models.artifact import artifact_target, read_artifact, write_artifact
+from id_learning.models.artifact import (
+    ArtifactExtra,
+    artifact_target,
+    read_artifact,
+    write_artifact,
+)
 from id_learning.models.base import InverseDynamicsModel, ModelConfig
 from id_learning.models.blackbox import LstmConfig, LstmModel, MlpConfig, MlpModel
 from id_learning.models.effects import (
@@ -78,15 +83,18 @@ def make_model(kind: str, robot: RobotConfig, **overrides: Any) -> InverseDynami
 
 
 def save_model(
-    model: InverseDynamicsModel, folder: Path, extra: dict[str, Any] | None = None
+    model: InverseDynamicsModel, folder: Path, extra: ArtifactExtra | None = None
 ) -> Path:
     """Write a fitted model as an artifact folder (safetensors + JSON)."""
-    metadata = {
-        'hyperparameters': model.config.to_dict(),
-        'fitted': model.fitted_metadata(),
-        **(extra or {}),
-    }
-    return write_artifact(Path(folder), model.kind, model.robot, model.state(), metadata)
+    return write_artifact(
+        Path(folder),
+        model.kind,
+        model.robot,
+        model.state(),
+        settings=model.config.to_dict(),
+        fitted=model.fitted_metadata(),
+        extra=extra,
+    )
 
 
 def load_model(
@@ -112,13 +120,11 @@ def load_model(
     if found not in MODEL_KINDS:
         raise CheckpointError(f'{folder}: unknown model kind {found!r}')
     retired = ('kind', *RETIRED_HYPERPARAMETERS.get(found, ()))
-    hyper = metadata.get('hyperparameters')
-    if not isinstance(hyper, dict):
-        raise CheckpointError(f'{folder}: model.json has no hyperparameters object, got {hyper!r}')
+    hyper = metadata['hyperparameters']
     try:
         config = make_config(found, **{k: v for k, v in hyper.items() if k not in retired})
     except (ConfigError, TypeError) as err:
         raise CheckpointError(f'{folder}: hyper-parameters do not fit {found}: {err}') from err
     model = MODEL_KINDS[found][1](config, robot)
-    model.load_state(tensors, metadata.get('fitted', {}))
+    model.load_state(tensors, metadata['fitted'])
     return model

@@ -120,7 +120,8 @@ class LabelFilter:
         size = 1 << math.ceil(math.log2(length + 2 * k))
         spectrum = torch.fft.rfft(torque.transpose(1, 2), n=size)
         full = torch.fft.irfft(spectrum * self._spectrum(size, torque.device), n=size)
-        return full[..., 2 * k : length].transpose(1, 2)
+        out: torch.Tensor = full[..., 2 * k : length].transpose(1, 2)
+        return out
 
 
 @dataclass(frozen=True, eq=False)

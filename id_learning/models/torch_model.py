@@ -21,10 +21,10 @@ from id_learning.models.fitting import (
     EpochHook,
     NetworkSettings,
     TrainHistory,
-    WindowPredictor,
     fit_network,
 )
 from id_learning.models.network_common import load_module_state, module_state
+from id_learning.models.through_filter import WindowPredictor
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['TorchModel']

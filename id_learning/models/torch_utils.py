@@ -74,7 +74,8 @@ def numpy_softplus(x: np.ndarray) -> np.ndarray:
 
 
 def _relu(x: np.ndarray) -> np.ndarray:
-    return np.maximum(x, 0.0)
+    out: np.ndarray = np.maximum(x, 0.0)
+    return out
 
 
 _NUMPY_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {

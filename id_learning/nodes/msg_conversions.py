@@ -83,7 +83,8 @@ def message_class(msg_type: str) -> type:
     """
     try:
         package, kind, name = msg_type.split('/')
-        return getattr(importlib.import_module(f'{package}.{kind}'), name)
+        out: type = getattr(importlib.import_module(f'{package}.{kind}'), name)
+        return out
     except (ValueError, ImportError, AttributeError) as err:
         raise ConfigError(f'unknown message type {msg_type!r}: {err}') from err
 

@@ -37,6 +37,7 @@ from id_learning.config_io import (
 from id_learning.errors import ConfigError
 
 if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
     from rclpy.node import Node
 
 __all__ = [
@@ -56,7 +57,7 @@ __all__ = [
     'validate_change',
 ]
 
-_T = TypeVar('_T')
+_T = TypeVar('_T', bound='DataclassInstance')
 
 
 def param(
@@ -107,13 +108,13 @@ def constraints(item: dataclasses.Field[Any]) -> str:
     return 'a ROS topic name' if item.metadata.get('topic') else ''
 
 
-def check_schema(config: object) -> None:
+def check_schema(config: DataclassInstance) -> None:
     """Check every field against its schema: choices, finite numbers in range, topic names.
 
     Raises:
         ConfigError: names the parameter, the value and what it may hold.
     """
-    for item in dataclasses.fields(config):  # type: ignore[arg-type]
+    for item in dataclasses.fields(config):
         value = getattr(config, item.name)
         choices = item.metadata.get('choices')
         if choices and value not in choices:
@@ -433,8 +434,8 @@ def _hinted(unknown: list[str], known: list[str]) -> str:
 
 def kind_name(kind: object) -> str:
     """How a parameter's type reads in a message."""
-    names = {bool: 'boolean', int: 'integer', float: 'number', str: 'string'}
-    return names.get(kind, 'list of strings')  # type: ignore[call-overload]
+    names: dict[object, str] = {bool: 'boolean', int: 'integer', float: 'number', str: 'string'}
+    return names.get(kind, 'list of strings')
 
 
 #: Parameters every rclpy node takes besides its own.
@@ -472,17 +473,14 @@ def read_snapshot(node: Node, cls: type[_T]) -> _T:
     Raises:
         ConfigError: a value has the wrong type or is out of range (names the parameter).
     """
-    values = {
-        item.name: node.get_parameter(item.name).value
-        for item in dataclasses.fields(cls)  # type: ignore[arg-type]
-    }
+    values = {item.name: node.get_parameter(item.name).value for item in dataclasses.fields(cls)}
     return config_from_mapping(cls, values, f'node {node.get_name()}')
 
 
 def validate_change(current: _T, changes: Mapping[str, Any]) -> tuple[_T | None, str]:
     """A new snapshot with ``changes`` applied, or None and the reason to reject them."""
     types = _field_types(type(current))
-    metadata = {item.name: item.metadata for item in dataclasses.fields(current)}  # type: ignore[arg-type]
+    metadata = {item.name: item.metadata for item in dataclasses.fields(current)}
     updates = {}
     for name, value in changes.items():
         if name not in metadata:
@@ -494,6 +492,6 @@ def validate_change(current: _T, changes: Mapping[str, Any]) -> tuple[_T | None,
         except ConfigError as err:
             return None, str(err)
     try:
-        return dataclasses.replace(current, **updates), ''  # type: ignore[type-var]
+        return dataclasses.replace(current, **updates), ''
     except ConfigError as err:
         return None, str(err)

@@ -61,7 +61,6 @@ from typing import Any, cast
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
@@ -110,7 +109,7 @@ from id_learning.nodes.predictor_report import (
     troubles,
 )
 from id_learning.nodes.qos import DIAGNOSTICS_QOS, TORQUE_QOS, reference_qos
-from id_learning.nodes.runtime import run_node
+from id_learning.nodes.runtime import ShellNode, run_node
 from id_learning.predictor import (
     FeedForwardPredictor,
     ReferenceSample,
@@ -128,7 +127,7 @@ NODE_NAME = 'predictor'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 
 
-class Predictor(Node):
+class Predictor(ShellNode):
     """Publishes guarded tau_u for every reference sample, from a ready core.
 
     The node loads nothing: ``make_predictor`` (what ``main`` runs) reads the parameters, builds
@@ -588,7 +587,6 @@ def main(args: Sequence[str] | None = None) -> int:
     """Run the predictor until SIGINT/SIGTERM; returns the exit status."""
     return run_node(
         make_predictor,
-        lambda node: node.config.executor,  # type: ignore[attr-defined]
         args,
         name='predictor',
         config_class=PredictorNodeConfig,

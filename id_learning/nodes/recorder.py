@@ -65,7 +65,7 @@ from id_learning.nodes.params import (
     validate_change,
 )
 from id_learning.nodes.qos import DIAGNOSTICS_QOS, sensor_qos
-from id_learning.nodes.runtime import run_node
+from id_learning.nodes.runtime import ShellNode, run_node
 from id_learning.outputs import bag_output
 
 __all__ = ['Recorder', 'TopicCounts', 'main']
@@ -89,7 +89,7 @@ class TopicCounts:
     lost: int = 0
 
 
-class Recorder(Node):
+class Recorder(ShellNode):
     """Records raw messages of configured topics into a rosbag2 MCAP bag.
 
     Args:
@@ -404,7 +404,6 @@ def main(args: Sequence[str] | None = None) -> int:
 
     status = run_node(
         make,
-        lambda node: node.config.executor,  # type: ignore[attr-defined]
         args,
         name='recorder',
         config_class=RecorderConfig,

@@ -49,7 +49,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
@@ -86,7 +85,7 @@ from id_learning.nodes.replay_span import (
     source_stretch,
     unpaired_tail,
 )
-from id_learning.nodes.runtime import run_node
+from id_learning.nodes.runtime import ShellNode, run_node
 from id_learning.predictor.reference import reference_from_states
 from id_learning.predictor.timing import RollingStats
 from id_learning.robot.config import RobotConfig, load_robot_config
@@ -351,7 +350,7 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     )
 
 
-class Replay(Node):
+class Replay(ShellNode):
     """Publishes a bag's cycles on their deadlines from a playback thread.
 
     Args:
@@ -568,7 +567,6 @@ def main(args: Sequence[str] | None = None) -> int:
     """Play a bag; returns the exit status when done (or on SIGINT/SIGTERM)."""
     return run_node(
         Replay,
-        lambda node: node.config.executor,  # type: ignore[attr-defined]
         args,
         name='replay',
         config_class=ReplayConfig,

@@ -14,41 +14,60 @@ import os
 import signal
 import sys
 import threading
+from abc import abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import MISSING, fields
-from typing import Protocol
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.rcutils_logger import RcutilsLogger
+from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
+from rclpy.utilities import ok, try_shutdown
 
 from id_learning.errors import IdLearningError
 from id_learning.nodes import param_schema
 
-__all__ = ['ClosableNode', 'close_spun_node', 'make_executor', 'run_node']
+__all__ = ['ShellNode', 'close_spun_node', 'make_executor', 'run_node']
 
 SPIN_SLICE_S = 0.1
 
 _LOG = logging.getLogger(__name__)
 
 
-class ClosableNode(Protocol):
-    """What run_node needs of a node."""
+class ShellNode(Node):
+    """Base of the package's nodes: what run_node needs of them, and rclpy's API typed.
+
+    ``done`` completes when the node has finished its work (a replay at the bag's end); nodes
+    that run until shut down never complete it.
+    """
 
     done: Future
 
-    def close(self) -> None:
-        """Finish work (files, reports); called once, before destroy_node."""
+    def get_logger(self) -> RcutilsLogger:
+        """The node's logger (rclpy's method, with its type)."""
+        logger: RcutilsLogger = Node.get_logger(self)
+        return logger
 
     def destroy_node(self) -> None:
-        """Release the node's ROS resources."""
+        """Release the node's ROS resources (rclpy's method, with its type)."""
+        Node.destroy_node(self)
+
+    @property
+    def executor_kind(self) -> str:
+        """The executor the node's ``executor`` parameter names (every node declares one)."""
+        return str(Node.get_parameter(self, 'executor').value)
+
+    @abstractmethod
+    def close(self) -> None:
+        """Finish work (files, reports); called once, before destroy_node."""
 
 
 def make_executor(name: str) -> rclpy.executors.Executor:
     """'single_threaded' (rclpy's) or 'events' (the experimental C++ events executor)."""
     if name == 'events':
-        from rclpy.experimental import EventsExecutor
+        from rclpy.experimental.events_executor import EventsExecutor
 
         return EventsExecutor()
     return SingleThreadedExecutor()
@@ -128,8 +147,7 @@ def wants_help(args: Sequence[str] | None) -> bool:
 
 
 def run_node(
-    make_node: Callable[[], ClosableNode],
-    executor: Callable[[ClosableNode], str],
+    make_node: Callable[[], ShellNode],
     args: Sequence[str] | None,
     *,
     name: str = '',
@@ -160,16 +178,16 @@ def run_node(
         print(f'error: {name or "node"}: ROS 2 could not start it: {err}', file=sys.stderr)
         return 2
     stop = _StopOnSignal()
-    node: ClosableNode | None = None
+    node: ShellNode | None = None
     status = 0
     param_schema.COMMAND_LINE = None if args is None else list(args)  # its --params-file files
     try:
         node = make_node()
-        spinner = make_executor(executor(node))
-        spinner.add_node(node)  # type: ignore[arg-type]
+        spinner = make_executor(node.executor_kind)
+        spinner.add_node(node)
         # Short waits: Python runs signal handlers only between them. (Not
         # spin_until_future_complete with a timeout: each call adds a callback to the future.)
-        while not (node.done.done() or stop.event.is_set()) and rclpy.ok():
+        while not (node.done.done() or stop.event.is_set()) and ok():
             spinner.spin_once(timeout_sec=SPIN_SLICE_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -186,5 +204,5 @@ def run_node(
                     node.destroy_node()
         finally:
             stop.restore()
-            rclpy.try_shutdown()
+            try_shutdown()
     return status

@@ -48,7 +48,8 @@ class CheckSetup:
     @property
     def kind(self) -> str:
         """The artifact's model kind."""
-        return self.model.kind
+        out: str = self.model.kind
+        return out
 
     @property
     def joints(self) -> tuple[str, ...]:

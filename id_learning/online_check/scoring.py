@@ -50,7 +50,8 @@ def score(
     def through_filter(excerpt_torque: np.ndarray) -> np.ndarray:
         spliced = excerpt.along.copy()
         spliced[index] = excerpt_torque
-        return dataset.filter_like_labels(spliced)[index]
+        out: np.ndarray = dataset.filter_like_labels(spliced)[index]
+        return out
 
     n_missing = excerpt.n_samples - len(tau_by_row)
     if n_missing:
@@ -138,11 +139,13 @@ def _node_model(setup: CheckSetup, ref_by_row: _References, matched: list[int]) 
     """
     q_node, v_node, a_node = (np.vstack([ref_by_row[r][k] for r in matched]) for k in range(3))
     limit = setup.robot.limits.torque
-    return np.clip(setup.model.predict(q_node, v_node, a_node), -limit, limit)
+    out: np.ndarray = np.clip(setup.model.predict(q_node, v_node, a_node), -limit, limit)
+    return out
 
 
 def _rmse(prediction: np.ndarray, target: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.mean((prediction - target) ** 2, axis=0))
+    out: np.ndarray = np.sqrt(np.mean((prediction - target) ** 2, axis=0))
+    return out
 
 
 def _columns(names: tuple[str, ...], joints: tuple[str, ...], what: str) -> list[int]:

@@ -176,7 +176,8 @@ class AugmentedModel:
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
         )
-        return self._additive(back, others, None, folded) - quantities.tau_nominal - now
+        out: np.ndarray = self._additive(back, others, None, folded) - quantities.tau_nominal - now
+        return out
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], for the online predictor.

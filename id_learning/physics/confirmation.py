@@ -206,7 +206,8 @@ def judge_claims(
 
     def residual(problem: Problem, estimate: np.ndarray) -> np.ndarray:
         a, b = problem.design(estimate, stribeck)
-        return (a @ estimate - b).reshape(problem.n, -1).T
+        out: np.ndarray = (a @ estimate - b).reshape(problem.n, -1).T
+        return out
 
     with_all = residual(held, x)
     seconds_per_row = inner.step * held.dataset.period_s

@@ -81,7 +81,8 @@ def stribeck(
         hump = 1.0 / (1.0 + x**2)
     else:
         raise ValueError(f'unknown Stribeck shape {shape!r}; known: {list(STRIBECK_SHAPES)}')
-    return hump * smooth_sign(v, smoothing_velocity)
+    out: np.ndarray = hump * smooth_sign(v, smoothing_velocity)
+    return out
 
 
 def load_dependent(v: Any, load: Any, smoothing_velocity: Any) -> np.ndarray:
@@ -89,12 +90,14 @@ def load_dependent(v: Any, load: Any, smoothing_velocity: Any) -> np.ndarray:
 
     L [N*m] is the link torque the gear transmits: tooth and bearing forces grow with it.
     """
-    return np.abs(np.asarray(load)) * smooth_sign(v, smoothing_velocity)
+    out: np.ndarray = np.abs(np.asarray(load)) * smooth_sign(v, smoothing_velocity)
+    return out
 
 
 def load_slope(v: Any, load: Any, smoothing_velocity: Any) -> np.ndarray:
     """d/dL of ``load_dependent``: sign(L) tanh(v / v_eps), per unit coefficient."""
-    return np.sign(np.asarray(load)) * smooth_sign(v, smoothing_velocity)
+    out: np.ndarray = np.sign(np.asarray(load)) * smooth_sign(v, smoothing_velocity)
+    return out
 
 
 def warm_up(

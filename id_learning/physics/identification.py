@@ -73,6 +73,7 @@ def _solve(problem: Problem, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, 
         (x, the posterior covariance of x (constraints inactive), the solver's status).
     """
     import cvxpy as cp
+    from cvxpy.atoms.sum_squares import sum_squares
 
     layout = problem.layout
     mean = np.asarray(layout.prior_mean)
@@ -97,7 +98,7 @@ def _solve(problem: Problem, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, 
     # give 1e13 there, beyond a conic solver's tolerances); its minimiser is the same.
     scale = 1.0 / max(1.0, float(z @ z) / max(len(z), 1))
     objective = scale * (
-        cp.sum_squares(r @ u - z) + cp.sum_squares(u[has_prior]) + 1e-9 * cp.sum_squares(u)
+        sum_squares(r @ u - z) + sum_squares(u[has_prior]) + 1e-9 * sum_squares(u)
     )
     theta_block = layout.blocks['theta']
     basis = pseudo_inertia_basis()

@@ -278,7 +278,8 @@ class RigidBodyDynamics:
     @property
     def n_bodies(self) -> int:
         """Number of moving bodies (one per joint)."""
-        return self.model.njoints - 1
+        out: int = self.model.njoints - 1
+        return out
 
     def total_moving_mass(self) -> float:
         """Sum of the moving bodies' masses [kg]."""
@@ -373,7 +374,8 @@ class RigidBodyDynamics:
 
         def one(qk: np.ndarray, vk: np.ndarray) -> np.ndarray:
             nle = pin.rnea(self.model, self._data, qk, vk, zero)
-            return (nle - pin.computeGeneralizedGravity(self.model, self._data, qk))[ix]
+            out: np.ndarray = (nle - pin.computeGeneralizedGravity(self.model, self._data, qk))[ix]
+            return out
 
         return self._batched(one, q, v, out_shape=(self.n_joints,))
 
@@ -384,7 +386,8 @@ class RigidBodyDynamics:
         def one(qk: np.ndarray) -> np.ndarray:
             mass = pin.crba(self.model, self._data, qk)
             mass = np.triu(mass) + np.triu(mass, 1).T
-            return mass[np.ix_(ix, ix)]
+            out: np.ndarray = mass[np.ix_(ix, ix)]
+            return out
 
         return self._batched(one, q, out_shape=(self.n_joints, self.n_joints))
 

@@ -46,7 +46,7 @@ from id_learning.dataset.consistency import ConsistencyStream, KinematicConsiste
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import SampleGate
 from id_learning.errors import ConfigError
-from id_learning.models.base import InverseDynamicsModel
+from id_learning.models.base import InverseDynamicsModel, as_sequence_model
 from id_learning.predictor.acceleration import CausalAccelerationEstimator
 from id_learning.predictor.adaptation import AdaptationLoop
 from id_learning.predictor.config import GuardConfig
@@ -154,15 +154,16 @@ class FeedForwardPredictor:
         self.compute_s = RollingStats(compute_stats)
         self._n = n
         self._estimator = CausalAccelerationEstimator(self.config.acceleration_cutoff_hz)
-        self.is_sequence_model = bool(getattr(model, 'is_sequence_model', False))
-        self.sequence_length = int(getattr(model, 'sequence_length', 0) or 0)
-        if self.is_sequence_model and self.sequence_length < 1:
-            self.sequence_length = int(model.config.sequence_length)  # type: ignore[attr-defined]
+        self._sequence_model = as_sequence_model(model)
+        self.is_sequence_model = self._sequence_model is not None
+        self.sequence_length = (
+            0 if self._sequence_model is None else self._sequence_model.sequence_length
+        )
         self._window: np.ndarray | None = None
         # Built once: exporting weights per sample would cost more than the prediction.
         self._sequence = (
-            model.sequence_predictor()  # type: ignore[attr-defined]
-            if self.is_sequence_model and inference == 'numpy'
+            self._sequence_model.sequence_predictor()
+            if self._sequence_model is not None and inference == 'numpy'
             else None
         )
         self._predict_one: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] = (
@@ -582,14 +583,18 @@ class FeedForwardPredictor:
         return None
 
     def _predict(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-        if self.is_sequence_model:
+        if self._sequence_model is not None:
             tau = self._push_window(q, v, a)
             if tau is not None:
                 return tau
+            assert self._window is not None  # _push_window has filled it
             with torch.inference_mode():
-                return np.asarray(self.model.predict_window(self._window), dtype=float)  # type: ignore[attr-defined]
+                return np.asarray(self._sequence_model.predict_window(self._window), dtype=float)
         return self._predict_one(q, v, a)
 
     def _predict_torch(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         with torch.inference_mode():
-            return np.asarray(self.model.predict(q[None], v[None], a[None]), dtype=float)[0]
+            out: np.ndarray = np.asarray(
+                self.model.predict(q[None], v[None], a[None]), dtype=float
+            )[0]
+            return out

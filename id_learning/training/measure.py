@@ -17,7 +17,7 @@ import torch
 
 from id_learning.dataset.preprocess import Dataset
 from id_learning.evaluation.study import StudyTable
-from id_learning.models.base import InverseDynamicsModel
+from id_learning.models.base import InverseDynamicsModel, as_sequence_model
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import segment_rows
 from id_learning.training.fitting import ModelResult
@@ -39,13 +39,8 @@ LATENCY_WARMUP = 10
 
 def _window(model: InverseDynamicsModel) -> int:
     """Samples one prediction needs: the sequence length of a sequence model, else 1."""
-    if not model.is_sequence_model:
-        return 1
-    for name in ('sequence_length', 'window', 'seq_len'):
-        value = getattr(model.config, name, None)
-        if isinstance(value, int):
-            return value
-    return 1
+    sequence = as_sequence_model(model)
+    return 1 if sequence is None else sequence.sequence_length
 
 
 def predict_rows(

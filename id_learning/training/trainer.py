@@ -33,7 +33,7 @@ import numpy as np
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, Target
 from id_learning.errors import CheckpointError, TrainingError
 from id_learning.evaluation.study import StudyTable
-from id_learning.models.artifact import _git_commit, robot_fingerprint
+from id_learning.models.artifact import ArtifactExtra, _git_commit, robot_fingerprint
 from id_learning.models.data import TrainingData
 from id_learning.models.fitting import configure_torch
 from id_learning.models.registry import save_model
@@ -345,7 +345,11 @@ def _fit_and_save(
         TrainingError: no kind could be fitted.
     """
     out = folder.work
-    extra = {key: run[key] for key in ('preprocessing', 'target_scaler', 'training_data')}
+    extra = ArtifactExtra(
+        preprocessing=run['preprocessing'],
+        target_scaler=run['target_scaler'],
+        training_data=run['training_data'],
+    )
     # run.json lists the models saved so far: an interrupted run says how far it got.
     run['requested_kinds'], run['kinds'] = list(kinds), []
     write_json(out / RUN_FILE, run)

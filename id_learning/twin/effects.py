@@ -77,7 +77,8 @@ class ViscousFriction(Effect):
         """Friction torque (..., n) [N*m] at velocities v [rad/s] (N, n) and shift times (N,)."""
         scale = warm_up(self.warm_scale, self.warm_up_s, shift_time_s)
         (column,) = viscous(v)
-        return self.coefficient * column * scale
+        out: np.ndarray = self.coefficient * column * scale
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,7 +98,8 @@ class CoulombFriction(Effect):
     def torque(self, v: np.ndarray, shift_time_s: np.ndarray | None = None) -> np.ndarray:
         """Friction torque (..., n) [N*m] at velocities (N, n) and shift times (N,)."""
         scale = warm_up(self.warm_scale, self.warm_up_s, shift_time_s)
-        return self.level * coulomb(v, self.smoothing_velocity) * scale
+        out: np.ndarray = self.level * coulomb(v, self.smoothing_velocity) * scale
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,7 +118,10 @@ class StribeckFriction(Effect):
 
     def torque(self, v: np.ndarray) -> np.ndarray:
         """Friction torque (..., n) [N*m]."""
-        return self.level * stribeck(v, self.velocity, self.smoothing_velocity, self.shape)
+        out: np.ndarray = self.level * stribeck(
+            v, self.velocity, self.smoothing_velocity, self.shape
+        )
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,7 +135,8 @@ class LoadDependentFriction(Effect):
 
     def torque(self, v: np.ndarray, load: np.ndarray) -> np.ndarray:
         """Friction torque (..., n) [N*m] for load torques ``load`` [N*m] through the gear."""
-        return self.coefficient * load_dependent(v, load, self.smoothing_velocity)
+        out: np.ndarray = self.coefficient * load_dependent(v, load, self.smoothing_velocity)
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,7 +228,8 @@ class CoggingEffect(Effect):
 
     def torque(self, q: np.ndarray, gear_ratio: np.ndarray) -> np.ndarray:
         """Cogging torque (..., n) [N*m] at joint positions q [rad]."""
-        return self.amplitude * np.sin(self.periods_per_motor_turn * gear_ratio * q)
+        out: np.ndarray = self.amplitude * np.sin(self.periods_per_motor_turn * gear_ratio * q)
+        return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -420,7 +420,9 @@ def test_a_model_saved_before_the_balance_loads_unbalanced_and_says_so(fitted, m
 
 def test_state_round_trip_through_safetensors_and_json_is_exact(fitted, mabi, tmp_path) -> None:
     model = fitted['delan']
-    write_artifact(tmp_path, 'delan', mabi, model.state(), {'fitted': model.fitted_metadata()})
+    write_artifact(
+        tmp_path, 'delan', mabi, model.state(), settings={}, fitted=model.fitted_metadata()
+    )
     saved, tensors = read_artifact(tmp_path, mabi, 'delan')
     loaded = DelanModel(DelanConfig(**QUICK), mabi)
     loaded.load_state(tensors, saved['fitted'])

@@ -366,7 +366,7 @@ def test_a_newer_packages_artifact_loads_with_one_warning_naming_both_versions(
 def test_nothing_is_written_that_a_load_would_refuse(tmp_path, mabi):
     fitted = {'input_scaler': {'low': [0.0] * 18, 'high': [1.0] * 17 + [0.0]}}
     with pytest.raises(CheckpointError, match=r'zero width at index 17 \(a of joint_6\)'):
-        write_artifact(tmp_path / 'm', 'mlp', mabi, {'w': np.zeros(2)}, {'fitted': fitted})
+        write_artifact(tmp_path / 'm', 'mlp', mabi, {'w': np.zeros(2)}, settings={}, fitted=fitted)
     assert not (tmp_path / 'm').exists()
 
 
