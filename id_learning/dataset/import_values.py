@@ -40,6 +40,12 @@ from id_learning.dataset.plausibility import (
 )
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
+from id_learning.robot.drives import (
+    current_from_motor_torque,
+    joint_from_motor_motion,
+    joint_torque_from_motor_side,
+    reduction_matrix,
+)
 
 __all__ = [
     'IMPLAUSIBLE_FACTOR',
@@ -147,13 +153,14 @@ def joint_side(
         ConfigError: currents are mapped motor side without a robot config.
     """
     gear = np.asarray(motors.gear_ratio, dtype=float)[order]
-    coupling = np.eye(len(order)) if motors.coupling is None else np.asarray(motors.coupling)
-    reduction = gear[:, None] * coupling[np.ix_(order, order)]
-    inverse = np.linalg.inv(reduction)
+    coupling = (
+        None if motors.coupling is None else np.asarray(motors.coupling)[np.ix_(order, order)]
+    )
+    reduction = reduction_matrix(gear, coupling)
     out = dict(values)
     for quantity in ('position', 'velocity'):
         if quantity in motors.signals:
-            out[quantity] = values[quantity] @ inverse.T
+            out[quantity] = joint_from_motor_motion(values[quantity], reduction)
     if 'current' in motors.signals:
         if robot is None:
             raise ConfigError(
@@ -161,8 +168,8 @@ def joint_side(
                 "written as the currents of the robot config's drives"
             )
         kt = np.asarray(motors.torque_constant, dtype=float)[order]
-        torque = (values['current'] * kt) @ reduction
-        out['current'] = torque / (robot.drives.gear_ratio * robot.drives.torque_constant)
+        torque = joint_torque_from_motor_side(values['current'] * kt, reduction)
+        out['current'] = current_from_motor_torque(torque, robot.drives)
     return out
 
 
@@ -187,7 +194,7 @@ class RowChecks:
         if quantity == 'velocity':
             return limits.velocity
         if quantity == 'current':
-            return limits.torque / (robot.drives.gear_ratio * robot.drives.torque_constant)
+            return current_from_motor_torque(limits.torque, robot.drives)
         return limits.torque
 
     def _bounds(self, quantity: str, wide: bool) -> tuple[np.ndarray, np.ndarray] | None:

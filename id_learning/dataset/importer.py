@@ -59,6 +59,7 @@ from id_learning.dataset.plausibility import check_efforts, check_motion
 from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
+from id_learning.robot.drives import amperes_per_newton_metre
 
 __all__ = [
     'DEFAULT_START_NS',
@@ -306,7 +307,7 @@ def _check_efforts(recording: Recording, robot: RobotConfig, where: str) -> None
     """Currents and torques within what the robot's torque limits can need (the gate)."""
     drives = robot.drives
     checks = (
-        (recording.current, 'current [A]', 1.0 / (drives.gear_ratio * drives.torque_constant)),
+        (recording.current, 'current [A]', amperes_per_newton_metre(drives)),
         (recording.joint_torque, 'joint torque [N*m]', None),
     )
     for values, what, unit_per_nm in checks:

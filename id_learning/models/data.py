@@ -14,6 +14,7 @@ from id_learning.physics.augmented import AugmentedModel
 from id_learning.physics.identification import IdentificationConfig, identify
 from id_learning.physics.identified import IdentifiedPhysics
 from id_learning.physics.rigid_body import RigidBodyDynamics
+from id_learning.robot import drives
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['DiagnosedEffects', 'PhysicsFeatures', 'TrainingData', 'nominal_rnea']
@@ -124,7 +125,7 @@ class TrainingData:
         ds = self.dataset
         return PhysicsFeatures(
             rnea=nominal_rnea(self.robot, ds.q, ds.v, ds.a),
-            rotor_basis=ds.a * self.robot.drives.gear_ratio**2,
+            rotor_basis=drives.rotor_basis(ds.a, self.robot.drives.gear_ratio),
         )
 
     @property

@@ -30,7 +30,7 @@ from id_learning.models.network_common import NumpyNormalisedMlp, require_fitted
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
 from id_learning.physics.base_parameters import CadPrior
 from id_learning.physics.identification import IdentificationConfig
-from id_learning.physics.identified import FRICTION_LAWS, IdentifiedPhysics
+from id_learning.physics.identified import FRICTION_LAWS, IdentifiedPhysics, sum_parts
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['RneaIdConfig', 'RneaIdMlpConfig', 'RneaIdMlpModel', 'RneaIdModel']
@@ -122,7 +122,7 @@ def _components(
     coriolis = parts['rigid_body'] - inertial - gravity
     rest = parts['balancer'] + parts['offset'] + parts['delay']
     return TorqueComponents(
-        total=sum(parts.values()),  # type: ignore[arg-type]
+        total=sum_parts(parts),
         inertial=inertial,
         coriolis=coriolis,
         gravity=gravity,
@@ -199,7 +199,7 @@ class RneaIdModel(InverseDynamicsModel):
 class RneaIdMlpConfig(RneaMlpConfig):
     """The Newtonian network's settings on top of the identified physics (see RneaIdConfig)."""
 
-    kind: Literal['rnea_id_mlp'] = 'rnea_id_mlp'  # type: ignore[assignment]
+    kind: Literal['rnea_id_mlp'] = 'rnea_id_mlp'
     friction: str = ','.join(FRICTION_LAWS)
     balancer: str = 'auto'
     delay: bool = True

@@ -46,6 +46,7 @@ from id_learning.models.torch_utils import to_tensor
 from id_learning.physics.friction import coulomb
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
+from id_learning.robot.drives import rotor_inertia_joint_side, rotor_inertia_torque
 
 __all__ = [
     'FRICTION_MODELS',
@@ -272,7 +273,7 @@ class RneaLqModel(_NominalPhysics):
         if 'coulomb' in self.config.parameter_names:
             friction = friction + p['coulomb'] * coulomb(v, self.config.coulomb_velocity)
         return {
-            'rotor_inertia': p['rotor_inertia_motor_side'] * gear**2 * a,
+            'rotor_inertia': rotor_inertia_torque(a, p['rotor_inertia_motor_side'], gear),
             'friction': friction,
             'offset': np.broadcast_to(p['offset'], v.shape),
         }
@@ -290,7 +291,9 @@ class RneaLqModel(_NominalPhysics):
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque, the terms of ``predict`` folded: q, v, a (n,) -> tau (n,)."""
         p = self._parameters()
-        rotor = p['rotor_inertia_motor_side'] * self.robot.drives.gear_ratio**2
+        rotor = rotor_inertia_joint_side(
+            p['rotor_inertia_motor_side'], self.robot.drives.gear_ratio
+        )
         viscous, level, offset = p['viscous'], p['coulomb'], p['offset']
         has_coulomb = 'coulomb' in self.config.parameter_names
         smoothing = self.config.coulomb_velocity
@@ -364,7 +367,8 @@ class RneaMlpConfig(NetworkConfig):
         activation: hidden activation of h.
     """
 
-    kind: Literal['rnea_mlp'] = 'rnea_mlp'
+    # str, not a Literal: the rnea_id_mlp and rnea_effects_mlp configs extend this one.
+    kind: str = 'rnea_mlp'
     width: int = 64
     depth: int = 2
     activation: str = 'tanh'
@@ -431,7 +435,7 @@ class RneaMlpModel(_NominalPhysics, TorchModel[NormalisedMlp]):
     def _rotor_joint_side(self) -> np.ndarray:
         """J_m N^2 [kg*m^2] per joint for motor labels; zero for joint-torque labels."""
         drives = self.robot.drives
-        rotor: np.ndarray = drives.rotor_inertia * drives.gear_ratio**2
+        rotor = rotor_inertia_joint_side(drives.rotor_inertia, drives.gear_ratio)
         return rotor if self.target_ == 'motor' else np.zeros_like(rotor)
 
     def _rotor_torque(self, a: np.ndarray) -> np.ndarray:

@@ -31,6 +31,7 @@ from id_learning.physics.nominal import NominalModel
 from id_learning.physics.rigid_body import N_INERTIAL_PARAMETERS, RigidBodyDynamics
 from id_learning.physics.terms import gravity_loaded_joints
 from id_learning.robot.config import RobotConfig
+from id_learning.robot.drives import rotor_basis
 
 __all__ = ['PINNED_STD', 'IdentificationConfig', 'Layout', 'Problem']
 
@@ -229,7 +230,7 @@ class Problem:
         ]
         self.filtered_rate = self._regressor_rate(q, v, a) if self.has_delay else None
         gear = robot.drives.gear_ratio
-        self.rotor_column = self._filter(a * gear**2)[self.rows] if self.motor else None
+        self.rotor_column = self._filter(rotor_basis(a, gear))[self.rows] if self.motor else None
         self.label = dataset.tau[self.rows]
         self.balancer_joints = self._balancer_joints()
         self.q = q
@@ -338,7 +339,8 @@ class Problem:
 
     def kept_columns(self, x: np.ndarray, joint: int) -> np.ndarray:
         """Columns (N, k) of one joint as its label meets them, on the kept rows."""
-        return self._filter(x, joint)[self.rows]
+        out: np.ndarray = self._filter(x, joint)[self.rows]
+        return out
 
     def _balancer_joints(self) -> list[int]:
         setting, joints = self.config.balancer, self.robot.joints

@@ -29,8 +29,9 @@ from id_learning.physics.balancer import BALANCER_TERMS, balancer_basis
 from id_learning.physics.effects import FRICTION_LAWS, friction_law
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
+from id_learning.robot.drives import rotor_inertia_joint_side, rotor_inertia_torque
 
-__all__ = ['FRICTION_LAWS', 'IdentifiedPhysics', 'friction_columns']
+__all__ = ['FRICTION_LAWS', 'IdentifiedPhysics', 'friction_columns', 'sum_parts']
 
 #: Step of the central difference along (v, a) that gives the link torque's rate [s].
 RATE_STEP_S = 1e-4
@@ -39,6 +40,15 @@ RATE_STEP_S = 1e-4
 #: coulomb F_c tanh(v / v_eps); stribeck F_s exp(-(v / v_s)^2) tanh(v / v_eps); load_dependent
 #: mu |tau_link| tanh(v / v_eps). Unit of each coefficient: its effect's parameter's.
 FRICTION_UNITS = {law: friction_law(law).parameters[0].unit for law in FRICTION_LAWS}
+
+
+def sum_parts(parts: dict[str, np.ndarray]) -> np.ndarray:
+    """The total torque (B, n) [N*m] of a decomposition's parts, all of one shape."""
+    values = iter(parts.values())
+    total = np.array(next(values), dtype=float)
+    for part in values:
+        total += part
+    return total
 
 
 def friction_columns(
@@ -149,7 +159,7 @@ class IdentifiedPhysics:
             friction += self.friction[law] * column
         return {
             'rigid_body': scale * rigid,
-            'rotor_inertia': scale * self.rotor * gear**2 * a,
+            'rotor_inertia': rotor_inertia_torque(a, scale * self.rotor, gear),
             'balancer': balancer,
             'friction': friction,
             'offset': np.broadcast_to(self.offset, v.shape).copy(),
@@ -158,8 +168,7 @@ class IdentifiedPhysics:
 
     def torque(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Torque (B, n) [N*m] for q, v, a (B, n) [rad, rad/s, rad/s^2]."""
-        total: np.ndarray = sum(self.parts(q, v, a).values())  # type: ignore[assignment]
-        return total
+        return sum_parts(self.parts(q, v, a))
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """``torque`` of one sample, q, v, a (n,) -> (n,) [N*m], folded for the online path."""
@@ -169,7 +178,7 @@ class IdentifiedPhysics:
         if not np.array_equal(index, np.arange(len(index))):
             return lambda q, v, a: self.torque(q[None], v[None], a[None])[0]
         scale = 1.0 + self.gain
-        rotor = scale * self.rotor * self.robot.drives.gear_ratio**2
+        rotor = rotor_inertia_joint_side(scale * self.rotor, self.robot.drives.gear_ratio)
         coefficients = [self.friction[law] for law in self.laws]
         laws, eps, vs = self.laws, self.smoothing_velocity, self.stribeck_velocity
         offset, rnea = self.offset, pin.rnea

@@ -18,7 +18,7 @@ import pinocchio as pin
 from id_learning.physics.inertial import frame_parameter_map, payload_parameter_map
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
-from id_learning.robot.drives import rotor_inertia_torque
+from id_learning.robot.drives import rotor_inertia_joint_side, rotor_inertia_torque
 
 __all__ = ['NominalModel', 'NominalQuantities']
 
@@ -112,7 +112,7 @@ class NominalModel:
         drives = self.robot.drives
         if self.target != 'motor':
             return np.zeros(self.robot.n_joints)
-        return drives.rotor_inertia * drives.gear_ratio**2
+        return rotor_inertia_joint_side(drives.rotor_inertia, drives.gear_ratio)
 
     def sample_function(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
         """tau_nominal of one sample, (n,) q, v, a -> (n,) [N*m], with its own pinocchio data."""
@@ -191,8 +191,9 @@ class NominalModel:
         if quantities.dtau_dq is None or quantities.dtau_dv is None or quantities.mass is None:
             raise ValueError('the nominal rate needs quantities evaluated with derivatives=True')
         inertia = quantities.mass + np.diag(self.rotor_inertia_joint_side)
-        return (
+        rate: np.ndarray = (
             np.einsum('bij,bj->bi', quantities.dtau_dq, quantities.v)
             + np.einsum('bij,bj->bi', quantities.dtau_dv, quantities.a)
             + np.einsum('bij,bj->bi', inertia, quantities.jerk)
         )
+        return rate

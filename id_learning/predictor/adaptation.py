@@ -38,6 +38,7 @@ from id_learning.errors import ConfigError
 from id_learning.physics.friction import coulomb
 from id_learning.predictor.adaptation_inertia import InertiaAdapter, stabilised
 from id_learning.robot.config import RobotConfig
+from id_learning.robot.drives import torque_per_ampere
 
 __all__ = ['ADAPTATION_JSON', 'AdaptationConfig', 'AdaptationLoop', 'FrictionAdapter']
 
@@ -280,7 +281,8 @@ class AdaptationLoop:
             pending[stamp_ns] = (v.copy(), regressor, tau_model.copy())
             if len(pending) > self.capacity:
                 del pending[next(iter(pending))]  # dicts keep insertion order: the oldest goes
-        return tau
+        out: np.ndarray = tau
+        return out
 
     def measured(self, stamp_ns: int, currents: np.ndarray, *, stale: bool = False) -> bool:
         """Learn from the currents (n,) [A] of one cycle; whether the friction adapter learnt.
@@ -342,7 +344,7 @@ class AdaptationLoop:
             if inertia
             else None
         )
-        return cls(adapter, (drives.gear_ratio * drives.torque_constant)[order], inertia=body)
+        return cls(adapter, torque_per_ampere(drives)[order], inertia=body)
 
     def measured_message(
         self, stamp_ns: int, names: Sequence[str], effort: Sequence[float], joints: Sequence[str]

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from id_learning.robot.drives import rotor_inertia_joint_side
 from id_learning.twin.effects import GravitySpring, JointOffset, RotorInertia, TorqueConstantScale
 from id_learning.twin.simulate import (
     TwinConfig,
@@ -67,7 +68,9 @@ class TwinPlant:
         rotor = effects.get('rotor_inertia')
         assert isinstance(rotor, RotorInertia)
         scale = rotor.scale if rotor.enabled else 1.0
-        self.rotor_inertia_joint_side = robot.drives.rotor_inertia * scale * self.gear**2
+        self.rotor_inertia_joint_side = rotor_inertia_joint_side(
+            robot.drives.rotor_inertia * scale, self.gear
+        )
         kt = effects.get('torque_constant_scale')
         assert isinstance(kt, TorqueConstantScale)
         self.kt_scale = kt.scale if kt.enabled else np.ones(robot.n_joints)
@@ -117,7 +120,8 @@ class TwinPlant:
             self.config.effects, v, q, link, self.gear, shift_time_s=shift
         )
         friction = np.sum(list(parts.values()), axis=0) if parts else 0.0
-        return link + self.rotor_inertia_joint_side * a + friction
+        out: np.ndarray = link + self.rotor_inertia_joint_side * a + friction
+        return out
 
     # -- integration ----------------------------------------------------------------------------
     def start(self, q: np.ndarray, v: np.ndarray, a: np.ndarray | None = None) -> PlantState:

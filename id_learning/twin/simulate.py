@@ -24,7 +24,11 @@ from id_learning.errors import ConfigError
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
 from id_learning.robot.config import RobotConfig, load_robot_config
-from id_learning.robot.drives import current_from_motor_torque
+from id_learning.robot.drives import (
+    current_from_motor_torque,
+    rotor_inertia_torque,
+    torque_per_ampere,
+)
 from id_learning.twin.bounds import check_duration, check_excitation
 from id_learning.twin.effects import (
     CoggingEffect,
@@ -368,7 +372,7 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     rotor = effects.get('rotor_inertia')
     assert isinstance(rotor, RotorInertia)
     rotor_inertia = robot.drives.rotor_inertia * (rotor.scale if rotor.enabled else 1.0)
-    components['rotor_inertia'] = rotor_inertia * gear**2 * ac
+    components['rotor_inertia'] = rotor_inertia_torque(ac, rotor_inertia, gear)
 
     shift_time = config.shift_start_s + t - delay_s
     components |= friction_and_cogging(effects, vc, qc, tau_joint, gear, shift_time_s=shift_time)
@@ -480,7 +484,8 @@ def _link_torque(
     if spring.enabled:
         j = robot.joints.index(spring.joint)
         spring_torque[:, j] = spring.torque_on_joint(q[:, j])
-    return gravity + coriolis + inertia - spring_torque
+    out: np.ndarray = gravity + coriolis + inertia - spring_torque
+    return out
 
 
 def _check_torque_limits(tau_motor: np.ndarray, robot: RobotConfig, t: np.ndarray) -> None:
@@ -502,7 +507,7 @@ def _ground_truth_parameters(
     delay_s: float,
 ) -> dict[str, Any]:
     robot, m = config.robot, config.measurement
-    tau_per_amp = robot.drives.gear_ratio * robot.drives.torque_constant
+    tau_per_amp = torque_per_ampere(robot.drives)
     masses, coms = dynamics.body_masses_and_coms()
     return {
         'robot': robot.name,

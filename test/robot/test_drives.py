@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import re
+import tokenize
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from support import REPO
 
 from id_learning.robot import (
     DriveConfig,
@@ -14,6 +19,15 @@ from id_learning.robot import (
     current_from_motor_torque,
     motor_torque_from_current,
     rotor_inertia_torque,
+)
+from id_learning.robot.drives import (
+    amperes_per_newton_metre,
+    joint_from_motor_motion,
+    joint_torque_from_motor_side,
+    reduction_matrix,
+    rotor_basis,
+    rotor_inertia_joint_side,
+    torque_per_ampere,
 )
 
 GEAR_RATIOS = st.floats(1.0, 500.0)
@@ -139,3 +153,104 @@ def test_rotor_torque_with_explicit_numbers() -> None:
 
     assert tau[0] == pytest.approx(3.5e-3 * 205.0**2 * 2.0, rel=1e-12)
     assert tau[0] == pytest.approx(294.175, rel=1e-12)
+
+
+@st.composite
+def coupled_case(draw: st.DrawFn) -> tuple:
+    """A reduction K = diag(N) C of 2..4 joints with a well-conditioned coupling, and a batch."""
+    n = draw(st.integers(2, 4))
+    gear = draw(arrays(np.float64, n, elements=GEAR_RATIOS))
+    off = draw(arrays(np.float64, (n, n), elements=st.floats(-0.3, 0.3)))
+    coupling = np.eye(n) + np.triu(off, 1)  # unit upper-triangular, as wrist couplings are
+    rows = st.floats(-5.0, 5.0)
+    batch = draw(st.integers(1, 4))
+    return (
+        reduction_matrix(gear, coupling),
+        draw(arrays(np.float64, (batch, n), elements=rows)),
+        draw(arrays(np.float64, (batch, n), elements=rows)),
+    )
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(coupled_case())
+def test_coupled_drives_conserve_power(case: tuple) -> None:
+    """The motors' power tau_m . theta_dot is the joints' tau_j . q_dot (virtual work)."""
+    reduction, motor_rate, torque_motor_side = case
+
+    q_dot = joint_from_motor_motion(motor_rate, reduction)
+    tau_joint = joint_torque_from_motor_side(torque_motor_side, reduction)
+
+    np.testing.assert_allclose(q_dot @ reduction.T, motor_rate, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(
+        np.sum(tau_joint * q_dot, axis=1),
+        np.sum(torque_motor_side * motor_rate, axis=1),
+        rtol=1e-9,
+        atol=1e-6,
+    )
+
+
+def test_uncoupled_reduction_divides_by_the_gear_ratio() -> None:
+    reduction = reduction_matrix(np.array([100.0, 50.0]))
+
+    np.testing.assert_allclose(
+        joint_from_motor_motion(np.array([[200.0, -25.0]]), reduction), [[2.0, -0.5]]
+    )
+    np.testing.assert_allclose(
+        joint_torque_from_motor_side(np.array([[1.5, 2.0]]), reduction), [[150.0, 100.0]]
+    )
+
+
+def test_reflected_inertia_and_rotor_basis_with_explicit_numbers() -> None:
+    drives = DriveConfig(np.array([205.0, 81.0]), np.array([2.05, 0.98]), np.array([3.5e-3, 1e-3]))
+
+    np.testing.assert_allclose(
+        rotor_inertia_joint_side(drives.rotor_inertia, drives.gear_ratio),
+        [3.5e-3 * 205.0**2, 1e-3 * 81.0**2],
+        rtol=1e-12,
+    )
+    np.testing.assert_allclose(rotor_basis(np.array([2.0, -1.0]), drives.gear_ratio),
+                               [2.0 * 205.0**2, -(81.0**2)], rtol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(torque_per_ampere(drives), [205 * 2.05, 81 * 0.98], rtol=1e-12)
+    np.testing.assert_allclose(
+        amperes_per_newton_metre(drives) * torque_per_ampere(drives), 1.0, rtol=1e-12
+    )
+
+
+#: Inline motor/joint conversions: N * k_t, N**2, or J * N**2 written out of drives.py.
+_INLINE = re.compile(
+    r'gear(_ratio)?\s*\*\*\s*2|gear(_ratio)?\s*\*\s*[\w.\[\]]*torque_constant'
+    r'|torque_constant\s*\*\s*[\w.\[\]]*gear'
+)
+
+
+def _code_lines(path: Path) -> dict[int, str]:
+    """Each line's code tokens, strings and comments left out (docstrings state the formulas)."""
+    lines: dict[int, list[str]] = {}
+    with path.open('rb') as stream:
+        for token in tokenize.tokenize(stream.readline):
+            if token.type in (tokenize.NAME, tokenize.OP, tokenize.NUMBER):
+                lines.setdefault(token.start[0], []).append(token.string)
+    return {number: ''.join(parts) for number, parts in lines.items()}
+
+
+def test_motor_joint_conversions_live_in_drives_only() -> None:
+    """Every conversion goes through robot/drives.py, so a convention changes in one place."""
+    found = []
+    for path in sorted((REPO / 'id_learning').rglob('*.py')):
+        if path.name == 'drives.py' and path.parent.name == 'robot':
+            continue
+        for number, code in _code_lines(path).items():
+            if _INLINE.search(code):
+                found.append(f'{path.relative_to(REPO)}:{number}: {code}')
+    assert not found, 'convert with id_learning.robot.drives:\n' + '\n'.join(found)
+
+
+def test_the_conversion_check_finds_an_inline_conversion(tmp_path: Path) -> None:
+    source = tmp_path / 'inline.py'
+    source.write_text('"""tau = gear_ratio * torque_constant * i"""\n'
+                      'tau = drives.gear_ratio * drives.torque_constant * i\n'
+                      'rotor = j * gear ** 2  # reflected\n', encoding='utf-8')  # fmt: skip
+
+    hits = [n for n, code in _code_lines(source).items() if _INLINE.search(code)]
+
+    assert hits == [2, 3]

@@ -37,6 +37,7 @@ from id_learning.physics.effects.links import (
     PAYLOAD_MASS,
 )
 from id_learning.physics.nominal import NominalModel, NominalQuantities
+from id_learning.robot.drives import rotor_basis, rotor_inertia_joint_side
 
 __all__ = ['LABEL_GAIN_STD', 'LIBRARY', 'ROTOR_INERTIA_STD']
 
@@ -284,7 +285,7 @@ class RotorInertia(JointEffect):
         self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
         model: NominalModel,
     ) -> JointColumns:  # fmt: skip
-        return (model.robot.drives.gear_ratio[joint] ** 2 * quantities.a[:, joint],)
+        return (rotor_basis(quantities.a[:, joint], model.robot.drives.gear_ratio[joint]),)
 
     def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
         """On joint-torque labels the axis inertia seen link side; on motor labels the rotor's."""
@@ -294,7 +295,7 @@ class RotorInertia(JointEffect):
         theta, lo, hi = fit.theta[0], fit.low[0], fit.high[0]
         drives = model.robot.drives
         if model.target != 'motor':
-            n2 = float(drives.gear_ratio[j]) ** 2
+            n2 = float(rotor_inertia_joint_side(1.0, drives.gear_ratio[j]))  # N**2
             return [entry('axis_inertia_change_link_side', n2 * theta, n2 * lo, n2 * hi, 'kg*m^2')]
         nominal = drives.rotor_inertia[j]
         out = [entry('rotor_inertia_motor_side', nominal + theta, nominal + lo, nominal + hi,
