@@ -96,7 +96,11 @@ def write_contract_bag(
                     '/joint_states',
                     log_ns,
                     encode_joint_state(
-                        stamp, names_js, recording.position[k], recording.velocity[k], empty
+                        stamp,
+                        names_js,
+                        recording.position[k],
+                        recording.velocity[k],
+                        empty if recording.joint_torque is None else recording.joint_torque[k],
                     ),
                 )
             if '/motor_currents' in topics:

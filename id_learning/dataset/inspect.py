@@ -47,9 +47,10 @@ from id_learning.dataset.inspect_report import (
     TopicReport,
 )
 from id_learning.dataset.inspect_text import render_report
-from id_learning.dataset.plausibility import effort_bound
+from id_learning.dataset.plausibility import effort_bound, first_unpaired
 from id_learning.errors import ConfigError
 from id_learning.robot.config import RobotConfig, TopicConfig
+from id_learning.robot.drives import amperes_per_newton_metre
 
 __all__ = ['inspect_bag', 'plot_report', 'render_report']
 
@@ -177,7 +178,7 @@ def _beyond_drive(
     drives = robot.drives
     per_nm = None
     if effort == 'current':
-        per_nm = 1.0 / (drives.gear_ratio[joint] * drives.torque_constant[joint])
+        per_nm = amperes_per_newton_metre(drives)[joint : joint + 1]
     bound = float(effort_bound(robot.limits.torque[joint : joint + 1], per_nm)[0])
     finite = np.abs(values[np.isfinite(values)])
     if not finite.size:
@@ -343,7 +344,9 @@ def _contract(
     msgtypes: Mapping[str, str],
     decoded: Mapping[str, _JointStateTopic],
     several_types: tuple[str, ...],
+    period_s: float | None,
 ) -> ContractReport:
+    """The contract's topics, and whether they pair (``period_s``: None for their median step)."""
     names = (topics.joint_states, topics.motor_currents)
     needed = {topics.joint_states: ('position', 'velocity'), topics.motor_currents: ('effort',)}
     empty = tuple(
@@ -370,11 +373,15 @@ def _contract(
     a = np.array(states.all_stamps, dtype=np.int64)
     b = np.array(currents.all_stamps, dtype=np.int64)
     size = min(a.size, b.size)
-    differ = np.flatnonzero(a[:size] != b[:size])
-    if differ.size:
-        first: int | None = int(differ[0])
-    else:
-        first = None if a.size == b.size else size
+    steps = np.diff(a)
+    period = (
+        period_s
+        if period_s is not None
+        else (float(np.median(steps)) * 1e-9 if steps.size else 0.0)
+    )
+    first = first_unpaired(a, b, period)
+    if first is None and a.size != b.size:
+        first = size
     names_match = (
         None if states.names is None or currents.names is None else states.names == currents.names
     )
@@ -528,6 +535,7 @@ def inspect_bag(
             msgtypes,
             decoded,
             tuple(name for name, _ in several_types),
+            nominal,
         ),
         series=series,
         robot_joints=robot.joints if robot else (),

@@ -175,9 +175,10 @@ class ContractReport:
         motor_currents: the contract's motor current topic.
         missing: contract topics the bag lacks (or holds with another type than JointState).
         wrong_types: of those, the ones the bag holds with another type: (topic, type found).
-        stamps_match: both topics carry the same header stamps, sample for sample; None when a
-            topic is missing.
-        first_mismatch: first sample index where the stamps differ (or the shorter topic ends).
+        stamps_match: both topics carry the same header stamps, sample for sample, within
+            ``plausibility.PAIRING_SHARE`` of the period; None when a topic is missing.
+        first_mismatch: first sample index where the stamps do not pair (or the shorter topic
+            ends).
         names_match: both topics name the same joints; None when a topic is missing or empty.
         joint_torques_only: no motor-current topic, and the joint states carry efforts (joint
             torque sensors): a recording for ``--target joint``, which needs no currents.

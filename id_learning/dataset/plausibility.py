@@ -32,6 +32,7 @@ __all__ = [
     'ACCELERATION_FACTOR',
     'DEGREES_SPREAD_FACTOR',
     'NEAR_LIMIT_SHARE',
+    'PAIRING_SHARE',
     'POSITION_MARGIN_RAD',
     'RATE_DEGREES_FACTOR',
     'SCALE_PEAK_FACTOR',
@@ -49,6 +50,7 @@ __all__ = [
     'check_stamps',
     'effort_bound',
     'farthest_position',
+    'first_unpaired',
     'rate_in_degrees',
     'reads_as_degrees',
     'urdf_position_limits',
@@ -76,6 +78,10 @@ RATE_DEGREES_FACTOR = 10.0
 #: A value beyond a limit by at most this share of the joint's range (positions) or of the limit
 #: (velocities, currents, torques) is a limit question, not a unit question.
 NEAR_LIMIT_SHARE = 0.1
+#: The currents pair with the joint states sample by sample when their stamps differ by at most
+#: this share of the sample period: drivers that stamp the two topics separately differ by
+#: microseconds, a missed or doubled message by a whole period.
+PAIRING_SHARE = 0.1
 #: A torque or current whose largest |value| is this multiple of what ``check_efforts`` lets
 #: pass is a unit or scale problem (mA for A, a wrong gear ratio), not a limit question.
 SCALE_PEAK_FACTOR = 10.0
@@ -223,6 +229,17 @@ def check_finite(
             f'joint {joints[column]}: '
             f'value {array[sample, column]} is not finite ({int(bad.sum())} bad values in all)'
         )
+
+
+def first_unpaired(a_ns: np.ndarray, b_ns: np.ndarray, period_s: float) -> int | None:
+    """The first sample of the common length whose two stamps do not pair, or None.
+
+    Stamps pair when they differ by at most ``PAIRING_SHARE`` of ``period_s`` [s].
+    """
+    size = min(len(a_ns), len(b_ns))
+    apart = np.abs(np.asarray(a_ns[:size], dtype=np.int64) - np.asarray(b_ns[:size], np.int64))
+    beyond = np.flatnonzero(apart > PAIRING_SHARE * period_s * 1e9)
+    return int(beyond[0]) if beyond.size else None
 
 
 def check_stamps(

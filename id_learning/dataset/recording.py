@@ -33,13 +33,16 @@ from id_learning.bag import (
 from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.content import check_content
 from id_learning.dataset.plausibility import (
+    PAIRING_SHARE,
     check_efforts,
     check_finite,
     check_limits,
     check_stamps,
+    first_unpaired,
 )
 from id_learning.errors import DatasetError
 from id_learning.robot.config import RobotConfig, TopicConfig
+from id_learning.robot.drives import amperes_per_newton_metre
 
 _LOG = logging.getLogger(__name__)
 
@@ -236,7 +239,9 @@ def load_recording(
 
     Raises:
         BagError: missing topic, wrong type, truncated or corrupt file.
-        DatasetError: joint names differ, NaN/Inf samples, stamps backwards/repeated/gapped,
+        DatasetError: joint names differ, NaN/Inf samples (in the joint states' effort only
+            when it is the label: with ``require_current`` it is left out with a warning),
+            stamps backwards/repeated/gapped,
             positions or velocities beyond the robot's limits, currents or joint torques beyond
             what its torque limits need, or the two topics' stamps do not match (each names
             topic, joint and sample; ``dataset.plausibility``); a label (currents, else joint
@@ -260,6 +265,16 @@ def load_recording(
     joint_torque = None if states.effort is None else states.effort[:, order]
     check_finite(position, robot.joints, states.stamps_ns, f'{where_js} position')
     check_finite(velocity, robot.joints, states.stamps_ns, f'{where_js} velocity')
+    if require_current and joint_torque is not None and not np.isfinite(joint_torque).all():
+        # Not the label here (the currents are): many drivers fill effort with NaN when the arm
+        # has no torque sensors. Left out, so nothing downstream reads it.
+        _LOG.warning(
+            '%s effort: %d of %d values are not finite; left out (the currents are the label)',
+            where_js,
+            int((~np.isfinite(joint_torque)).sum()),
+            joint_torque.size,
+        )
+        joint_torque = None
     if joint_torque is not None:
         check_finite(joint_torque, robot.joints, states.stamps_ns, f'{where_js} effort')
         check_efforts(
@@ -281,13 +296,7 @@ def load_recording(
             raise DatasetError(f'{where_mc}: messages carry no effort (the motor currents)')
         _check_segment_stamps(currents.stamps_ns, starts, robot, max_gap_periods, where_mc)
         size = min(len(currents.stamps_ns), len(states.stamps_ns))
-        mismatch = np.flatnonzero(currents.stamps_ns[:size] != states.stamps_ns[:size])
-        if mismatch.size:
-            raise DatasetError(
-                f'{path}: {topics.motor_currents} and {topics.joint_states} stamps differ '
-                f'from sample {int(mismatch[0])} on; the bag contract requires one current '
-                'message per joint state with the same header stamp'
-            )
+        _check_paired(states.stamps_ns, currents.stamps_ns, robot.ipo_period_s, path, topics)
         if len(currents.stamps_ns) != len(states.stamps_ns):
             longer = topics.joint_states if len(states.stamps_ns) > size else topics.motor_currents
             extra = abs(len(states.stamps_ns) - len(currents.stamps_ns))
@@ -316,7 +325,7 @@ def load_recording(
             torque_limit=robot.limits.torque,
             where=f'{where_mc} effort',
             what='current [A]',
-            unit_per_nm=1.0 / (drives.gear_ratio * drives.torque_constant),
+            unit_per_nm=amperes_per_newton_metre(drives),
         )
     recording = Recording(
         joints=robot.joints,
@@ -330,6 +339,39 @@ def load_recording(
     )
     check_recording_content(recording)
     return recording
+
+
+def _check_paired(
+    states_ns: np.ndarray,
+    currents_ns: np.ndarray,
+    period_s: float,
+    path: Path,
+    topics: TopicConfig,
+) -> None:
+    """Require one current message per joint state, stamped alike (``PAIRING_SHARE``).
+
+    Raises:
+        DatasetError: names the first sample whose stamps differ by more, and by how much.
+    """
+    sample = first_unpaired(states_ns, currents_ns, period_s)
+    if sample is not None:
+        apart_us = (int(currents_ns[sample]) - int(states_ns[sample])) * 1e-3
+        raise DatasetError(
+            f'{path}: {topics.motor_currents} and {topics.joint_states} stamps differ by '
+            f'{apart_us:.1f} us at sample {sample}, more than the '
+            f'{PAIRING_SHARE * period_s * 1e6:.0f} us ({PAIRING_SHARE:.0%} of the IPO period) '
+            'that pairs them; the bag contract requires one current message per joint state '
+            'with (nearly) the same header stamp'
+        )
+    size = min(len(states_ns), len(currents_ns))
+    offset_ns = np.abs(currents_ns[:size].astype(np.int64) - states_ns[:size].astype(np.int64))
+    if size and offset_ns.max() > 0:
+        _LOG.info(
+            '%s: currents stamped up to %.1f us off the joint states; paired sample by sample '
+            '(the joint states give the time)',
+            path,
+            float(offset_ns.max()) * 1e-3,
+        )
 
 
 def check_recording_content(

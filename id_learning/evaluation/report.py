@@ -306,7 +306,17 @@ def _header(report: ReportInput) -> list[str]:
         f'on {report.evaluated_on} ({n} samples, {n * ds.period_s:.0f} s). '
         f'Models fitted {MODES[ds.mode]}.',
         '',
+        *_data_warnings(ds),
     ]
+
+
+def _data_warnings(dataset: Dataset) -> list[str]:
+    """What loading the recordings warned of (a joint that never moves, a clipped label)."""
+    warnings = dataset.extra.get('data_warnings') or []
+    if not warnings:
+        return []
+    return ['**Data warnings** (the figures below hold with these):', '',
+            *(f'- {text}' for text in warnings), '']  # fmt: skip
 
 
 def _figures_section(figures: list[Figure]) -> list[str]:

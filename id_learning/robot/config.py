@@ -86,7 +86,11 @@ class JointLimits:
 
 @dataclass(frozen=True)
 class TopicConfig:
-    """Topic names of the bag contract."""
+    """Topic names of the bag contract: full names, as a bag stores them.
+
+    A robot config may write them relative (``joint_states``): they are read as a node in the
+    root namespace resolves them (``/joint_states``).
+    """
 
     joint_states: str = '/joint_states'
     motor_currents: str = '/motor_currents'
@@ -260,7 +264,19 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         problem = topic_name_problem(topic)
         if problem:
             raise ConfigError(f'{where}: topics.{key}: {topic!r} is no ROS topic name: {problem}')
-    topics = TopicConfig(**topics_data)
+        if '~' in topic or '{' in topic:
+            raise ConfigError(
+                f'{where}: topics.{key}: {topic!r} depends on a node name; a bag stores topics '
+                "by their full names: write it as '/...'"
+            )
+    # A bag stores full names: a relative name is resolved as a node in the root namespace
+    # resolves it (the recorder's default), 'joint_states' -> '/joint_states'.
+    topics = TopicConfig(
+        **{
+            key: topic if topic.startswith('/') else f'/{topic}'
+            for key, topic in topics_data.items()
+        }
+    )
     if topics.joint_states == topics.motor_currents:
         raise ConfigError(
             f'{where}: topics.joint_states and topics.motor_currents are both '

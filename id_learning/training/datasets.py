@@ -23,18 +23,20 @@ from tqdm import tqdm
 
 from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, prepare_dataset
-from id_learning.dataset.recording import load_recording
+from id_learning.dataset.recording import check_recording_content, load_recording
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
 from id_learning.models.data import TrainingData
 from id_learning.robot.config import RobotConfig
 from id_learning.twin import read_noise_free_torque
 
 __all__ = [
+    'DATA_WARNINGS',
     'bag_of',
     'bag_sha256',
     'combine_datasets',
     'concatenate_for_evaluation',
     'data_sha256',
+    'data_warnings',
     'datasets_by_bag',
     'load_datasets',
     'mask_sha256',
@@ -153,6 +155,9 @@ def load_datasets(
             progress=progress,
             trim_unpaired_tail=trim_unpaired_tail,
         )
+        # What load_recording warned of (a still joint, a clipped label), for the report too.
+        found = check_recording_content(recording, config.target, warn=False)
+        warnings = [f'{bag}: {text}' for text in found]
         for k, segment in enumerate(recording.segments()):
             try:
                 dataset = prepare_dataset(segment, robot, config, segment=k)
@@ -165,9 +170,8 @@ def load_datasets(
                     'resample.max_gap_s to keep them joined'
                 ) from err
             clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)
-            datasets.append(
-                replace(dataset, tau_clean=clean, extra={**dataset.extra, 'bag': str(bag)})
-            )
+            extra = {**dataset.extra, 'bag': str(bag), DATA_WARNINGS: warnings}
+            datasets.append(replace(dataset, tau_clean=clean, extra=extra))
         _LOG.info(
             '%s: %d samples in %d segment(s)',
             bag,
@@ -187,6 +191,15 @@ def datasets_by_bag(
 ) -> list[tuple[Path, list[int]]]:
     """Per bag, the indices of its datasets (its segments, in order) in ``datasets``."""
     return [(bag, [i for i, d in enumerate(datasets) if bag_of(d) == str(bag)]) for bag in bags]
+
+
+#: ``Dataset.extra`` key of what loading the recordings warned of (``dataset.content``).
+DATA_WARNINGS = 'data_warnings'
+
+
+def data_warnings(datasets: Sequence[Dataset]) -> list[str]:
+    """The recordings' content warnings, each once, in order."""
+    return list(dict.fromkeys(w for d in datasets for w in d.extra.get(DATA_WARNINGS, ())))
 
 
 def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
@@ -376,7 +389,7 @@ def _joined(
         tau_clean=stack('tau_clean') if has_clean else None,
         regularise_report=regularise_report,
         source=' + '.join(d.source for d in datasets),
-        extra={'segments': segments},
+        extra={'segments': segments, DATA_WARNINGS: data_warnings(datasets)},
     )
 
 
@@ -433,4 +446,5 @@ def training_data_summary(
         'n_fit': data.n_fit,
         'n_validation': dataset.n_train - data.n_fit,
         'segments': dataset.extra['segments'],
+        DATA_WARNINGS: data_warnings([dataset]),
     }

@@ -195,7 +195,8 @@ def test_contract_mismatch_names_the_first_differing_sample(tmp_path: Path) -> N
         for k, stamp in enumerate(stamps.tolist()):
             q = np.full(2, 0.1 * k)
             writer.write('/joint_states', stamp, encode_joint_state(stamp, joints, q, q, empty))
-            current_stamp = stamp + (1000 if k >= 42 else 0)
+            # 137 ns pairs (a driver stamping each topic itself); 2 ms is another sample.
+            current_stamp = stamp + (2_000_000 if k >= 42 else 137)
             data = encode_joint_state(current_stamp, joints, empty, empty, q)
             writer.write('/motor_currents', stamp, data)
 

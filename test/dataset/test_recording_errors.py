@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from support import sine_recording, write_contract_bag
 
 from id_learning.dataset.recording import Recording, load_recording
@@ -136,10 +139,46 @@ def test_gaps_longer_than_a_few_ipo_periods_are_refused(tmp_path, mabi):
 def test_current_stamps_that_do_not_match_the_joint_states_are_refused(tmp_path, mabi):
     recording = sine_recording(300)
     stamps_mc = recording.stamps_ns.copy()
-    stamps_mc[77:] += 1_000
+    stamps_mc[77:] += 1_000_000  # 1 ms: more than 10 % of the 8 ms IPO period
     path = write_contract_bag(tmp_path / 'bag', recording, stamps_mc=stamps_mc)
-    with pytest.raises(DatasetError, match=r'stamps differ from sample 77'):
+    with pytest.raises(
+        DatasetError, match=r'stamps differ by 1000.0 us at sample 77, more than the 800 us'
+    ):
         load_recording(path, mabi)
+
+
+@settings(max_examples=8, deadline=None, derandomize=True)
+@given(offsets=arrays(np.int64, 300, elements=st.integers(-800_000, 800_000)))
+def test_currents_stamped_apart_by_a_driver_pair_with_the_joint_states(
+    tmp_path_factory, mabi, offsets
+):
+    """Within 10 % of the IPO period, each current belongs to the joint state of its index."""
+    recording = sine_recording(300)
+    stamps_mc = recording.stamps_ns + offsets
+    path = write_contract_bag(
+        tmp_path_factory.mktemp('bag') / 'bag', recording, stamps_mc=stamps_mc
+    )
+
+    loaded = load_recording(path, mabi)
+
+    np.testing.assert_array_equal(loaded.stamps_ns, recording.stamps_ns)
+    np.testing.assert_array_equal(loaded.current, recording.current)
+
+
+def test_an_effort_of_nan_is_left_out_where_the_currents_are_the_label(tmp_path, mabi, caplog):
+    recording = sine_recording(300)
+    effort = np.full_like(recording.position, np.nan)  # a driver without torque sensors
+    path = write_contract_bag(tmp_path / 'bag', broken(recording, joint_torque=effort))
+
+    loaded = load_recording(path, mabi)
+
+    assert loaded.joint_torque is None
+    np.testing.assert_array_equal(loaded.current, recording.current)
+    assert '1800 of 1800 values are not finite; left out' in caplog.text
+    with pytest.raises(
+        DatasetError, match=r'/joint_states effort: sample 0 .*joint_1.*not finite'
+    ):
+        load_recording(path, mabi, require_current=False)  # the effort is the label there
 
 
 def test_a_truncated_mcap_file_is_refused_with_a_recovery_hint(tmp_path, mabi):

@@ -110,6 +110,24 @@ def test_config_arrays_and_fields_are_read_only(robot_configs: dict[str, RobotCo
         config.name = 'other'  # type: ignore[misc]
 
 
+def test_relative_topic_names_are_the_root_namespace_full_names(write_config: Any) -> None:
+    path = write_config(
+        'mabi_max100', {'topics': {'joint_states': 'arm/joint_states', 'motor_currents': '/i'}}
+    )
+
+    topics = load_robot_config(path).topics
+
+    assert (topics.joint_states, topics.motor_currents) == ('/arm/joint_states', '/i')
+
+
+@pytest.mark.parametrize('topic', ['~/joint_states', '{node}/joint_states'])
+def test_topic_names_that_depend_on_a_node_are_refused(write_config: Any, topic: str) -> None:
+    path = write_config('mabi_max100', {'topics': {'joint_states': topic}})
+
+    with pytest.raises(ConfigError, match=r'topics\.joint_states: .* depends on a node name'):
+        load_robot_config(path)
+
+
 def test_urdf_sha256_is_the_hash_of_the_urdf_bytes(robot_configs: dict[str, RobotConfig]) -> None:
     for config in robot_configs.values():
         expected = hashlib.sha256(config.urdf_path.read_bytes()).hexdigest()

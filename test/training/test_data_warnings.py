@@ -1,0 +1,44 @@
+"""What loading a recording warns of reaches the run: its datasets, run.json and report.md."""
+
+from __future__ import annotations
+
+import numpy as np
+from support import sine_recording, write_contract_bag
+
+from id_learning.dataset.preprocess import PreprocessConfig
+from id_learning.dataset.recording import Recording
+from id_learning.evaluation.report import _data_warnings
+from id_learning.training.datasets import DATA_WARNINGS, combine_datasets, load_datasets
+
+
+def _with_still_joint(recording: Recording, joint: int) -> Recording:
+    position, velocity = recording.position.copy(), recording.velocity.copy()
+    position[:, joint], velocity[:, joint] = 0.2, 0.0
+    return Recording(recording.joints, recording.stamps_ns, position, velocity,
+                     recording.current, None, source=recording.source)  # fmt: skip
+
+
+def test_a_still_joint_is_carried_into_the_datasets_and_the_report(tmp_path, mabi):
+    still = write_contract_bag(tmp_path / 'still', _with_still_joint(sine_recording(4000), 5))
+    clean = write_contract_bag(tmp_path / 'clean', sine_recording(4000))
+
+    datasets = load_datasets([still, clean], mabi, PreprocessConfig(), progress=False)
+    combined = combine_datasets(datasets)
+
+    warned = combined.extra[DATA_WARNINGS]
+    assert len(warned) == 1
+    assert warned[0].startswith(f'{still}: joint_6 does not move')
+    assert datasets[1].extra[DATA_WARNINGS] == []
+    lines = _data_warnings(combined)
+    assert lines[0].startswith('**Data warnings**')
+    assert f'- {warned[0]}' in lines
+
+
+def test_a_recording_without_findings_adds_nothing_to_the_report(tmp_path, mabi):
+    bag = write_contract_bag(tmp_path / 'clean', sine_recording(4000))
+
+    combined = combine_datasets(load_datasets([bag], mabi, PreprocessConfig(), progress=False))
+
+    assert combined.extra[DATA_WARNINGS] == []
+    assert _data_warnings(combined) == []
+    assert np.isfinite(combined.tau).all()
