@@ -157,3 +157,32 @@ def test_demo_runs_the_closed_loop_of_a_bag_without_twin_config_given_twin(tmp_p
     assert 'closed loop not run' not in said
     assert 'RMS tracking error' in said
     assert (tmp_path / 'd' / 'closed_loop' / 'closed_loop.json').is_file()
+
+
+@pytest.mark.parametrize(
+    ('argv', 'named'),
+    [
+        (['train', '--bag', 'BAG', '--out', ''], '--out'),
+        (['train', '--bag', '', '--bag', 'BAG', '--out', 'OUT'], '--bag'),
+        (['train', '--bag', 'BAG', '--out=', '--robot', 'ROBOT'], '--out'),
+        (['evaluate', '--run', ' ', '--bag', 'BAG', '--out', 'OUT'], '--run'),
+        (['inspect', ''], 'bag'),
+        (['simulate', '--config', '', '--out', 'OUT'], '--config'),
+        (['diagnose', '--bag', 'BAG', '--out', 'OUT', '--robot', ''], '--robot'),
+    ],
+)
+def test_an_empty_path_is_refused_naming_it_before_any_work(
+    argv, named, small_bag, tmp_path, capsys, monkeypatch
+):
+    """Path('') is the working folder: never what an empty --out or --bag meant."""
+    monkeypatch.chdir(tmp_path)
+    robot = REPO / 'config' / 'mabi_max100.yaml'
+    real = {'BAG': str(small_bag), 'OUT': str(tmp_path / 'out'), 'ROBOT': str(robot)}
+    argv = [real.get(item, item) for item in argv]
+
+    with pytest.raises(SystemExit) as exited:
+        main(argv)
+
+    assert exited.value.code == 2
+    assert f'error: {named}: an empty path; name the file or folder' in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -22,6 +22,7 @@ from id_learning import __version__
 from id_learning.cli.data import add_data_commands
 from id_learning.cli.demo import add_demo_command
 from id_learning.cli.diagnose import add_diagnose_command
+from id_learning.cli.options import empty_paths
 from id_learning.cli.sweep import add_sweep_command
 from id_learning.cli.train import add_train_commands
 from id_learning.errors import IdLearningError
@@ -185,7 +186,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(argv: Sequence[str] | None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    empty = empty_paths(args, sys.argv[1:] if argv is None else argv)
+    if empty:  # Path('') is the working folder: never a bag, a run or an output meant
+        parser.error(f'{", ".join(empty)}: an empty path; name the file or folder')
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING,
         format='%(levelname)s %(name)s: %(message)s',

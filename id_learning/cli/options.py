@@ -21,12 +21,14 @@ if TYPE_CHECKING:
     from id_learning.robot.config import RobotConfig
 
 __all__ = [
+    'PATH_ARGUMENTS',
     'PREPROCESSING_CHOICES',
     'SEED_MAX',
     'SPLIT_SEED_CONTRADICTION',
     'bag_paths',
     'comma_names',
     'effect_names',
+    'empty_paths',
     'finite',
     'hyper_parameters',
     'integer',
@@ -409,3 +411,23 @@ def refuse_contradictions(args: argparse.Namespace, pairs: Sequence[tuple[str, s
 def _dest(option: str) -> str:
     """The argparse attribute of an option: '--split-seed' -> 'split_seed'."""
     return option.lstrip('-').replace('-', '_')
+
+
+#: Arguments that name a file or folder: an empty value would silently mean the working folder.
+PATH_ARGUMENTS = (
+    'bag', 'config', 'hyper_file', 'mapping', 'out', 'plot', 'robot', 'run', 'source',
+    'study_table', 'twin',
+)  # fmt: skip
+
+
+def empty_paths(args: argparse.Namespace, argv: Sequence[str]) -> list[str]:
+    """The path arguments given as an empty string: option names (``--out``), else positional."""
+    empty = []
+    for dest in PATH_ARGUMENTS:
+        value = getattr(args, dest, None)
+        values = value if isinstance(value, list) else [value]
+        if any(isinstance(item, str) and not item.strip() for item in values):
+            option = f'--{dest.replace("_", "-")}'
+            given = any(token == option or token.startswith(f'{option}=') for token in argv)
+            empty.append(option if given else dest)
+    return empty
