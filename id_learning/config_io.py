@@ -33,6 +33,7 @@ __all__ = [
     'finite_number',
     'float_vector',
     'load_yaml_mapping',
+    'not_a_file',
     'parse_yaml',
     'range_problem',
     'read_capped',
@@ -115,6 +116,18 @@ _FILE_KINDS = (
     (stat.S_ISBLK, 'a block device'),
     (stat.S_ISSOCK, 'a socket'),
 )
+
+
+def not_a_file(path: Path | str) -> str | None:
+    """What ``path`` is when it is no regular file ('no such file', 'a folder', 'a FIFO', ...)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return 'no such file'
+    except OSError as err:
+        return f'cannot be read ({err.strerror or err})'
+    kinds = ((stat.S_ISDIR, 'a folder'), (stat.S_ISFIFO, 'a FIFO (named pipe)'), *_FILE_KINDS)
+    return next((kind for is_kind, kind in kinds if is_kind(mode)), None)
 
 
 def read_capped(
@@ -208,7 +221,8 @@ def range_problem(
     allowed = describe_range(low, high, low_open=low_open, high_open=high_open)
     kind = ' '.join(filter(None, ('an integer' if integer else 'a finite number', allowed)))
     if isinstance(value, bool) or not isinstance(value, (int,) if integer else (int, float)):
-        return f'must be {kind}'
+        # A quoted '0.008' (or a !!str tag) reads as a range problem unless its type is named.
+        return f'must be {kind}, not a string' if isinstance(value, str) else f'must be {kind}'
     # An int compares exactly; one beyond the float range is no finite float.
     finite = abs(value) <= sys.float_info.max if isinstance(value, int) else math.isfinite(value)
     inside = finite and not (

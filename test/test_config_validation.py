@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 import pytest
@@ -193,3 +194,49 @@ def test_invalid_topic_names_are_refused_saying_why(name: object, why: str):
     problem = topic_name_problem(name)
     assert problem is not None
     assert why in problem
+
+
+def test_a_number_written_as_a_string_is_named_a_string():
+    from id_learning.config_io import range_problem
+
+    assert range_problem('0.008', low=1e-5, high=1.0) == (
+        'must be a finite number in [1e-05, 1], not a string'
+    )
+    assert range_problem(None, low=1e-5, high=1.0) == 'must be a finite number in [1e-05, 1]'
+
+
+def test_what_a_path_is_when_it_is_no_regular_file(tmp_path):
+    from id_learning.config_io import not_a_file
+
+    fifo = tmp_path / 'pipe'
+    os.mkfifo(fifo)
+    (tmp_path / 'file').write_text('x')
+
+    assert not_a_file(tmp_path / 'file') is None
+    assert not_a_file(tmp_path) == 'a folder'
+    assert not_a_file(fifo) == 'a FIFO (named pipe)'
+    assert not_a_file(tmp_path / 'none') == 'no such file'
+    assert not_a_file('/dev/null') == 'a character device'
+
+
+def test_a_model_file_that_is_a_fifo_is_named_as_one_not_as_missing(tmp_path, mabi):
+    from id_learning.errors import CheckpointError
+    from id_learning.models.artifact import read_artifact
+
+    (tmp_path / 'model.json').write_text('{}')
+    os.mkfifo(tmp_path / 'weights.safetensors')
+
+    with pytest.raises(
+        CheckpointError, match=r'weights\.safetensors: a FIFO \(named pipe\), not a'
+    ):
+        read_artifact(tmp_path, mabi)
+
+
+def test_a_node_robot_config_that_is_a_folder_is_named_as_one(tmp_path):
+    from id_learning.nodes.params import resolve_robot_config
+
+    with pytest.raises(ConfigError, match=r'robot_config: .*: a folder, not a robot config file'):
+        resolve_robot_config(str(tmp_path))
+    fifo = tmp_path / 'robot.yaml'
+    os.mkfifo(fifo)
+    assert resolve_robot_config(str(fifo)) == fifo  # read as it comes, as --robot <(...)

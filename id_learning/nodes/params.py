@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
+from id_learning.config_io import not_a_file
 from id_learning.errors import ConfigError
 from id_learning.nodes.param_schema import (
     check_schema,
@@ -545,8 +546,10 @@ def resolve_robot_config(value: str) -> Path:
     """
     if value:
         path = Path(value).expanduser()
-        if not path.is_file():
-            raise ConfigError(f'robot_config: no such file {path}')
+        kind = not_a_file(path)
+        # A FIFO is read as it comes (``robot_config:=<(...)``); read_capped refuses devices.
+        if kind is not None and not kind.startswith('a FIFO'):
+            raise ConfigError(f'robot_config: {path}: {kind}, not a robot config file')
         return path
     candidates = [Path(__file__).resolve().parents[2] / 'config' / DEFAULT_ROBOT_CONFIG]
     try:

@@ -22,6 +22,7 @@ from id_learning.config_io import (
     finite_number,
     float_vector,
     load_yaml_mapping,
+    not_a_file,
     range_problem,
     topic_name_problem,
 )
@@ -184,8 +185,9 @@ def resolve_urdf(value: str, base_dir: Path, where: str = 'robot config') -> Pat
     path = Path(value)
     if not path.is_absolute():
         path = base_dir / path
-    if not path.is_file():
-        raise ConfigError(f'{where}: urdf {value!r}: no such file {path}')
+    kind = not_a_file(path)
+    if kind is not None and not kind.startswith('a FIFO'):  # a FIFO is read as it comes
+        raise ConfigError(f'{where}: urdf {value!r}: {path}: {kind}, not a URDF file')
     return path.resolve()
 
 

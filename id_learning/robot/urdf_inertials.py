@@ -20,6 +20,7 @@ driven); this module looks at each link alone.
 
 from __future__ import annotations
 
+import codecs
 import logging
 import math
 from pathlib import Path
@@ -60,12 +61,27 @@ def read_urdf(urdf: Path | str) -> bytes:
     """The URDF's bytes, read through the capped reader (``config_io.read_capped``).
 
     Raises:
-        RobotModelError: the file is missing, a device or over ``MAX_CONFIG_BYTES``.
+        RobotModelError: the file is missing, a device, over ``MAX_CONFIG_BYTES``, or not UTF-8.
     """
     try:
-        return read_capped(urdf, 'URDF')
+        data = read_capped(urdf, 'URDF')
     except ConfigError as err:
         raise RobotModelError(str(err)) from None
+    # urdfdom (pinocchio's parser) reads UTF-8 only; XML in UTF-16 parses here but not there.
+    wide = (codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE, codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+    if data.startswith(wide) or b'\x00' in data[:256]:
+        raise RobotModelError(
+            f'{urdf}: the URDF is UTF-16 or UTF-32 text; URDF parsers read UTF-8: convert it '
+            '(iconv -f UTF-16 -t UTF-8 and an encoding="UTF-8" declaration)'
+        )
+    try:
+        data.decode('utf-8')
+    except UnicodeDecodeError as err:
+        raise RobotModelError(
+            f'{urdf}: the URDF is not UTF-8 text (byte {err.start} is {data[err.start]:#04x}); '
+            'save it as UTF-8'
+        ) from None
+    return data
 
 
 def parse_urdf(urdf: Path | str, text: bytes | None = None) -> ElementTree.Element:

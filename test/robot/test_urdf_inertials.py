@@ -8,6 +8,7 @@ import pytest
 
 from id_learning.errors import RobotModelError
 from id_learning.robot import check_urdf_inertials, load_robot_config
+from id_learning.robot.urdf_inertials import read_urdf
 
 REPO = Path(__file__).resolve().parents[2]
 URDF = REPO / 'urdf/mabi_max100.urdf'
@@ -132,3 +133,25 @@ def test_a_massless_frame_with_no_inertia_is_fine(tmp_path: Path) -> None:
     zero = 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"'
     frame.write_text(frame.read_text().replace(LINK_3, zero))
     assert check_urdf_inertials(frame) == []  # a frame: no mass, no inertia
+
+
+@pytest.mark.parametrize('encoding', ['utf-16', 'utf-16-be', 'utf-32'])
+def test_a_urdf_in_a_wide_encoding_is_named_as_such(tmp_path, encoding):
+    text = (REPO / 'urdf/mabi_max100.urdf').read_text(encoding='utf-8')
+    wide = tmp_path / 'arm.urdf'
+    wide.write_bytes(
+        text.replace(
+            '<?xml version="1.0"?>', f'<?xml version="1.0" encoding="{encoding}"?>'
+        ).encode(encoding)
+    )
+
+    with pytest.raises(RobotModelError, match=r'arm\.urdf: the URDF is UTF-16 or UTF-32 text'):
+        read_urdf(wide)
+
+
+def test_a_urdf_in_latin_1_names_the_first_byte_that_is_not_utf_8(tmp_path):
+    latin = tmp_path / 'arm.urdf'
+    latin.write_bytes('<robot name="Gerät"><link name="base"/></robot>'.encode('latin-1'))
+
+    with pytest.raises(RobotModelError, match=r'not UTF-8 text \(byte 16 is 0xe4\)'):
+        read_urdf(latin)
