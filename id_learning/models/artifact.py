@@ -23,13 +23,14 @@ import shutil
 import subprocess
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TypedDict, cast
+from typing import Any, NotRequired, TypedDict, cast
 
 import numpy as np
 from safetensors import SafetensorError
 from safetensors.numpy import load_file, save_file
 
 from id_learning import __version__
+from id_learning.config_io import not_a_file
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import CheckpointError
 from id_learning.models.metadata_checks import DuplicateKeyError, check_metadata, loads_unique
@@ -77,6 +78,8 @@ class RobotFingerprint(TypedDict):
     joints: list[str]
     urdf_sha256: str
     drives: DriveFingerprint
+    #: The IPO period its recordings were made at [s]; absent in artifacts from before it.
+    ipo_period_s: NotRequired[float]
 
 
 class ArtifactExtra(TypedDict, total=False):
@@ -130,6 +133,7 @@ def robot_fingerprint(robot: RobotConfig) -> RobotFingerprint:
             'torque_constant_nm_per_a': drives['torque_constant_nm_per_a'],
             'rotor_inertia_motor_side_kgm2': drives['rotor_inertia_motor_side_kgm2'],
         },
+        'ipo_period_s': robot.ipo_period_s,
     }
 
 
@@ -348,10 +352,14 @@ def read_artifact(
     """
     folder = Path(folder)
     meta_path, weights_path = folder / METADATA_FILE, folder / WEIGHTS_FILE
-    if not meta_path.is_file() or not weights_path.is_file():
-        raise CheckpointError(
-            f'{folder}: not a model artifact (needs {METADATA_FILE} and {WEIGHTS_FILE})'
-        )
+    for path in (meta_path, weights_path):
+        kind = not_a_file(path)
+        if kind == 'no such file':
+            raise CheckpointError(
+                f'{folder}: not a model artifact (needs {METADATA_FILE} and {WEIGHTS_FILE})'
+            )
+        if kind is not None:
+            raise CheckpointError(f'{path}: {kind}, not a regular file as an artifact holds')
     metadata = read_metadata(meta_path)
     if metadata.get('format') != ARTIFACT_FORMAT:
         raise CheckpointError(f'{meta_path}: format is not {ARTIFACT_FORMAT!r}')

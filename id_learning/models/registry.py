@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import math
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +14,7 @@ from id_learning.models.artifact import (
     read_artifact,
     write_artifact,
 )
-from id_learning.models.base import InverseDynamicsModel, ModelConfig
+from id_learning.models.base import InverseDynamicsModel, ModelConfig, as_sequence_model
 from id_learning.models.blackbox import LstmConfig, LstmModel, MlpConfig, MlpModel
 from id_learning.models.effects import (
     RneaEffectsConfig,
@@ -39,6 +41,8 @@ from id_learning.models.physics import RneaLqConfig, RneaLqModel, RneaMlpConfig,
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['MODEL_KINDS', 'STUDY_MODELS', 'load_model', 'make_config', 'make_model', 'save_model']
+
+_LOG = logging.getLogger(__name__)
 
 MODEL_KINDS: dict[str, tuple[type[ModelConfig], type[InverseDynamicsModel]]] = {
     'rnea_lq': (RneaLqConfig, RneaLqModel),
@@ -127,4 +131,29 @@ def load_model(
         raise CheckpointError(f'{folder}: hyper-parameters do not fit {found}: {err}') from err
     model = MODEL_KINDS[found][1](config, robot)
     model.load_state(tensors, metadata['fitted'])
+    _check_period(model, metadata['robot'].get('ipo_period_s'), folder)
     return model
+
+
+def _check_period(model: InverseDynamicsModel, trained_s: float | None, folder: Path) -> None:
+    """Refuse a sequence model at another IPO period; warn for the others.
+
+    A sequence model's window is a count of samples: at another rate it spans another time. The
+    others are functions of (q, v, a), but their labels were filtered and their inputs smoothed
+    at the training rate.
+
+    Raises:
+        CheckpointError: a sequence model trained at another period than the robot config's.
+    """
+    now_s = model.robot.ipo_period_s
+    if trained_s is None or math.isclose(trained_s, now_s, rel_tol=1e-9):
+        return
+    text = (
+        f'{folder}: trained on recordings at an IPO period of {trained_s * 1e3:g} ms; the robot '
+        f'config says {now_s * 1e3:g} ms'
+    )
+    if as_sequence_model(model) is not None:
+        raise CheckpointError(f'{text}: its window counts samples, so it would span another '
+                              'time; retrain it on recordings at this period')  # fmt: skip
+    _LOG.warning('%s: its labels were filtered and inputs smoothed at the other rate; compare '
+                 'it on recordings at this period before trusting it', text)  # fmt: skip
