@@ -31,6 +31,7 @@ from id_learning.twin import read_noise_free_torque
 
 __all__ = [
     'DATA_WARNINGS',
+    'Samples',
     'bag_of',
     'bag_sha256',
     'combine_datasets',
@@ -42,8 +43,10 @@ __all__ = [
     'mask_sha256',
     'preprocess_from_dict',
     'preprocess_to_dict',
+    'refuse_shared_samples',
     'seen_rows',
     'segment_rows',
+    'shared_stamps',
     'training_data_summary',
 ]
 
@@ -147,6 +150,7 @@ def load_datasets(
     if not bags:
         raise ConfigError('no bag given: pass at least one --bag')
     datasets = []
+    samples: list[Samples] = []
     for bag in tqdm(bags, desc='loading bags', unit='bag', disable=not progress or len(bags) < 2):
         recording = load_recording(
             Path(bag),
@@ -155,6 +159,7 @@ def load_datasets(
             progress=progress,
             trim_unpaired_tail=trim_unpaired_tail,
         )
+        samples.append((str(bag), recording.stamps_ns, recording.position))
         # What load_recording warned of (a still joint, a clipped label), for the report too.
         found = check_recording_content(recording, config.target, warn=False)
         warnings = [f'{bag}: {text}' for text in found]
@@ -178,6 +183,9 @@ def load_datasets(
             recording.n_samples,
             len(recording.segment_starts),
         )
+    refuse_shared_samples(
+        samples, 'the same motion would be in the training and the test part; give each once'
+    )
     return datasets
 
 
@@ -191,6 +199,44 @@ def datasets_by_bag(
 ) -> list[tuple[Path, list[int]]]:
     """Per bag, the indices of its datasets (its segments, in order) in ``datasets``."""
     return [(bag, [i for i, d in enumerate(datasets) if bag_of(d) == str(bag)]) for bag in bags]
+
+
+#: A recording's samples, to tell whether two bags hold the same ones: (bag, stamps [ns],
+#: positions (N, n) [rad] in one joint order).
+Samples = tuple[str, np.ndarray, np.ndarray]
+
+
+def shared_stamps(first: Samples, second: Samples) -> np.ndarray:
+    """The stamps [ns] at which two recordings hold the same moving sample.
+
+    Two recordings of one arm never share a stamp; twin recordings share stamps, and the rest
+    pose at them, but not the motion. Equal positions at a stamp where the arm moves (its
+    positions differ from the sample before) mean one recording was cut from the other.
+    """
+    _, a_ns, a_q = first
+    _, b_ns, b_q = second
+    both, in_a, in_b = np.intersect1d(a_ns, b_ns, assume_unique=True, return_indices=True)
+    same = np.all(a_q[in_a] == b_q[in_b], axis=1)
+    moving = np.any(a_q[in_a] != a_q[np.maximum(in_a - 1, 0)], axis=1)
+    out: np.ndarray = both[same & moving]
+    return out
+
+
+def refuse_shared_samples(recordings: Sequence[Samples], why: str) -> None:
+    """Refuse two recordings that hold the same samples, naming both and the shared span.
+
+    Raises:
+        DatasetError: the first pair that shares samples.
+    """
+    for i, first in enumerate(recordings):
+        for second in recordings[i + 1 :]:
+            shared = shared_stamps(first, second)
+            if shared.size:
+                span_s = (int(shared[-1]) - int(shared[0])) * 1e-9
+                raise DatasetError(
+                    f'{first[0]} and {second[0]} hold the same {shared.size} samples (stamps '
+                    f'{int(shared[0])} to {int(shared[-1])} ns, {span_s:.1f} s): {why}'
+                )
 
 
 #: ``Dataset.extra`` key of what loading the recordings warned of (``dataset.content``).

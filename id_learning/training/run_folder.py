@@ -8,6 +8,7 @@ defined in one place; ``training.trainer`` decides what goes into them. The layo
 from __future__ import annotations
 
 import json
+import logging
 import os
 import platform
 import time
@@ -23,7 +24,7 @@ from id_learning.models.artifact import _git_commit, robot_fingerprint
 from id_learning.models.metadata_checks import DuplicateKeyError, loads_unique
 from id_learning.outputs import incomplete_reason, partial_path, write_text_atomic
 from id_learning.robot.config import RobotConfig
-from id_learning.training.datasets import bag_sha256
+from id_learning.training.datasets import Samples, bag_sha256, refuse_shared_samples
 from id_learning.training.fitting import ModelResult
 from id_learning.training.measure import metric_notes
 
@@ -38,11 +39,14 @@ __all__ = [
     'metrics_document',
     'read_run',
     'refuse_incomplete_run',
+    'refuse_training_samples',
     'run_document',
     'save_models',
     'training_bag',
     'write_json',
 ]
+
+_LOG = logging.getLogger(__name__)
 
 RUN_FORMAT = 'id_learning.run/1'
 METRICS_FORMAT = 'id_learning.metrics/1'
@@ -280,3 +284,44 @@ def metrics_document(
         'machine': machine,
         'git_commit': git_commit,
     }
+
+
+def _bag_samples(bag: Path, robot: RobotConfig) -> Samples:
+    """A bag's joint-state stamps and positions, in the robot's joint order."""
+    from id_learning.bag import read_joint_states
+
+    states = read_joint_states(bag, robot.topics.joint_states)
+    if states.position is None or set(states.names) != set(robot.joints):
+        return str(bag), np.zeros(0, dtype=np.int64), np.zeros((0, robot.n_joints))
+    order = [states.names.index(name) for name in robot.joints]
+    return str(bag), states.stamps_ns, states.position[:, order]
+
+
+def refuse_training_samples(
+    bags: list[Path], run: dict[str, Any], run_dir: Path, robot: RobotConfig
+) -> None:
+    """Refuse a new bag that holds samples of the run's training bags (cut from one of them).
+
+    Scored as unseen, they would count training samples as test samples. Training bags that
+    are not found cannot be compared; they are named in a warning.
+
+    Raises:
+        DatasetError: names the bag, the training bag and the shared span.
+    """
+    trained_on = run['training_data']['bags']
+    new = [bag for bag in bags if bag_sha256(bag) not in {e.get('sha256') for e in trained_on}]
+    if not new:
+        return
+    training: list[Samples] = []
+    for index in range(len(trained_on)):
+        try:
+            training.append(_bag_samples(training_bag(run, run_dir, index), robot))
+        except CheckpointError as err:
+            _LOG.warning('cannot tell whether the bags hold training samples: %s', err)
+    why = (
+        'scored as a new recording it would count training samples as unseen; evaluate the '
+        'training bag itself (its test part is scored) or a recording the run has not seen'
+    )
+    for bag in new:
+        for known in training:
+            refuse_shared_samples([_bag_samples(bag, robot), known], why)

@@ -73,6 +73,7 @@ from id_learning.training.run_folder import (
     machine_info,
     metrics_document,
     read_run,
+    refuse_training_samples,
     run_document,
     save_models,
     write_json,
@@ -524,6 +525,7 @@ def _evaluate_into(
     configure_torch(TRAIN_THREADS)
     results = _load_models(run_dir, run, robot)
     datasets = load_datasets(bags, robot, config, progress=progress)
+    refuse_training_samples(bags, run, run_dir, robot)
     seen, parts = _unseen_parts(bags, datasets, run)
     target_scaler = MinMaxScaler.from_dict(run['target_scaler'])
     dataset = concatenate_for_evaluation(datasets, seen, target_scaler)
