@@ -453,14 +453,12 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 def variant_cases(args: argparse.Namespace, seed: int, common: dict[str, Any]) -> list[dict]:
     """Base friction of our own form, alone and with each variant effect (diagnosis_variants)."""
-    from diagnosis_variants import VARIANT_SINGLE
+    from diagnosis_variants import selected_variants
 
     cases: list[dict[str, Any]] = [
         {**common, 'scenario': 'variant:nothing', 'seed': seed, 'hidden': []}
     ]
-    for name, joints in VARIANT_SINGLE.items():
-        if args.effects and name not in args.effects:
-            continue
+    for name, joints in selected_variants(args.effects).items():
         joint = None if joints is None else joints[seed % len(joints)]
         cases.append(
             {**common, 'scenario': f'variant:{name}', 'seed': seed, 'hidden': [(name, joint)]}

@@ -22,6 +22,19 @@ speed), as every real axis does.
 | joint offset | constant | constant plus once-per-turn eccentricity |
 | inertial parameter error | all links' mass/COM at random | one link heavier, its COM moved |
 
+**Alternative forms** (selectable effect keys ``effect@form``, run only where ``--effects`` names
+them, so the default plan and its results stay as they were; ``FORMS``):
+
+| key | the form | truth |
+|---|---|---|
+| load_dependent_friction@gravity | mu |g(q)| sign(v), g the gravity torque | mu |
+| gravity_spring@torsion | torsion spring about the axis, -k (q - q0), opposing gravity | by name |
+| gravity_spring@counterweight | counterweight, -m g r cos(q + phi), opposing gravity | by name |
+| joint_offset@fixed | a fixed 0.03 rad encoder offset (not sized by ``--magnitude``) | 0.03 rad |
+
+They are scored as the variants are, and where a truth exists also by the value: within 15 %
+of it, and its 95 % interval holding it.
+
 ``apply_variant`` returns the modified clean torque (and positions); sizes scale each variant's
 reference strength as in ``diagnosis_scoring.effect_section``, so one calibration run per case
 gives the size for a target magnitude.
@@ -32,7 +45,7 @@ all single effects. ``diagnosis_scoring.py`` runs these cases among its own (sce
 ``variant``); run alone, this script runs only them:
 
     python benchmarks/diagnosis_variants.py [--seeds 10] [--duration 200] [--magnitude 3]
-        [--jobs 2] [--effects payload_mass,rotor_inertia]
+        [--jobs 2] [--effects payload_mass,rotor_inertia,gravity_spring@torsion]
         [--out out/benchmarks/diagnosis_variants.json]
 
 It prints the rates, writes the JSON document (per-run details included) to ``--out`` and
@@ -48,6 +61,7 @@ import os
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 os.environ.setdefault('OMP_NUM_THREADS', '1')
 
+import math
 import time
 from dataclasses import dataclass, replace
 from typing import Any
@@ -70,7 +84,7 @@ from diagnosis_scoring import (
 from scipy.signal import lfilter
 
 from id_learning.dataset.preprocess import prepare_dataset
-from id_learning.diagnosis import evaluation_rows, run_diagnosis
+from id_learning.diagnosis import FoundEffect, evaluation_rows, run_diagnosis
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import current_from_motor_torque
@@ -79,11 +93,13 @@ from id_learning.twin.simulate import TwinResult
 
 __all__ = [
     'BASE_FRICTION',
+    'FORMS',
     'VARIANT_SINGLE',
     'Variant',
     'apply_variant',
     'base_friction',
     'run_variant_case',
+    'selected_variants',
     'variant_report',
 ]
 
@@ -93,6 +109,8 @@ __all__ = [
 BASE_FRICTION = ('viscous_friction', 'coulomb_friction', 'stribeck_friction')
 #: share of all single-effect variant runs that must succeed.
 TARGET_SINGLES = 0.90
+#: standard gravity [m/s^2] (a counterweight's weight).
+GRAVITY_MS2 = 9.81
 #: the twin's default friction levels [N*m], [N*m*s/rad]: the scale of the base friction.
 _DEFAULTS = yaml.safe_load(TWIN.read_text(encoding='utf-8'))['effects']
 COULOMB_NM = np.array(_DEFAULTS['coulomb_friction']['level'], dtype=float)
@@ -106,6 +124,37 @@ VARIANT_SINGLE: dict[str, tuple[str, ...] | None] = {
     for name, joints in SINGLE.items()
     if name not in ('viscous_friction', 'coulomb_friction')
 } | {'joint_offset': ('joint_2', 'joint_3', 'joint_5')}
+#: alternative forms ``effect@form`` -> the joints they go on (rotated over seeds): run only
+#: where ``--effects`` names them (module doc). The gravity forms sit where gravity sweeps a
+#: real torque.
+FORMS: dict[str, tuple[str, ...] | None] = {
+    'load_dependent_friction@gravity': ('joint_2', 'joint_3', 'joint_5'),
+    'gravity_spring@torsion': SINGLE['gravity_spring'],
+    'gravity_spring@counterweight': SINGLE['gravity_spring'],
+    'joint_offset@fixed': ('joint_2', 'joint_3', 'joint_5'),
+}
+#: forms of a fixed size of their own: not scaled to ``--magnitude`` times the noise.
+FIXED_SIZE = ('joint_offset@fixed',)
+#: the fixed encoder offset of ``joint_offset@fixed`` [rad].
+FIXED_OFFSET_RAD = 0.03
+#: a value counts as recovered within this share of the truth (and its interval holding it).
+PARAMETER_TOLERANCE = 0.15
+
+
+def selected_variants(effects: list[str] | None) -> dict[str, tuple[str, ...] | None]:
+    """The single-effect variants a plan runs: all of ``VARIANT_SINGLE`` (or those ``effects``
+    names) and the alternative forms ``effects`` names."""
+    if effects is None:
+        return dict(VARIANT_SINGLE)
+    unknown = [key for key in effects if '@' in key and key not in FORMS]
+    if unknown:
+        raise ValueError(f'no form {", ".join(unknown)}; the forms: {", ".join(FORMS)}')
+    return {key: joints for key, joints in (VARIANT_SINGLE | FORMS).items() if key in effects}
+
+
+def effect_of(key: str) -> str:
+    """The diagnosis' name of a variant key (``effect`` or ``effect@form``)."""
+    return key.partition('@')[0]
 
 
 @dataclass(frozen=True)
@@ -175,6 +224,12 @@ def apply_variant(
         extra = mu * load**2 / limit * np.sign(v[:, j])
         section = {'mu': mu, 'form': 'mu tau_load^2 / tau_max sign(v)'}
         return Variant(tau_u + _column(n_samples, n, j, extra), no_shift, None, section)
+    if name == 'load_dependent_friction@gravity':
+        assert j is not None
+        mu = 0.01 * size
+        extra = mu * np.abs(_gravity(robot, q)[:, j]) * np.sign(v[:, j])
+        section = {'mu': float(mu), 'form': 'mu |g(q)| sign(v)'}
+        return Variant(tau_u + _column(n_samples, n, j, extra), no_shift, float(mu), section)
     if name == 'rotor_inertia':
         assert j is not None
         inertia = 0.2 * size * robot.drives.rotor_inertia[j]
@@ -187,9 +242,31 @@ def apply_variant(
         # Mounted to balance: its torque opposes the joint's gravity torque, whichever way the
         # robot's joint axis turns.
         spring = gas_spring(q[:, j], preload_n=40.0 * size)
-        gravity = RigidBodyDynamics.from_config(robot).gravity(q)[:, j]
-        extra = -np.sign(np.mean(spring * gravity)) * spring
+        extra = _balancing(spring, _gravity(robot, q)[:, j])
         section = {'preload_n': 40.0 * size, 'form': 'gas spring, arms 0.30/0.55 m'}
+        return Variant(tau_u + _column(n_samples, n, j, extra), no_shift, None, section)
+    if name == 'gravity_spring@torsion':
+        assert j is not None
+        gravity = _gravity(robot, q)[:, j]
+        # Neutral where gravity's straight-line fit over the recorded motion crosses zero (as a
+        # balancer relaxed where the arm stands upright): it pulls against gravity's slope.
+        slope, intercept = np.polyfit(q[:, j], gravity, 1)
+        neutral, stiffness = -intercept / slope, 100.0 * size
+        extra = _balancing(-stiffness * (q[:, j] - neutral), gravity)
+        section = {'stiffness_nm_per_rad': float(stiffness), 'neutral_rad': float(neutral),
+                   'form': 'torsion spring -k (q - q0)'}  # fmt: skip
+        return Variant(tau_u + _column(n_samples, n, j, extra), no_shift, None, section)
+    if name == 'gravity_spring@counterweight':
+        assert j is not None
+        gravity = _gravity(robot, q)[:, j]
+        # Its arm along the direction of the joint's gravity torque, c cos q + s sin q + d fitted
+        # over the recorded motion: c cos q + s sin q = R cos(q + phi), phi = -atan2(s, c).
+        basis = np.column_stack([np.cos(q[:, j]), np.sin(q[:, j]), np.ones(n_samples)])
+        cosine, sine, _ = np.linalg.lstsq(basis, gravity, rcond=None)[0]
+        phase, moment = -float(np.arctan2(sine, cosine)), 10.0 * size  # moment: m r [kg*m]
+        extra = _balancing(-moment * GRAVITY_MS2 * np.cos(q[:, j] + phase), gravity)
+        section = {'mass_times_arm_kgm': float(moment), 'phase_rad': phase,
+                   'form': 'counterweight -m g r cos(q + phi)'}  # fmt: skip
         return Variant(tau_u + _column(n_samples, n, j, extra), no_shift, None, section)
     if name == 'payload_mass':
         mass = 1.0 * size
@@ -237,6 +314,11 @@ def apply_variant(
         shift = _column(n_samples, n, j, offset * (1.0 + 0.3 * np.sin(q[:, j])))
         section = {'offset': offset, 'eccentricity': 0.3 * offset}
         return Variant(tau_u, shift, offset, section)
+    if name == 'joint_offset@fixed':
+        assert j is not None
+        offset = FIXED_OFFSET_RAD * size
+        shift = _column(n_samples, n, j, np.full(n_samples, offset))
+        return Variant(tau_u, shift, offset, {'offset': offset, 'form': 'fixed'})
     if name == 'inertial_parameter_error':
         dynamics = RigidBodyDynamics.from_config(robot)
         masses, coms = dynamics.body_masses_and_coms()
@@ -263,15 +345,16 @@ def run_variant_case(case: dict[str, Any]) -> dict[str, Any]:
     noise = np.sqrt(np.mean((dataset.tau - filtered(base.tau_u_clean, dataset))[rows] ** 2, 0))
     clean = base.tau_u_clean + base_friction(base, seed)
     shift = np.zeros_like(clean)
-    truth_value, section = None, {}
+    truth_value, section, achieved = None, {}, None
     for name, joint in case['hidden']:
         reference = apply_variant(name, joint, 1.0, tau_u=clean, base=base, robot=robot)
         apparent = reference.tau_u - clean
-        if name == 'joint_offset':
+        if effect_of(name) == 'joint_offset':
             apparent = _apparent_offset_torque(base, robot, reference.position_shift)
         rms = np.sqrt(np.mean(filtered(apparent, dataset)[rows] ** 2, axis=0))
         j = robot.joints.index(joint) if joint else int(np.argmax(rms / noise))
-        size = case['magnitude'] * noise[j] / rms[j]
+        size = 1.0 if name in FIXED_SIZE else case['magnitude'] * noise[j] / rms[j]
+        achieved = float(size * rms[j] / noise[j])
         variant = apply_variant(name, joint, size, tau_u=clean, base=base, robot=robot)
         clean, shift = variant.tau_u, shift + variant.position_shift
         truth_value, section = variant.truth, variant.section
@@ -284,7 +367,7 @@ def run_variant_case(case: dict[str, Any]) -> dict[str, Any]:
     simulated = time.perf_counter()
     result = run_diagnosis(recording, robot)
     diagnosed = time.perf_counter()
-    truth = {(name, joint) for name, joint in case['hidden']}
+    truth = {(effect_of(name), joint) for name, joint in case['hidden']}
     named = named_set(result)
     beyond = {item for item in named if item[0] not in BASE_FRICTION}
     aliases = [s for s in alias_members(result) if s & truth]
@@ -298,12 +381,23 @@ def run_variant_case(case: dict[str, Any]) -> dict[str, Any]:
         'confidence': {e.label: e.confidence for e in result.named_effects()},
         'alias_sets': [sorted([list(m) for m in s], key=str) for s in alias_members(result)],
         'structured_joints': result.structured_joints(),
+        'refused': [
+            {key: r[key] for key in ('joint', 'label', 'fitted', 'reason')} for r in result.refused
+        ],
+        'wrong_confident': sorted(
+            e.label
+            for e in result.named_effects()
+            if e.confidence == 'high'
+            and (e.name, e.spec.joint_name or None) not in truth
+            and e.name not in BASE_FRICTION
+        ),
         'simulate_s': simulated - start,
         'diagnose_s': diagnosed - simulated,
     }
     if not truth:
         out['success'] = not beyond
         return out
+    out['magnitude_achieved'] = achieved
     small = [s for s in aliases if len(s) <= 3]
     out['truth_named'] = truth <= named
     # (A hidden Stribeck hump must be named on its joint: it is a base-friction name.)
@@ -311,15 +405,43 @@ def run_variant_case(case: dict[str, Any]) -> dict[str, Any]:
     out['success'] = (found or any(truth <= s for s in small)) and all(
         item in truth or any(item in s for s in small) for item in beyond
     )
-    name, joint = case['hidden'][0]
+    key, joint = case['hidden'][0]
+    name = effect_of(key)
     match = [e for e in result.effects if e.name == name and (e.spec.joint_name or None) == joint]
     if truth_value is not None and match:
         out['parameter_error'] = float(abs(match[0].coefficients[0] - truth_value) / truth_value)
+        out['parameter'] = _parameter_record(match[0], truth_value)
+    if key in FORMS and truth_value is not None:
+        # The forms are judged by the value too, where it has a truth (module doc).
+        within = out.get('parameter_error', math.inf) <= PARAMETER_TOLERANCE
+        holds = out.get('parameter', {}).get('interval_holds_truth', False)
+        out['success'] = out['success'] and within and holds
     return out
 
 
+def _parameter_record(effect: FoundEffect, truth: float) -> dict[str, Any]:
+    """The effect's first value against the truth: the coefficient and its 95 % interval, and
+    the value effects.json reports (``FoundEffect.parameters``) with its interval."""
+    low, high = (float(x) for x in effect.coefficients_ci[0])
+    reported = effect.parameters[0] if effect.parameters else None
+    record: dict[str, Any] = {
+        'truth': float(truth),
+        'coefficient': float(effect.coefficients[0]),
+        'coefficient_ci': [low, high],
+        'interval_holds_truth': low <= truth <= high,
+    }
+    if reported is not None:
+        r_low, r_high = reported['ci']
+        record |= {
+            'reported': reported['value'],
+            'reported_ci': [r_low, r_high],
+            'reported_holds_truth': r_low <= truth <= r_high,
+        }
+    return record
+
+
 def name_is_base(case: dict[str, Any]) -> bool:
-    return any(name in BASE_FRICTION for name, _ in case['hidden'])
+    return any(effect_of(name) in BASE_FRICTION for name, _ in case['hidden'])
 
 
 def _apparent_offset_torque(base: TwinResult, robot: RobotConfig, shift: np.ndarray) -> np.ndarray:
@@ -327,6 +449,18 @@ def _apparent_offset_torque(base: TwinResult, robot: RobotConfig, shift: np.ndar
     dynamics = RigidBodyDynamics.from_config(robot)
     q, v, a = base.q_true, base.v_true, base.a_true
     return dynamics.rnea(q, v, a) - dynamics.rnea(q - shift, v, a)
+
+
+def _gravity(robot: RobotConfig, q: np.ndarray) -> np.ndarray:
+    """(N, n) the rigid-body gravity torque g(q) [N*m]."""
+    return RigidBodyDynamics.from_config(robot).gravity(q)
+
+
+def _balancing(torque: np.ndarray, gravity: np.ndarray) -> np.ndarray:
+    """A balancer's ``torque`` mounted to balance: opposing the joint's ``gravity`` torque on
+    average, whichever way the robot's joint axis turns."""
+    balancing: np.ndarray = -np.sign(np.mean(torque * gravity)) * torque
+    return balancing
 
 
 def gas_spring(q: np.ndarray, preload_n: float) -> np.ndarray:
@@ -381,6 +515,8 @@ def variant_report(summary: dict[str, Any], runs: list[dict[str, Any]]) -> list[
             ]
         )
     singles = [run for run in runs if run['scenario'].startswith('variant:') and run['hidden']]
+    forms = [run for run in singles if run['hidden'][0][0] in FORMS]
+    singles = [run for run in singles if run['hidden'][0][0] not in FORMS]
     rate = sum(bool(run.get('success')) for run in singles) / len(singles) if singles else None
     target = (
         f'Over all single effects: {share(rate)} of {len(singles)} runs succeeded; target '
@@ -388,6 +524,11 @@ def variant_report(summary: dict[str, Any], runs: list[dict[str, Any]]) -> list[
         if rate is not None
         else 'No single-effect variant run: the target was not judged.'
     )
+    if forms:
+        target += (
+            f' Alternative forms (`effect@form`, judged by the value too where it has a truth): '
+            f'{sum(bool(run.get("success")) for run in forms)} of {len(forms)} runs succeeded.'
+        )
     return [
         'Effects in forms of our own (`diagnosis_variants.py`), each run also carrying base '
         'friction of its own form. Success: nothing named beyond base friction (viscous, '
