@@ -19,6 +19,8 @@ from rosbags.rosbag2.errors import ReaderError
 from tqdm import tqdm
 
 from id_learning.bag.messages import JOINT_STATE, JointStateSeries, decode_joint_state, typestore
+from id_learning.bag.reader_storage import check_encodings, check_storage_types, order_by_time
+from id_learning.bag.reader_storage import listed_files as _listed_files
 from id_learning.errors import BagError, ConfigError, DatasetError
 
 __all__ = [
@@ -37,6 +39,8 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 #: Bags whose unlisted storage files were already warned about (one warning per bag).
 _WARNED_UNLISTED: set[tuple[Path, tuple[str, ...]]] = set()
+#: Notes on misordered storage files already warned about (one warning per bag).
+_WARNED_ORDER: set[str] = set()
 
 RECOVER_HINT = 'if the recording was interrupted, `id-learning bag recover PATH` rebuilds it'
 
@@ -61,6 +65,8 @@ class BagInfo:
     duration_ns: int
     topics: tuple[TopicInfo, ...]
     custom_data: dict[str, str] = field(default_factory=dict)
+    #: metadata.yaml lists the storage files against their times (``order_by_time``'s note).
+    order_note: str | None = None
 
     def topic(self, name: str) -> TopicInfo:
         """Return a topic by name.
@@ -80,7 +86,8 @@ class BagInfo:
         )
 
 
-def _open(path: Path) -> Reader:
+def _open(path: Path) -> tuple[Reader, str | None]:
+    """Open a bag, its storage files in time order; (reader, note on their order or None)."""
     if not path.exists():
         raise BagError(f'{path}: no such bag')
     if path.is_file():
@@ -107,7 +114,11 @@ def _open(path: Path) -> Reader:
             f'({type(err).__name__}: {err}){_compression_note(path)}'
         ) from err
     _warn_unlisted(path, reader)
-    return reader
+    note = order_by_time(path, reader)
+    if note is not None and note not in _WARNED_ORDER:
+        _WARNED_ORDER.add(note)
+        _LOG.warning('%s', note)
+    return reader, note
 
 
 def _check_metadata(path: Path) -> None:
@@ -200,15 +211,6 @@ def _warn_unlisted(path: Path, reader: Reader) -> None:
             ', '.join(extra),
             ', '.join(sorted(listed)) or 'none',
         )
-
-
-def _listed_files(path: Path) -> list[str]:
-    """The storage files metadata.yaml lists (``relative_file_paths``)."""
-    try:
-        meta = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
-        return [str(p) for p in meta['rosbag2_bagfile_information']['relative_file_paths']]
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
-        return []
 
 
 def _data_files(path: Path) -> list[Path]:
@@ -322,7 +324,7 @@ def bag_info(path: Path | str) -> BagInfo:
         BagError: the folder is missing, incomplete, truncated or corrupt.
     """
     path = Path(path)
-    reader = _open(path)
+    reader, note = _open(path)
     files = tuple(sorted(p.name for p in path.iterdir() if p.suffix in {'.mcap', '.db3'}))
     try:
         topics = tuple(TopicInfo(c.topic, c.msgtype, int(c.msgcount)) for c in reader.connections)
@@ -337,6 +339,7 @@ def bag_info(path: Path | str) -> BagInfo:
             else 0,
             topics=topics,
             custom_data=bag_custom_data(path),
+            order_note=note,
         )
     finally:
         reader.close()
@@ -358,42 +361,6 @@ def bag_custom_data(path: Path | str) -> dict[str, str]:
         raise BagError(f'{path}: cannot read metadata.yaml: {err}') from err
     custom = info.get('custom_data') if isinstance(info, dict) else None
     return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
-
-
-def _storage_types(reader: Reader) -> dict[str, set[str]]:
-    """Message types per topic as the storage files (not metadata.yaml) declare them.
-
-    Empty when the rosbags version at hand does not expose its storage readers.
-    """
-    out: dict[str, set[str]] = {}
-    storage = getattr(reader, 'storage', None)
-    for store in getattr(storage, 'storages', ()) or ():
-        for conn in getattr(store, 'connections', ()) or ():
-            out.setdefault(str(conn.topic), set()).add(str(conn.msgtype))
-    return out
-
-
-def _check_storage_types(path: Path, reader: Reader, topics: Sequence[str]) -> None:
-    """Refuse a topic whose type in metadata.yaml is not the type its storage channel holds.
-
-    rosbags matches messages by topic and type, so such a topic would read as empty.
-
-    Raises:
-        BagError: names the topic, both types and the storage files.
-    """
-    stored = _storage_types(reader)
-    if not stored:
-        return
-    for topic in topics:
-        in_storage = stored.get(topic, set())
-        for msgtype in {c.msgtype for c in reader.connections if c.topic == topic} - in_storage:
-            if not in_storage:
-                continue
-            raise BagError(
-                f'{path}: topic {topic} has type {msgtype} in metadata.yaml but '
-                f'{", ".join(sorted(in_storage))} in {", ".join(_listed_files(path)) or "storage"}'
-                '; the metadata and the storage disagree: fix metadata.yaml'
-            )
 
 
 def _refuse_several_types(
@@ -443,7 +410,7 @@ def iter_typed(
         BagError: a topic is missing, or the file is truncated or corrupt.
     """
     path = Path(path)
-    reader = _open(path)
+    reader, _ = _open(path)
     try:
         connections = [conn for conn in reader.connections if conn.topic in topics]
         present = {conn.topic for conn in reader.connections}
@@ -453,7 +420,8 @@ def iter_typed(
         if not several_types:
             found = [(c.topic, c.msgtype, int(c.msgcount)) for c in connections]
             _refuse_several_types(path, found, topics)
-        _check_storage_types(path, reader, topics)
+        check_storage_types(path, reader, topics)
+        check_encodings(path, reader, topics)
         held = dict.fromkeys(topics, 0)
         try:
             for conn, timestamp, data in reader.messages(connections=connections):

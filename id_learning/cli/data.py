@@ -93,7 +93,12 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             Path(args.plot), force=args.force, inputs=[Path(args.bag)], suffixes=image_suffixes()
         )
     robot = options.load_robot(args) if args.robot else None
-    report = inspect_bag(Path(args.bag), robot=robot)
+    gravity = None
+    if robot is not None:  # the label's sign and scale, judged against the URDF's gravity
+        from id_learning.physics.rigid_body import RigidBodyDynamics
+
+        gravity = RigidBodyDynamics.from_config(robot).gravity
+    report = inspect_bag(Path(args.bag), robot=robot, gravity=gravity)
     print(render_report(report))
     if plot is not None:
         print(f'plot: {plot_report(report, plot)}')

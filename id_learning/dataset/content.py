@@ -16,19 +16,36 @@ warns with these lines, ``inspect`` lists them as problems.
   joint-side encoder), or less than ``STILL_NOISE_FACTOR`` times its position noise, does not
   move: its friction and inertia cannot be identified (warned). When no joint moves there is
   nothing to identify: refused.
+- With the robot, each joint's label (in N*m: currents times gear ratio and torque constant) is
+  regressed on the URDF's gravity torque at the recorded positions (both centred), where that
+  torque varies enough to decide (standard deviation at least ``NOMINAL_MIN_SHARE`` of the torque
+  limit) and explains the label (|correlation| at least ``NOMINAL_MIN_CORRELATION``). The slope
+  is near +1 on a sound recording (friction, a payload, a balancer spring move it, hence the
+  generous ``NOMINAL_SLOPE_FACTOR``); near -1 names a sign (the joint's current sign, or gravity
+  acting otherwise than in the URDF: a robot mounted upside down), a factor 1e-3 or 1e3 a unit or
+  scale. Warned (``gravity_findings``).
+
+``sampling_problem`` is the timing counterpart inspect and the replay share: a topic sampled at
+another period than the robot's IPO period.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from id_learning.errors import DatasetError
+from id_learning.robot.config import RobotConfig
+from id_learning.robot.drives import torque_per_ampere
 
 __all__ = [
+    'NOMINAL_MIN_CORRELATION',
+    'NOMINAL_MIN_SHARE',
+    'NOMINAL_SLOPE_FACTOR',
+    'SAMPLING_TOLERANCE',
     'SATURATION_LEVEL_RATIO',
     'SATURATION_MIN_SAMPLES',
     'SATURATION_MIN_SHARE',
@@ -36,10 +53,14 @@ __all__ = [
     'STILL_NOISE_FACTOR',
     'STILL_SPAN_RAD',
     'Finding',
+    'GravityTorque',
     'check_content',
+    'gravity_findings',
     'label_findings',
     'motion_findings',
+    'nominal_findings',
     'position_noise',
+    'sampling_problem',
     'saturated_levels',
 ]
 
@@ -58,6 +79,20 @@ SATURATION_MIN_SAMPLES = 10
 SATURATION_LEVEL_RATIO = 5.0
 #: ... of this many values next to it.
 SATURATION_NEIGHBOURS = 3
+#: The nominal gravity torque judges a joint's label only where its standard deviation over the
+#: recording reaches this share of the joint's torque limit ...
+NOMINAL_MIN_SHARE = 0.005
+#: ... and where it explains the label: |correlation| at least this.
+NOMINAL_MIN_CORRELATION = 0.5
+#: A slope of the label on the nominal torque within [1 / this, this] passes.
+NOMINAL_SLOPE_FACTOR = 30.0
+#: At most this many samples, evenly strided, go through the nominal model.
+NOMINAL_MAX_SAMPLES = 5000
+#: A median stamp step within this share of the IPO period from it keeps the stamps on the IPO
+#: grid (``PreprocessConfig.jitter_tolerance``'s default: train refuses stamps further off).
+SAMPLING_TOLERANCE = 0.25
+#: Train refuses steps longer than this many IPO periods as gaps (``load_recording``'s default).
+SAMPLING_MAX_PERIODS = 3.0
 
 
 @dataclass(frozen=True)
@@ -66,7 +101,8 @@ class Finding:
 
     Attributes:
         joint: the joint's name ('' for a finding about every joint).
-        kind: 'constant' (label), 'saturated' (label), 'still' (one joint), 'no_motion' (all).
+        kind: 'constant' (label), 'saturated' (label), 'still' (one joint), 'no_motion' (all),
+            'nominal_sign' or 'nominal_scale' (label against the nominal model).
         refuses: training and diagnosis refuse the recording for it (else a warning).
         text: one line naming the joint, the value and the span.
     """
@@ -239,6 +275,142 @@ def motion_findings(
     ]
 
 
+def nominal_findings(
+    label_nm: np.ndarray,
+    nominal_nm: np.ndarray,
+    joints: Sequence[str],
+    torque_limit: np.ndarray,
+    *,
+    quantity: str = 'motor current',
+) -> list[Finding]:
+    """Joints whose label (N, n) [N*m] contradicts a nominal torque (N, n) in sign or scale.
+
+    Each column pair is centred and the label regressed on the nominal torque; a joint is judged
+    only where the nominal torque varies enough and explains the label (module docstring).
+    """
+    label_nm = np.asarray(label_nm, dtype=float)
+    nominal_nm = np.asarray(nominal_nm, dtype=float)
+    findings: list[Finding] = []
+    for j, joint in enumerate(joints):
+        x = nominal_nm[:, j] - nominal_nm[:, j].mean()
+        y = label_nm[:, j] - label_nm[:, j].mean()
+        spread, label_spread = float(x.std()), float(y.std())
+        if spread < NOMINAL_MIN_SHARE * float(torque_limit[j]) or not label_spread > 0:
+            continue
+        correlation = float(x @ y) / (x.size * spread * label_spread)
+        if abs(correlation) < NOMINAL_MIN_CORRELATION:
+            continue
+        slope = float(x @ y) / float(x @ x)
+        head = (
+            f'{joint}: {quantity} against the URDF gravity torque at the recorded positions: '
+            f'slope {slope:.3g} (near +1 expected; correlation {correlation:.2f}, gravity '
+            f'torque std {spread:.3g} N*m)'
+        )
+        if abs(slope) < 1 / NOMINAL_SLOPE_FACTOR or abs(slope) > NOMINAL_SLOPE_FACTOR:
+            factor = 10.0 ** round(float(np.log10(abs(slope))))
+            unit = (
+                "the currents' unit (kA or mA recorded as A?) or the drives' gear_ratio and "
+                'torque_constant'
+                if quantity == 'motor current'
+                else "the torques' unit (kN*m or N*mm recorded as N*m?)"
+            )
+            text = f'{head}: the label is about {factor:g} x the nominal torque: check {unit}'
+            findings.append(Finding(joint, 'nominal_scale', False, text))
+        if slope < 0:
+            text = (
+                f'{head}: the sign is wrong: either the {quantity} sign of this joint is flipped, '
+                'or gravity acts otherwise than in the URDF (the robot mounted upside down or '
+                'on a wall while the URDF stands it on the floor)'
+            )
+            findings.append(Finding(joint, 'nominal_sign', False, text))
+    return findings
+
+
+#: The URDF's gravity torque (N, n) [N*m] at positions (N, n) [rad]: the dataset layer takes it
+#: from its caller (``physics.rigid_body.RigidBodyDynamics.gravity``), it builds no dynamics.
+GravityTorque = Callable[[np.ndarray], np.ndarray]
+
+
+def gravity_findings(
+    position: np.ndarray,
+    label: np.ndarray,
+    robot: RobotConfig,
+    gravity: GravityTorque,
+    *,
+    quantity: str = 'motor current',
+) -> list[Finding]:
+    """``nominal_findings`` against the gravity torque of the robot's URDF.
+
+    Args:
+        position: (N, n) positions [rad] in the robot's joint order.
+        label: (N, n) currents [A] ('motor current') or joint torques [N*m].
+        gravity: the robot's gravity torque at positions (``GravityTorque``).
+        quantity: what the label is.
+
+    Rows with a non-finite value are left out; at most ``NOMINAL_MAX_SAMPLES`` rows are used.
+    """
+    position = np.asarray(position, dtype=float)
+    label = np.asarray(label, dtype=float)
+    rows = np.isfinite(position).all(axis=1) & np.isfinite(label).all(axis=1)
+    position, label = position[rows], label[rows]
+    if len(position) < 3:
+        return []
+    stride = -(-len(position) // NOMINAL_MAX_SAMPLES)
+    position, label = position[::stride], label[::stride]
+    if quantity == 'motor current':
+        label = label * torque_per_ampere(robot.drives)
+    nominal = gravity(position)
+    return nominal_findings(label, nominal, robot.joints, robot.limits.torque, quantity=quantity)
+
+
+def sampling_problem(stamps_ns: np.ndarray, period_s: float, where: str) -> str | None:
+    """How a topic's stamps contradict the robot's IPO period, or None when they do not.
+
+    Train's rule (``preprocess.regularise``): every stamp lies within ``SAMPLING_TOLERANCE``
+    periods of the IPO grid laid from its stretch's first stamp, one per slot; whole multiples up
+    to ``SAMPLING_MAX_PERIODS`` periods are filled by interpolation, longer steps are gaps
+    (``load_recording``). A stretch ends at such a gap or a stamp that does not increase (both
+    reported on their own). The median positive step names the sampling period found.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    steps = np.diff(stamps)
+    positive = steps[steps > 0]
+    if not positive.size or not period_s > 0:
+        return None
+    period_ns = period_s * 1e9
+    step_s = float(np.median(positive)) * 1e-9
+    ratio = step_s / period_s
+    head = (
+        f"{where}: sampled every {step_s * 1e3:.4g} ms (median stamp step), the robot's IPO "
+        f'period is {period_s * 1e3:g} ms'
+    )
+    remedy = 'record at the IPO period, or give the robot config whose ipo_period_s it has'
+    whole = round(ratio)
+    if abs(ratio - whole) <= SAMPLING_TOLERANCE and 2 <= whole <= SAMPLING_MAX_PERIODS:
+        return (
+            f'{head}: one sample every {whole} IPO cycles, so train fills {whole - 1} of '
+            f'{whole} samples by interpolation; {remedy}'
+        )
+    if ratio > SAMPLING_MAX_PERIODS:
+        return (
+            f'{head}: train refuses steps over {SAMPLING_MAX_PERIODS:g} periods as gaps; {remedy}'
+        )
+    breaks = (steps <= 0) | (steps > SAMPLING_MAX_PERIODS * period_ns)
+    starts = np.concatenate(([0], np.flatnonzero(breaks) + 1))
+    origin = stamps[starts[np.searchsorted(starts, np.arange(stamps.size), side='right') - 1]]
+    offsets = (stamps - origin).astype(float)
+    jitter = np.abs(offsets - np.round(offsets / period_ns) * period_ns)
+    off = np.flatnonzero(jitter > SAMPLING_TOLERANCE * period_ns)
+    if not off.size and abs(ratio - 1.0) <= SAMPLING_TOLERANCE:
+        return None
+    k = int(off[0]) if off.size else 1
+    return (
+        f'{head}: sample {k} (stamp {int(stamps[k])} ns) lies {jitter[k] * 1e-6:.3f} ms off the '
+        f'IPO grid, and train refuses stamps more than {SAMPLING_TOLERANCE:.0%} of a period off '
+        f'it; {remedy}'
+    )
+
+
 def check_content(
     position: np.ndarray,
     label: np.ndarray | None,
@@ -249,6 +421,7 @@ def check_content(
     unit: str = 'A',
     duration_s: float | None = None,
     warn: bool = True,
+    nominal: tuple[RobotConfig, GravityTorque] | None = None,
 ) -> tuple[str, ...]:
     """Refuse a recording without signal, log and return the warnings (module docstring).
 
@@ -257,6 +430,8 @@ def check_content(
         label: (N, n) the label's recorded values (currents [A] or joint torques [N*m]), or None.
         where: the recording (bag path), for the messages.
         warn: log the warnings (they are returned either way).
+        nominal: the robot (in whose joint order ``joints`` are) and its gravity torque: adds
+            ``gravity_findings``.
 
     Raises:
         DatasetError: a label column is constant, or no joint moves (every such line).
@@ -267,6 +442,8 @@ def check_content(
             label, joints, quantity=quantity, unit=unit, duration_s=duration_s
         )
     refusals = [finding.text for finding in findings if finding.refuses]
+    if nominal is not None and label is not None and not refusals:
+        findings += gravity_findings(position, label, *nominal, quantity=quantity)
     if refusals:
         raise DatasetError(f'{where}: ' + '; '.join(refusals))
     warnings = tuple(finding.text for finding in findings)

@@ -32,7 +32,13 @@ from id_learning.bag import (
 )
 from id_learning.config_io import parse_yaml
 from id_learning.dataset.consistency import KinematicConsistency, gap_starts
-from id_learning.dataset.content import label_findings, motion_findings
+from id_learning.dataset.content import (
+    GravityTorque,
+    label_findings,
+    motion_findings,
+    sampling_problem,
+)
+from id_learning.dataset.inspect_nominal import with_nominal_lines
 from id_learning.dataset.inspect_plot import plot_report
 from id_learning.dataset.inspect_report import (
     FIELDS,
@@ -211,6 +217,15 @@ def _content(
         finding.text + ('; train and diagnose refuse the bag' if finding.refuses else '')
         for finding in findings
     )
+
+
+def _sampling(
+    name: str, stamps: list[int], topics: TopicConfig, robot: RobotConfig | None
+) -> str | None:
+    """A contract topic's stamps against the robot's IPO period (``content.sampling_problem``)."""
+    if robot is None or name not in (topics.joint_states, topics.motor_currents):
+        return None
+    return sampling_problem(np.array(stamps, dtype=np.int64), robot.ipo_period_s, name)
 
 
 @dataclass
@@ -434,6 +449,7 @@ def inspect_bag(
     path: Path | str,
     robot: RobotConfig | None = None,
     period_s: float | None = None,
+    gravity: GravityTorque | None = None,
 ) -> BagReport:
     """Read every message of a bag and report timing, value ranges, limits and the contract.
 
@@ -446,6 +462,8 @@ def inspect_bag(
         robot: robot to check joint limits and contract topic names against; without one the
             contract topics are '/joint_states' and '/motor_currents'.
         period_s: nominal sample period [s]; overrides the robot's IPO period.
+        gravity: the robot's gravity torque at positions: with ``robot``, the label of each
+            joint is judged against it (``content.gravity_findings``: sign and scale).
 
     Returns:
         The report; samples a validated load would reject are counted, never raised.
@@ -511,6 +529,7 @@ def inspect_bag(
                     contradictions=contradictions,
                     first_contradiction=first,
                     content=_content(series[name], label, name == topics.joint_states, robot),
+                    sampling=_sampling(name, acc.all_stamps, topics, robot),
                 )
             )
         else:
@@ -518,8 +537,10 @@ def inspect_bag(
             timing = _timing(stamps, np.arange(count), None, 'log')
             reports.append(TopicReport(name, msgtypes[name], count, timing))
 
+    reports = with_nominal_lines(reports, series, topics, robot, gravity)
+    order = (f'metadata: {info.order_note.removeprefix(f"{path}: ")}',) if info.order_note else ()
     report = BagReport(
-        metadata_mismatches=_metadata_mismatches(path, info.topics, every),
+        metadata_mismatches=order + _metadata_mismatches(path, info.topics, every),
         several_types=several_types,
         path=path,
         storage=info.storage,

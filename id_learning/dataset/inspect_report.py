@@ -150,7 +150,10 @@ class TopicReport:
             describe one motion (``dataset.consistency``; with a robot, finite samples only).
         first_contradiction: the first of them, described (sample, joint, mismatch), or None.
         content: what the signal lacks (``dataset.content``: a constant or clipped label, a
-            joint that does not move), one line each, the refusals marked.
+            joint that does not move, a label against the URDF's gravity torque), one line
+            each, the refusals marked.
+        sampling: how the topic's sampling contradicts the robot's IPO period
+            (``content.sampling_problem``), or None.
     """
 
     name: str
@@ -164,6 +167,7 @@ class TopicReport:
     contradictions: int = 0
     first_contradiction: str | None = None
     content: tuple[str, ...] = ()
+    sampling: str | None = None
 
 
 @dataclass(frozen=True)
@@ -339,6 +343,8 @@ def _topic_problems(topic: TopicReport) -> list[str]:
     timing = topic.timing
     if topic.count == 0:
         lines.append(f'{topic.name}: no messages')
+    if topic.sampling:
+        lines.append(topic.sampling)
     if timing.gap_count:
         first = timing.gaps[0]
         lines.append(

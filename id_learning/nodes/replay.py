@@ -27,6 +27,8 @@ played (``timing: log_time``) go out as recorded; the predictor refuses such sta
 The stamps read pass train's timing checks first, in the bag's order (``replay_span``): one that
 repeats or goes backwards, or a hole inside the span in the reference source, refuses the bag,
 naming it (never re-sorted silently, never left to show up as an impossible acceleration).
+A reference source sampled off the robot's IPO period is refused (without a reference, stamp
+timing only warns); with ``timing: log_time``, log times that do not advance refuse the bag.
 
 Jitter: for every cycle the lateness (publish time minus its deadline) is recorded; the median,
 99th percentile and maximum [ms] and the number of cycles later than one IPO period are logged at
@@ -79,11 +81,11 @@ from id_learning.nodes.params import (
 )
 from id_learning.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, reference_qos, sensor_qos
 from id_learning.nodes.replay_span import (
-    check_topics_order,
+    check_timing,
     check_topics_play,
     header_stamp_ns,
     source_stretch,
-    unpaired_tail,
+    stamp_notes,
 )
 from id_learning.nodes.runtime import ShellNode, run_node
 from id_learning.predictor.reference import reference_from_states
@@ -317,8 +319,7 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
             first=firsts[''],
         )
         states = sorted(states[stretch], key=lambda item: item[0])
-    if config.timing == 'stamp':
-        check_topics_order(path, config.topics, [item[:2] for item in keyed], firsts)
+    check_timing(path, config.topics, config.timing, [item[:2] for item in keyed], firsts)
     by_key: dict[int, Cycle] = {}
     for key, topic_index, data in sorted(keyed, key=lambda item: item[0]):
         by_key.setdefault(key, Cycle(0, key)).messages.append((topic_index, data))
@@ -337,16 +338,18 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     origin = cycles[0].stamp_ns
     for cycle in cycles:
         cycle.offset_ns = cycle.stamp_ns - origin
-    tail = None
-    if config.timing == 'stamp':  # log times differ per topic: only stamps pair messages
-        held = [[i for i, _ in cycle.messages] for cycle in cycles]
-        tail = unpaired_tail(path, config.topics, held, [c.stamp_ns for c in cycles])
     return ReplayPlan(
         tuple(config.topics),
         tuple(types[t] for t in config.topics),
         cycles,
         round(robot.ipo_period_s * NS_PER_S),
-        (tail,) if tail else (),
+        stamp_notes(
+            path,
+            config.topics,
+            config.timing,
+            [([i for i, _ in cycle.messages], cycle.stamp_ns) for cycle in cycles],
+            None if has_reference else robot.ipo_period_s,
+        ),
     )
 
 

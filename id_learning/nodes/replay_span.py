@@ -9,6 +9,12 @@ it to play instead; a hole in the padding read around the span only ends the pad
 Without that, a hole or a swapped stamp shows up later as an acceleration or a consistency error
 that names neither.
 
+Sampling (``refuse_off_period``): the reference source's stamps must keep the robot's IPO period
+(``dataset.content.sampling_problem``, train's rule): the reference is filtered and differentiated
+for that period, so a bag sampled at another is refused with both periods; without a reference
+the replay only warns. Log times (``check_log_times``): with ``timing: log_time`` they schedule
+the cycles, so log times that do not advance (all equal, or running backwards) refuse the bag.
+
 Kept apart from ``replay.py`` (no rclpy here): the checks see only header stamps (read with
 ``header_stamp_ns``), keys, topic indices and counts.
 """
@@ -21,23 +27,74 @@ from pathlib import Path
 import numpy as np
 
 from id_learning.bag.messages import typestore
+from id_learning.dataset.content import sampling_problem
 from id_learning.dataset.plausibility import check_stamps
 from id_learning.errors import BagError, DatasetError
 from id_learning.predictor.guards import stamp_problem
 
 __all__ = [
+    'LOG_TIME_STUCK_SHARE',
     'MAX_GAP_PERIODS',
+    'check_log_times',
     'check_stamp_order',
+    'check_timing',
     'check_topics_order',
     'check_topics_play',
     'header_stamp_ns',
+    'refuse_off_period',
     'source_stretch',
+    'stamp_notes',
     'unpaired_tail',
 ]
 
 #: The longest silence within a played stretch [IPO periods]: train's (``load_recording``).
 MAX_GAP_PERIODS = 3.0
 NS_PER_S = 1_000_000_000
+#: Log times that do not advance in more than this share of a topic's steps cannot schedule it.
+LOG_TIME_STUCK_SHARE = 0.1
+
+
+def check_log_times(path: Path, topics: Sequence[str], keyed: Sequence[tuple[int, int]]) -> None:
+    """Refuse ``timing: log_time`` on a topic whose log times do not advance.
+
+    Args:
+        path: the bag (for the message).
+        topics: the played topics.
+        keyed: (log time [ns], topic index) of each message in the span, as read.
+
+    Raises:
+        BagError: names the bag, the topic and what its log times do; suggests the stamps.
+    """
+    for k, topic in enumerate(topics):
+        logs = np.array([key for key, index in keyed if index == k], dtype=np.int64)
+        steps = np.diff(logs)
+        stuck = int(np.count_nonzero(steps <= 0))
+        if not steps.size or stuck <= LOG_TIME_STUCK_SHARE * steps.size:
+            continue
+        what = (
+            f'all {logs.size} log times are {int(logs[0])} ns'
+            if stuck == steps.size and not steps.any()
+            else f'log times repeat in {int(np.count_nonzero(steps == 0))} and run backwards in '
+            f'{int(np.count_nonzero(steps < 0))} of {steps.size} steps'
+        )
+        raise BagError(
+            f'{path}: {topic}: {what}, so timing:=log_time cannot pace a real-time replay (it '
+            'would publish them in bursts): use timing:=stamp (the header stamps)'
+        )
+
+
+def refuse_off_period(where: str, stamps_ns: Sequence[int], period_s: float) -> None:
+    """Refuse a reference source sampled at another period than the robot's IPO period.
+
+    Raises:
+        BagError: ``content.sampling_problem``'s line (both periods), and why nothing plays.
+    """
+    problem = sampling_problem(np.asarray(stamps_ns, dtype=np.int64), period_s, where)
+    if problem is not None:
+        raise BagError(
+            f'{problem}; nothing is played: the reference is filtered and differentiated for '
+            'the IPO period'
+        )
 
 
 def header_stamp_ns(data: bytes, msgtype: str, where: str) -> int | None:
@@ -142,7 +199,8 @@ def source_stretch(
 
     Raises:
         BagError: a stamp repeats or goes backwards; a hole lies inside the span (named as train
-            names it, with the start offset or duration that plays around it).
+            names it, with the start offset or duration that plays around it); the stretch is
+            sampled off the IPO period (``refuse_off_period``).
     """
     remedy = (
         '; timing:=log_time with reference_mode:=none plays the bag as recorded, without a '
@@ -184,6 +242,7 @@ def source_stretch(
                     f"{after_s:.3f} s after the bag's start), across which no reference can be "
                     f'built: {instead}'
                 ) from err
+    refuse_off_period(where, np.sort(stamps[begin:end]).tolist(), period_s)
     return slice(begin, end)
 
 
@@ -246,3 +305,46 @@ def unpaired_tail(
         'recording; they are played as they are (train refuses such a tail unless '
         '--trim-unpaired-tail)'
     )
+
+
+def check_timing(
+    path: Path,
+    topics: Sequence[str],
+    timing: str,
+    keyed: Sequence[tuple[int, int]],
+    firsts: Mapping[str, int],
+) -> None:
+    """Refuse what the timing cannot play: stamps out of order ('stamp'), stuck log times."""
+    if timing == 'stamp':
+        check_topics_order(path, topics, keyed, firsts)
+    else:
+        check_log_times(path, topics, keyed)
+
+
+def stamp_notes(
+    path: Path,
+    topics: Sequence[str],
+    timing: str,
+    cycles: Sequence[tuple[Sequence[int], int]],
+    period_s: float | None,
+) -> tuple[str, ...]:
+    """What a replay timed by stamps warns of: an unpaired tail, and cycles off the IPO period.
+
+    Log times differ per topic: only stamps pair messages, so ``timing: log_time`` has none.
+
+    Args:
+        cycles: per cycle, the indices of the topics it holds and its stamp [ns].
+        period_s: the IPO period to hold the cycle stamps against; None where a reference is
+            built (its source was refused off the period already).
+    """
+    if timing != 'stamp':
+        return ()
+    stamps = [stamp for _, stamp in cycles]
+    tail = unpaired_tail(path, topics, [held for held, _ in cycles], stamps)
+    off = None
+    if period_s is not None:
+        found = sampling_problem(
+            np.array(stamps, dtype=np.int64), period_s, f'{path}: cycle stamps'
+        )
+        off = None if found is None else f'{found}; played as recorded'
+    return tuple(note for note in (tail, off) if note)

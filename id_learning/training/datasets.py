@@ -21,11 +21,13 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from id_learning.dataset.content import gravity_findings
 from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, prepare_dataset
-from id_learning.dataset.recording import check_recording_content, load_recording
+from id_learning.dataset.recording import Recording, check_recording_content, load_recording
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
 from id_learning.models.data import TrainingData
+from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 from id_learning.twin import read_noise_free_torque
 
@@ -162,7 +164,10 @@ def load_datasets(
         samples.append((str(bag), recording.stamps_ns, recording.position))
         # What load_recording warned of (a still joint, a clipped label), for the report too.
         found = check_recording_content(recording, config.target, warn=False)
-        warnings = [f'{bag}: {text}' for text in found]
+        nominal = _nominal_findings(recording, robot, config.target)
+        for text in nominal:  # load_recording logged the others
+            _LOG.warning('%s: %s', bag, text)
+        warnings = [f'{bag}: {text}' for text in (*found, *nominal)]
         for k, segment in enumerate(recording.segments()):
             try:
                 dataset = prepare_dataset(segment, robot, config, segment=k)
@@ -237,6 +242,17 @@ def refuse_shared_samples(recordings: Sequence[Samples], why: str) -> None:
                     f'{first[0]} and {second[0]} hold the same {shared.size} samples (stamps '
                     f'{int(shared[0])} to {int(shared[-1])} ns, {span_s:.1f} s): {why}'
                 )
+
+
+def _nominal_findings(recording: Recording, robot: RobotConfig, target: str) -> list[str]:
+    """The label against the URDF's gravity torque, per joint: sign and scale (warnings)."""
+    label = recording.current if target == 'motor' else recording.joint_torque
+    if label is None:
+        return []
+    quantity = 'motor current' if target == 'motor' else 'joint torque'
+    gravity = RigidBodyDynamics.from_config(robot).gravity
+    findings = gravity_findings(recording.position, label, robot, gravity, quantity=quantity)
+    return [finding.text for finding in findings]
 
 
 #: ``Dataset.extra`` key of what loading the recordings warned of (``dataset.content``).
