@@ -210,6 +210,9 @@ def _write_files(
         found = re.search(r'os error (\d+)', str(err))
         code = int(found.group(1)) if found else errno.EIO
         raise OSError(code, os.strerror(code), str(folder / WEIGHTS_FILE)) from err
+    # safetensors creates its file 0600: as readable as the folder (made under the umask, as
+    # model.json is), so that a predictor node running as another user can load the artifact.
+    os.chmod(folder / WEIGHTS_FILE, folder.stat().st_mode & 0o666)
     settings, fitted, extra = contents
     document = ModelDocument(
         **extra,

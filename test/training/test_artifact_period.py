@@ -37,3 +37,12 @@ def test_a_sequence_model_at_another_period_is_refused(mabi, now_s):
         _check_period(lstm, 0.008, Path('runs/x/models/lstm'))
     _check_period(lstm, now_s, Path('runs/x/models/lstm'))  # its own period: accepted
     _check_period(lstm, None, Path('runs/x/models/lstm'))  # a file from before: accepted
+
+
+def test_the_weights_are_as_readable_as_model_json(run):
+    folder = run.out / 'models' / 'mlp'
+    files = ('model.json', 'weights.safetensors')
+
+    modes = {name: (folder / name).stat().st_mode & 0o777 for name in files}
+
+    assert modes['weights.safetensors'] == modes['model.json']
