@@ -339,7 +339,9 @@ def _recorder_over(run: Path) -> Outcome:
 def _run_cases(fx: Fixtures) -> Iterator[Case]:
     """Cases on the fixture run: evaluations over it, an interrupted copy, full disks."""
     assert fx.run_dir is not None
-    run, bag = fx.run_dir, str(fx.bag)
+    # The run's own training bag (its test part is scored): fx.bag holds the same samples under
+    # another hash, which evaluate refuses as training samples scored as unseen.
+    run, bag = fx.run_dir, str(fx.path('twin'))
 
     def evaluate(out: Path, *extra: str, run_dir: Path = run) -> list[str]:
         return ['evaluate', '--run', str(run_dir), '--bag', bag, '--out', str(out), '--quiet',
