@@ -5,9 +5,14 @@ stops at the first record that is incomplete (the torn tail) or does not decode 
 compressed data or CRC is damaged). Everything before it -- schemas, channels and every message of
 the complete chunks -- is written again with ``BagWriter``, message bytes and log times unchanged,
 so the recovered messages are a prefix of what was recorded. A chunk torn by the cut is not lost
-whole: its compressed bytes are decompressed as a stream as far as they go (zstd or none), and
-every record complete within them is kept (the chunk's CRC cannot be checked; each record's
-length is).
+whole: its compressed bytes are decompressed as a stream as far as they go (zstd, lz4 or none),
+and every record complete within them is kept (the chunk's CRC cannot be checked; each record's
+length is). The stop reason names the chunk (its offset and compression).
+
+Nothing readable is ever lost: a result with no message while the files hold bytes past their
+header is refused (nothing is written, in place or to ``out``); and when the scan stopped at data
+it could not decode (a damaged chunk, a compression it cannot stream), in place the originals are
+kept as ``<file>.damaged`` whatever ``keep_damaged`` says, since a better reader may get more.
 
 Safety: the rebuilt bag is written to a hidden sibling folder and read back (per-topic counts must
 match the scan) before anything of the original is touched. In place, the damaged files are then
@@ -25,25 +30,21 @@ import logging
 import os
 import re
 import shutil
-import struct
 import tempfile
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from io import BytesIO
+from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
 
 import yaml
-import zstandard
-from mcap.data_stream import ReadDataStream
-from mcap.exceptions import EndOfFile, McapError
-from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Footer, McapRecord, Message, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
 from rosbags.typesys.base import TypesysError
 
 from id_learning.bag.messages import message_definition
 from id_learning.bag.reader import TopicInfo, bag_info
+from id_learning.bag.recover_scan import (
+    DAMAGED_SUFFIX,
+    FileScan,
+    Topics,
+    scan_file,
+)
 from id_learning.bag.writer import BagWriter
 from id_learning.errors import BagError
 from id_learning.outputs import check_target, os_reason, output_lock
@@ -51,38 +52,6 @@ from id_learning.outputs import check_target, os_reason, output_lock
 __all__ = ['FileScan', 'RecoverReport', 'recover_bag']
 
 _LOG = logging.getLogger(__name__)
-
-MCAP_MAGIC = b'\x89MCAP0\r\n'
-DAMAGED_SUFFIX = '.damaged'
-# What a damaged record or chunk raises while being parsed or decompressed (CRC errors are
-# ValueErrors; truncated fixed-size fields are struct errors).
-_DAMAGE = (McapError, struct.error, ValueError, zstandard.ZstdError)
-
-
-@dataclass(frozen=True)
-class FileScan:
-    """What the scan of one ``.mcap`` file found.
-
-    Attributes:
-        name: file name inside the bag folder.
-        size_bytes: file size [bytes].
-        valid_bytes: offset just past the last complete record [bytes].
-        messages: complete messages found.
-        is_complete: the file ends with its footer and closing magic (the writer finished it).
-        stop_reason: why the scan stopped before the footer, or None.
-    """
-
-    name: str
-    size_bytes: int
-    valid_bytes: int
-    messages: int
-    is_complete: bool
-    stop_reason: str | None = None
-
-    @property
-    def bytes_discarded(self) -> int:
-        """Bytes after the last complete record, lost with the torn tail."""
-        return self.size_bytes - self.valid_bytes
 
 
 @dataclass(frozen=True)
@@ -135,204 +104,12 @@ class RecoverReport:
             )
         lines += [f'  topic {t.name} [{t.msgtype}]: {t.count} messages' for t in self.topics]
         lines += [f'  kept damaged original {path}' for path in self.damaged_kept]
+        lines += [
+            f'  {scan.name}: original kept: {scan.undecoded}'
+            for scan in self.files
+            if scan.undecoded
+        ]
         return '\n'.join(lines)
-
-
-@dataclass
-class _Topics:
-    """Topics seen over all files of a bag: channel ids are per file, topic names are not."""
-
-    msgtypes: dict[str, str] = field(default_factory=dict)
-    counts: dict[str, int] = field(default_factory=dict)
-    schema_texts: dict[str, bytes] = field(default_factory=dict)
-
-    def add(self, file: Path, topic: str, msgtype: str, schema_text: bytes) -> None:
-        known = self.msgtypes.get(topic)
-        if known is None:
-            self.msgtypes[topic] = msgtype
-            self.counts[topic] = 0
-            self.schema_texts.setdefault(msgtype, schema_text)
-        elif known != msgtype:
-            raise BagError(
-                f'{file}: topic {topic} has type {msgtype} here and {known} in an earlier file'
-            )
-
-    def infos(self) -> tuple[TopicInfo, ...]:
-        return tuple(
-            TopicInfo(name, kind, self.counts[name]) for name, kind in self.msgtypes.items()
-        )
-
-
-_MessageSink = Callable[[str, int, bytes], None]
-
-
-class _Bounded:
-    """A binary stream whose reads never ask for more than the file has left.
-
-    A damaged length field can claim exabytes; reading it as is would raise MemoryError or
-    OverflowError. Clamped, the read comes back short and the record counts as torn.
-    """
-
-    def __init__(self, stream: BinaryIO, size: int) -> None:
-        self._stream = stream
-        self._size = size
-
-    def read(self, length: int = -1) -> bytes:
-        left = self._size - self._stream.tell()
-        return self._stream.read(left if length < 0 else min(length, left))
-
-    def tell(self) -> int:
-        return self._stream.tell()
-
-
-def _torn_chunk_records(raw: bytes) -> list[McapRecord]:
-    """The records complete within a chunk record cut short (``raw`` from its opcode on).
-
-    Chunk layout: opcode, length (u64), start and end time (u64 each), uncompressed size (u64),
-    CRC (u32), compression (u32 length + text), records (u64 length + bytes).
-    """
-    fixed = struct.Struct('<BQQQQI')
-    if len(raw) < fixed.size + 4 or raw[0] != Opcode.CHUNK.value:
-        return []
-    pos = fixed.size
-    (name_length,) = struct.unpack_from('<I', raw, pos)
-    pos += 4
-    compression = raw[pos : pos + name_length].decode('utf-8', errors='replace')
-    pos += name_length + 8  # the records' byte length follows the name
-    compressed = raw[pos:]
-    if compression == 'zstd':
-        try:
-            data = zstandard.ZstdDecompressor().decompressobj().decompress(compressed)
-        except zstandard.ZstdError:
-            return []
-    elif compression == '':
-        data = compressed
-    else:
-        return []
-    readers: dict[int, Callable[[ReadDataStream], McapRecord]] = {
-        Opcode.SCHEMA.value: Schema.read,
-        Opcode.CHANNEL.value: Channel.read,
-    }
-    records: list[McapRecord] = []
-    at = 0
-    while at + 9 <= len(data):
-        opcode = data[at]
-        (length,) = struct.unpack_from('<Q', data, at + 1)
-        end = at + 9 + length
-        if end > len(data):
-            break  # the record the cut went through
-        stream = ReadDataStream(BytesIO(data[at + 9 : end]))
-        try:
-            if opcode == Opcode.MESSAGE.value:
-                records.append(Message.read(stream, length))
-            elif opcode in readers:
-                records.append(readers[opcode](stream))
-        except _DAMAGE:
-            break
-        at = end
-    return records
-
-
-def _scan_file(file: Path, topics: _Topics, sink: _MessageSink | None) -> FileScan:
-    """Read the complete records of one MCAP file; pass each message to sink in file order."""
-    size = file.stat().st_size
-    with file.open('rb') as stream:
-        head = stream.read(len(MCAP_MAGIC))
-        if head != MCAP_MAGIC[: len(head)]:
-            raise BagError(f'{file}: not an MCAP file (starts with {head!r})')
-        if len(head) < len(MCAP_MAGIC):
-            reason = 'empty file' if not head else 'file ends inside the MCAP magic'
-            return FileScan(file.name, size, 0, 0, is_complete=False, stop_reason=reason)
-        schemas: dict[int, Schema] = {}
-        channels: dict[int, tuple[str, str]] = {}
-        messages = 0
-        valid = stream.tell()
-        footer_seen = False
-        stop_reason: str | None = None
-
-        def take(record: object) -> None:
-            nonlocal messages
-            if isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel):
-                schema = schemas.get(record.schema_id)
-                if schema is None or record.message_encoding != 'cdr':
-                    raise BagError(
-                        f'{file}: topic {record.topic} has no schema or encoding '
-                        f'{record.message_encoding!r}; only CDR messages of ROS 2 types are '
-                        'recovered'
-                    )
-                topics.add(file, record.topic, schema.name, schema.data)
-                channels[record.id] = (record.topic, schema.name)
-            elif isinstance(record, Message):
-                channel = channels.get(record.channel_id)
-                if channel is None:
-                    raise BagError(
-                        f'{file}: message at log time {record.log_time} ns names channel '
-                        f'{record.channel_id}, which the file never declares'
-                    )
-                topics.counts[channel[0]] += 1
-                messages += 1
-                if sink is not None:
-                    sink(channel[0], record.log_time, record.data)
-
-        # Magic checked above; the closing magic after the footer is still read and checked.
-        # No record size limit: a record longer than what is left is the torn tail, and the
-        # bounded stream turns it into a short read instead of a huge allocation.
-        reader = StreamReader(
-            _Bounded(stream, size),  # type: ignore[arg-type]  # duck-typed: read() is all it uses
-            skip_magic=True,
-            emit_chunks=True,
-            record_size_limit=None,
-        )
-        records = reader.records
-        while True:
-            try:
-                record = next(records)
-            except StopIteration:
-                break
-            except _DAMAGE as err:
-                # Truncation shows as EndOfFile, or as a struct error in a short fixed-size field.
-                at_end = isinstance(err, EndOfFile) or stream.tell() >= size
-                stop_reason = (
-                    'file ends inside a record'
-                    if at_end
-                    else f'damaged record: {err or type(err).__name__}'
-                )
-                if at_end:
-                    stream.seek(valid)
-                    torn = _torn_chunk_records(stream.read())
-                    before = messages
-                    for item in torn:
-                        take(item)
-                    if messages > before:
-                        stop_reason = (
-                            f'file ends inside a chunk; {messages - before} messages kept from '
-                            'its complete part'
-                        )
-                break
-            if isinstance(record, Chunk):
-                try:
-                    inner = breakup_chunk(record, validate_crc=True)
-                except _DAMAGE as err:
-                    stop_reason = f'damaged chunk: {err or type(err).__name__}'
-                    break
-                for item in inner:
-                    take(item)
-            else:
-                take(record)
-                footer_seen = footer_seen or isinstance(record, Footer)
-            valid = stream.tell()
-        if stop_reason is None:
-            valid = stream.tell()
-    return FileScan(
-        name=file.name,
-        size_bytes=size,
-        valid_bytes=valid,
-        messages=messages,
-        is_complete=footer_seen and stop_reason is None,
-        stop_reason=stop_reason,
-    )
 
 
 def _mcap_files(path: Path) -> list[Path]:
@@ -355,7 +132,7 @@ def _metadata_files(path: Path) -> set[str] | None:
         return None
 
 
-def _is_intact(path: Path, scans: list[FileScan], topics: _Topics) -> bool:
+def _is_intact(path: Path, scans: list[FileScan], topics: Topics) -> bool:
     """Complete files, and metadata that rosbags opens and that agrees with the scan."""
     if not all(scan.is_complete for scan in scans):
         return False
@@ -370,7 +147,7 @@ def _is_intact(path: Path, scans: list[FileScan], topics: _Topics) -> bool:
     }
 
 
-def _check_types(path: Path, topics: _Topics) -> None:
+def _check_types(path: Path, topics: Topics) -> None:
     """Require every type to be known to the typestore BagWriter takes definitions from."""
     for msgtype, schema_text in topics.schema_texts.items():
         names = [name for name, kind in topics.msgtypes.items() if kind == msgtype]
@@ -391,13 +168,13 @@ def _check_types(path: Path, topics: _Topics) -> None:
             )
 
 
-def _write(target: Path, files: list[Path], topics: _Topics) -> tuple[FileScan, ...]:
+def _write(target: Path, files: list[Path], topics: Topics) -> tuple[FileScan, ...]:
     """Write the recovered messages to a new bag folder and read its metadata back."""
-    rescanned = _Topics()
+    rescanned = Topics()
     with BagWriter(target) as writer:
         for name, msgtype in topics.msgtypes.items():
             writer.add_topic(name, msgtype)
-        scans = tuple(_scan_file(file, rescanned, writer.write) for file in files)
+        scans = tuple(scan_file(file, rescanned, writer.write) for file in files)
     expected = {t.name: t.count for t in topics.infos()}
     got = {t.name: t.count for t in bag_info(target).topics}
     if got != expected:
@@ -499,15 +276,16 @@ def recover_bag(
         out: where to write the recovered bag (a new folder; the original is left untouched).
             None recovers in place (see the module docstring for the order of steps).
         keep_damaged: in place, keep the replaced originals as ``<file>.damaged``; otherwise they
-            are deleted once the rebuilt bag has been read back. Ignored with ``out``.
+            are deleted once the rebuilt bag has been read back, unless the scan left data it
+            could not decode (``FileScan.undecoded``). Ignored with ``out``.
 
     Returns:
         What was scanned, recovered and discarded.
 
     Raises:
         BagError: path is not a folder of ``.mcap`` files, a file is not MCAP, a type is unknown,
-            ``out`` exists, a folder to write cannot be written, or the rebuilt bag does not
-            read back.
+            no message could be read (``_refuse_empty``), ``out`` exists, a folder to write
+            cannot be written, or the rebuilt bag does not read back.
         OutputError: ``out`` is refused (``outputs.check_target``), or another process writes
             the folder recovered into (named by its pid).
     """
@@ -528,15 +306,18 @@ def recover_bag(
     with contextlib.ExitStack() as lock:
         if not had_metadata:  # torn for sure: refused before the long scan, not after
             target = _prepare_output(path, target, lock)
-        topics = _Topics()
-        scans = [_scan_file(file, topics, None) for file in files]
+        topics = Topics()
+        scans = [scan_file(file, topics, None) for file in files]
         if had_metadata and _is_intact(path, scans, topics):
             _LOG.info('%s: bag is complete with valid metadata; nothing to recover', path)
             return RecoverReport(path, path, True, had_metadata, tuple(scans), topics.infos())
         _check_types(path, topics)
+        _refuse_empty(path, target, scans)
         if had_metadata:
             target = _prepare_output(path, target, lock)
-        kept = _rebuild(path, target, files, tuple(scans), topics, keep_damaged=keep_damaged)
+        # What the scan could not decode may still be read by a better reader: keep it.
+        keep = keep_damaged or any(scan.undecoded for scan in scans)
+        kept = _rebuild(path, target, files, tuple(scans), topics, keep_damaged=keep)
     report = RecoverReport(
         path=path,
         output=target or path,
@@ -557,12 +338,36 @@ def recover_bag(
     return report
 
 
+def _refuse_empty(path: Path, target: Path | None, scans: list[FileScan]) -> None:
+    """Refuse a result with no message: into ``target`` always, in place when bytes are lost.
+
+    An empty bag into a new folder says nothing the scan did not; in place it would replace
+    files whose bytes past the header might hold messages a better reader gets back.
+
+    Raises:
+        BagError: no message recovered (each file's size and why its scan stopped).
+    """
+    if any(scan.messages for scan in scans):
+        return
+    if target is None and not any(scan.bytes_discarded for scan in scans):
+        return  # nothing there to lose (empty files): an empty valid bag is what they hold
+    where = f'nothing written to {target}' if target is not None else 'nothing replaced'
+    files = '; '.join(
+        f'{scan.name} ({scan.size_bytes} bytes): {scan.stop_reason or "no message"}'
+        for scan in scans
+    )
+    raise BagError(
+        f'{path}: no complete message could be read ({files}); {where}, the original is left '
+        'as it is'
+    )
+
+
 def _rebuild(
     path: Path,
     target: Path | None,
     files: list[Path],
     scans: tuple[FileScan, ...],
-    topics: _Topics,
+    topics: Topics,
     *,
     keep_damaged: bool,
 ) -> tuple[Path, ...]:
