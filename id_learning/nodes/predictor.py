@@ -61,6 +61,8 @@ from typing import Any, cast
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
@@ -197,12 +199,14 @@ class Predictor(ShellNode):
         self.latency_from = (
             'callback_start' if config.executor == 'events' else 'middleware_receive'
         )
-        # Half the stale threshold: a stale reference is noticed within 1.5 thresholds.
+        # Half the stale threshold: a stale reference is noticed within 1.5 thresholds. On the
+        # steady clock: a /clock that stops (use_sim_time) must not stop them, nor diagnostics.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._watchdog = self.create_timer(
-            max(self.core.config.stale_after_ns * 0.5e-9, 0.002), self._check_stale
+            max(self.core.config.stale_after_ns * 0.5e-9, 0.002), self._check_stale, clock=steady
         )
         self._diagnostics_timer = self.create_timer(
-            config.diagnostics_period_s, self._publish_diagnostics
+            config.diagnostics_period_s, self._publish_diagnostics, clock=steady
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._measured = self._start_adaptation()
@@ -239,12 +243,7 @@ class Predictor(ShellNode):
             + '; '
             + (self.core.inputs.describe() if self.core.inputs else 'inputs not recorded')
         )
-        self._warn_about_setup()
-
-    def _warn_about_setup(self) -> None:
-        """Say once, at start, what in the artifact's setup will cost accuracy."""
-        for warning in setup_warnings(self.core, self.config):
-            self.get_logger().warning(warning)
+        self._say([(True, text) for text in setup_warnings(self.core, self.config)])  # once
 
     # -- the hot path -----------------------------------------------------------------------------
     def _warm_up(self) -> None:
@@ -312,10 +311,10 @@ class Predictor(ShellNode):
             )
 
     def _start_adaptation(self) -> Any:
-        """With the core's adaptation loop (rls, rls_inertia), its currents subscription."""
-        self._adaptation_file: Path | None = None
+        """With the core's adaptation loop: continue from the stored file; the currents' topic."""
         if self.core.adaptation is None:
             return None
+        self._say([self.core.adaptation.load(Path(self.config.artifact), self.names).line()])
         with endpoint(self, 'measured_topic', self.config.measured_topic):
             return self.create_subscription(
                 JointState, self.config.measured_topic, self._on_measured, reference_qos(64)
@@ -327,17 +326,27 @@ class Predictor(ShellNode):
         if loop is None:
             return
         try:
-            stamp = time_to_ns(msg.header.stamp)
+            topic = self._measured.topic_name
             if self.core.is_stale:
-                loop.adapter.counters.frozen += 1
-                return
-            loop.measured_message(stamp, list(msg.name), list(msg.effort), self.names)
+                loop.freeze('stale', f'{topic}: the reference is stale')
+            else:
+                stamp = time_to_ns(msg.header.stamp)
+                loop.measured_message(stamp, list(msg.name), list(msg.effort), self.names, topic)
+            self._say(loop.take_reasons())  # each kind of reason once
         except Exception as err:  # the edge of the callback: report and keep running
             self.counts.callback_errors += 1
             self.get_logger().error(
                 f'measured-current callback failed: {type(err).__name__}: {err}',
                 throttle_duration_sec=self.config.log_throttle_s,
             )
+
+    def _say(self, lines: Sequence[tuple[bool, str] | None]) -> None:
+        """Log each (is a warning, line) at the warning level, or else at info."""
+        for is_warning, line in filter(None, lines):
+            if is_warning:
+                self.get_logger().warning(line)
+            else:
+                self.get_logger().info(line)
 
     def _refuse_stamp(self, problem: str) -> None:
         """Refuse a sample whose header stamp is no time (counted as rejected invalid_stamp)."""
@@ -525,15 +534,8 @@ class Predictor(ShellNode):
         if self._is_closed:
             return
         self._is_closed = True
-        if self.core.adaptation is not None:
-            try:
-                self._adaptation_file = self.core.adaptation.save(
-                    Path(self.config.artifact), tuple(self.names)
-                )
-            except OSError as err:
-                self.get_logger().error(f'adapted parameters not saved: {err}')
-            else:
-                self.get_logger().info(f'adapted parameters saved to {self._adaptation_file}')
+        if self.core.adaptation is not None:  # saved only if it learnt, atomically
+            self._say([self.core.adaptation.finish(Path(self.config.artifact), self.names)])
         self.get_logger().info(final_report(self.core, self.counts, self.latency_s.summary()))
 
 

@@ -18,10 +18,13 @@ adaptation inside a control loop needs them:
   then stay biased for the whole shift);
 - bounded covariance: each parameter's variance is capped at its prior one, so that
   forgetting without excitation (a robot standing still) cannot wind it up;
-- frozen input: a non-finite sample, or one the caller marks stale, changes nothing.
+- frozen input: a non-finite sample, or one the caller marks stale, changes nothing; the loop
+  keeps why (``frozen_reason``), and each kind of reason once for its caller to say.
 
 The adapter is plain numpy (no ROS): the predictor node updates it from measured currents and
-adds ``correction`` to every prediction.
+adds ``correction`` to every prediction. Across sessions the learnt values are kept in
+``<artifact>.adaptation.json`` (``adaptation_store``): continued from at start, written back
+only by a session that learnt.
 """
 
 from __future__ import annotations
@@ -37,13 +40,18 @@ import numpy as np
 from id_learning.errors import ConfigError
 from id_learning.physics.friction import coulomb
 from id_learning.predictor.adaptation_inertia import InertiaAdapter, stabilised
+from id_learning.predictor.adaptation_store import (
+    ADAPTATION_JSON,
+    StoredBase,
+    adaptation_path,
+    load_base,
+    save_state,
+)
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import torque_per_ampere
 
 __all__ = ['ADAPTATION_JSON', 'AdaptationConfig', 'AdaptationLoop', 'FrictionAdapter']
 
-#: Where adapted parameters are saved beside (never over) an artifact.
-ADAPTATION_JSON = 'adaptation.json'
 _COLUMNS = ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
 #: The corrections are bounded to this share of the torque limits: a drift, not a new model.
 BOUND_SHARE = 0.1
@@ -189,6 +197,12 @@ class FrictionAdapter:
         self.counters.updates += 1
         return True
 
+    def restore(self, estimate: np.ndarray, error_scale: np.ndarray) -> None:
+        """Continue from a stored estimate (n, 3) and error scale (n,); the prior covariance."""
+        self._estimate = np.array(estimate, dtype=float)
+        self.theta = np.clip(self._estimate, -self.bounds, self.bounds)
+        self.error_scale = np.array(error_scale, dtype=float)
+
     @property
     def at_bounds(self) -> int:
         """Parameters whose estimate lies beyond its bound (the applied value is the bound)."""
@@ -200,6 +214,7 @@ class FrictionAdapter:
             'joints': list(joints),
             'columns': list(_COLUMNS),
             'theta': self.theta.tolist(),
+            'estimate': self._estimate.tolist(),
             'error_scale_nm': self.error_scale.tolist(),
             'updates': self.counters.updates,
             'gated_joint_samples': self.counters.gated,
@@ -214,11 +229,10 @@ class FrictionAdapter:
     ) -> Path:
         """Write the state as ``<artifact>.adaptation.json`` beside the artifact folder.
 
-        Never into it: the artifact's files are hashed. A restart starts from zero again (the
-        file is a record of what was learnt, not loaded back).
+        Never into it: the artifact's files are hashed. Unconditional: the predictor saves
+        through ``AdaptationLoop.save``, which keeps what an earlier session stored.
         """
-        artifact = Path(artifact).resolve()
-        path = artifact.parent / f'{artifact.name}.{ADAPTATION_JSON}'
+        path = adaptation_path(artifact)
         tmp = path.with_suffix('.tmp')
         state = self.state(joints) | (extra or {})
         tmp.write_text(json.dumps(state, indent=2), encoding='utf-8')
@@ -256,6 +270,31 @@ class AdaptationLoop:
         self.capacity = capacity
         self._pending: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]] = {}
         self.unpaired = 0
+        #: Why the latest sample was frozen ('' if none was), for /diagnostics.
+        self.frozen_reason = ''
+        #: (kind, text) of each kind of freeze reason, the first time it occurs: the caller
+        #: says it once and clears the list.
+        self.new_reasons: list[tuple[str, str]] = []
+        self._kinds_seen: set[str] = set()
+        #: What the stored file gave at start (``load``); None: not looked at.
+        self.base: StoredBase | None = None
+
+    def freeze(self, kind: str, reason: str) -> bool:
+        """Count a sample nothing was learnt from and why; False, as an update learning nothing.
+
+        ``kind``: stale, names, length or non_finite (each kind is said once).
+        """
+        self.adapter.counters.frozen += 1
+        self.frozen_reason = reason
+        if kind not in self._kinds_seen:
+            self._kinds_seen.add(kind)
+            self.new_reasons.append((kind, reason))
+        return False
+
+    @property
+    def session_updates(self) -> int:
+        """Updates the active estimator accepted in this session."""
+        return self.adapter.counters.updates if self.inertia is None else self.inertia.updates
 
     def serve(
         self,
@@ -284,10 +323,19 @@ class AdaptationLoop:
         out: np.ndarray = tau
         return out
 
-    def measured(self, stamp_ns: int, currents: np.ndarray, *, stale: bool = False) -> bool:
+    def measured(
+        self,
+        stamp_ns: int,
+        currents: np.ndarray,
+        *,
+        stale: bool = False,
+        names: Sequence[str] = (),
+        source: str = 'measured currents',
+    ) -> bool:
         """Learn from the currents (n,) [A] of one cycle; whether the friction adapter learnt.
 
         With the rigid body adapted too, the joint estimator (``InertiaAdapter``) learns alone.
+        ``names`` (the joints in order) and ``source`` (the topic) name a frozen sample's cause.
         """
         pair = self._pending.pop(stamp_ns, None)
         if pair is None:
@@ -295,21 +343,68 @@ class AdaptationLoop:
             return False
         v, regressor, tau_model = pair
         measured = self.torque_per_ampere * currents
+        if stale:
+            return self.freeze('stale', 'the reference is stale')
+        if not np.isfinite(measured).all():
+            bad = np.flatnonzero(~np.isfinite(measured)).tolist()
+            which = [names[j] for j in bad] if len(names) == len(measured) else bad
+            return self.freeze('non_finite', f'{source}: effort (current) of {which} not finite')
         if self.inertia is not None and regressor is not None:
-            if stale or not np.isfinite(measured).all():
-                self.adapter.counters.frozen += 1
-                return False
             return self.inertia.update(regressor, measured - tau_model)
-        return self.adapter.update(v, measured, tau_model, stale=stale)
+        return self.adapter.update(v, measured, tau_model)
 
-    def save(self, artifact: Path, joints: tuple[str, ...]) -> Path:
-        """Write the active estimator's state beside the artifact (``FrictionAdapter.save``).
+    def take_reasons(self) -> list[tuple[bool, str]]:
+        """(is a warning, log line) of each freeze reason new since the last call.
+
+        A stale reference is normal (the end of a motion): said at the info level.
+        """
+        lines = [
+            (
+                kind != 'stale',
+                f'adaptation learns nothing from a sample: {reason} (said once per kind; counted '
+                'as adaptation_frozen, the latest reason as adaptation_frozen_reason)',
+            )
+            for kind, reason in self.new_reasons
+        ]
+        self.new_reasons.clear()
+        return lines
+
+    def finish(self, artifact: Path, joints: Sequence[str]) -> tuple[bool, str]:
+        """``save`` at the end of a session: (is a warning, a line saying what was stored)."""
+        try:
+            saved = self.save(artifact, tuple(joints))
+        except OSError as err:
+            return True, f'adapted parameters not saved: {err}'
+        if saved is not None:
+            return False, f'adapted parameters saved to {saved[0]}: {saved[1]}'
+        path = self.base.path if self.base else adaptation_path(artifact)
+        why = self.frozen_reason or 'no paired currents'
+        return False, (
+            f'adaptation accepted no update this session ({self.adapter.counters.frozen} '
+            f'frozen samples, the latest: {why}); {path} is left as it was'
+        )
+
+    def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
+        """The active estimator's state, JSON-ready.
 
         With the rigid body adapted, its joint estimate (friction terms and base-parameter
         changes, ``InertiaAdapter.state``) replaces the unused friction adapter's.
         """
-        extra = {} if self.inertia is None else self.inertia.state() | {'mode': 'rls_inertia'}
-        return self.adapter.save(artifact, joints, extra)
+        extra = {} if self.inertia is None else self.inertia.state()
+        return self.adapter.state(joints) | extra
+
+    def load(self, artifact: Path, joints: Sequence[str]) -> StoredBase:
+        """Continue from ``<artifact>.adaptation.json`` when it fits (``adaptation_store``)."""
+        self.base = load_base(self, artifact, tuple(joints))
+        return self.base
+
+    def save(self, artifact: Path, joints: tuple[str, ...]) -> tuple[Path, str] | None:
+        """Write the state beside the artifact if this session learnt: (path, what), or None.
+
+        A file not looked at by ``load`` is not continued from: it is kept aside, not lost.
+        """
+        base = self.base or StoredBase(adaptation_path(artifact), problem='not loaded at start')
+        return save_state(self, joints, base)
 
     @classmethod
     def for_robot(
@@ -347,19 +442,34 @@ class AdaptationLoop:
         return cls(adapter, torque_per_ampere(drives)[order], inertia=body)
 
     def measured_message(
-        self, stamp_ns: int, names: Sequence[str], effort: Sequence[float], joints: Sequence[str]
+        self,
+        stamp_ns: int,
+        names: Sequence[str],
+        effort: Sequence[float],
+        joints: Sequence[str],
+        source: str = 'measured currents',
     ) -> bool:
         """``measured`` from a JointState's names and effort (the currents), in any order.
 
         A message whose names are not the joints, or whose effort does not match them, counts
-        as frozen input (nothing learnt).
+        as frozen input (nothing learnt), with the reason naming ``source`` (the topic).
         """
-        if len(names) != len(joints) or set(names) != set(joints) or len(effort) != len(names):
-            self.adapter.counters.frozen += 1
-            return False
+        if len(names) != len(joints) or set(names) != set(joints):
+            missing = [name for name in joints if name not in names]
+            extra = [name for name in names if name not in joints]
+            return self.freeze(
+                'names',
+                f"{source}: names {list(names)} are not the model's joints {list(joints)} "
+                f'(missing {missing}, unexpected {extra})',
+            )
+        if len(effort) != len(names):
+            return self.freeze(
+                'length',
+                f'{source}: effort has {len(effort)} values for {len(names)} names',
+            )
         index = {name: k for k, name in enumerate(names)}
         currents = np.array([effort[index[name]] for name in joints], dtype=float)
-        return self.measured(stamp_ns, currents)
+        return self.measured(stamp_ns, currents, names=joints, source=source)
 
     def report(self, joints: Sequence[str]) -> dict[str, object]:
         """Diagnostics key-values: counts and each joint's adapted parameters."""
@@ -369,6 +479,7 @@ class AdaptationLoop:
             'adaptation_gated': counters.gated if inertia is None else inertia.gated,
             'adaptation_frozen': counters.frozen,
             'adaptation_unpaired': self.unpaired,
+            'adaptation_frozen_reason': self.frozen_reason or 'none',
             'adaptation_at_bounds': self.adapter.at_bounds if inertia is None else 0,
         }
         theta = self.adapter.theta if self.inertia is None else self.inertia.friction

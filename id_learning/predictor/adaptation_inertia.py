@@ -152,6 +152,11 @@ class InertiaAdapter:
         self.updates += 1
         return True
 
+    def restore(self, estimate: np.ndarray, error_scale: np.ndarray) -> None:
+        """Continue from a stored estimate (3n + p,) and error scale (n,); the prior covariance."""
+        self.estimate = np.array(estimate, dtype=float)
+        self.error_scale = np.array(error_scale, dtype=float)
+
     def state(self) -> dict[str, Any]:
         """The estimated friction terms and base-parameter changes, JSON-ready."""
         return {

@@ -1,0 +1,204 @@
+"""The adaptation's learnt values across predictor sessions: ``<artifact>.adaptation.json``.
+
+A session starts from what the file holds (when it was written for the same joints and mode)
+and writes back only when it learnt something: a session that accepted no update (NaN currents,
+a reference always stale) leaves the file as it was, so that it never erases what an earlier one
+learnt. Writing is atomic (a temporary file, flushed to disk, then renamed over the old one). A
+file that cannot be continued from (unreadable, other joints or mode) is never overwritten: it is
+kept as ``<file>.previous`` (or ``.previous.N``) before a new one is written.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+__all__ = [
+    'ADAPTATION_JSON',
+    'AdaptationLoop',
+    'StoredBase',
+    'adaptation_path',
+    'load_base',
+    'save_state',
+]
+
+
+class _Estimator(Protocol):
+    """An adapter whose estimate a stored state continues."""
+
+    def restore(self, estimate: np.ndarray, error_scale: np.ndarray) -> None:
+        """Continue from a stored estimate and error scale (n,)."""
+
+
+class _BodyEstimator(_Estimator, Protocol):
+    """The inertial adapter: its estimate also holds the base parameters' changes."""
+
+    @property
+    def names(self) -> Sequence[str]:
+        """The base parameters' names."""
+
+
+class AdaptationLoop(Protocol):
+    """What the store needs of ``adaptation.AdaptationLoop`` (kept apart: no import cycle)."""
+
+    @property
+    def adapter(self) -> _Estimator:
+        """The friction adapter."""
+
+    @property
+    def inertia(self) -> _BodyEstimator | None:
+        """The inertial adapter (mode rls_inertia), else None."""
+
+    @property
+    def session_updates(self) -> int:
+        """Updates accepted in this session."""
+
+    def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
+        """The JSON-ready state to store."""
+
+
+#: Where adapted parameters are saved beside (never over) an artifact.
+ADAPTATION_JSON = 'adaptation.json'
+
+
+@dataclass(frozen=True)
+class StoredBase:
+    """What a session found in the file at start.
+
+    Attributes:
+        path: the file.
+        updates_before: accepted updates of the earlier sessions (0 when not continued from).
+        problem: why the file could not be continued from, or None (continued from).
+        found: the file was there at start.
+    """
+
+    path: Path
+    updates_before: int = 0
+    problem: str | None = None
+    found: bool = True
+
+    def line(self) -> tuple[bool, str] | None:
+        """(is a warning, what the session starts from) for the log; None: there was no file."""
+        if self.problem is not None:
+            return True, (
+                f'adaptation starts from zero: {self.path} cannot be continued from '
+                f'({self.problem}); it is kept as {self.path.name}.previous if this session '
+                'learns'
+            )
+        if not self.found:
+            return None
+        return False, (
+            f'adaptation continues from {self.path} ({self.updates_before} updates in earlier '
+            'sessions)'
+        )
+
+
+def adaptation_path(artifact: Path | str) -> Path:
+    """``<artifact>.adaptation.json`` beside the artifact folder (never in it: it is hashed)."""
+    artifact = Path(artifact).resolve()
+    return artifact.parent / f'{artifact.name}.{ADAPTATION_JSON}'
+
+
+def _mode(loop: AdaptationLoop) -> str:
+    return 'rls' if loop.inertia is None else 'rls_inertia'
+
+
+def _array(state: dict[str, Any], key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """A finite array of the given shape from the stored state (ValueError naming the key)."""
+    value = np.asarray(state.get(key), dtype=float)
+    if value.shape != shape or not np.isfinite(value).all():
+        raise ValueError(f'{key!r} is not {shape} finite numbers')
+    return value
+
+
+def _restore(loop: AdaptationLoop, state: dict[str, Any], joints: tuple[str, ...]) -> None:
+    """Set the loop's estimates from a stored state (ValueError: it does not fit the loop)."""
+    if state.get('joints') != list(joints):
+        raise ValueError(f"joints {state.get('joints')} are not the model's {list(joints)}")
+    if state.get('mode', 'rls') != _mode(loop):
+        raise ValueError(f'mode {state.get("mode", "rls")!r}, this session runs {_mode(loop)!r}')
+    n = len(joints)
+    scale = _array(state, 'error_scale_nm', (n,))
+    if loop.inertia is None:
+        estimate = _array(state, 'estimate', (n, 3)) if 'estimate' in state else None
+        theta = _array(state, 'theta', (n, 3))
+        loop.adapter.restore(theta if estimate is None else estimate, scale)
+        return
+    body = loop.inertia
+    if state.get('base_parameters') != list(body.names):
+        raise ValueError("its base parameters are not the robot model's")
+    friction = _array(state, 'theta', (n, 3))
+    change = _array(state, 'change', (len(body.names),))
+    body.restore(np.concatenate([friction.reshape(-1), change]), scale)
+
+
+def load_base(loop: AdaptationLoop, artifact: Path | str, joints: tuple[str, ...]) -> StoredBase:
+    """Continue the loop from the stored file when it fits; what was found (no file: zero)."""
+    path = adaptation_path(artifact)
+    if not path.exists():
+        return StoredBase(path, found=False)
+    try:
+        state = json.loads(path.read_text(encoding='utf-8'))
+        if not isinstance(state, dict):
+            raise ValueError('not a JSON object')
+        _restore(loop, state, joints)
+        before = int(state.get('updates_total', state.get('updates')) or 0)
+    except (OSError, ValueError, TypeError) as err:  # JSONDecodeError is a ValueError
+        return StoredBase(path, problem=str(err) or type(err).__name__)
+    return StoredBase(path, updates_before=before)
+
+
+def _aside(path: Path) -> Path:
+    """A free name beside ``path`` for a file that must not be overwritten."""
+    candidate = path.with_name(f'{path.name}.previous')
+    k = 1
+    while candidate.exists():
+        candidate = path.with_name(f'{path.name}.previous.{k}')
+        k += 1
+    return candidate
+
+
+def save_state(
+    loop: AdaptationLoop, joints: tuple[str, ...], base: StoredBase
+) -> tuple[Path, str] | None:
+    """Write the loop's state over ``base.path`` if this session learnt; (path, what) or None.
+
+    None: no accepted update this session, so the stored state is left as it was. Otherwise a
+    file that could not be continued from is moved aside first, and the new state is written
+    to a temporary file, flushed to disk and renamed over the old one.
+
+    Raises:
+        OSError: the file could not be written (the old one is then as it was).
+    """
+    updates = loop.session_updates
+    if updates == 0:
+        return None
+    state = loop.state(joints) | {
+        'mode': _mode(loop),
+        'updates': updates,
+        'updates_total': base.updates_before + updates,
+        'continued_from_earlier_sessions': base.problem is None and base.updates_before > 0,
+    }
+    path = base.path
+    moved = ''
+    if base.problem is not None and path.exists():
+        aside = _aside(path)
+        path.replace(aside)
+        moved = f'; the file it could not continue from is kept as {aside.name}'
+    tmp = path.with_name(f'.{path.name}.tmp')
+    with tmp.open('w', encoding='utf-8') as stream:
+        stream.write(json.dumps(state, indent=2))
+        stream.flush()
+        os.fsync(stream.fileno())
+    tmp.replace(path)
+    what = (
+        f'{updates} updates of this session on top of {base.updates_before} earlier '
+        f'({state["updates_total"]} in all){moved}'
+    )
+    return path, what
