@@ -257,7 +257,8 @@ def main() -> None:
     results: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as scratch:
         if args.artifacts:
-            artifacts = {kind: args.artifacts / kind for kind in args.kinds}
+            # Absolute: the node processes start elsewhere than this process's folder.
+            artifacts = {kind: args.artifacts.resolve() / kind for kind in args.kinds}
         else:
             artifacts = fit_quick_artifacts(Path(scratch), args.robot, args.kinds)
         bench = Bench(args.domain)
