@@ -8,7 +8,7 @@ from typing import Any
 from id_learning.dataset.preprocess import Dataset
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.pipeline import run_diagnosis
-from id_learning.errors import ConfigError
+from id_learning.errors import ConfigError, DatasetError
 from id_learning.physics.augmented import AugmentedModel
 from id_learning.robot.config import RobotConfig
 
@@ -56,7 +56,14 @@ def diagnose_training_part(
 ) -> tuple[AugmentedModel, dict[str, Any]]:
     """Diagnose the training part; the augmented model and a JSON-ready summary of the finding."""
     config = config or DiagnosisConfig()
-    result = run_diagnosis(training_part(dataset, config), robot, config)
+    try:
+        result = run_diagnosis(training_part(dataset, config), robot, config)
+    except DatasetError as err:  # its lengths are the training part's, not the recordings'
+        share = dataset.n_train / max(len(dataset.q), 1)
+        raise DatasetError(
+            f'{err}; these lengths are of the training part only ({share:.0%} of the '
+            f'recordings): the recordings need about {1 / max(share, 1e-9):.2g} times as long'
+        ) from err
     summary = {
         'source': 'diagnosis of the training part (its last 30 % held out)',
         'effects': [effect.label for effect in result.named_effects()],
