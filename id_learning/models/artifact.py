@@ -356,13 +356,13 @@ def read_artifact(
     folder = Path(folder)
     meta_path, weights_path = folder / METADATA_FILE, folder / WEIGHTS_FILE
     for path in (meta_path, weights_path):
-        kind = not_a_file(path)
-        if kind == 'no such file':
+        what = not_a_file(path)
+        if what == 'no such file':
             raise CheckpointError(
                 f'{folder}: not a model artifact (needs {METADATA_FILE} and {WEIGHTS_FILE})'
             )
-        if kind is not None:
-            raise CheckpointError(f'{path}: {kind}, not a regular file as an artifact holds')
+        if what is not None:
+            raise CheckpointError(f'{path}: {what}, not a regular file as an artifact holds')
     metadata = read_metadata(meta_path)
     if metadata.get('format') != ARTIFACT_FORMAT:
         raise CheckpointError(f'{meta_path}: format is not {ARTIFACT_FORMAT!r}')

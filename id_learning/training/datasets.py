@@ -227,16 +227,21 @@ def shared_stamps(first: Samples, second: Samples) -> np.ndarray:
     return out
 
 
+#: Two recordings that share this many moving samples hold the same motion. Fewer happen by
+#: chance: twin recordings leave one rest pose at one stamp by the same encoder count.
+MIN_SHARED_SAMPLES = 100
+
+
 def refuse_shared_samples(recordings: Sequence[Samples], why: str) -> None:
-    """Refuse two recordings that hold the same samples, naming both and the shared span.
+    """Refuse two recordings that hold the same motion, naming both and the shared span.
 
     Raises:
-        DatasetError: the first pair that shares samples.
+        DatasetError: the first pair that shares ``MIN_SHARED_SAMPLES`` moving samples or more.
     """
     for i, first in enumerate(recordings):
         for second in recordings[i + 1 :]:
             shared = shared_stamps(first, second)
-            if shared.size:
+            if shared.size >= MIN_SHARED_SAMPLES:
                 span_s = (int(shared[-1]) - int(shared[0])) * 1e-9
                 raise DatasetError(
                     f'{first[0]} and {second[0]} hold the same {shared.size} samples (stamps '
