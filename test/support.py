@@ -75,8 +75,12 @@ def write_contract_bag(
     names_mc: tuple[str, ...] | None = None,
     stamps_mc=None,
     topics: tuple[str, ...] = ('/joint_states', '/motor_currents'),
+    split_duration_ns: int | None = None,
 ) -> Path:
-    """Write a bag sample by sample, with hooks to break the contract on purpose."""
+    """Write a bag sample by sample, with hooks to break the contract on purpose.
+
+    ``split_duration_ns``: a new storage file every so many nanoseconds of log time.
+    """
     import numpy as np
 
     from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state
@@ -85,7 +89,7 @@ def write_contract_bag(
     names_mc = names_mc or recording.joints
     stamps_mc = recording.stamps_ns if stamps_mc is None else stamps_mc
     empty = np.empty(0)
-    with BagWriter(path) as writer:
+    with BagWriter(path, split_duration_ns=split_duration_ns) as writer:
         for topic in topics:
             writer.add_topic(topic, JOINT_STATE)
         for k, stamp in enumerate(recording.stamps_ns.tolist()):

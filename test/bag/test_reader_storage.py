@@ -11,10 +11,9 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from support import sine_recording
+from support import sine_recording, write_contract_bag
 
-from id_learning.bag import BagWriter, bag_info, encode_joint_state, iter_raw, read_joint_states
-from id_learning.bag.messages import JOINT_STATE
+from id_learning.bag import bag_info, iter_raw, read_joint_states
 from id_learning.dataset.inspect import inspect_bag
 from id_learning.dataset.recording import load_recording
 from id_learning.errors import BagError
@@ -27,20 +26,7 @@ def split_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A contract bag split into three storage files of 1.6 s each."""
     recording = sine_recording(N_SAMPLES)
     path = tmp_path_factory.mktemp('split') / 'bag'
-    empty = np.empty(0)
-    with BagWriter(path, split_duration_ns=1_600_000_000) as writer:
-        writer.add_topic('/joint_states', JOINT_STATE)
-        writer.add_topic('/motor_currents', JOINT_STATE)
-        for k, stamp in enumerate(recording.stamps_ns.tolist()):
-            q, v, i = recording.position[k], recording.velocity[k], recording.current[k]
-            writer.write(
-                '/joint_states', stamp, encode_joint_state(stamp, recording.joints, q, v, empty)
-            )
-            writer.write(
-                '/motor_currents',
-                stamp,
-                encode_joint_state(stamp, recording.joints, empty, empty, i),
-            )
+    write_contract_bag(path, recording, split_duration_ns=1_600_000_000)
     assert len(listed(path)) == 3
     return path
 

@@ -11,7 +11,7 @@ import yaml
 
 pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
 
-from support import sine_recording
+from support import sine_recording, write_contract_bag
 
 from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state
 from id_learning.dataset.recording import write_recording
@@ -59,21 +59,7 @@ def test_log_times_that_do_not_advance_refuse_log_time_timing(tmp_path: Path, ma
 def test_files_listed_out_of_time_order_play_in_time_order(tmp_path: Path, mabi) -> None:
     source = write_recording(sine_recording(600), tmp_path / 'whole')
     bag = tmp_path / 'split'
-    recording = sine_recording(600)
-    empty = np.empty(0)
-    with BagWriter(bag, split_duration_ns=2_000_000_000) as writer:
-        writer.add_topic('/joint_states', JOINT_STATE)
-        writer.add_topic('/motor_currents', JOINT_STATE)
-        for k, stamp in enumerate(recording.stamps_ns.tolist()):
-            q, v, i = recording.position[k], recording.velocity[k], recording.current[k]
-            writer.write(
-                '/joint_states', stamp, encode_joint_state(stamp, recording.joints, q, v, empty)
-            )
-            writer.write(
-                '/motor_currents',
-                stamp,
-                encode_joint_state(stamp, recording.joints, empty, empty, i),
-            )
+    write_contract_bag(bag, sine_recording(600), split_duration_ns=2_000_000_000)
     meta = yaml.safe_load((bag / 'metadata.yaml').read_text())
     files = meta['rosbag2_bagfile_information']['relative_file_paths']
     assert len(files) > 1
