@@ -74,6 +74,8 @@ class Recording:
         joint_torque: (N, n) measured joint torques [N*m], or None when not measured.
         source: where the samples came from (bag path, log file), for error messages.
         segment_starts: first sample of each segment, from 0 (see the module docstring).
+        content_warnings: what ``load_recording``'s content check warned of (a joint that does
+            not move, a clipped label), for reports.
     """
 
     joints: tuple[str, ...]
@@ -84,6 +86,7 @@ class Recording:
     joint_torque: np.ndarray | None = None
     source: str = '<memory>'
     segment_starts: tuple[int, ...] = (0,)
+    content_warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         """Check that every array has one row per stamp and one column per joint."""
@@ -337,8 +340,7 @@ def load_recording(
         source=str(path),
         segment_starts=tuple(start for start in starts if start < len(states.stamps_ns)),
     )
-    check_recording_content(recording)
-    return recording
+    return replace(recording, content_warnings=check_recording_content(recording))
 
 
 def _check_paired(

@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from id_learning.dataset.content import gravity_findings
+from id_learning.dataset.content import GravityTorque, gravity_findings
 from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, prepare_dataset
-from id_learning.dataset.recording import Recording, check_recording_content, load_recording
+from id_learning.dataset.recording import Recording, load_recording
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
 from id_learning.models.data import TrainingData
 from id_learning.physics.rigid_body import RigidBodyDynamics
@@ -153,6 +153,7 @@ def load_datasets(
         raise ConfigError('no bag given: pass at least one --bag')
     datasets = []
     samples: list[Samples] = []
+    gravity = RigidBodyDynamics.from_config(robot).gravity  # one model for every bag
     for bag in tqdm(bags, desc='loading bags', unit='bag', disable=not progress or len(bags) < 2):
         recording = load_recording(
             Path(bag),
@@ -163,11 +164,10 @@ def load_datasets(
         )
         samples.append((str(bag), recording.stamps_ns, recording.position))
         # What load_recording warned of (a still joint, a clipped label), for the report too.
-        found = check_recording_content(recording, config.target, warn=False)
-        nominal = _nominal_findings(recording, robot, config.target)
+        nominal = _nominal_findings(recording, robot, config.target, gravity)
         for text in nominal:  # load_recording logged the others
             _LOG.warning('%s: %s', bag, text)
-        warnings = [f'{bag}: {text}' for text in (*found, *nominal)]
+        warnings = [f'{bag}: {text}' for text in (*recording.content_warnings, *nominal)]
         for k, segment in enumerate(recording.segments()):
             try:
                 dataset = prepare_dataset(segment, robot, config, segment=k)
@@ -249,13 +249,14 @@ def refuse_shared_samples(recordings: Sequence[Samples], why: str) -> None:
                 )
 
 
-def _nominal_findings(recording: Recording, robot: RobotConfig, target: str) -> list[str]:
+def _nominal_findings(
+    recording: Recording, robot: RobotConfig, target: str, gravity: GravityTorque
+) -> list[str]:
     """The label against the URDF's gravity torque, per joint: sign and scale (warnings)."""
     label = recording.current if target == 'motor' else recording.joint_torque
     if label is None:
         return []
     quantity = 'motor current' if target == 'motor' else 'joint torque'
-    gravity = RigidBodyDynamics.from_config(robot).gravity
     findings = gravity_findings(recording.position, label, robot, gravity, quantity=quantity)
     return [finding.text for finding in findings]
 
