@@ -56,6 +56,7 @@ __all__ = [
     'GravityTorque',
     'check_content',
     'gravity_findings',
+    'grid_slots',
     'label_findings',
     'motion_findings',
     'nominal_findings',
@@ -88,8 +89,8 @@ NOMINAL_MIN_CORRELATION = 0.5
 NOMINAL_SLOPE_FACTOR = 30.0
 #: At most this many samples, evenly strided, go through the nominal model.
 NOMINAL_MAX_SAMPLES = 5000
-#: A median stamp step within this share of the IPO period from it keeps the stamps on the IPO
-#: grid (``PreprocessConfig.jitter_tolerance``'s default: train refuses stamps further off).
+#: A stamp within this share of the IPO period from the IPO grid is on it
+#: (``PreprocessConfig.jitter_tolerance``'s default: train refuses stamps further off).
 SAMPLING_TOLERANCE = 0.25
 #: Train refuses steps longer than this many IPO periods as gaps (``load_recording``'s default).
 SAMPLING_MAX_PERIODS = 3.0
@@ -363,6 +364,18 @@ def gravity_findings(
     return nominal_findings(label, nominal, robot.joints, robot.limits.torque, quantity=quantity)
 
 
+def grid_slots(
+    stamps_ns: np.ndarray, period_ns: float, origin_ns: np.ndarray | int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each stamp's IPO slot counted from ``origin_ns``, and its distance from that slot [ns].
+
+    The grid ``preprocess.regularise`` snaps a recording onto, and ``sampling_problem`` judges.
+    """
+    offsets = (np.asarray(stamps_ns, dtype=np.int64) - origin_ns).astype(float)
+    slots = np.round(offsets / period_ns).astype(np.int64)
+    return slots, np.abs(offsets - slots * period_ns)
+
+
 def sampling_problem(stamps_ns: np.ndarray, period_s: float, where: str) -> str | None:
     """How a topic's stamps contradict the robot's IPO period, or None when they do not.
 
@@ -398,8 +411,7 @@ def sampling_problem(stamps_ns: np.ndarray, period_s: float, where: str) -> str 
     breaks = (steps <= 0) | (steps > SAMPLING_MAX_PERIODS * period_ns)
     starts = np.concatenate(([0], np.flatnonzero(breaks) + 1))
     origin = stamps[starts[np.searchsorted(starts, np.arange(stamps.size), side='right') - 1]]
-    offsets = (stamps - origin).astype(float)
-    jitter = np.abs(offsets - np.round(offsets / period_ns) * period_ns)
+    _, jitter = grid_slots(stamps, period_ns, origin)
     off = np.flatnonzero(jitter > SAMPLING_TOLERANCE * period_ns)
     if not off.size and abs(ratio - 1.0) <= SAMPLING_TOLERANCE:
         return None

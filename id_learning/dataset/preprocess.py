@@ -27,6 +27,7 @@ from typing import Any, Literal, Self
 import numpy as np
 
 from id_learning.config_io import finite_number
+from id_learning.dataset.content import SAMPLING_TOLERANCE, grid_slots
 from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.recording import Recording
 from id_learning.dataset.signals import differentiate, lowpass
@@ -89,7 +90,7 @@ class PreprocessConfig:
     cutoff_hz: tuple[float, ...] | None = None
     input_smoothing_hz: tuple[float, ...] | None = None
     train_fraction: float = 0.7
-    jitter_tolerance: float = 0.25
+    jitter_tolerance: float = SAMPLING_TOLERANCE
     min_filter_periods: float = 2.0
     split: SplitKind = 'contiguous'
     split_seed: int = 0
@@ -194,7 +195,7 @@ class RegulariseReport:
 
 
 def regularise(
-    recording: Recording, period_s: float, jitter_tolerance: float = 0.25
+    recording: Recording, period_s: float, jitter_tolerance: float = SAMPLING_TOLERANCE
 ) -> tuple[Recording, RegulariseReport]:
     """Put the samples on the uniform IPO grid the filter assumes.
 
@@ -206,9 +207,7 @@ def regularise(
         DatasetError: a stamp is further from the grid than the tolerance, or two share a slot.
     """
     period_ns = period_s * 1e9
-    offsets = (recording.stamps_ns - recording.stamps_ns[0]).astype(float)
-    slots = np.round(offsets / period_ns).astype(np.int64)
-    jitter = np.abs(offsets - slots * period_ns)
+    slots, jitter = grid_slots(recording.stamps_ns, period_ns, recording.stamps_ns[0])
     if (jitter > jitter_tolerance * period_ns).any():
         sample = int(np.argmax(jitter > jitter_tolerance * period_ns))
         raise DatasetError(
