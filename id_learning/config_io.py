@@ -147,11 +147,10 @@ def read_capped(
         ConfigError: the file is missing or unreadable, a device or socket, or over ``limit``
             bytes; the message names the file.
     """
+    kind = not_a_file(path)  # a FIFO is read as it comes; a missing file fails at open
+    if kind in {name for _, name in _FILE_KINDS}:
+        raise ConfigError(f'{path}: cannot read {what}: {kind}, not a regular file')
     try:
-        mode = os.stat(path).st_mode
-        for is_kind, kind in _FILE_KINDS:
-            if is_kind(mode):
-                raise ConfigError(f'{path}: cannot read {what}: {kind}, not a regular file')
         with open(path, 'rb') as stream:
             data = stream.read(limit + 1)
     except OSError as err:
