@@ -18,7 +18,7 @@ from scipy import stats
 from id_learning.diagnosis.design import PARTS, Design, Fit
 from id_learning.diagnosis.selection import PlausibilityCheck
 
-__all__ = ['AliasSet', 'find_aliases']
+__all__ = ['AliasSet', 'find_aliases', 'given_way']
 
 
 @dataclass(frozen=True)
@@ -218,3 +218,27 @@ def _mimic_residual(
         value += -2.0 * beta @ (gram[np.ix_(idx_s, idx_a)] @ theta_a)
         value += beta @ gram[np.ix_(idx_s, idx_s)] @ beta
     return max(float(value), 0.0)
+
+
+def given_way(
+    before: list[AliasSet], stand_in: dict[str, str | None], now: list[AliasSet]
+) -> list[AliasSet]:
+    """``now`` with each spring that gave way to a stand-in among the stand-in's alternatives.
+
+    The spring stays an alternative of what took its place: the data could not tell them apart,
+    and a robot-wide stand-in (the link parameters) has no joint to find it by again.
+    """
+    out = list(now)
+    for alias in before:
+        taker = stand_in.get(alias.representative)
+        if taker is None:
+            continue
+        led = next((a for a in out if a.representative == taker), None)
+        members = [taker, *(m for m in alias.members if m != taker)]
+        if led is not None:
+            members = [*led.members, *(m for m in members if m not in led.members)]
+            out.remove(led)
+        correlation = {**alias.canonical_correlation, **(led.canonical_correlation if led else {})}
+        unexplained = {**alias.unexplained, **(led.unexplained if led else {})}
+        out.append(AliasSet(taker, members, correlation, unexplained))
+    return out

@@ -29,7 +29,7 @@ from id_learning.diagnosis.friction_shape import (
     reshaped,
 )
 from id_learning.diagnosis.problem import ResidualProblem
-from id_learning.diagnosis.refinement import refine_setting
+from id_learning.diagnosis.refinement import choose_form, refine_setting
 from id_learning.physics.effects import REGISTRY, effect
 from id_learning.physics.terms import EffectSpec, whole_model_settings
 
@@ -77,6 +77,7 @@ class CandidateSet:
             gravity=model.dynamics.gravity(quantities.q),
             moving_mass_kg=model.dynamics.total_moving_mass(),
             body_parameters=model.dynamics.inertial_parameters().reshape(-1, 10),
+            positions=np.stack([quantities.q.min(axis=0), quantities.q.max(axis=0)]),
         )
 
     def _shape_friction(self) -> list[FrictionShape]:
@@ -114,11 +115,20 @@ class CandidateSet:
         return renamed
 
     def _others_on(self, j: int) -> list[np.ndarray]:
-        """Training columns (M, k) on joint j of every testable candidate but its friction laws."""
-        out = []
+        """Training columns (M, k) on joint j of every testable candidate but its friction laws.
+
+        Of an effect's exclusive variants (a spring's forms) only the first: together they
+        would span more than any one form can.
+        """
+        out, seen = [], set()
         for label in self.testable:
+            spec = self.specs[label]
+            if effect(spec.name).exclusive_variants:
+                if (spec.name, spec.joint) in seen:
+                    continue
+                seen.add((spec.name, spec.joint))
             column = self.columns[label]['train'][:, j, :]
-            if not _shaped_on(self.specs[label], j) and np.any(column):
+            if not _shaped_on(spec, j) and np.any(column):
                 out.append(column)
         return out
 
@@ -264,7 +274,9 @@ class CandidateSet:
     ) -> list[str]:
         """Tune the selected effects' nonlinear settings; the selection's new labels.
 
-        Stribeck velocity, payload COM and balancer geometry, then the friction's load.
+        Stribeck velocity, payload COM and balancer geometry, then the friction's load. An
+        effect with forms (exclusive variants) takes the one that, refined, predicts the
+        held-out part best.
         """
         selected = list(selected)
         for index, label in enumerate(list(selected)):
@@ -273,6 +285,9 @@ class CandidateSet:
                 selected = self._refine_hump(selected, index, y, n_eff)
                 continue
             item = effect(spec.name)
+            if item.exclusive_variants and not item.hump:
+                selected[index] = self._choose_form(selected, index, y, n_eff)
+                continue
             if not (item.tuned_settings(spec.settings) or item.fit_sets_settings):
                 continue
             others = {g: self.columns[g] for g in selected if g != label}
@@ -283,6 +298,37 @@ class CandidateSet:
             self._swap(label, refined)
             selected[index] = refined.label
         return self.load_on_model(selected, y, n_eff)
+
+    def _choose_form(
+        self,
+        selected: list[str],
+        index: int,
+        y: dict[str, np.ndarray],
+        n_eff: dict[str, np.ndarray],
+    ) -> str:
+        """A selected effect in its form that predicts held-out best (``choose_form``)."""
+        label = selected[index]
+        others = {g: self.columns[g] for g in selected if g != label}
+        forms = [self.specs[form] for form in [label, *self._variants_of(label)]]
+        design_of = functools.partial(self.design_over, y, n_eff=n_eff)
+        best = choose_form(self.problem, others, forms, design_of)
+        if best is not self.specs[label]:
+            self._swap(label, best)
+        return best.label
+
+    def forms_of(self, label: str) -> list[str]:
+        """A selected effect's other testable forms with as many coefficients; none of a hump's.
+
+        Friction growing with gravity or with the link torque, torsion springs of other neutrals.
+        """
+        item = effect(self.specs[label].name)
+        if not item.exclusive_variants or item.hump:
+            return []
+        size = self.columns[label]['train'].shape[2]
+        return [t for t in self._variants_of(label) if self.columns[t]['train'].shape[2] == size]
+
+    def _variants_of(self, label: str) -> list[str]:
+        return [t for t in self.testable if t != label and self.variants(label, t)]
 
     def _judged_beside_fixed_humps(self, spec: EffectSpec) -> bool:
         """Whether a Stribeck hump's joint was given a softer turn or a curved viscous law."""
@@ -435,7 +481,10 @@ class CandidateSet:
         the last fit (``ResidualProblem.load_offset``) until the fit stops moving.
         """
         specs = [self.specs[label] for label in selected]
-        loads = [i for i, s in enumerate(specs) if effect(s.name).reads_link_torque]
+        loads = [
+            i for i, s in enumerate(specs)
+            if effect(s.name).model_load_settings(s.settings) is not None
+        ]  # fmt: skip
         link = [g for g, s in zip(selected, specs, strict=True) if effect(s.name).link_side]
         problem, selected = self.problem, list(selected)
         if not loads or not link:
@@ -450,7 +499,10 @@ class CandidateSet:
             problem.link_terms = [(self.specs[g], design.physical(fit, g)) for g in link]
             terms = []
             for i in loads:
-                refined = self.specs[selected[i]].replace_settings(load='model')
+                spec = self.specs[selected[i]]
+                settings = effect(spec.name).model_load_settings(spec.settings)
+                assert settings is not None  # only such frictions are in ``loads``
+                refined = spec.replace_settings(**settings)
                 terms.append((refined, design.physical(fit, selected[i])))
                 self._swap(selected[i], refined)
                 selected[i] = refined.label

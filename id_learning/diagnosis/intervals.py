@@ -44,9 +44,10 @@ class IntervalRule:
     datasheet values no effect names free within their tolerances
     (``CandidateSet.datasheet_unknowns``); their intervals hold what the refined Stribeck
     velocities leave unknown too (``CandidateSet.setting_sensitivities``), and what the data
-    leave open between an alias set's members: the largest move of a value when one of the
-    closest alternatives stands in for a kept effect, weighted by how well that model fits, is
-    added to its covariance, as one more standard deviation. The delay and torque-constant
+    leave open between an alias set's members and between an effect's forms: the largest move of
+    a value when one of the closest alternatives, or another form, stands in for a kept effect,
+    weighted by how well that model fits, is added to its covariance, as one more standard
+    deviation. The delay and torque-constant
     columns hold the torque of the fit the values come from (``HELD_TORQUE_STEPS``): the rule
     leaves the candidates' and the problem's whole-model columns holding it.
     """
@@ -96,6 +97,12 @@ class IntervalRule:
             for alias in ([] if self.stand_ins else aliases)
             for member in alias.alternatives()[:ALIAS_ALTERNATIVES]
         ]
+        # A kept effect's other forms with parameters like its own (friction growing with
+        # gravity or with the link torque): what the data leave open between them.
+        self.form_swaps = {
+            label: [(form, *self._swapped(label, form)) for form in candidates.forms_of(label)]
+            for label in ([] if self.stand_ins else final.groups)
+        }
         if self.stand_ins:
             _LOG.warning(
                 'datasheet values moved far outside their tolerances (%s): they stand in for '
@@ -134,7 +141,8 @@ class IntervalRule:
         """(k, k) w d d^T, an effect's largest weighted move (against ``covariance``).
 
         d: the move when one of an alias set's closest alternatives stands in for its kept
-        effect; w: that model's Akaike weight against the kept one, capped at 1. An alternative
+        effect, or the move to another form of it (``CandidateSet.forms_of``); w: that model's
+        Akaike weight against the kept one, capped at 1. An alternative
         that fits as well moves the values as far as the data leave open; one that fits clearly
         worse is no model the data allow (a payload beside the link parameters: their CAD prior
         leaves the payload's torque to the payload, and an alternative in its place fitted 9 %
@@ -147,6 +155,9 @@ class IntervalRule:
             math.sqrt(self.akaike_weight(fit)) * (d.physical(fit, label) - value)
             for d, fit in self.swaps
             if label in fit.groups
+        ] + [
+            math.sqrt(self.akaike_weight(fit)) * (d.physical(fit, form) - value)
+            for form, d, fit in self.form_swaps.get(label, [])
         ]
         if not moves:
             return np.zeros_like(covariance)

@@ -33,7 +33,7 @@ from id_learning.dataset.recording import Recording
 from id_learning.dataset.statistics import (
     integrated_autocorrelation,
 )
-from id_learning.diagnosis.aliases import AliasSet, find_aliases
+from id_learning.diagnosis.aliases import AliasSet, find_aliases, given_way
 from id_learning.diagnosis.candidate_set import CandidateSet
 from id_learning.diagnosis.config import DiagnosisConfig
 from id_learning.diagnosis.design import PARTS, Design, Fit
@@ -171,9 +171,14 @@ def run_diagnosis(
         else selected
     )
     if specific != selected:
-        selected = candidates.refine(specific, y, n_eff)
+        before, selected = selected, candidates.refine(specific, y, n_eff)
         design = candidates.design(y, n_eff)
-        aliases = aliases_of(selected)
+        # A spring that gave way stays an alternative of what took its place.
+        given: dict[str, str | None] = {
+            old: new for old, new in zip(before, selected, strict=True)
+            if old not in specific and effect(candidates.specs[old].name).claims_hardware
+        }  # fmt: skip
+        aliases = given_way(aliases, given, aliases_of(selected))
     aliases = candidates.without_generalisations(aliases)
     blocks = test_blocks(problem, design.residual(design.fit(selected), 'test'))
     steps = list(selection.steps)
@@ -197,7 +202,8 @@ def run_diagnosis(
         else:
             steps = [st for st, keep in zip(steps, kept, strict=True) if keep]
             selected, design = dropped, without
-            aliases = candidates.without_generalisations(aliases_of(selected))
+            now = candidates.without_generalisations(aliases_of(selected))
+            aliases = given_way(aliases, stand_in, now)
     return _assemble(
         problem,
         candidates,

@@ -296,7 +296,7 @@ class ResidualProblem:
         if any(effect(name).reads_link_torque for name in self.config.effects):
             return self.model.evaluate(q, v, a)
         zeros = np.zeros_like(q)  # only the load-dependent columns read the torques
-        return NominalQuantities(q, v, a, zeros, zeros, zeros, zeros)
+        return NominalQuantities(q, v, a, zeros, zeros, zeros, zeros, tau_gravity=zeros)
 
     def joined_quantities(self) -> NominalQuantities:
         """Training rows of every recording, for choices that look at the whole excitation."""
@@ -314,6 +314,7 @@ class ResidualProblem:
             tau_rigid=join('tau_rigid'),
             tau_rotor=join('tau_rotor'),
             tau_nominal=join('tau_nominal'),
+            tau_gravity=join('tau_gravity'),
         )
 
     def part(self, key: str, part: str) -> np.ndarray:

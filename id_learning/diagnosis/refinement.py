@@ -18,7 +18,7 @@ from id_learning.diagnosis.problem import ResidualProblem
 from id_learning.physics.effects import effect
 from id_learning.physics.terms import EffectSpec
 
-__all__ = ['refine_setting']
+__all__ = ['choose_form', 'refine_setting']
 
 
 #: Rounds of the shrinking grids that refine a setting, each a third as wide as the one before.
@@ -91,6 +91,31 @@ def refine_setting(
         if full > 0 and n * math.log(point / full) > richer[1] * math.log(n) + 10.0:
             current = current.replace_settings(**richer[0])
     return current
+
+
+def choose_form(
+    problem: ResidualProblem,
+    others: dict[str, dict[str, np.ndarray]],
+    forms: list[EffectSpec],
+    design_of: Callable[[dict[str, dict[str, np.ndarray]]], Design],
+) -> EffectSpec:
+    """Of an effect's forms, the one that, refined beside the others, fits held-out best.
+
+    The selection takes a form greedily, the one that helps most on the training part when it
+    enters; fitted beside the effects that entered after it, another may do better (a twin's
+    balancer entered as a counterweight before the friction was in). Each form is refined
+    (``refine_setting``) and judged on the held-out part. ``forms[0]`` is the selected one.
+    """
+    best: tuple[float, EffectSpec] | None = None
+    for form in forms:
+        spec = refine_setting(problem, others, form, design_of) or form
+        fit = design_of({**others, spec.label: problem.columns(spec)[0]}).fit(
+            [*others, spec.label]
+        )
+        if best is None or fit.rss['test'] < best[0]:
+            best = (fit.rss['test'], spec)
+    assert best is not None, 'no form to choose from'
+    return best[1]
 
 
 def _grid_search(

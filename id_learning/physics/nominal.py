@@ -22,9 +22,6 @@ from id_learning.robot.drives import rotor_inertia_joint_side, rotor_inertia_tor
 
 __all__ = ['NominalModel', 'NominalQuantities']
 
-#: Poses over which a joint's lever arm to the payload frame is taken at its largest.
-LEVER_POSES = 256
-
 
 @dataclass(frozen=True, eq=False)
 class NominalQuantities:
@@ -39,6 +36,7 @@ class NominalQuantities:
         dtau_dv: (N, n, n) d tau_rigid_i / d v_j [N*m*s/rad], or None.
         mass: (N, n, n) joint-space mass matrix [kg*m^2], or None.
         regressor: (N, n, 10 * bodies) inertial-parameter regressor, or None.
+        tau_gravity: g(q) of the URDF [N*m], or None (quantities built without it).
     """
 
     q: np.ndarray
@@ -52,6 +50,7 @@ class NominalQuantities:
     dtau_dv: np.ndarray | None = None
     mass: np.ndarray | None = None
     regressor: np.ndarray | None = None
+    tau_gravity: np.ndarray | None = None
 
 
 class NominalModel:
@@ -73,7 +72,6 @@ class NominalModel:
         )
         self._data = model.createData()
         self._payload_maps: dict[tuple[str, tuple[float, ...], bool], tuple[int, np.ndarray]] = {}
-        self._lever_arms: np.ndarray | None = None
 
     def payload_map(
         self, frame: str, com_guess_m: Sequence[float], inertia: bool = False
@@ -90,21 +88,6 @@ class NominalModel:
                 mapping = np.hstack([mapping, frame_parameter_map(self.dynamics, frame)[1][:, 4:]])
             self._payload_maps[key] = (body, mapping)
         return self._payload_maps[key]
-
-    def lever_arms(self) -> np.ndarray:
-        """(n,) the farthest the payload frame moves per radian of each joint [m/rad].
-
-        The largest over poses drawn across the joint ranges (fixed draws: the same robot gets
-        the same figures).
-        """
-        if self._lever_arms is None:
-            limits = self.robot.limits
-            poses = np.random.default_rng(0).uniform(
-                limits.position_lower, limits.position_upper, (LEVER_POSES, self.robot.n_joints)
-            )
-            frame = self.robot.payload_frame
-            self._lever_arms = np.max([self.dynamics.lever_arms(frame, q) for q in poses], axis=0)
-        return self._lever_arms
 
     @property
     def rotor_inertia_joint_side(self) -> np.ndarray:
@@ -167,6 +150,7 @@ class NominalModel:
             dtau_dv=dv,
             mass=mass,
             regressor=self.dynamics.regressor(q, v, a) if regressor else None,
+            tau_gravity=self.dynamics.gravity(q),
         )
 
     def _derivatives(

@@ -431,14 +431,6 @@ class RigidBodyDynamics:
             [self.model.inertias[i].toDynamicParameters() for i in range(1, self.model.njoints)]
         )
 
-    def lever_arms(self, frame: str, q: np.ndarray) -> np.ndarray:
-        """(n,) how far the origin of ``frame`` moves per radian of each joint at q [m/rad]."""
-        index = frame_id(self.model, frame)
-        jacobian = pin.computeFrameJacobian(
-            self.model, self._data, self._to_pin(q), index, pin.LOCAL_WORLD_ALIGNED
-        )
-        return np.asarray(np.linalg.norm(jacobian[:3, self._index], axis=0))
-
     # -- variations of the model (the digital twin's "true" robot) --------------------------------
     def with_payload(
         self, frame: str, mass: float, com: np.ndarray, inertia: np.ndarray | None = None

@@ -22,7 +22,7 @@ FRICTION = {
 
 
 def spring_candidates(recording, robot):
-    """The diagnosis's problem with a balancer candidate on joint 2 beside the friction ones."""
+    """The diagnosis's problem with its balancer candidate on joint 2 beside the friction ones."""
     diagnosis = DiagnosisConfig(gravity_spring_joints=('joint_2',))
     problem = ResidualProblem(as_datasets(recording, robot, diagnosis), robot, diagnosis)
     candidates = CandidateSet(problem)
@@ -30,7 +30,10 @@ def spring_candidates(recording, robot):
     n_eff = {part: problem.n_effective(part) for part in ('train', 'test')}
     friction = [label for label in candidates.testable if candidates.specs[label].name in FRICTION]
     (spring,) = [
-        label for label in candidates.testable if candidates.specs[label].name == 'gravity_spring'
+        label
+        for label in candidates.testable
+        if candidates.specs[label].name == 'gravity_spring'
+        and 'ratio' in candidates.specs[label].settings
     ]
     return problem, candidates, y, n_eff, friction, spring
 

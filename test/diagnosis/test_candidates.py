@@ -38,7 +38,9 @@ def test_a_balancer_is_plausible_when_it_takes_load_off_on_average(mabi):
     t = np.linspace(0.0, 20.0, 2001)
     gravity = np.zeros((len(t), mabi.n_joints))
     gravity[:, 2] = -400.0 + 300.0 * np.sin(t)
-    facts = PlausibilityFacts(np.ones(mabi.n_joints), gravity, 1000.0, np.zeros((6, 10)))
+    facts = PlausibilityFacts(
+        np.ones(mabi.n_joints), gravity, 1000.0, np.zeros((6, 10)), np.zeros((2, 6))
+    )
     spec = EffectSpec('gravity_spring', 2, mabi.joints[2], {'ratio': 0.5, 'phase_rad': 0.0})
 
     def verdict(spring: np.ndarray, sd: float = 0.0) -> tuple[bool, str]:
@@ -65,7 +67,9 @@ def test_a_viscous_law_with_a_linear_part_must_dissipate_within_the_torque_limit
     speed up to the limit and stays below the torque limit there, beyond its margin."""
     model = NominalModel(mabi)
     j = 1
-    facts = PlausibilityFacts(np.ones(mabi.n_joints), np.zeros((10, 6)), 1000.0, np.zeros((6, 10)))
+    facts = PlausibilityFacts(
+        np.ones(mabi.n_joints), np.zeros((10, 6)), 1000.0, np.zeros((6, 10)), np.zeros((2, 6))
+    )
     top, limit = mabi.limits.velocity[j], mabi.limits.torque[j]
     columns = np.zeros((1, mabi.n_joints, 2))
 

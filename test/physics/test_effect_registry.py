@@ -7,6 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import settings as hypothesis_settings
+from hypothesis import strategies as st
 
 from id_learning.errors import ConfigError
 from id_learning.physics import NominalModel
@@ -20,6 +23,7 @@ from id_learning.physics.effects import (
     friction_law,
 )
 from id_learning.physics.effects.judgement import CandidateGrid, PlausibilityFacts, Trial
+from id_learning.physics.effects.links import JOINT_OFFSET, offset_range
 from id_learning.physics.terms import EffectSpec, effect_columns
 from id_learning.twin.effects import effects_from_dict
 
@@ -95,6 +99,7 @@ def test_every_effect_judges_a_fit_and_lists_candidates(mabi):
     facts = PlausibilityFacts(
         np.ones(6), model.dynamics.gravity(q), 1000.0,
         model.dynamics.inertial_parameters().reshape(-1, 10),
+        np.stack([q.min(axis=0), q.max(axis=0)]),
     )  # fmt: skip
     grid = CandidateGrid(0.005, (0.05,), (6,), (1,))
     for name, item in REGISTRY.items():
@@ -151,3 +156,58 @@ def test_every_friction_law_of_the_identification_is_an_effects_law():
         np.testing.assert_allclose(column[::-1], -column, atol=1e-12)
     with pytest.raises(ConfigError, match='unknown friction law'):
         friction_law('dry')
+
+
+@pytest.fixture(scope='module')
+def mabi_model(mabi):
+    return NominalModel(mabi)
+
+
+@hypothesis_settings(max_examples=60, deadline=None)
+@given(
+    joint=st.integers(0, 5),
+    low_share=st.floats(-0.2, 1.0),
+    span_share=st.floats(0.0, 1.2),
+)
+def test_an_encoder_offset_may_move_the_measured_angles_only_within_the_limits(
+    mabi_model, joint, low_share, span_share
+):
+    """offset_range: zero always inside; at most the plausible bound either way; and where the
+    recording kept inside the limits, every offset in the range keeps it there."""
+    limits = mabi_model.robot.limits
+    lower, upper = limits.position_lower[joint], limits.position_upper[joint]
+    width = upper - lower
+    positions = np.zeros((2, 6))
+    positions[0, joint] = lower + low_share * width
+    positions[1, joint] = positions[0, joint] + span_share * width
+    low, high = offset_range(joint, mabi_model, positions)
+    assert low <= 0.0 <= high
+    bound = JOINT_OFFSET.plausible_bound(joint, mabi_model)
+    assert -bound <= low
+    assert high <= bound
+    if lower <= positions[0, joint] and positions[1, joint] <= upper:
+        for offset in (low, high):
+            assert lower - 1e-12 <= positions[0, joint] + offset
+            assert positions[1, joint] + offset <= upper + 1e-12
+    if positions[1, joint] > upper:  # already beyond: no offset pushes it further out
+        assert high == 0.0
+
+
+def test_an_offset_the_limits_leave_room_for_is_plausible_and_one_beyond_is_refused(mabi_model):
+    """0.03 rad on a heavy axis recorded 0.1 rad inside its limits is kept; 0.06 is not."""
+    limits = mabi_model.robot.limits
+    j = 1
+    positions = np.zeros((2, 6))
+    positions[:, j] = limits.position_lower[j] + 0.1, limits.position_upper[j] - 0.05
+    facts = PlausibilityFacts(np.ones(6), np.zeros((3, 6)), 1000.0, np.zeros((6, 10)), positions)
+    columns = np.zeros((3, 6, 1))
+
+    def verdict(value: float) -> tuple[bool, str]:
+        trial = Trial(j, {}, np.array([value]), np.array([[1e-8]]), columns)
+        return JOINT_OFFSET.plausibility(trial, mabi_model, facts)
+
+    assert verdict(0.03)[0]
+    assert verdict(-0.09)[0]
+    ok, reason = verdict(0.06)
+    assert not ok
+    assert 'outside the plausible range' in reason

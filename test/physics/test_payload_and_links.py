@@ -1,4 +1,4 @@
-"""Payloads, lever arms and link-parameter changes of RigidBodyDynamics, against references."""
+"""Payloads and link-parameter changes of RigidBodyDynamics, against references."""
 
 from __future__ import annotations
 
@@ -41,32 +41,6 @@ def test_point_payload_changes_gravity_by_the_closed_form_torque(
     change = loaded.gravity(q) - dynamics.gravity(q)
     assert np.abs(expected).max() > 1.0
     np.testing.assert_allclose(change, expected, rtol=1e-9, atol=1e-9)
-
-
-def test_lever_arms_are_the_payload_frames_distance_from_each_axis(
-    robot_name: str,
-    robot_configs: dict[str, RobotConfig],
-    robot_dynamics: dict[str, RigidBodyDynamics],
-) -> None:
-    """How far the frame moves per radian: |axis x (frame - axis origin)|, zero on the joints
-    that do not carry it."""
-    config, dynamics = robot_configs[robot_name], robot_dynamics[robot_name]
-    model, data, index, axes, frame_id, supporting = payload_frame_setup(config)
-    q, _, _ = random_states(config, np.random.default_rng(23), count=5)
-    for k in range(len(q)):
-        q_pin = np.zeros(model.nq)
-        q_pin[index] = q[k]
-        pin.framesForwardKinematics(model, data, q_pin)
-        point = data.oMf[frame_id].translation
-        expected = np.zeros(config.n_joints)
-        for i, name in enumerate(config.joints):
-            if name in supporting:
-                origin, axis = world_axes(model, data, axes, name)
-                expected[i] = np.linalg.norm(np.cross(axis, point - origin))
-        assert expected.max() > 0.1
-        np.testing.assert_allclose(
-            dynamics.lever_arms(config.payload_frame, q[k]), expected, atol=1e-12
-        )
 
 
 def test_payload_rotational_inertia_leaves_gravity_unchanged_but_not_inertia(

@@ -196,6 +196,11 @@ class Effect:
         del settings
         return False
 
+    def model_load_settings(self, settings: Mapping[str, Any]) -> dict[str, Any] | None:
+        """Its settings growing with the whole model's link torque; None: no such form."""
+        del settings
+        return None
+
     def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
         """Whether a fitted value is physically plausible; the reason when not (``judgement``)."""
         raise NotImplementedError(self.name)

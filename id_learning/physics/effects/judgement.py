@@ -31,12 +31,15 @@ class PlausibilityFacts:
         gravity: (N, n) nominal gravity torque along the training motion (for the spring's sign).
         moving_mass_kg: total moving mass of the URDF [kg].
         body_parameters: (bodies, 10) the URDF's inertial parameters (pinocchio's order).
+        positions: (2, n) the lowest and highest measured joint angle of the training motion
+            [rad] (what an encoder offset may shift within the URDF's limits).
     """
 
     rigid_rms: np.ndarray
     gravity: np.ndarray
     moving_mass_kg: float
     body_parameters: np.ndarray
+    positions: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)

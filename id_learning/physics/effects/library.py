@@ -222,17 +222,30 @@ class StribeckFriction(_SignedFriction):
 
 
 class LoadDependentFriction(_SignedFriction):
-    """mu |L| tanh(v / v_eps), L the link torque on the joint.
+    """mu |L| tanh(v / v_eps), L the load the gear carries, in one of two forms.
 
-    Its 'model' form grows with the whole model's link torque (nominal plus the link-side
-    effects): with a payload or a balancer the URDF's alone is far off. Terms written before
-    that form (no 'load' setting) take the URDF's rigid-body torque.
+    - link torque (no 'load' setting: the URDF's rigid-body torque; 'model': the whole model's,
+      nominal plus the link-side effects, since with a payload or a balancer the URDF's alone
+      is far off);
+    - 'gravity': the URDF's gravity torque alone (a gear loaded by the weight it holds, not
+      by what accelerates the arm).
+
+    The forms are exclusive variants: held-out evidence picks one per joint.
     """
 
     name = 'load_dependent_friction'
     parameters = (Parameter('coefficient', '1'),)
     reads_link_torque = True
+    exclusive_variants = True
     law = 'load_dependent'
+
+    def candidates(
+        self, model: NominalModel, grid: CandidateGrid
+    ) -> list[tuple[int | None, dict[str, Any]]]:
+        """Each form on each joint, at the grid's smoothing velocity."""
+        link: dict[str, Any] = {'smoothing_velocity': grid.smoothing_velocity}
+        forms = (link, {**link, 'load': 'gravity'})
+        return [(j, dict(form)) for j in range(model.robot.n_joints) for form in forms]
 
     def law_column(
         self, v: np.ndarray, load: np.ndarray, smoothing_velocity: float, velocity: Any
@@ -240,16 +253,29 @@ class LoadDependentFriction(_SignedFriction):
         return laws.load_dependent(v, load, smoothing_velocity)
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
-        return ['model load'] if self.uses_model_load(settings) else []
+        load = settings.get('load')
+        return [f'{load} load'] if load in ('model', 'gravity') else []
 
     def uses_model_load(self, settings: Mapping[str, Any]) -> bool:
         return settings.get('load') == 'model'
+
+    def model_load_settings(self, settings: Mapping[str, Any]) -> dict[str, Any] | None:
+        """The link torque's form grows with the whole model's; gravity's stays the URDF's."""
+        if settings.get('load') == 'gravity':
+            return None
+        return {**settings, 'load': 'model'}
 
     def joint_columns(
         self, quantities: NominalQuantities, joint: Any, settings: Mapping[str, Any],
         model: NominalModel,
     ) -> JointColumns:  # fmt: skip
-        v, load = quantities.v[:, joint], quantities.tau_rigid[:, joint]
+        if settings.get('load') == 'gravity':
+            if quantities.tau_gravity is None:
+                raise ValueError('load_dependent_friction (gravity) needs the gravity torque')
+            load = quantities.tau_gravity[:, joint]
+        else:
+            load = quantities.tau_rigid[:, joint]
+        v = quantities.v[:, joint]
         return (laws.load_dependent(v, load, settings['smoothing_velocity']),)
 
     def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:

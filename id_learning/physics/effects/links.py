@@ -44,24 +44,36 @@ __all__ = [
 #: Farthest a payload's centre of mass may lie from its frame [m]: a tool or a spindle, not a
 #: lever arm.
 PAYLOAD_COM_LIMIT_M = 1.0
-#: How far an encoder zero error may move the payload frame before a cell notices it [m]
-#: (every taught point off by as much), and the largest joint offset plausible at all [rad].
-MASTERING_TOLERANCE_M = 0.03
-JOINT_OFFSET_MAX_RAD = 0.2
+#: The largest encoder zero error plausible at all [rad]: mastering marks are read to a fraction
+#: of a degree, and an error of ten degrees is seen on the arm by eye.
+JOINT_OFFSET_MAX_RAD = 0.15
 
 
 class GravitySpring(JointEffect):
-    """A balancer's torque (``physics.balancer``) for its geometry in the settings.
+    """What holds a link against gravity besides the motor, in one of its forms.
 
-    Terms written before the balancer form hold a polynomial in (q - reference_rad) instead.
+    - balancer (settings ``ratio``, ``phase_rad``): a spring or gas spring between the link
+      and its predecessor (``physics.balancer``), three force coefficients;
+    - ``form: counterweight``: a mass on the link's far side, a cos q + b sin q (any phase);
+    - ``form: torsion``: a torsion spring about the axis, -k (q - q0): a slope and a constant
+      about ``reference_rad`` (the middle of the joint's range), so its neutral is linear too.
+
+    The forms are exclusive variants: held-out evidence picks one per joint. Terms written
+    before the forms hold a polynomial in (q - reference_rad) of their ``degree``.
     """
 
     name = 'gravity_spring'
     parameters = (Parameter('f0', 'N*m'), Parameter('f1', 'N*m'), Parameter('f2', 'N*m'))
     claims_hardware = True
     link_side = True
+    exclusive_variants = True
 
     def label_parts(self, settings: Mapping[str, Any]) -> list[str]:
+        form = settings.get('form')
+        if form == 'counterweight':
+            return ['counterweight']
+        if form == 'torsion':
+            return ['torsion']
         if 'ratio' not in settings:
             return []
         return [f'r={settings["ratio"]:.3g}, phi={settings["phase_rad"]:.3g}']
@@ -71,6 +83,11 @@ class GravitySpring(JointEffect):
         model: NominalModel,
     ) -> JointColumns:  # fmt: skip
         q = quantities.q[:, joint]
+        form = settings.get('form')
+        if form == 'counterweight':
+            return (np.cos(q), np.sin(q))
+        if form == 'torsion':
+            return (q - settings['reference_rad'], np.ones_like(q))
         if 'ratio' in settings:
             basis = balancer_basis(q, settings['ratio'], settings['phase_rad'])
             return tuple(basis[..., k] for k in range(BALANCER_TERMS))
@@ -78,14 +95,15 @@ class GravitySpring(JointEffect):
         return tuple(dq**k for k in range(1, int(settings['degree']) + 1))
 
     def tuned_settings(self, settings: Mapping[str, Any]) -> tuple[SettingAxis, ...]:
-        """The balancer's geometry: arm ratio and phase, tuned together.
+        """A balancer's geometry: arm ratio and phase, tuned together.
 
         An encoder zero error shifts the phase by milliradians. The ratio stays in the grid's
         range: towards 0 the three columns merge into sin and sin 2 of the angle, an ill-posed
-        pair that fits the training part's noise, not a balancer. Terms of the polynomial form
-        have nothing to tune.
+        pair that fits the training part's noise, not a balancer. A counterweight, a torsion
+        spring (linear in their coefficients) and terms of the polynomial form have nothing to
+        tune.
         """
-        if 'ratio' not in settings:
+        if 'ratio' not in settings or 'form' in settings:
             return ()
         low, high = min(BALANCER_RATIOS), max(BALANCER_RATIOS)
         return (
@@ -95,6 +113,11 @@ class GravitySpring(JointEffect):
 
     def describe(self, fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
         theta, lo, hi = fit.theta, fit.low, fit.high
+        form = fit.settings.get('form')
+        if form == 'counterweight':
+            return _counterweight(fit, model)
+        if form == 'torsion':
+            return _torsion(fit)
         if 'ratio' in fit.settings:
             ratio, phase = fit.settings['ratio'], fit.settings['phase_rad']
             return [
@@ -139,8 +162,22 @@ class GravitySpring(JointEffect):
     def candidates(
         self, model: NominalModel, grid: CandidateGrid
     ) -> list[tuple[int | None, dict[str, Any]]]:
-        """One on each joint that may carry a balancer, of a middling geometry (refined)."""
-        return [(j, {'ratio': 0.5, 'phase_rad': 0.0}) for j in grid.spring_joints]
+        """Each form on each joint that may carry one.
+
+        A balancer of a middling geometry (refined when selected), a counterweight, a torsion
+        spring about the middle of the joint's range.
+        """
+        limits = model.robot.limits
+        out: list[tuple[int | None, dict[str, Any]]] = []
+        for j in grid.spring_joints:
+            low = max(float(limits.position_lower[j]), -math.pi)
+            middle = round(0.5 * (low + min(float(limits.position_upper[j]), math.pi)), 3)
+            out += [
+                (j, {'ratio': 0.5, 'phase_rad': 0.0}),
+                (j, {'form': 'counterweight'}),
+                (j, {'form': 'torsion', 'reference_rad': middle}),
+            ]
+        return out
 
 
 class PayloadMass(Effect):
@@ -259,21 +296,30 @@ class JointOffset(Effect):
         return quantities.dtau_dq[:, :, joint : joint + 1].copy()
 
     def plausible_bound(self, joint: int | None, model: NominalModel) -> float | None:
-        """Judged by what it does at the payload frame [rad].
-
-        Taught points are off by up to the offset times the frame's farthest distance from the
-        axis: a heavy axis 2 m from the flange may hide 1 degree, a wrist axis 0.25 m from it
-        several.
-        """
-        assert joint is not None
-        lever = float(model.lever_arms()[joint])
-        return min(JOINT_OFFSET_MAX_RAD, MASTERING_TOLERANCE_M / max(lever, 1e-9))
+        """The largest encoder zero error plausible on any joint [rad]."""
+        del joint, model
+        return JOINT_OFFSET_MAX_RAD
 
     def plausibility(self, trial: Trial, model: NominalModel, facts: PlausibilityFacts) -> Verdict:
-        """Within what mastering leaves unnoticed (``plausible_bound``)."""
-        bound = self.plausible_bound(trial.joint, model)
-        assert bound is not None
-        return trial.first_within(-bound, bound, 'rad')
+        """Within what the data and the URDF allow (``offset_range``)."""
+        assert trial.joint is not None
+        low, high = offset_range(trial.joint, model, facts.positions)
+        return trial.first_within(low, high, 'rad')
+
+
+def offset_range(joint: int, model: NominalModel, positions: np.ndarray) -> tuple[float, float]:
+    """The encoder offsets [rad] that keep every measured angle of ``joint`` inside its limits.
+
+    The links sit at q + offset: an offset that would put them beyond the URDF's limits where
+    the recording went is no offset. Bounded by ``JOINT_OFFSET_MAX_RAD`` either way, and never
+    excluding zero (a recording that grazes a limit does not condemn the URDF's zero).
+    """
+    limits = model.robot.limits
+    room_low = float(limits.position_lower[joint] - positions[0, joint])
+    room_high = float(limits.position_upper[joint] - positions[1, joint])
+    low = min(0.0, max(-JOINT_OFFSET_MAX_RAD, room_low))
+    high = max(0.0, min(JOINT_OFFSET_MAX_RAD, room_high))
+    return low, high
 
 
 class InertialParameterError(Effect):
@@ -388,6 +434,58 @@ GRAVITY_SPRING = GravitySpring()
 PAYLOAD_MASS = PayloadMass()
 JOINT_OFFSET = JointOffset()
 INERTIAL_PARAMETER_ERROR = InertialParameterError()
+
+
+def _torsion(fit: FittedTerm) -> list[dict[str, Any]]:
+    """A torsion spring s (q - r) + c as -k (q - q0): stiffness k = -s, neutral q0 = r - c / s.
+
+    The neutral's interval by the delta method on the interval covariance (the coefficients'
+    own half widths, uncorrelated, where there is none).
+    """
+    slope, constant = (float(x) for x in fit.theta)
+    out = [entry('stiffness', -slope, -fit.high[0], -fit.low[0], 'N*m/rad')]
+    if slope == 0.0:
+        return out
+    covariance = _interval_covariance(fit)
+    neutral = float(fit.settings['reference_rad']) - constant / slope
+    gradient = np.array([constant / slope**2, -1.0 / slope])
+    half = math.sqrt(max(float(gradient @ covariance @ gradient), 0.0))
+    out.append(entry('neutral', neutral, neutral - half, neutral + half, 'rad'))
+    return out
+
+
+def _interval_covariance(fit: FittedTerm) -> np.ndarray:
+    """The fit's interval covariance, or its half widths' squares where it has none."""
+    if fit.interval_covariance is not None:
+        return np.asarray(fit.interval_covariance, dtype=float)
+    return np.diag(np.asarray(fit.half_width, dtype=float) ** 2)
+
+
+def _counterweight(fit: FittedTerm, model: NominalModel) -> list[dict[str, Any]]:
+    """A counterweight a cos q + b sin q as -m r g cos(q + phi): moment m r [kg*m], phase.
+
+    Intervals by the delta method on the coefficients' interval covariance (their own half
+    widths, uncorrelated, where there is none).
+    """
+    a, b = (float(x) for x in fit.theta)
+    covariance = _interval_covariance(fit)
+    g = float(np.linalg.norm(model.dynamics.model.gravity.linear))
+    amplitude = math.hypot(a, b)
+    out = [
+        entry(f'c_{name}', fit.theta[k], fit.low[k], fit.high[k], 'N*m')
+        for k, name in enumerate(('cos', 'sin'))
+    ]
+    if amplitude == 0.0 or g == 0.0:
+        return out
+    phase = math.atan2(b, -a)
+    for name, value, gradient, unit, scale in (
+        ('moment', amplitude, np.array([a, b]) / amplitude, 'kg*m', 1.0 / g),
+        ('phase', phase, np.array([b, -a]) / amplitude**2, 'rad', 1.0),
+    ):
+        half = math.sqrt(max(float(gradient @ covariance @ gradient), 0.0))
+        low, high = scale * (value - half), scale * (value + half)
+        out.append(entry(name, scale * value, low, high, unit))
+    return out
 
 
 def _body_limits(nominal: np.ndarray) -> tuple[float, float, float]:
