@@ -18,7 +18,7 @@ from scipy import stats
 from id_learning.diagnosis.design import PARTS, Design, Fit
 from id_learning.diagnosis.selection import PlausibilityCheck
 
-__all__ = ['AliasSet', 'find_aliases', 'given_way']
+__all__ = ['AliasSet', 'find_aliases', 'given_way', 'holds_columns']
 
 
 @dataclass(frozen=True)
@@ -242,3 +242,18 @@ def given_way(
         unexplained = {**alias.unexplained, **(led.unexplained if led else {})}
         out.append(AliasSet(taker, members, correlation, unexplained))
     return out
+
+
+def holds_columns(general: np.ndarray, special: np.ndarray) -> bool:
+    """Whether ``general``'s columns (..., k) span every one of ``special``'s, and more.
+
+    Such an effect is a generalisation of the other (a torsion spring's constant is a torque
+    offset), not an alternative to it: the data can never prefer the special one by fit.
+    """
+    x_general = general.reshape(-1, general.shape[-1])
+    x_special = special.reshape(-1, special.shape[-1])
+    if x_general.shape[1] <= x_special.shape[1] or not x_special.any():
+        return False
+    fit, *_ = np.linalg.lstsq(x_general, x_special, rcond=None)
+    misfit = np.linalg.norm(x_general @ fit - x_special)
+    return bool(misfit <= 1e-9 * np.linalg.norm(x_special))

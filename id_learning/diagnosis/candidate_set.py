@@ -14,7 +14,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from id_learning.diagnosis.aliases import AliasSet
+from id_learning.diagnosis.aliases import AliasSet, holds_columns
 from id_learning.diagnosis.candidates import (
     ExcitationFacts,
     PlausibilityFacts,
@@ -317,10 +317,7 @@ class CandidateSet:
         return best.label
 
     def forms_of(self, label: str) -> list[str]:
-        """A selected effect's other testable forms with as many coefficients; none of a hump's.
-
-        Friction growing with gravity or with the link torque, torsion springs of other neutrals.
-        """
+        """A selected effect's other testable forms with as many coefficients (no hump's)."""
         item = effect(self.specs[label].name)
         if not item.exclusive_variants or item.hump:
             return []
@@ -521,7 +518,10 @@ class CandidateSet:
                 self._swap(label, self.specs[label])
 
     def _general_of(self, special: str, general: str) -> bool:
-        return effect(self.specs[special].name).special_case_of == self.specs[general].name
+        """Declared so, or its columns hold the special one's (a torsion spring's constant)."""
+        if effect(self.specs[special].name).special_case_of == self.specs[general].name:
+            return True
+        return holds_columns(self.columns[general]['train'], self.columns[special]['train'])
 
     def special_cases(self, selected: Sequence[str], aliases: Sequence[AliasSet]) -> list[str]:
         """``selected`` with each general effect replaced by a special case that mimics it.

@@ -6,10 +6,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from support import twin_config
 
 from id_learning.diagnosis import run_diagnosis
-from id_learning.diagnosis.aliases import AliasSet, given_way
+from id_learning.diagnosis.aliases import AliasSet, given_way, holds_columns
 from id_learning.physics import RigidBodyDynamics
 from id_learning.robot.drives import current_from_motor_torque
 from id_learning.twin import simulate
@@ -78,3 +80,19 @@ def test_a_spring_that_gives_way_stays_an_alternative_of_what_took_its_place():
     (alone,) = given_way(before, {spring: links}, [])
     assert alone.members == [links, spring]
     assert given_way(before, {spring: None}, now) == now
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**16), extra=st.integers(1, 3), k=st.integers(1, 3))
+def test_an_effect_whose_columns_hold_anothers_is_its_generalisation(seed, extra, k):
+    """Columns that span another effect's, and more, generalise it; a mixture of its columns
+    spans them too; columns of their own, or no more of them, do not."""
+    rng = np.random.default_rng(seed)
+    special = rng.normal(size=(40, 6, k))
+    mixed = np.concatenate(
+        [special @ rng.normal(size=(k, k)), rng.normal(size=(40, 6, extra))], -1
+    )
+    assert holds_columns(mixed, special)
+    assert not holds_columns(special, mixed)
+    assert not holds_columns(special, special)
+    assert not holds_columns(rng.normal(size=(40, 6, k + extra)), special)

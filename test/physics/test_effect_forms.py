@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pinocchio_reference import G_WORLD, reference_model, velocity_index
 
-from id_learning.physics import EffectSpec, NominalModel, effect_columns
+from id_learning.physics import AugmentedModel, EffectSpec, NominalModel, effect_columns
 from id_learning.physics.effects import effect
 from id_learning.physics.effects.base import FittedTerm
 from id_learning.physics.effects.judgement import CandidateGrid
@@ -134,3 +134,28 @@ def test_only_the_link_torque_form_moves_to_the_whole_models_load():
     }  # fmt: skip
     assert item.model_load_settings({'smoothing_velocity': 0.01, 'load': 'gravity'}) is None
     assert effect('coulomb_friction').model_load_settings({}) is None
+
+
+def test_every_form_carries_into_a_saved_model_and_its_online_torque(model, quantities):
+    """A model of the diagnosis's forms (rnea_effects) gives the same torque batch and per
+    sample, and after a round trip through its JSON."""
+    robot = model.robot
+    terms = [
+        (EffectSpec('gravity_spring', 1, robot.joints[1], {'form': 'counterweight'}),
+         np.array([100.0, -50.0])),
+        (EffectSpec('gravity_spring', 2, robot.joints[2],
+                    {'form': 'torsion', 'reference_rad': -0.5}), np.array([-30.0, 5.0])),
+        (EffectSpec('load_dependent_friction', 1, robot.joints[1],
+                    {'smoothing_velocity': 0.005, 'load': 'gravity'}), np.array([0.02])),
+    ]  # fmt: skip
+    augmented = AugmentedModel(robot, 'motor', terms)
+    q, v, a = quantities.q[:30], quantities.v[:30], quantities.a[:30]
+    batch = augmented.torque(q, v, a)
+    expected = quantities.tau_nominal[:30] + sum(
+        effect_columns(spec, model.evaluate(q, v, a), model) @ theta for spec, theta in terms
+    )
+    np.testing.assert_allclose(batch, expected, rtol=1e-12, atol=1e-9)
+    one = augmented.sample_function()
+    np.testing.assert_allclose([one(*row) for row in zip(q, v, a, strict=True)], batch, atol=1e-9)
+    again = AugmentedModel.from_dict(augmented.to_dict(), robot)
+    np.testing.assert_allclose(again.torque(q, v, a), batch, atol=1e-12)
