@@ -173,11 +173,7 @@ def run_diagnosis(
     if specific != selected:
         before, selected = selected, candidates.refine(specific, y, n_eff)
         design = candidates.design(y, n_eff)
-        # A spring that gave way stays an alternative of what took its place.
-        given: dict[str, str | None] = {
-            old: new for old, new in zip(before, selected, strict=True)
-            if old not in specific and effect(candidates.specs[old].name).claims_hardware
-        }  # fmt: skip
+        given = _springs_given_way(candidates, before, specific, selected)
         aliases = given_way(aliases, given, aliases_of(selected))
     aliases = candidates.without_generalisations(aliases)
     blocks = test_blocks(problem, design.residual(design.fit(selected), 'test'))
@@ -266,6 +262,16 @@ def _newly_structured(
         for design, groups in (before, after)
     ]  # fmt: skip
     return flags[1] - flags[0]
+
+
+def _springs_given_way(
+    candidates: CandidateSet, before: list[str], specific: list[str], after: list[str]
+) -> dict[str, str | None]:
+    """Each spring that ``special_cases`` replaced -> what took its place (refined)."""
+    return {
+        old: new for old, new in zip(before, after, strict=True)
+        if old not in specific and effect(candidates.specs[old].name).claims_hardware
+    }  # fmt: skip
 
 
 def _best_other(label: str, aliases: list[AliasSet], candidates: CandidateSet) -> str | None:
