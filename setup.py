@@ -30,11 +30,12 @@ setup(
     python_requires='>=3.11',
     entry_points={
         'console_scripts': [
-            'id-learning = id_learning.cli.main:main',
-            'train = id_learning.cli.main:train_main',
-            'recorder = id_learning.nodes.recorder:main',
-            'replay = id_learning.nodes.replay:main',
-            'predictor = id_learning.nodes.predictor:main',
+            # Each program is imported inside Ctrl-C's handling (id_learning/entry.py).
+            'id-learning = id_learning.entry:cli',
+            'train = id_learning.entry:train',
+            'recorder = id_learning.entry:recorder',
+            'replay = id_learning.entry:replay',
+            'predictor = id_learning.entry:predictor',
         ],
     },
 )

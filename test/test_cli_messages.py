@@ -17,8 +17,10 @@ from id_learning.twin import simulate
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'id_learning'
 FLAG = re.compile(r'(?<![\w-])--[a-z][a-z0-9-]+')
-#: Flags of programs other than ours that messages may name.
-FOREIGN = {'--ros-args', '--params-file'}
+#: Flags of programs other than ours that messages may name (ROS 2's own arguments, which the
+#: nodes read where they look for their parameters).
+FOREIGN = {'--ros-args', '--params-file', '--param', '--remap', '--enclave', '--log-level',
+           '--log-config-file', '--log-file-name'}  # fmt: skip
 
 
 def _options(parser: argparse.ArgumentParser) -> set[str]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -109,3 +110,110 @@ def test_the_tool_leaves_the_signal_handlers_as_it_found_them(tmp_path: Path) ->
     # main may run in a process that goes on (a test, ros2 run's entry point)
     assert main(['inspect', str(tmp_path / 'missing')]) == 2
     assert [signal.getsignal(number) for number in numbers] == before
+
+
+# -- while a program imports (id_learning/entry.py) ---------------------------------------------
+#: A program that says when it is importing, then imports for a minute.
+SLOW_PROGRAM = """
+import sys, time
+print('importing', file=sys.stderr, flush=True)
+time.sleep(60)
+def main():
+    return 0
+"""
+
+
+def _slow_start(tmp_path: Path) -> subprocess.Popen[str]:
+    """``id_learning.entry.run`` of a program that is importing when it says so."""
+    (tmp_path / 'slow_program.py').write_text(SLOW_PROGRAM)
+    code = (
+        f'import sys; sys.path.insert(0, {str(tmp_path)!r}); import id_learning.entry as entry; '
+        "entry.PROGRAMS['slow'] = ('slow_program', 'main'); sys.exit(entry.run('slow'))"
+    )
+    return subprocess.Popen(
+        [sys.executable, '-c', code], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
+        text=True, cwd=REPO,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ('number', 'status', 'word'),
+    [(signal.SIGINT, 130, 'interrupted'), (signal.SIGTERM, 143, 'terminated')],
+)
+def test_a_signal_while_a_program_imports_is_one_line_and_the_shells_status(
+    tmp_path: Path, number: int, status: int, word: str
+) -> None:
+    process = _slow_start(tmp_path)
+    try:
+        _wait_for(process, 'importing')
+    except BaseException:
+        process.kill()
+        process.communicate()
+        raise
+    code, lines = _stop(process, number)
+    assert code == status, lines
+    assert lines == [f'slow: {word} while starting; nothing was done'], lines
+
+
+def test_every_console_script_starts_through_the_entry_module() -> None:
+    """Each imports its program only inside the handling (setup.py's console_scripts)."""
+    from id_learning.entry import PROGRAMS
+
+    setup = (REPO / 'setup.py').read_text()
+    for name in PROGRAMS:
+        function = 'cli' if name == 'id-learning' else name
+        assert f"'{name} = id_learning.entry:{function}'" in setup, name
+
+
+def _loaded(pid: int, library: str, deadline_s: float = 120.0) -> bool:
+    """Wait until the process has loaded a shared library (False: it ended first)."""
+    maps = Path(f'/proc/{pid}/maps')
+    deadline = time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        try:
+            if library in maps.read_text():
+                return True
+        except OSError:  # it has ended
+            return False
+        time.sleep(0.002)  # a poll of the condition, not a wait for time to pass
+    raise AssertionError(f'{library} not loaded by pid {pid} within {deadline_s:g} s')
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize(
+    ('node', 'parameters', 'library'),
+    [
+        ('predictor', ['-p', 'artifact:=/nonexistent/model'], '_rclpy_pybind11'),
+        ('predictor', ['-p', 'artifact:=/nonexistent/model'], 'libtorch'),
+        ('recorder', ['-p', 'output:=OUT'], '_rclpy_pybind11'),
+    ],
+)
+def test_ctrl_c_while_a_node_starts_is_one_line_never_a_traceback(
+    tmp_path: Path, node: str, parameters: list[str], library: str
+) -> None:
+    """The probe's traceback at 0.3, 0.5 and 1.5 s: SIGINT at each stage of a node's start."""
+    pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
+    from ros.ros_helpers import node_environment, random_domain
+
+    words = [word.replace('OUT', str(tmp_path / 'bag')) for word in parameters]
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'id_learning.entry', node, '--ros-args', *words],
+        env=node_environment(random_domain()), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, cwd=tmp_path,
+    )  # fmt: skip
+    try:
+        assert _loaded(process.pid, library), process.communicate()
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=EXIT_S)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    lines = [line for line in (out + err).splitlines() if line.strip()]
+    assert 'Traceback' not in out + err, lines
+    if process.returncode == 130:  # still importing or starting ROS
+        assert lines == [f'{node}: interrupted while starting; nothing was done'], lines
+    else:  # it got as far as its parameters (the artifact is refused), or up and stopped
+        assert process.returncode in (0, 2), lines
+    if node == 'recorder' and process.returncode == 130:
+        assert not (tmp_path / 'bag').exists()

@@ -241,7 +241,11 @@ def nodes_page() -> str:
         '*runtime*: whether `ros2 param set` may change it while the node runs (a change is '
         'checked like a start value, and refused with the reason). Unknown parameters, values '
         'of the wrong type or out of range, and a parameter file with no section for the node '
-        'are refused at start, naming the parameter. `ros2 param describe /NODE NAME` shows the '
+        'are refused at start, naming the parameter. Every value given is checked, each `-p` '
+        'and each parameter file, also one a later value replaces (naming where it was given); '
+        'the last value given counts, whatever its type (rcl alone would keep the first of two '
+        'of different types). `[]` is an empty list for a list parameter (refused where one '
+        'may not be empty) and refused for any other. `ros2 param describe /NODE NAME` shows the '
         'same description, and `additional_constraints` the allowed values.',
         '',
     ]

@@ -4,6 +4,6 @@ from __future__ import annotations
 
 import sys
 
-from id_learning.cli.main import main
+from id_learning.entry import cli
 
-sys.exit(main())
+sys.exit(cli())

@@ -225,10 +225,15 @@ def model_kinds(text: str) -> list[str]:
         for kind in groups.get(item, (item,) if item else ()):
             if kind not in kinds:
                 kinds.append(kind)
-    unknown = [kind for kind in kinds if kind not in MODEL_KINDS]
-    if unknown or not kinds:
+    if not kinds:
         raise ConfigError(
-            f'--models: unknown model kind(s) {unknown or [text]}; known kinds: '
+            f'--models {text!r}: names no model kind; name some (e.g. rnea_lq,mlp), or leave '
+            'it out for all'
+        )
+    unknown = [kind for kind in kinds if kind not in MODEL_KINDS]
+    if unknown:
+        raise ConfigError(
+            f'--models: unknown model kind(s) {unknown}; known kinds: '
             f'{", ".join(MODEL_KINDS)} (or all: every kind; study: the seven of the study)'
         )
     return kinds

@@ -142,13 +142,14 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
     from id_learning.training.closed_loop_run import closed_loop_run
 
     run_dir = Path(args.run)
+    kinds = None if args.models is None else options.model_kinds(args.models)  # '' is refused
     result = closed_loop_run(
         run_dir,
         _run_robot(args, run_dir),
         Path(args.out),
         twin_config=Path(args.twin) if args.twin else None,
         duration_s=args.duration,
-        kinds=options.model_kinds(args.models) if args.models else None,
+        kinds=kinds,
         progress=not args.quiet,
         force=args.force,
     )
@@ -262,10 +263,13 @@ def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument(
         '--duration',
         type=options.finite(0.0, 86400.0, low_open=True),
-        default=60.0,
-        help='seconds of the test part to track (60)',
+        help='seconds of the test part to track; a shorter test part is tracked whole, with a '
+        'warning naming both (default: the whole test part, at most 60 s)',
     )
-    p.add_argument('--models', help="comma-separated kinds (default: all of the run's)")
+    p.add_argument(
+        '--models',
+        help="comma-separated kinds (default: all of the run's; an empty list is refused)",
+    )
     options.robot_option(p, 'robot config YAML (default: the one the run was trained with)')
     p.add_argument('--quiet', action='store_true', help='no progress bars')
     _force_option(p)

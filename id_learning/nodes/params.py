@@ -25,13 +25,12 @@ from typing import cast
 
 from id_learning.config_io import not_a_file
 from id_learning.errors import ConfigError
+from id_learning.nodes.param_ros import declare_parameters, read_snapshot
 from id_learning.nodes.param_schema import (
     check_schema,
     config_from_mapping,
-    declare_parameters,
     load_node_config,
     param,
-    read_snapshot,
     shared_topic_problem,
     validate_change,
 )
@@ -69,6 +68,8 @@ MAX_PERIOD_S = 3600.0
 #: The smallest recorder split [s], [MiB] (besides 0 = off): a new file per message otherwise.
 MIN_SPLIT_S = 0.1
 MIN_SPLIT_MIB = 0.1
+#: The smallest torque_limit_scale: the share the predictor core accepts (``GuardConfig``).
+MIN_TORQUE_LIMIT_SCALE = 1e-6
 #: The shortest repeat of the predictor's 'still stale' line [s] (besides 0 = once).
 MIN_LOG_PERIOD_S = 1.0
 #: What a node publishes on its own fixed topics (a topic parameter naming one is refused).
@@ -145,7 +146,13 @@ class RecorderConfig:
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
         check_schema(self)
-        if not self.topics or len(self.topics) != len(self.msg_types):
+        if not self.topics:
+            raise ConfigError('topics: an empty list; give at least one topic to record')
+        if not self.msg_types:
+            raise ConfigError(
+                f'msg_types: an empty list; give one pkg/msg/Type per topic of {list(self.topics)}'
+            )
+        if len(self.topics) != len(self.msg_types):
             raise ConfigError(
                 f'topics and msg_types need one entry per topic, got {list(self.topics)} and '
                 f'{list(self.msg_types)}'
@@ -240,8 +247,8 @@ class ReplayConfig:
     )
     reference_smoothing_hz: float = param(
         0.0,
-        'Velocity smoothing of the controller reference [Hz] (zero-phase Butterworth); '
-        '0 = the robot config input_smoothing_hz.',
+        'Velocity smoothing of the controller reference [Hz] (zero-phase Butterworth), above '
+        "the robot config's label cut-offs and below Nyquist; 0 = its input_smoothing_hz.",
         low=0.0,
     )
     qos_depth: int = param(
@@ -391,11 +398,11 @@ class PredictorNodeConfig:
     )
     torque_limit_scale: float = param(
         1.0,
-        'Clamp tau_u to this share of the robot torque limits [-], in (0, 1].',
+        'Clamp tau_u to this share of the robot torque limits [-], from 1e-6 (practically '
+        'zero) to 1.',
         read_only=False,
-        low=0.0,
+        low=MIN_TORQUE_LIMIT_SCALE,
         high=1.0,
-        low_open=True,
     )
     range_margin: float = param(
         0.1,
@@ -403,6 +410,7 @@ class PredictorNodeConfig:
         'out_of_range acts beyond it; fallback blends the physics prior in across it.',
         read_only=False,
         low=0.0,
+        high=1e3,
     )
     out_of_range: str = param(
         'auto',

@@ -89,7 +89,7 @@ from id_learning.nodes.msg_conversions import (
     trajectory_message,
     trajectory_to_sample,
 )
-from id_learning.nodes.param_schema import read_node_config
+from id_learning.nodes.param_ros import read_node_config
 from id_learning.nodes.params import (
     PredictorNodeConfig,
     declare_parameters,

@@ -1,8 +1,9 @@
 """Running this package's nodes as child processes: the online check, benchmarks and tests use it.
 
-A node runs as ``python -m id_learning.nodes.<module> --ros-args -r ... -p ...`` with the given
-environment (the PyPI wheels' bootstrap needs the whole of it: LD_LIBRARY_PATH, AMENT_PREFIX_PATH)
-and its stdout and stderr in a log file. ``node_processes`` starts nodes in one DDS domain and
+A node runs as ``python -m id_learning.entry <module> --ros-args -r ... -p ...`` (as its console
+script does: Ctrl-C while it imports is one line) with the given environment (the PyPI wheels'
+bootstrap needs the whole of it: LD_LIBRARY_PATH, AMENT_PREFIX_PATH) and its stdout and stderr
+in a log file. ``node_processes`` starts nodes in one DDS domain and
 stops every one of them on exit.
 """
 
@@ -44,7 +45,7 @@ class NodeProcess:
         remaps: dict[str, str] | None = None,
     ) -> None:
         """Start the node now."""
-        command = [sys.executable, '-m', f'id_learning.nodes.{module}', '--ros-args']
+        command = [sys.executable, '-m', 'id_learning.entry', module, '--ros-args']
         for old, new in (remaps or {}).items():
             command += ['-r', f'{old}:={new}']
         for name, value in parameters.items():

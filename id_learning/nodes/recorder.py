@@ -2,8 +2,12 @@
 
 Subscriptions are raw: the serialized CDR bytes as received are stored unchanged (never
 re-serialized; rclpy's serializer pads messages that end in an empty array, which rosbags then
-refuses). The log time of a message is its receive time on the node clock (the replay's /clock
-when use_sim_time is set).
+refuses). The log time of a message is its receive time: on the system clock, or on the replay's
+/clock when use_sim_time is set. Under use_sim_time with no /clock yet (ROS time reads 0) when
+the first message comes, the whole recording is logged on the system clock instead (one time
+base per bag; log times of 0 could neither split the bag nor schedule a ``timing: log_time``
+replay), with a warning, said again in the final summary and on /diagnostics. The flush and
+diagnostics timers run on the steady clock: a /clock that stands still stops neither.
 
 Crash safety: a timer flushes the writer every ``flush_period_s`` (<= 0.5 s), which ends the
 MCAP chunk in progress and pushes it to the file. After a SIGKILL the bag lacks its summary and
@@ -41,6 +45,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,7 +53,8 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.clock import ROSClock
+from rclpy.clock import Clock, ROSClock
+from rclpy.clock_type import ClockType
 from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -126,6 +132,10 @@ class Recorder(ShellNode):
         self._is_single_publisher = dict.fromkeys(config.topics, False)
         receive = self._on_message_info if self._has_sequence else self._on_message
         self._uses_system_time = not _ros_time_is_active(self)
+        #: Under use_sim_time: the topic whose first message came before any /clock (the whole
+        #: recording is then logged on the system clock), and whether /clock came after all.
+        self.system_clock_since: str | None = None
+        self._clock_came_late = False
         self._by_topic: dict[str, Any] = {}
         refuse_clashing_topics(self, config)
         typed = list(zip(config.topics, config.msg_types, strict=True))
@@ -177,9 +187,10 @@ class Recorder(ShellNode):
         for topic, msg_type in typed:
             self.writer.add_topic(topic, msg_type)
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self._flush_timer = self.create_timer(config.flush_period_s, self._flush)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)  # runs whatever /clock does
+        self._flush_timer = self.create_timer(config.flush_period_s, self._flush, clock=steady)
         self._diagnostics_timer = self.create_timer(
-            config.diagnostics_period_s, self._publish_diagnostics
+            config.diagnostics_period_s, self._publish_diagnostics, clock=steady
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(
@@ -188,8 +199,8 @@ class Recorder(ShellNode):
         )
 
     # -- callbacks --------------------------------------------------------------------------------
-    def _on_message(self, topic: str, data: bytes, log_time_ns: int = 0) -> None:
-        log_time_ns = log_time_ns or self.get_clock().now().nanoseconds
+    def _on_message(self, topic: str, data: bytes, received_ns: int = 0) -> None:
+        log_time_ns = self._log_time(topic, received_ns)
         self.counts[topic].received += 1
         if self.failure is not None:  # the recording has ended: counted as lost
             return
@@ -243,8 +254,29 @@ class Recorder(ShellNode):
                 )
         # The middleware's receive time is the true log time (a drained message waited in the
         # queue); under use_sim_time the node clock (the replay's /clock) is used instead.
-        received = info.get('received_timestamp') or 0
-        self._on_message(topic, data, received if self._uses_system_time else 0)
+        self._on_message(topic, data, info.get('received_timestamp') or 0)
+
+    def _log_time(self, topic: str, received_ns: int) -> int:
+        """A message's log time: its receive time on the system clock, or on /clock (sim time).
+
+        Under use_sim_time, a message that comes before any /clock (ROS time reads 0) puts the
+        whole recording on the system clock, with one warning: one time base per bag.
+        """
+        if self._uses_system_time:
+            return received_ns or self.get_clock().now().nanoseconds
+        if self.system_clock_since is None:
+            now = self.get_clock().now().nanoseconds
+            if now > 0:
+                return now
+            self.system_clock_since = topic
+            self.get_logger().warning(
+                f'use_sim_time is set, but no /clock had come (ROS time reads 0) when {topic} '
+                'sent its first message: this recording is logged on the system clock, at the '
+                'receive times, instead of at 0 (log times of 0 could neither split the bag nor '
+                'schedule a timing: log_time replay); start the /clock publisher first (replay '
+                'publish_clock:=true), or set use_sim_time:=false'
+            )
+        return received_ns or time.time_ns()
 
     def _on_lost(self, topic: str, info: QoSMessageLostInfo) -> None:
         if not self._has_sequence:  # else the sequence gap counts the same messages
@@ -257,6 +289,17 @@ class Recorder(ShellNode):
 
     def _flush(self) -> None:
         self._uses_system_time = not _ros_time_is_active(self)
+        if (
+            self.system_clock_since is not None
+            and not self._clock_came_late
+            and not self._uses_system_time
+            and self.get_clock().now().nanoseconds > 0
+        ):
+            self._clock_came_late = True
+            self.get_logger().warning(
+                '/clock started after the recording had begun on the system clock: it stays '
+                'on the system clock to the end (one time base per bag)'
+            )
         for topic in self._is_single_publisher:
             self._is_single_publisher[topic] = self.count_publishers(topic) == 1
         if self.failure is not None:
@@ -311,6 +354,7 @@ class Recorder(ShellNode):
             'dropped': total.dropped,
             'lost': total.lost,
             'flushes': self.flushes,
+            'log_time': self.log_time_base(),
         }
         if self.failure is not None:
             values['failure'] = str(self.failure)
@@ -323,11 +367,21 @@ class Recorder(ShellNode):
                 values[f'{topic} wrong type'] = ', '.join(self.wrong_types(topic))
         return values
 
+    def log_time_base(self) -> str:
+        """Which clock the log times are on, in words."""
+        if self.system_clock_since is not None:
+            return (
+                f'the system clock (use_sim_time, but no /clock when {self.system_clock_since} '
+                'sent its first message)'
+            )
+        return 'the system clock' if self._uses_system_time else '/clock (use_sim_time)'
+
     def _publish_diagnostics(self) -> None:
         self.check_publisher_types()
         total = self.totals()
         wrong = [topic for topic in self.counts if self.wrong_types(topic)]
-        level = 'error' if self.failure else 'warn' if total.dropped or wrong else 'ok'
+        fallback = self.system_clock_since is not None
+        level = 'error' if self.failure else 'warn' if total.dropped or wrong or fallback else 'ok'
         message = (
             f'{total.written} written, {total.dropped} dropped'
             if total.received
@@ -338,6 +392,8 @@ class Recorder(ShellNode):
 
         if wrong:
             message += f'; a publisher of another type on {", ".join(wrong)}'
+        if fallback:
+            message += '; logged on the system clock: use_sim_time without /clock'
         self._diagnostics.publish(
             serialize_exact(
                 diagnostic_array(
@@ -373,6 +429,8 @@ class Recorder(ShellNode):
             f'lost {c.lost}'
             for topic, c in self.counts.items()
         ]
+        if self.system_clock_since is not None:
+            lines.append(f'log times: {self.log_time_base()}')
         if self.failure is not None:
             lines.append(
                 f'a write failed: the {total.written} message(s) written are in the file, the '

@@ -187,12 +187,6 @@ def _reference_bytes(
         order = [robot.joints.index(name) for name in names]
         if config.reference_inputs == 'study':
             inputs = InputDefinition.study(robot.lowpass_cutoff_hz[order])
-        elif config.reference_smoothing_hz >= 0.5 / robot.ipo_period_s:
-            raise ConfigError(
-                f'reference_smoothing_hz {config.reference_smoothing_hz:g} Hz must be below the '
-                f'Nyquist frequency {0.5 / robot.ipo_period_s:g} Hz of the IPO period '
-                f"{robot.ipo_period_s:g} s (0: the robot config's input_smoothing_hz)"
-            )
         elif config.reference_smoothing_hz > 0:
             inputs = InputDefinition.controller(np.full(len(names), config.reference_smoothing_hz))
         else:
@@ -231,6 +225,26 @@ def _reference_bytes(
     return out
 
 
+def check_smoothing(config: ReplayConfig, robot: RobotConfig) -> None:
+    """Refuse a reference_smoothing_hz the robot config would refuse as input_smoothing_hz.
+
+    It must lie above the label cut-offs (the reference keeps the motion the labels smear:
+    models are fitted and scored on such inputs) and below the Nyquist frequency of the IPO.
+    """
+    hz, nyquist = config.reference_smoothing_hz, 0.5 / robot.ipo_period_s
+    if config.reference_mode == 'none' or config.reference_inputs != 'controller' or hz == 0:
+        return
+    cutoffs = robot.lowpass_cutoff_hz.tolist()
+    if not max(cutoffs) < hz < nyquist:
+        raise ConfigError(
+            f'node replay: reference_smoothing_hz {hz:g} Hz must lie above the label cut-offs '
+            f'lowpass_cutoff_hz {cutoffs} of robot config {robot.source or robot.name} (the '
+            'reference keeps the motion the labels smear, as input_smoothing_hz does) and below '
+            f"the Nyquist frequency {nyquist:g} Hz of the IPO period; 0: the robot config's "
+            f'input_smoothing_hz {robot.input_smoothing_hz.tolist()}'
+        )
+
+
 def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     """Load the replayed span of a bag into cycles.
 
@@ -239,11 +253,11 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
 
     Raises:
         BagError: the bag is unreadable, lacks a topic, or a message has no header stamp with
-            ``timing: stamp``.
-            Also: a requested topic (or the reference source) yields no message in the span,
-            or its type in metadata.yaml differs from the storage's.
-        ConfigError: the span is empty, or reference_smoothing_hz is not below Nyquist.
+            ``timing: stamp``; a requested topic (or the reference source) yields no message in
+            the span, or its type in metadata.yaml differs from the storage's.
+        ConfigError: the span is empty, or reference_smoothing_hz is refused (``check_smoothing``).
     """
+    check_smoothing(config, robot)
     path = Path(config.bag)
     info = bag_info(path)
     has_reference = config.reference_mode != 'none'

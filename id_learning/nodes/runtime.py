@@ -4,7 +4,8 @@ On Jazzy ``rclpy.init()`` is no context manager: init, spin inside try, catch
 ``KeyboardInterrupt`` and ``ExternalShutdownException``, and ``rclpy.try_shutdown()`` in finally.
 SIGINT and SIGTERM end the spin through our own handler (see _StopOnSignal). A node's ``close()``
 runs before the node is destroyed, so that the recorder finishes its bag and every node logs its
-final report.
+final report, and the process exits 0. A signal before that, while Python imports the node
+(``id_learning.entry``) or ROS starts, ends it with one line and 130 (143 for SIGTERM).
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rclpy.utilities import ok, try_shutdown
 
+from id_learning.entry import stopped_while_starting
 from id_learning.errors import IdLearningError
-from id_learning.nodes import param_schema
+from id_learning.nodes import param_ros
 
 __all__ = ['ShellNode', 'close_spun_node', 'make_executor', 'run_node']
 
@@ -157,7 +159,9 @@ def run_node(
 
     Returns:
         The process exit status: 0, or 2 when the node could not start (bad parameters,
-        missing files), with the reason logged.
+        missing files), with the reason logged; 130 after one line when Ctrl-C came while ROS
+        started, before the node was being made (during the imports, ``id_learning.entry``
+        says so alike).
     """
     if config_class is not None and wants_help(args):
         try:
@@ -174,13 +178,18 @@ def run_node(
             args=None if args is None else list(args),
             signal_handler_options=SignalHandlerOptions.NO,
         )
+        # From here a signal is noted, never raised: a node being made is made whole (a
+        # recorder's bag opened), then closed with its report.
+        stop = _StopOnSignal()
     except RuntimeError as err:  # rclpy's RCLError: an unreadable --params-file, bad --ros-args
         print(f'error: {name or "node"}: ROS 2 could not start it: {err}', file=sys.stderr)
         return 2
-    stop = _StopOnSignal()
+    except KeyboardInterrupt as err:  # Ctrl-C while ROS starts: nothing of the node exists yet
+        try_shutdown()
+        return stopped_while_starting(name or 'node', err)
     node: ShellNode | None = None
     status = 0
-    param_schema.COMMAND_LINE = None if args is None else list(args)  # its --params-file files
+    param_ros.COMMAND_LINE = None if args is None else list(args)  # its -p and params files
     try:
         node = make_node()
         spinner = make_executor(node.executor_kind)

@@ -18,6 +18,10 @@ adaptation inside a control loop needs them:
   then stay biased for the whole shift);
 - bounded covariance: each parameter's variance is capped at its prior one, so that
   forgetting without excitation (a robot standing still) cannot wind it up;
+- bounded recursion: the estimate itself stays within ``ESTIMATE_PRIOR_STDS`` prior standard
+  deviations (ten times the bounds with the default prior), and the error scale within the torque
+  limit: beyond, the recursion winds up on input no drift explains. A stored state beyond these
+  limits is refused at load (``adaptation_store``): what a session stores, the next continues;
 - frozen input: a non-finite sample, or one the caller marks stale, changes nothing; the loop
   keeps why (``frozen_reason``), and each kind of reason once for its caller to say.
 
@@ -42,6 +46,8 @@ from id_learning.physics.friction import coulomb
 from id_learning.predictor.adaptation_inertia import InertiaAdapter, stabilised
 from id_learning.predictor.adaptation_store import (
     ADAPTATION_JSON,
+    COLUMNS,
+    ESTIMATE_PRIOR_STDS,
     StoredBase,
     adaptation_path,
     load_base,
@@ -52,7 +58,6 @@ from id_learning.robot.drives import torque_per_ampere
 
 __all__ = ['ADAPTATION_JSON', 'AdaptationConfig', 'AdaptationLoop', 'FrictionAdapter']
 
-_COLUMNS = ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
 #: The corrections are bounded to this share of the torque limits: a drift, not a new model.
 BOUND_SHARE = 0.1
 #: The rigid body's correction may reach this share: a payload can weigh as much as a link.
@@ -127,6 +132,9 @@ class FrictionAdapter:
         self.theta = np.zeros((n, 3))  # what is applied: the estimate within the bounds
         self._estimate = np.zeros((n, 3))  # the recursion's own, unclipped
         self._p0 = np.stack([np.diag((self.config.initial_std * b) ** 2) for b in self.bounds])
+        #: How far the recursion's estimate may go (n, 3), and the error scale (n,).
+        self.estimate_limit = ESTIMATE_PRIOR_STDS * self.config.initial_std * self.bounds
+        self.error_scale_limit = limit
         self.covariance = self._p0.copy()
         self.forgetting = 1.0 - self.period_s / self.config.time_constant_s
         self.error_scale = 0.02 * limit  # running RMS of the prediction error [N*m]
@@ -176,14 +184,18 @@ class FrictionAdapter:
         # gate: a scale that had shrunk to the noise of a standstill grows back within a second
         # of motion, instead of gating every sample from then on.
         clipped = np.minimum(np.abs(error), limit)
-        self.error_scale = np.sqrt(lam * self.error_scale**2 + (1 - lam) * clipped**2)
+        self.error_scale = np.minimum(
+            np.sqrt(lam * self.error_scale**2 + (1 - lam) * clipped**2), self.error_scale_limit
+        )
         if not accept.all():
             self.counters.gated += int(np.count_nonzero(~accept))
             if not accept.any():
                 return False
         p_phi = np.matmul(self.covariance, phi[:, :, None])[:, :, 0]
         gain = p_phi / (lam + (phi * p_phi).sum(axis=1))[:, None]
-        estimate = self._estimate + gain * error[:, None]
+        estimate = np.clip(
+            self._estimate + gain * error[:, None], -self.estimate_limit, self.estimate_limit
+        )
         covariance = (self.covariance - gain[:, :, None] * p_phi[:, None, :]) / lam
         covariance, resets = stabilised(covariance, self._p0, self.config.max_variance)
         self.counters.resets += resets
@@ -212,7 +224,7 @@ class FrictionAdapter:
         """The adapted parameters and counters, JSON-ready (for /diagnostics and the file)."""
         return {
             'joints': list(joints),
-            'columns': list(_COLUMNS),
+            'columns': list(COLUMNS),
             'theta': self.theta.tolist(),
             'estimate': self._estimate.tolist(),
             'error_scale_nm': self.error_scale.tolist(),
@@ -484,7 +496,7 @@ class AdaptationLoop:
         }
         theta = self.adapter.theta if self.inertia is None else self.inertia.friction
         for j, name in enumerate(joints):
-            for k, column in enumerate(_COLUMNS):
+            for k, column in enumerate(COLUMNS):
                 values[f'adapted_{column}_{name}'] = float(theta[j, k])
         if self.inertia is not None:
             values['adapted_base_parameter_change_norm'] = float(

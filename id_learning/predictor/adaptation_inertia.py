@@ -9,7 +9,8 @@ each weighted by its running error scale): estimated apart, the friction offsets
 the slowly varying gravity error along the motion and the two would never settle. The
 correction is clipped per joint to ``bound_share`` of its torque limit. A sample with any joint
 beyond the gate is not learnt from (the outputs share the parameters); the covariance
-safeguards are ``stabilised``.
+safeguards are ``stabilised``; the estimate stays within ``ESTIMATE_PRIOR_STDS`` prior standard
+deviations and the error scale within the torque limit (as the friction adapter's).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from id_learning.errors import ConfigError
 from id_learning.physics.base_parameters import base_parameters
 from id_learning.physics.friction import coulomb
 from id_learning.physics.rigid_body import RigidBodyDynamics
+from id_learning.predictor.adaptation_store import ESTIMATE_PRIOR_STDS
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['InertiaAdapter', 'stabilised']
@@ -87,6 +89,9 @@ class InertiaAdapter:
         nominal = base.matrix @ dynamics.inertial_parameters()
         body_std = _PRIOR_SHARE * np.abs(nominal) + _PRIOR_FLOOR
         self._p0 = np.diag(np.concatenate([friction_std, body_std]) ** 2)
+        #: How far the estimate may go (3n + p,), and the error scale (n,).
+        self.estimate_limit = ESTIMATE_PRIOR_STDS * np.concatenate([friction_std, body_std])
+        self.error_scale_limit = limit
         self.covariance = self._p0.copy()
         self.estimate = np.zeros(3 * n + base.count)
         self.forgetting = 1.0 - self.period_s / self.time_constant_s
@@ -132,14 +137,16 @@ class InertiaAdapter:
         error = residual - regressor @ self.estimate
         limit = self.gate_sigmas * self.error_scale
         clipped = np.minimum(np.abs(error), limit)
-        self.error_scale = np.sqrt(lam * self.error_scale**2 + (1 - lam) * clipped**2)
+        self.error_scale = np.minimum(
+            np.sqrt(lam * self.error_scale**2 + (1 - lam) * clipped**2), self.error_scale_limit
+        )
         if not (np.abs(error) <= limit).all():  # a NaN error is gated too
             self.gated += 1
             return False
         p_yt = self.covariance @ regressor.T  # (m, n)
         innovation = lam * np.diag(self.error_scale**2) + regressor @ p_yt
         gain = np.linalg.solve(innovation, p_yt.T).T  # P Y^T S^-1, S symmetric
-        estimate = self.estimate + gain @ error
+        estimate = np.clip(self.estimate + gain @ error, -self.estimate_limit, self.estimate_limit)
         if not np.isfinite(estimate).all():  # never carry a broken estimate into a torque
             self.resets += 1
             self.estimate, self.covariance = np.zeros_like(estimate), self._p0.copy()

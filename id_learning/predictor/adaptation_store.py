@@ -4,8 +4,12 @@ A session starts from what the file holds (when it was written for the same join
 and writes back only when it learnt something: a session that accepted no update (NaN currents,
 a reference always stale) leaves the file as it was, so that it never erases what an earlier one
 learnt. Writing is atomic (a temporary file, flushed to disk, then renamed over the old one). A
-file that cannot be continued from (unreadable, other joints or mode) is never overwritten: it is
-kept as ``<file>.previous`` (or ``.previous.N``) before a new one is written.
+file that cannot be continued from is never overwritten: it is kept as ``<file>.previous`` (or
+``.previous.N``) before a new one is written. It cannot be continued from when it is unreadable,
+for other joints, mode or base parameters, or holds a value the adaptation never reaches online:
+not finite, beyond the limits it keeps its estimate and error scale within (``ESTIMATE_PRIOR_STDS``
+prior standard deviations, the torque limit), an applied correction beyond its bound, or an error
+scale of 0 (which would gate every sample); the reason names the key, the joint and the value.
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ import numpy as np
 
 __all__ = [
     'ADAPTATION_JSON',
+    'COLUMNS',
+    'ESTIMATE_PRIOR_STDS',
     'AdaptationLoop',
     'StoredBase',
     'adaptation_path',
@@ -29,11 +35,35 @@ __all__ = [
 ]
 
 
+#: The friction terms per joint, in the order of the stored arrays' columns.
+COLUMNS = ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
+#: The adapters keep each estimated parameter within this many prior standard deviations.
+ESTIMATE_PRIOR_STDS = 100.0
+#: Rounding allowed on a stored value at its limit.
+_SLACK = 1e-9
+
+
 class _Estimator(Protocol):
     """An adapter whose estimate a stored state continues."""
 
+    @property
+    def estimate_limit(self) -> np.ndarray:
+        """How far each estimated parameter may go (the estimate's shape)."""
+
+    @property
+    def error_scale_limit(self) -> np.ndarray:
+        """The largest error scale per joint (n,)."""
+
     def restore(self, estimate: np.ndarray, error_scale: np.ndarray) -> None:
         """Continue from a stored estimate and error scale (n,)."""
+
+
+class _FrictionEstimator(_Estimator, Protocol):
+    """The friction adapter: what it applies is its estimate within ``bounds``."""
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(n, 3) the bound of each applied friction term."""
 
 
 class _BodyEstimator(_Estimator, Protocol):
@@ -48,7 +78,7 @@ class AdaptationLoop(Protocol):
     """What the store needs of ``adaptation.AdaptationLoop`` (kept apart: no import cycle)."""
 
     @property
-    def adapter(self) -> _Estimator:
+    def adapter(self) -> _FrictionEstimator:
         """The friction adapter."""
 
     @property
@@ -117,24 +147,61 @@ def _array(state: dict[str, Any], key: str, shape: tuple[int, ...]) -> np.ndarra
     return value
 
 
+def _within(key: str, values: np.ndarray, limit: np.ndarray, names: list[str], why: str) -> None:
+    """ValueError naming the first value beyond ``limit`` (same shape): its key, name, value."""
+    over = np.flatnonzero(np.abs(values) > np.asarray(limit) * (1 + _SLACK))
+    if over.size:
+        k = int(over[0])
+        raise ValueError(
+            f'{key!r} of {names[k]} is {values.flat[k]:.6g}, beyond the '
+            f'{np.asarray(limit).flat[k]:.6g} {why}'
+        )
+
+
+def _check_scale(scale: np.ndarray, limit: np.ndarray, joints: tuple[str, ...]) -> None:
+    """ValueError naming a joint whose stored error scale the adaptation never holds."""
+    for j, name in enumerate(joints):
+        if not scale[j] > 0:
+            raise ValueError(
+                f"'error_scale_nm' of {name} is {scale[j]:.6g}, not above 0 (it scales the "
+                'outlier gate: every sample would be gated)'
+            )
+    _within('error_scale_nm', scale, limit, list(joints), 'N*m torque limit it is kept within')
+
+
 def _restore(loop: AdaptationLoop, state: dict[str, Any], joints: tuple[str, ...]) -> None:
-    """Set the loop's estimates from a stored state (ValueError: it does not fit the loop)."""
+    """Set the loop's estimates from a stored state (ValueError: it does not fit the loop).
+
+    Every value is checked against what the adaptation keeps online before anything is set:
+    a state beyond it is no earlier session's (a corrupt or edited file).
+    """
     if state.get('joints') != list(joints):
         raise ValueError(f"joints {state.get('joints')} are not the model's {list(joints)}")
     if state.get('mode', 'rls') != _mode(loop):
         raise ValueError(f'mode {state.get("mode", "rls")!r}, this session runs {_mode(loop)!r}')
     n = len(joints)
+    terms = [f'{joint} {column}' for joint in joints for column in COLUMNS]
     scale = _array(state, 'error_scale_nm', (n,))
+    estimated = 'the adaptation keeps its estimate within'
     if loop.inertia is None:
-        estimate = _array(state, 'estimate', (n, 3)) if 'estimate' in state else None
+        adapter = loop.adapter
+        _check_scale(scale, adapter.error_scale_limit, joints)
         theta = _array(state, 'theta', (n, 3))
-        loop.adapter.restore(theta if estimate is None else estimate, scale)
+        _within('theta', theta, adapter.bounds, terms, 'the applied correction is bounded to')
+        estimate = _array(state, 'estimate', (n, 3)) if 'estimate' in state else theta
+        _within('estimate', estimate, adapter.estimate_limit, terms, estimated)
+        adapter.restore(estimate, scale)
         return
     body = loop.inertia
     if state.get('base_parameters') != list(body.names):
         raise ValueError("its base parameters are not the robot model's")
+    _check_scale(scale, body.error_scale_limit, joints)
     friction = _array(state, 'theta', (n, 3))
     change = _array(state, 'change', (len(body.names),))
+    limit = np.asarray(body.estimate_limit)
+    _within('theta', friction, limit[: 3 * n].reshape(n, 3), terms, estimated)
+    names = [f'base parameter {name}' for name in body.names]
+    _within('change', change, limit[3 * n :], names, estimated)
     body.restore(np.concatenate([friction.reshape(-1), change]), scale)
 
 

@@ -12,6 +12,7 @@ section ``evaluation.closed_loop_report`` writes; it is added to a run's report 
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -44,13 +45,17 @@ from id_learning.twin import load_twin_config
 from id_learning.twin.plant import TwinPlant
 from id_learning.twin.simulate import TWIN_CONFIG_COPY
 
-__all__ = ['CLOSED_LOOP_JSON', 'ClosedLoopResult', 'closed_loop_run']
+__all__ = ['CLOSED_LOOP_JSON', 'DEFAULT_DURATION_S', 'ClosedLoopResult', 'closed_loop_run']
+
+_LOG = logging.getLogger(__name__)
 
 CLOSED_LOOP_JSON = 'closed_loop.json'
 CLOSED_LOOP_PNG = 'closed_loop.png'
 FEED_FORWARD_PNG = 'closed_loop_feed_forward.png'
 #: The closed-loop section on its own, beside the results.
 CLOSED_LOOP_MD = 'report.md'
+#: Seconds of the test part tracked when no duration is asked for (the whole part if shorter).
+DEFAULT_DURATION_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -77,6 +82,13 @@ class ClosedLoopResult:
             f'{"improvement (" + self.best_model + ")":<{width}}'
             + ''.join(f'{x:>10.1f}' for x in self.improvement_best)
         )
+        reference = self.document['reference']
+        asked = reference.get('requested_duration_s')
+        cut = f', not the {asked:g} s asked for' if reference.get('shortened') else ''
+        lines.append(
+            f'tracked {reference["duration_s"]:.2f} s{cut}: {reference["part"]} of '
+            f'{reference["bag"]} (it holds {reference["available_s"]:.2f} s)'
+        )
         return '\n'.join(lines)
 
 
@@ -94,15 +106,48 @@ def _twin_config_path(bag: Path, twin_config: Path | None) -> Path:
 
 def _reference_rows(
     dataset: Dataset, config: PreprocessConfig, samples: int
-) -> tuple[int, int, str]:
-    """The rows [start, stop) of the reference (at most ``samples``), and which part they are."""
+) -> tuple[int, int, int, str]:
+    """The reference's rows [start, stop) (at most ``samples``), its part's end, and the part."""
     if dataset.is_shuffled:  # its test samples are scattered: the last share in time
         start, end = round(config.train_fraction * len(dataset.q)), len(dataset.q)
         part = 'the last share in time (a shuffled split: it holds training samples too)'
     else:
         start, end = segment_rows(dataset, 'test')[0]
         part = 'the test part'
-    return start, min(end, start + samples), part
+    return start, min(end, start + samples), end, part
+
+
+def _tracked(
+    dataset: Dataset, config: PreprocessConfig, bag: Path, period_s: float, asked: float | None
+) -> dict[str, Any]:
+    """What the reference tracks (closed_loop.json's ``reference``), ``asked`` seconds of it.
+
+    A part shorter than ``asked`` is tracked whole, with a warning naming both (None asks for
+    the whole part, at most ``DEFAULT_DURATION_S``, without one).
+
+    Raises:
+        ConfigError: fewer than 2 samples to track.
+    """
+    seconds = DEFAULT_DURATION_S if asked is None else asked
+    start, stop, end, part = _reference_rows(dataset, config, round(seconds / period_s))
+    if stop - start < 2:
+        raise ConfigError(f'{bag}: {stop - start} samples of the test part to track')
+    available = (end - start) * period_s
+    shortened = asked is not None and stop == end and asked > available + period_s
+    if shortened:
+        _LOG.warning(
+            'duration %g s asked for, but %s of %s holds %.2f s: tracking those %.2f s '
+            '(closed_loop.json records both)', asked, part, bag, available, available,
+        )  # fmt: skip
+    return {
+        'bag': str(bag),
+        'rows': [start, stop],
+        'duration_s': (stop - start) * period_s,
+        'requested_duration_s': asked,
+        'available_s': available,
+        'shortened': shortened,
+        'part': part,
+    }
 
 
 def closed_loop_run(
@@ -111,7 +156,7 @@ def closed_loop_run(
     out: Path,
     *,
     twin_config: Path | None = None,
-    duration_s: float = 60.0,
+    duration_s: float | None = None,
     kinds: Sequence[str] | None = None,
     progress: bool = True,
     force: bool = False,
@@ -120,6 +165,10 @@ def closed_loop_run(
 ) -> ClosedLoopResult:
     """Track the run's test motion on the twin with each model's feed-forward; write the results.
 
+    ``duration_s``: seconds of the test part to track; a part shorter than that is tracked whole,
+    with a warning naming both (closed_loop.json records both, and ``shortened``). None: the
+    whole part, at most ``DEFAULT_DURATION_S``, without a warning.
+    ``kinds``: the models to run (None: every model of the run; an empty list is refused).
     ``out`` is written whole or not at all (``id_learning.outputs``); ``force`` replaces an
     earlier result there, never the run itself. ``run_name``: the run's path as closed_loop.json
     records it, where ``run_dir`` is read inside another command's partial folder (the demo's).
@@ -132,8 +181,10 @@ def closed_loop_run(
         OutputError: ``out`` is refused, or a write failed.
     """
     run_dir, out = Path(run_dir), Path(out)
-    if not duration_s > 0:
+    if duration_s is not None and not duration_s > 0:
         raise ConfigError(f'duration must be positive [s], got {duration_s}')
+    if kinds is not None and not kinds:
+        raise ConfigError('no model kind named: name some, or leave the kinds out for all')
     run = read_run(run_dir)
     check_output(out, force=force, inputs=[run_dir], kind='closed-loop')  # before the loop
     if run.get('robot', {}).get('joints') != list(robot.joints):
@@ -144,15 +195,14 @@ def closed_loop_run(
     difference = how_robots_differ(robot, twin.robot)
     if difference:
         raise ConfigError(f"{twin_path}: the twin is not the run's robot: it has {difference}")
-    kinds = list(kinds or run['kinds'])
+    kinds = list(run['kinds'] if kinds is None else kinds)
     unknown = sorted(set(kinds) - set(run['kinds']))
     if unknown:
         raise ConfigError(f'{run_dir}: no model(s) {unknown} in the run; it has {run["kinds"]}')
     config = preprocess_from_dict(run['preprocessing'])
     dataset = load_datasets([bag], robot, config, progress=False)[0]
-    start, stop, part = _reference_rows(dataset, config, round(duration_s / robot.ipo_period_s))
-    if stop - start < 2:
-        raise ConfigError(f'{bag}: {stop - start} samples of the test part to track')
+    tracked = _tracked(dataset, config, bag, robot.ipo_period_s, duration_s)
+    start, stop = tracked['rows']
     reference = dataset.controller.take(slice(start, stop))
     # The plant's friction warms up from where the reference starts in the recording.
     offset_s = float(dataset.stamps_ns[start] - dataset.stamps_ns[0]) * 1e-9
@@ -175,12 +225,7 @@ def closed_loop_run(
     document = {
         'run': str(run_name or run_dir),
         'twin_config': str(twin_path),
-        'reference': {
-            'bag': str(bag),
-            'rows': [start, stop],
-            'duration_s': (stop - start) * robot.ipo_period_s,
-            'part': part,
-        },
+        'reference': tracked,
         'joints': list(robot.joints),
         'controller': {
             'structure': 'position P, velocity PI, torque limit, at the IPO period',

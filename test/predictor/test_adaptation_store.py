@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -188,3 +189,103 @@ def test_each_kind_of_freeze_reason_is_said_once_naming_the_topic_and_what_is_wr
     report = loop.report(mabi.joints)
     assert report['adaptation_frozen'] == 6
     assert 'not finite' in str(report['adaptation_frozen_reason'])
+
+
+# -- a stored state is checked against what the adaptation keeps online ---------------------------
+def _stream(loop: AdaptationLoop, robot: RobotConfig, levels: list[float], seed: int) -> None:
+    """Serve a sample per level; answer it with currents of that many times the torque limits."""
+    rng = np.random.default_rng(seed)
+    joints, n = list(robot.joints), len(robot.joints)
+    amperes = robot.limits.torque / loop.torque_per_ampere
+    for k, level in enumerate(levels):
+        stamp = 1_000_000 + k * 8_000_000
+        loop.serve(stamp, (rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), np.zeros(n)), np.zeros(n))
+        loop.measured_message(stamp, joints, list(level * amperes), joints, TOPIC)
+
+
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    levels=st.lists(
+        st.one_of(st.floats(-1e6, 1e6), st.sampled_from([0.0, 5.0, -5.0, 1e6])), min_size=1,
+        max_size=60,
+    ),
+    inertia=st.booleans(),
+    memory=st.sampled_from([0.08, 60.0]),
+)  # fmt: skip
+def test_what_a_session_stores_the_next_continues_from_whatever_it_was_fed(
+    mabi: RobotConfig, tmp_path: Path, levels: list[float], inertia: bool, memory: float
+) -> None:
+    """The limits kept online keep every stored value loadable, whatever the currents.
+
+    Absurd ones too (a million times the torque limit), with a memory of ten cycles that takes
+    them in at once (the error scale and the estimate reach their limits).
+    """
+    artifact = tmp_path / 'rnea_lq'
+    path = adaptation_path(artifact)
+    path.unlink(missing_ok=True)
+    config = AdaptationConfig(time_constant_s=memory)
+    first = AdaptationLoop.for_robot(mabi, mabi.joints, config, inertia=inertia)
+    first.load(artifact, mabi.joints)
+    _stream(first, mabi, levels, seed=len(levels))
+    first.save(artifact, mabi.joints)
+    second = new_loop(mabi, inertia=inertia)
+    assert second.load(artifact, mabi.joints).problem is None
+
+
+def _corrupt(artifact: Path, robot: RobotConfig, key: str, joint: int, column: int, value: float,
+             *, inertia: bool = False) -> str:  # fmt: skip
+    """Store a session's state with one value replaced; the file's text."""
+    loop = new_loop(robot, inertia=inertia)
+    loop.load(artifact, robot.joints)
+    session(loop, robot, ['valid'] * 20)
+    loop.save(artifact, robot.joints)
+    path = adaptation_path(artifact)
+    state = json.loads(path.read_text())
+    if key in ('error_scale_nm', 'change'):
+        state[key][joint] = value
+    else:
+        state[key][joint][column] = value
+    path.write_text(json.dumps(state))
+    return path.read_text()
+
+
+@pytest.mark.parametrize(
+    ('key', 'column', 'value', 'message'),
+    [
+        ('theta', 0, 1e12, r"'theta' of joint_2 coulomb_level_nm is 1e\+12, beyond the 1500 "
+                           'the applied correction is bounded to'),
+        ('estimate', 2, -1e12, r"'estimate' of joint_2 offset_nm is -1e\+12, beyond the 15000 "),
+        ('error_scale_nm', 0, 0.0, r"'error_scale_nm' of joint_2 is 0, not above 0"),
+        ('error_scale_nm', 0, 1e12, r"'error_scale_nm' of joint_2 is 1e\+12, beyond the 15000"),
+    ],
+)  # fmt: skip
+def test_a_stored_value_beyond_the_adaptations_limits_is_refused_naming_file_joint_and_value(
+    mabi: RobotConfig, artifact: Path, key: str, column: int, value: float, message: str
+) -> None:
+    """The probe's file: theta and estimate 1e12 gave each joint its bounded correction."""
+    text = _corrupt(artifact, mabi, key, 1, column, value)
+    loop = new_loop(mabi)
+    base = loop.load(artifact, mabi.joints)
+    assert base.problem is not None
+    assert re.search(message, base.problem), base.problem
+    line = base.line()
+    assert line is not None
+    assert line[0]
+    assert str(adaptation_path(artifact)) in line[1]
+    assert not loop.adapter.theta.any()  # starts from zero
+    assert adaptation_path(artifact).read_text() == text  # untouched at start
+    session(loop, mabi, ['valid'] * 5)
+    loop.save(artifact, mabi.joints)
+    aside = adaptation_path(artifact).with_name(f'{adaptation_path(artifact).name}.previous')
+    assert aside.read_text() == text  # kept aside, not overwritten
+
+
+def test_a_stored_base_parameter_change_beyond_its_limit_is_refused_by_name(
+    mabi: RobotConfig, artifact: Path
+) -> None:
+    _corrupt(artifact, mabi, 'change', 0, 0, 1e15, inertia=True)
+    loop = new_loop(mabi, inertia=True)
+    problem = loop.load(artifact, mabi.joints).problem or ''
+    assert re.search(r"'change' of base parameter .+ is 1e\+15, beyond the ", problem), problem

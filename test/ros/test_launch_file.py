@@ -23,6 +23,7 @@ from support import REPO
 
 pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
 
+from id_learning.entry import PROGRAMS
 from id_learning.nodes.params import PredictorNodeConfig, RecorderConfig, ReplayConfig
 
 pytestmark = pytest.mark.ros
@@ -126,8 +127,9 @@ def test_the_launch_file_starts_the_three_node_scripts_of_this_package(launched)
     for executable, node in started.items():
         assert node.kwargs['package'] == 'id_learning', executable
         assert node.kwargs['name'] == executable
-        main = scripts[executable].load()
-        assert main.__module__ == f'id_learning.nodes.{executable}', executable
+        # The script imports the node inside Ctrl-C's handling (id_learning/entry.py).
+        assert scripts[executable].value == f'id_learning.entry:{executable}', executable
+        assert PROGRAMS[executable] == (f'id_learning.nodes.{executable}', 'main'), executable
 
 
 def test_every_node_reads_the_one_parameter_file_and_has_its_section(launched, share):

@@ -16,10 +16,10 @@ from predictor.tiny_artifacts import reference_run
 from ros.ros_helpers import STARTUP_S, node_environment, random_domain
 
 from id_learning.errors import ConfigError
+from id_learning.nodes.param_ros import refuse_foreign_params_files
 from id_learning.nodes.param_schema import (
     params_file_problem,
     params_files,
-    refuse_foreign_params_files,
     section_matches,
 )
 from id_learning.nodes.params import (
