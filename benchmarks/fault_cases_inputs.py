@@ -342,7 +342,7 @@ def _node_parameter_cases(fx: Fixtures) -> Iterator[Case]:
         ('predictor range_margin nan', PredictorNodeConfig, {'range_margin': nan},
          ('node predictor', 'range_margin', 'nan')),
         ('predictor torque_limit_scale inf', PredictorNodeConfig, {'torque_limit_scale': inf},
-         ('torque_limit_scale', 'inf', '(0, 1]')),
+         ('torque_limit_scale', 'inf', '[1e-06, 1]')),
         ('predictor max_age_s -inf', PredictorNodeConfig, {'max_age_s': -inf},
          ('max_age_s', '-inf')),
         ('predictor input_depth beyond a million', PredictorNodeConfig, {'input_depth': 10**7},

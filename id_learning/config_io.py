@@ -34,6 +34,7 @@ __all__ = [
     'float_vector',
     'load_yaml_mapping',
     'not_a_file',
+    'number_hint',
     'parse_yaml',
     'range_problem',
     'read_capped',
@@ -258,8 +259,30 @@ def finite_number(
         value, low=low, high=high, low_open=low_open, high_open=high_open, integer=integer
     )
     if problem:
-        raise ConfigError(f'{where}: {problem}, got {value!r}')
+        raise ConfigError(f'{where}: {problem}, got {value!r}{number_hint(value)}')
     return int(value) if integer else float(value)
+
+
+#: A number followed by a unit ('8ms', '10 Hz', '2.5rad/s'): text where a bare number belongs.
+_NUMBER_WITH_UNIT = re.compile(r'\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*[^\d\s.+-].*')
+
+
+def number_hint(value: Any, unit: str = '') -> str:
+    """'; <how to write it>' for a string where a config number belongs, else ''.
+
+    A quoted number (``'0.008'``) is written without quotes; a number with a unit (``8ms``)
+    as the bare number in ``unit``, else in the unit the key names (``ipo_period_s``: s).
+    """
+    if not isinstance(value, str):
+        return ''
+    if _looks_numeric(value):
+        return f'; write the number without quotes: {value.strip()}'
+    if _NUMBER_WITH_UNIT.fullmatch(value):
+        return (
+            '; a number with a unit is text, not a number: write the bare number in '
+            f'{unit or "the unit the key names"}'
+        )
+    return ''
 
 
 def check_keys(
@@ -332,11 +355,8 @@ def float_vector(
     """
     word = _word_among_numbers(value)
     if word is not None:
-        hint = ''
-        if isinstance(word, str) and _looks_numeric(word):
-            hint = f'; write the number without quotes: {word.strip()}'
         context = '' if word is value else f' in {value!r}'
-        raise ConfigError(f'{where}: expected numbers, got {word!r}{context}{hint}')
+        raise ConfigError(f'{where}: expected numbers, got {word!r}{context}{number_hint(word)}')
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError) as err:

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from id_learning.bag.reader import bag_info, check_distinct
+from id_learning.bag.distinct import check_distinct
+from id_learning.bag.reader import bag_info
 from id_learning.cli import options
 from id_learning.dataset.import_mapping import ColumnSpec, ImportMapping, JointColumns
 from id_learning.dataset.importer import import_logs

@@ -7,6 +7,7 @@ from id_learning.bag.messages import (
     JointStateMessage,
     decode_joint_state,
     encode_joint_state,
+    header_stamp_problem,
 )
 from id_learning.bag.reader import (
     BagInfo,
@@ -32,6 +33,7 @@ __all__ = [
     'bag_info',
     'decode_joint_state',
     'encode_joint_state',
+    'header_stamp_problem',
     'iter_messages',
     'iter_raw',
     'iter_typed',

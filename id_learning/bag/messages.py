@@ -17,6 +17,7 @@ __all__ = [
     'canonical_cdr',
     'decode_joint_state',
     'encode_joint_state',
+    'header_stamp_problem',
     'message_definition',
     'typestore',
 ]
@@ -64,9 +65,27 @@ def canonical_cdr(data: bytes | memoryview, msgtype: str) -> bytes:
     return bytes(store.serialize_cdr(message, msgtype, little_endian=bool(raw[1])))
 
 
+def header_stamp_problem(sec: int, nanosec: int) -> str | None:
+    """What makes a header stamp no time, in words, or None for a valid one.
+
+    builtin_interfaces/Time holds ``nanosec`` in [0, 1e9) and, for a time since 1970, ``sec``
+    >= 0; folded into nanoseconds anything else reads as another time. Every door (the bag
+    readers, inspect, the replay and the predictor) refuses or reports such a stamp.
+    """
+    if not 0 <= nanosec < NS_PER_S:
+        return f'nanosec {nanosec} is not in [0, 1e9) (sec {sec})'
+    if sec < 0:
+        return f'sec {sec} is negative (nanosec {nanosec}): before 1970'
+    return None
+
+
 @dataclass(frozen=True, eq=False)
 class JointStateMessage:
-    """One decoded sensor_msgs/JointState. Arrays may be empty where the sender left them out."""
+    """One decoded sensor_msgs/JointState. Arrays may be empty where the sender left them out.
+
+    ``stamp_problem``: why the header stamp is no time (``header_stamp_problem``), else None;
+    ``stamp_ns`` is then sec * 1e9 + nanosec as stored.
+    """
 
     stamp_ns: int
     frame_id: str
@@ -74,6 +93,7 @@ class JointStateMessage:
     position: np.ndarray
     velocity: np.ndarray
     effort: np.ndarray
+    stamp_problem: str | None = None
 
 
 def encode_joint_state(
@@ -104,14 +124,15 @@ def encode_joint_state(
 def decode_joint_state(data: bytes | memoryview) -> JointStateMessage:
     """Deserialize CDR bytes of a JointState."""
     msg = typestore().deserialize_cdr(data, JOINT_STATE)
-    stamp = msg.header.stamp
+    sec, nanosec = int(msg.header.stamp.sec), int(msg.header.stamp.nanosec)
     return JointStateMessage(
-        stamp_ns=int(stamp.sec) * NS_PER_S + int(stamp.nanosec),
+        stamp_ns=sec * NS_PER_S + nanosec,
         frame_id=msg.header.frame_id,
         name=tuple(msg.name),
         position=msg.position,
         velocity=msg.velocity,
         effort=msg.effort,
+        stamp_problem=header_stamp_problem(sec, nanosec),
     )
 
 

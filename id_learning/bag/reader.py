@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import os
 import struct
 import traceback
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
@@ -19,9 +18,10 @@ from rosbags.rosbag2.errors import ReaderError
 from tqdm import tqdm
 
 from id_learning.bag.messages import JOINT_STATE, JointStateSeries, decode_joint_state, typestore
+from id_learning.bag.reader_paths import BagReader, folder_is_no_bag, storage_files
 from id_learning.bag.reader_storage import check_encodings, check_storage_types, order_by_time
 from id_learning.bag.reader_storage import listed_files as _listed_files
-from id_learning.errors import BagError, ConfigError, DatasetError
+from id_learning.errors import BagError, DatasetError
 
 __all__ = [
     'BagInfo',
@@ -29,7 +29,6 @@ __all__ = [
     'TopicInfo',
     'bag_custom_data',
     'bag_info',
-    'check_distinct',
     'iter_messages',
     'iter_raw',
     'iter_typed',
@@ -93,9 +92,26 @@ def _open(path: Path) -> tuple[Reader, str | None]:
     if path.is_file():
         raise BagError(f'{path}: expected a rosbag2 folder (with metadata.yaml), got a file')
     if not (path / 'metadata.yaml').is_file():
+        if (why := folder_is_no_bag(path)) is not None:
+            raise BagError(f'{path}: {why}')
         raise BagError(f'{path}: not a complete rosbag2 folder (no metadata.yaml); {RECOVER_HINT}')
     _check_metadata(path)
-    reader = Reader(path)
+    reader = BagReader(path)
+    try:
+        _open_reader(path, reader)
+    except BaseException:
+        reader.drop_view()
+        raise
+    _warn_unlisted(path, reader)
+    note = order_by_time(path, reader)
+    if note is not None and note not in _WARNED_ORDER:
+        _WARNED_ORDER.add(note)
+        _LOG.warning('%s', note)
+    return reader, note
+
+
+def _open_reader(path: Path, reader: Reader) -> None:
+    """Open ``reader`` on bag ``path``; what fails is a BagError naming the bag and the cause."""
     try:
         reader.open()
     except (ReaderError, struct.error, EOFError, ValueError, OSError) as err:
@@ -113,12 +129,6 @@ def _open(path: Path) -> tuple[Reader, str | None]:
             f'{path}: cannot open bag: {files} do(es) not decompress or decode '
             f'({type(err).__name__}: {err}){_compression_note(path)}'
         ) from err
-    _warn_unlisted(path, reader)
-    note = order_by_time(path, reader)
-    if note is not None and note not in _WARNED_ORDER:
-        _WARNED_ORDER.add(note)
-        _LOG.warning('%s', note)
-    return reader, note
 
 
 def _check_metadata(path: Path) -> None:
@@ -200,7 +210,7 @@ def _warn_unlisted(path: Path, reader: Reader) -> None:
     listed = {Path(name).name for name in getattr(reader, 'paths', ())} or {
         Path(str(item)).name for item in _listed_files(path)
     }
-    extra = tuple(sorted({p.name for p in _data_files(path)} - listed))
+    extra = tuple(sorted({p.name for p in data_files(path)} - listed))
     key = (path.resolve(), extra)
     if extra and key not in _WARNED_UNLISTED:
         _WARNED_UNLISTED.add(key)
@@ -213,7 +223,7 @@ def _warn_unlisted(path: Path, reader: Reader) -> None:
         )
 
 
-def _data_files(path: Path) -> list[Path]:
+def data_files(path: Path) -> list[Path]:
     """A log file itself, or a bag folder's storage files (``.mcap``, ``.db3``).
 
     metadata.yaml is left out: an edited copy of it must not hide a duplicate recording. Files
@@ -224,99 +234,6 @@ def _data_files(path: Path) -> list[Path]:
     return sorted(p for p in path.iterdir() if p.is_file() and p.suffix in {'.mcap', '.db3'})
 
 
-def _content_key(path: Path) -> tuple[int, tuple[str, ...]]:
-    """Total size and the sorted SHA-256 digests of a file, or of a bag folder's storage files.
-
-    File names are left out, so a renamed storage file still matches its original.
-    """
-    digests: list[str] = []
-    size = 0
-    for file in _data_files(path):
-        digest = hashlib.sha256()
-        with file.open('rb') as stream:
-            for block in iter(lambda: stream.read(1 << 20), b''):
-                digest.update(block)
-                size += len(block)
-        digests.append(digest.hexdigest())
-    return size, tuple(sorted(digests))
-
-
-def check_distinct(paths: Sequence[Path | str], what: str) -> list[Path]:
-    """``paths`` as Paths, refused when one file or bag is given twice.
-
-    Twice means the same resolved path, or the same storage bytes under another name (a copy,
-    even with an edited metadata.yaml), or a bag holding the same messages in other storage
-    bytes (re-compressed, re-chunked): either would weigh one recording double in training,
-    evaluation or an import. Files are hashed only for inputs of equal storage size and
-    messages only for bags whose metadata states the same span and counts, so distinct inputs
-    cost a ``stat`` and a metadata read each.
-
-    Raises:
-        ConfigError: names both spellings of the input given twice and ``what`` (e.g. --bag).
-    """
-    out = [Path(p) for p in paths]
-    seen: dict[Path, Path] = {}
-    for path in out:
-        key = path.resolve()
-        if key in seen:
-            raise ConfigError(
-                f'{what}: {path} is given twice ({seen[key]} and {path}); give it once'
-            )
-        seen[key] = path
-    by_size: dict[int, list[Path]] = {}
-    for path in out:
-        if path.exists() and _data_files(path):
-            by_size.setdefault(sum(f.stat().st_size for f in _data_files(path)), []).append(path)
-    for group in (g for g in by_size.values() if len(g) > 1):
-        _refuse_equal(group, _content_key, what, 'identical content')
-    by_span: dict[tuple[object, ...], list[Path]] = {}
-    for path in out:
-        if path.is_dir() and (path / 'metadata.yaml').is_file():
-            by_span.setdefault(_span_key(path), []).append(path)
-    for group in (g for k, g in by_span.items() if k and len(g) > 1):
-        _refuse_equal(group, _message_key, what, 'the same messages, stored differently')
-    return out
-
-
-def _refuse_equal(
-    group: Sequence[Path], key: Callable[[Path], object], what: str, how: str
-) -> None:
-    """Refuse the first path of ``group`` whose ``key`` an earlier one shares."""
-    seen: dict[object, Path] = {}
-    for path in group:
-        value = key(path)
-        if value in seen:
-            raise ConfigError(
-                f'{what}: {path} holds the same data as {seen[value]} ({how}); '
-                'give each recording once'
-            )
-        seen[value] = path
-
-
-def _span_key(path: Path) -> tuple[object, ...]:
-    """Start, duration and per-topic counts a bag's metadata states; () when it does not open.
-
-    Bags that agree on all of it are hashed message by message: a copy re-compressed or
-    converted to another storage has other bytes but the same messages.
-    """
-    try:
-        info = bag_info(path)
-    except BagError:
-        return ()  # the command's own reading names what is wrong with it
-    counts = tuple(sorted((t.name, t.count) for t in info.topics))
-    return (info.start_ns, info.duration_ns, counts)
-
-
-def _message_key(path: Path) -> str:
-    """SHA-256 over every message's topic, log time and serialized bytes, in log order."""
-    digest = hashlib.sha256()
-    topics = [t.name for t in bag_info(path).topics]
-    for topic, log_ns, data in iter_raw(path, topics):
-        digest.update(f'{topic}\0{log_ns}\0{len(data)}\0'.encode())
-        digest.update(data)
-    return digest.hexdigest()
-
-
 def bag_info(path: Path | str) -> BagInfo:
     """Read a bag's topics, counts and time span.
 
@@ -325,12 +242,12 @@ def bag_info(path: Path | str) -> BagInfo:
     """
     path = Path(path)
     reader, note = _open(path)
-    files = tuple(sorted(p.name for p in path.iterdir() if p.suffix in {'.mcap', '.db3'}))
+    files = storage_files(path)
     try:
         topics = tuple(TopicInfo(c.topic, c.msgtype, int(c.msgcount)) for c in reader.connections)
         return BagInfo(
             path=path,
-            storage='mcap' if all(name.endswith('.mcap') for name in files) else 'other',
+            storage='mcap' if all(n.endswith(('.mcap', '.mcap.zstd')) for n in files) else 'other',
             files=files,
             start_ns=int(reader.start_time) if reader.message_count else 0,
             # rosbags' end_time is one past the latest message; report last minus first.
@@ -488,21 +405,45 @@ def iter_messages(path: Path | str, topic: str) -> Iterator[tuple[int, Any]]:
         yield log_ns, message
 
 
-def read_joint_states(path: Path | str, topic: str, *, progress: bool = False) -> JointStateSeries:
+def _check_stored_type(path: Path, topic: str) -> None:
+    """Refuse, naming both types, a topic whose storage holds another type than metadata.yaml.
+
+    Raises:
+        BagError: ``reader_storage.check_storage_types``'s message (fix metadata.yaml).
+    """
+    reader, _ = _open(path)
+    try:
+        check_storage_types(path, reader, [topic])
+    finally:
+        reader.close()
+
+
+def read_joint_states(
+    path: Path | str,
+    topic: str,
+    *,
+    progress: bool = False,
+    fields: tuple[str, ...] = ('position', 'velocity', 'effort'),
+) -> JointStateSeries:
     """Read and stack every sensor_msgs/JointState on a topic.
+
+    ``fields``: the arrays read (and checked); the others come back None, whatever they hold
+    (the motor currents' topic carries its values in effort alone).
 
     Raises:
         BagError: missing topic, wrong message type, corrupt file.
-        DatasetError: messages disagree on joint names or array lengths (names the sample).
+        DatasetError: messages disagree on joint names or array lengths, or a header stamp is
+            no time (``header_stamp_problem``); names the sample.
     """
     path = Path(path)
     info = bag_info(path)
     msgtype = info.topic(topic).msgtype
     if msgtype != JOINT_STATE:
+        _check_stored_type(path, topic)  # metadata.yaml may be what is wrong, not the data
         raise BagError(f'{path}: topic {topic} has type {msgtype}, expected {JOINT_STATE}')
     stamps: list[int] = []
     logs: list[int] = []
-    fields: dict[str, list[np.ndarray]] = {'position': [], 'velocity': [], 'effort': []}
+    wanted: dict[str, list[np.ndarray]] = {key: [] for key in fields}
     names: tuple[str, ...] | None = None
     lengths: dict[str, int] = {}
     messages = tqdm(
@@ -521,9 +462,15 @@ def read_joint_states(path: Path | str, topic: str, *, progress: bool = False) -
                 f'{path}: {topic} message {index} (log time {log_ns} ns) is not a valid '
                 f'{JOINT_STATE}: {err}'
             ) from err
+        if msg.stamp_problem is not None:
+            raise DatasetError(
+                f'{path}: {topic} sample {index} (log time {log_ns} ns): invalid header stamp: '
+                f'{msg.stamp_problem}; a stamp that is no time cannot be placed (the replay and '
+                "the predictor refuse it too): fix the recorder's or the converter's stamps"
+            )
         if names is None:
             names = msg.name
-            lengths = {key: len(getattr(msg, key)) for key in fields}
+            lengths = {key: len(getattr(msg, key)) for key in wanted}
             for key, length in lengths.items():
                 if length not in (0, len(names)):
                     raise DatasetError(
@@ -536,7 +483,7 @@ def read_joint_states(path: Path | str, topic: str, *, progress: bool = False) -
                 f'joint names {list(msg.name)} '
                 f"differ from the first message's {list(names)}"
             )
-        for key, values in fields.items():
+        for key, values in wanted.items():
             array = getattr(msg, key)
             if len(array) != lengths[key]:
                 raise DatasetError(
@@ -551,7 +498,7 @@ def read_joint_states(path: Path | str, topic: str, *, progress: bool = False) -
         raise DatasetError(f'{path}: topic {topic} has no messages')
 
     def stacked(key: str) -> np.ndarray | None:
-        return np.vstack(fields[key]) if lengths[key] else None
+        return np.vstack(wanted[key]) if lengths.get(key) else None
 
     return JointStateSeries(
         topic=topic,

@@ -32,13 +32,14 @@ import re
 import shutil
 import tempfile
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePath
 
 import yaml
 from rosbags.typesys.base import TypesysError
 
 from id_learning.bag.messages import message_definition
 from id_learning.bag.reader import TopicInfo, bag_info
+from id_learning.bag.reader_paths import folder_is_no_bag, listed_paths
 from id_learning.bag.recover_scan import (
     DAMAGED_SUFFIX,
     FileScan,
@@ -113,13 +114,31 @@ class RecoverReport:
 
 
 def _mcap_files(path: Path) -> list[Path]:
-    """The bag's ``.mcap`` files in split order (``name_2`` before ``name_10``)."""
+    """The bag's ``.mcap`` files in split order (``name_2`` before ``name_10``).
+
+    Those in the folder, and those metadata.yaml lists in its subfolders (rosbag2 resolves
+    ``relative_file_paths`` against the bag folder).
+    """
 
     def order(file: Path) -> tuple[str, int]:
         match = re.fullmatch(r'(.*?)(\d+)', file.stem)
         return (match.group(1), int(match.group(2))) if match else (file.stem, -1)
 
-    return sorted((p for p in path.iterdir() if p.suffix == '.mcap' and p.is_file()), key=order)
+    found = [p for p in path.iterdir() if p.suffix == '.mcap' and p.is_file()]
+    found += [
+        file
+        for entry, file in listed_paths(path)
+        if PurePath(entry).parent != PurePath('.') and file.suffix == '.mcap' and file.is_file()
+    ]
+    return sorted(dict.fromkeys(found), key=order)
+
+
+def _is_empty_folder(path: Path) -> bool:
+    """Whether ``path`` is a folder with nothing in it (a recovery may fill it, as a recorder)."""
+    try:
+        return path.is_dir() and not any(path.iterdir())
+    except OSError:
+        return False
 
 
 def _metadata_files(path: Path) -> set[str] | None:
@@ -273,7 +292,8 @@ def recover_bag(
 
     Args:
         path: the bag folder.
-        out: where to write the recovered bag (a new folder; the original is left untouched).
+        out: where to write the recovered bag (a new or empty folder; the original is left
+            untouched).
             None recovers in place (see the module docstring for the order of steps).
         keep_damaged: in place, keep the replaced originals as ``<file>.damaged``; otherwise they
             are deleted once the rebuilt bag has been read back, unless the scan left data it
@@ -284,8 +304,8 @@ def recover_bag(
 
     Raises:
         BagError: path is not a folder of ``.mcap`` files, a file is not MCAP, a type is unknown,
-            no message could be read (``_refuse_empty``), ``out`` exists, a folder to write
-            cannot be written, or the rebuilt bag does not read back.
+            no message could be read (``_refuse_empty``), ``out`` exists and is no empty folder,
+            a folder to write cannot be written, or the rebuilt bag does not read back.
         OutputError: ``out`` is refused (``outputs.check_target``), or another process writes
             the folder recovered into (named by its pid).
     """
@@ -298,11 +318,16 @@ def recover_bag(
     if not files:
         damaged = sorted(p.name for p in path.glob(f'*.mcap{DAMAGED_SUFFIX}'))
         hint = f'; only damaged originals {damaged} are left' if damaged else ''
+        if not damaged and (why := folder_is_no_bag(path)) is not None:
+            hint = f': {why}'
         raise BagError(f'{path}: not a rosbag2 MCAP folder (no .mcap files){hint}')
     had_metadata = (path / 'metadata.yaml').is_file()
     target = None if out is None or Path(out).resolve() == path.resolve() else Path(out)
-    if target is not None and target.exists():
-        raise BagError(f'{target}: already exists; give a new folder to recover into')
+    if target is not None and target.exists() and not _is_empty_folder(target):
+        raise BagError(
+            f'{target}: already exists and is not an empty folder; give a new or empty folder '
+            'to recover into (nothing is ever written over)'
+        )
     with contextlib.ExitStack() as lock:
         if not had_metadata:  # torn for sure: refused before the long scan, not after
             target = _prepare_output(path, target, lock)
@@ -362,6 +387,24 @@ def _refuse_empty(path: Path, target: Path | None, scans: list[FileScan]) -> Non
     )
 
 
+def _move_into(staged: Path, target: Path) -> None:
+    """Move the staged bag to ``target``: a new folder, or an empty one it then replaces.
+
+    The rename replaces an empty folder only (the OS refuses a non-empty one), so what was
+    written into ``target`` meanwhile is never overwritten.
+
+    Raises:
+        BagError: the rename failed (the OS's reason); nothing was written to ``target``.
+    """
+    try:
+        staged.replace(target)
+    except OSError as err:
+        raise BagError(
+            f'{target}: {os_reason(err)} (moving the recovered bag there: it must be absent or '
+            'an empty folder); nothing was written to it, the original is left as it is'
+        ) from err
+
+
 def _rebuild(
     path: Path,
     target: Path | None,
@@ -386,7 +429,7 @@ def _rebuild(
         if written != scans:
             raise BagError(f'{path}: the files changed while being recovered; try again')
         if target is not None:
-            staged.replace(target)
+            _move_into(staged, target)
             kept: tuple[Path, ...] = ()
         else:
             kept = _install_in_place(path, staged, files, keep_damaged)

@@ -178,5 +178,7 @@ def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     bag_sub = p.add_subparsers(dest='bag_command', required=True, metavar='ACTION')
     r = bag_sub.add_parser('recover', help='rebuild a torn bag (e.g. a killed recorder)')
     r.add_argument('bag', help='bag folder')
-    r.add_argument('--out', help='write the recovered bag here instead of in place')
+    r.add_argument(
+        '--out', help='write the recovered bag here (a new or empty folder) instead of in place'
+    )
     r.set_defaults(func=cmd_bag_recover)

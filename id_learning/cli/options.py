@@ -349,12 +349,12 @@ def effect_names(text: str | None, option: str = '--effects') -> list[str] | Non
 
 
 def bag_paths(items: Sequence[str] | None, option: str = '--bag') -> list[Path]:
-    """The bags of a repeatable option as Paths, each given once (``bag.reader.check_distinct``).
+    """The bags of a repeatable option as Paths, each given once (``bag.distinct.check_distinct``).
 
     Raises:
         ConfigError: one bag given twice (same folder, or a copy with identical bytes).
     """
-    from id_learning.bag.reader import check_distinct
+    from id_learning.bag.distinct import check_distinct
 
     return check_distinct(list(items or ()), option)
 

@@ -171,6 +171,8 @@ def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:
     delimiter = mapping.delimiter or _sniff_delimiter(lines[:_SNIFF_LINES])
     rows = _split(lines, delimiter)
     has_header = _looks_like_header(rows[0]) if mapping.header == 'auto' else mapping.header
+    if has_header is True and mapping.header is True:
+        _check_header_row(rows[0], numbered[0][0], mapping, source)
     first_data = 1 if has_header else 0
     names, data_rows = rows[:first_data], rows[first_data:]
     if not data_rows:
@@ -243,6 +245,32 @@ def _check_no_extra_cells(
             f'{"header" if reference is not rows[0] else "first data row"}; {len(long)} row(s) '
             'are affected. Fix the log (a merged or shifted row?)'
         )
+
+
+def _check_header_row(row: list[str], line: int, mapping: ImportMapping, source: Path) -> None:
+    """Refuse ``header: true`` over a file whose first row holds numbers only: no header.
+
+    A header of numbers alone can name columns only when it holds every name the mapping uses.
+
+    Raises:
+        DatasetError: names the file, the line, its first cells and the settings that fit.
+    """
+    if _looks_like_header(row):
+        return
+    specs = [mapping.time] + [
+        getattr(joint, quantity)
+        for joint in mapping.joints
+        for quantity in ('position', 'velocity', 'current', 'torque')
+    ]
+    names = {spec.column for spec in specs if spec is not None and isinstance(spec.column, str)}
+    if names and names <= set(row):
+        return
+    shown = ', '.join(row[:3]) + (', ...' if len(row) > 3 else '')
+    raise DatasetError(
+        f'{source}: the mapping says header: true, but line {line}, the first row, holds only '
+        f'numbers ({shown}): the file has no header row; set header: false (map columns by '
+        '0-based index) or header: auto'
+    )
 
 
 def _check_unique_names(names: list[str], source: Path) -> None:

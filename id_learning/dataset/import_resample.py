@@ -112,7 +112,7 @@ def _samples_digest(grid: Gridded) -> str:
 def check_distinct_samples(grids: Sequence[Gridded], sources: Sequence[Path]) -> None:
     """Refuse two files whose samples on the grid are identical: one recording weighed twice.
 
-    Byte-identical copies are refused before reading (``bag.reader.check_distinct``); this
+    Byte-identical copies are refused before reading (``bag.distinct.check_distinct``); this
     catches the same samples in other bytes: other float formatting or line endings, a CSV and
     its NPZ export, a gzipped copy, or stamps shifted by a constant (slots count from a file's
     first grid point).

@@ -30,7 +30,7 @@ from typing import Literal
 
 import numpy as np
 
-from id_learning.bag.reader import check_distinct
+from id_learning.bag.distinct import check_distinct
 from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.import_mapping import (
     QUANTITIES,

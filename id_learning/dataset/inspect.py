@@ -15,7 +15,6 @@ import logging
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Literal
 
@@ -25,18 +24,22 @@ from rosbags.serde import SerdeError
 from id_learning.bag import (
     JOINT_STATE,
     JointStateSeries,
-    TopicInfo,
     bag_info,
     decode_joint_state,
     iter_typed,
 )
-from id_learning.config_io import parse_yaml
-from id_learning.dataset.consistency import KinematicConsistency, gap_starts
 from id_learning.dataset.content import (
     GravityTorque,
     label_findings,
     motion_findings,
     sampling_problem,
+)
+from id_learning.dataset.inspect_checks import (
+    consistency_failures,
+    iso_utc,
+    joint_accelerations,
+    log_time_problems,
+    metadata_mismatches,
 )
 from id_learning.dataset.inspect_nominal import with_nominal_lines
 from id_learning.dataset.inspect_plot import plot_report
@@ -128,13 +131,18 @@ def _field_stats(values: np.ndarray) -> FieldStats:
 
 
 def _joint_reports(
-    series: JointStateSeries, robot: RobotConfig | None, effort: str | None = None
+    series: JointStateSeries,
+    robot: RobotConfig | None,
+    effort: str | None = None,
+    motion: bool = False,
 ) -> tuple[JointReport, ...]:
     """Per joint: statistics and, with a robot, the shares beyond its limits.
 
     ``effort``: what the topic's effort is, 'current' or 'torque' (checked against the torque
-    limits as ``load_recording`` checks it), or None (not checked).
+    limits as ``load_recording`` checks it), or None (not checked). ``motion``: the topic is
+    the joint states, whose accelerations are judged as ``load_recording`` judges them.
     """
+    accelerations = joint_accelerations(series, robot) if motion else {}
     reports = []
     for column, name in enumerate(series.names):
         stats: dict[str, FieldStats | None] = {}
@@ -168,6 +176,7 @@ def _joint_reports(
                 effort_outside_limits=effort_out,
                 effort_peak_ratio=effort_peak,
                 effort_kind=None if effort_out is None else effort,
+                acceleration_beyond=accelerations.get(name),
             )
         )
     return tuple(reports)
@@ -243,6 +252,8 @@ class _JointStateTopic:
     undecodable: int = 0
     inconsistent: int = 0
     first_inconsistent: int | None = None
+    invalid_stamps: int = 0
+    first_invalid_stamp: str | None = None
 
     def add(self, index: int, log_ns: int, data: bytes) -> None:
         try:
@@ -251,6 +262,10 @@ class _JointStateTopic:
             # Damaged bytes are a finding here, not an error: count them and go on.
             self.undecodable += 1
             return
+        if msg.stamp_problem is not None:  # reported; the sample stays, stamped as stored
+            self.invalid_stamps += 1
+            if self.first_invalid_stamp is None:
+                self.first_invalid_stamp = f'sample {index}: {msg.stamp_problem}'
         self.all_stamps.append(msg.stamp_ns)
         self.all_index.append(index)
         if self.names is None:
@@ -291,48 +306,6 @@ class _JointStateTopic:
         )
 
 
-def _contradictions(series: JointStateSeries, robot: RobotConfig | None) -> tuple[int, str | None]:
-    """(samples failing the consistency gate, the first described) of the robot's joints.
-
-    Only where the topic names exactly the robot's joints with positions and velocities; rows
-    with a non-finite value, and stamps that do not increase, start a new segment (they are
-    reported on their own).
-    """
-    q, v = series.position, series.velocity
-    if robot is None or q is None or v is None or set(series.names) != set(robot.joints):
-        return 0, None
-    if len(series.names) != len(robot.joints) or len(q) < 2:
-        return 0, None
-    order = [series.names.index(name) for name in robot.joints]
-    stamps = np.asarray(series.stamps_ns, dtype=np.int64)
-    q, v = q[:, order], v[:, order]
-    bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(v).all(axis=1))
-    bad[1:] |= np.diff(stamps) <= 0
-    gate = KinematicConsistency.for_robot(robot)
-    breaks = np.flatnonzero(bad)  # a bad row is a segment of its own
-    gaps = gap_starts(stamps, robot.ipo_period_s, GAP_PERIODS)
-    starts = tuple(sorted({*gaps, *breaks.tolist(), *(breaks + 1).tolist()} - {len(stamps)}))
-    clean_q, clean_v = np.where(bad[:, None], 0.0, q), np.where(bad[:, None], 0.0, v)
-    failing = gate.failing(stamps, clean_q, clean_v, starts=starts) & ~bad
-    if not failing.any():
-        return 0, None
-    k = int(np.argmax(failing))
-    begin = max(start for start in starts if start <= k)  # explained within its segment
-    part = slice(begin, None)
-    worst = gate.explain(k - begin, stamps[part], clean_q[part], clean_v[part], None)
-    text = f'sample {k} (stamp {int(stamps[k])} ns): {worst.describe()}'
-    if gate.scale < 1.0 and not (
-        KinematicConsistency(gate.joints, gate.limits, gate.period_s)
-        .failing(stamps, clean_q, clean_v, starts=starts)
-        .any()
-    ):
-        text += (
-            f"; only the robot config's consistency_scale {gate.scale:g} makes them fail (every "
-            f'tolerance {1 / gate.scale:.4g} x tighter): at 1 none does'
-        )
-    return int(failing.sum()), text
-
-
 def _effort_kind(
     name: str, topics: TopicConfig, decoded: Mapping[str, _JointStateTopic]
 ) -> tuple[str | None, str | None]:
@@ -346,12 +319,6 @@ def _effort_kind(
     if name == topics.joint_states:
         return 'torque', None if topics.motor_currents in decoded else 'joint torque'
     return None, None
-
-
-def _iso_utc(stamp_ns: int) -> str:
-    seconds, rest = divmod(stamp_ns, NS_PER_S)
-    moment = datetime.fromtimestamp(seconds, UTC).replace(microsecond=rest // 1000)
-    return moment.isoformat(timespec='microseconds').replace('+00:00', 'Z')
 
 
 def _contract(
@@ -405,44 +372,44 @@ def _contract(
     )
 
 
-def _metadata_mismatches(
-    path: Path, topics: tuple[TopicInfo, ...], log_times: Mapping[tuple[str, str], list[int]]
-) -> tuple[str, ...]:
-    """Where metadata.yaml contradicts the messages the data files hold, one line each.
-
-    A metadata.yaml written by hand or copied from another recording: its message_count, a
-    topic's message_count or its duration disagree with what was read (a negative duration
-    never fits). ``log_times`` holds the messages read by (topic, type).
-    """
-    counts: dict[tuple[str, str], int] = {}
-    for topic in topics:
-        key = (topic.name, topic.msgtype)
-        counts[key] = counts.get(key, 0) + topic.count
-    several = {name for name, _ in counts if sum(name == other for other, _ in counts) > 1}
-    lines = [
-        f'metadata: {name}{f" ({msgtype})" if name in several else ""} message_count {count}, '
-        f'the file holds {len(log_times[name, msgtype])}'
-        for (name, msgtype), count in counts.items()
-        if count != len(log_times[name, msgtype])
-    ]
-    try:
-        document = parse_yaml((path / 'metadata.yaml').read_text(encoding='utf-8'), str(path))
-        meta = document['rosbag2_bagfile_information']
-    except (OSError, UnicodeDecodeError, ConfigError, KeyError, TypeError):
-        return tuple(lines)  # the reader opened the bag: what it read is checked above
-    held = sum(len(times) for times in log_times.values())
-    count = meta.get('message_count') if isinstance(meta, dict) else None
-    if count is not None and count != held:
-        lines.append(f'metadata: message_count {count}, the files hold {held}')
-    duration = meta.get('duration', {}) if isinstance(meta, dict) else {}
-    stated = duration.get('nanoseconds') if isinstance(duration, dict) else None
-    stamps = [t for times in log_times.values() for t in times]
-    span = max(stamps) - min(stamps) if stamps else 0
-    if stated is not None and stated != span:
-        lines.append(
-            f'metadata: duration {stated} ns, the messages span {span} ns (last minus first)'
-        )
-    return tuple(lines)
+def _joint_state_report(
+    decoded: Mapping[str, _JointStateTopic],
+    name: str,
+    *,
+    count: int,
+    nominal: float | None,
+    topics: TopicConfig,
+    robot: RobotConfig | None,
+) -> tuple[TopicReport, JointStateSeries]:
+    """One JointState topic's report (timing, joints against the robot, findings), its samples."""
+    acc = decoded[name]
+    timing = _timing(
+        np.array(acc.all_stamps, dtype=np.int64),
+        np.array(acc.all_index, dtype=np.int64),
+        nominal,
+        'header',
+    )
+    series = acc.series()
+    contradictions, first = consistency_failures(series, robot)
+    effort, label = _effort_kind(name, topics, decoded)
+    motion = name == topics.joint_states
+    report = TopicReport(
+        name=name,
+        msgtype=JOINT_STATE,
+        count=count,
+        timing=timing,
+        joints=_joint_reports(series, robot, effort, motion=motion),
+        undecodable=acc.undecodable,
+        inconsistent=acc.inconsistent,
+        first_inconsistent=acc.first_inconsistent,
+        invalid_stamps=acc.invalid_stamps,
+        first_invalid_stamp=acc.first_invalid_stamp,
+        contradictions=contradictions,
+        first_contradiction=first,
+        content=_content(series, label, motion, robot),
+        sampling=_sampling(name, acc.all_stamps, topics, robot),
+    )
+    return report, series
 
 
 def inspect_bag(
@@ -506,32 +473,10 @@ def inspect_bag(
     for name in names:
         count = len(log_times[name])
         if name in decoded:
-            acc = decoded[name]
-            timing = _timing(
-                np.array(acc.all_stamps, dtype=np.int64),
-                np.array(acc.all_index, dtype=np.int64),
-                nominal,
-                'header',
+            topic_report, series[name] = _joint_state_report(
+                decoded, name, count=count, nominal=nominal, topics=topics, robot=robot
             )
-            series[name] = acc.series()
-            contradictions, first = _contradictions(series[name], robot)
-            effort, label = _effort_kind(name, topics, decoded)
-            reports.append(
-                TopicReport(
-                    name=name,
-                    msgtype=JOINT_STATE,
-                    count=count,
-                    timing=timing,
-                    joints=_joint_reports(series[name], robot, effort),
-                    undecodable=acc.undecodable,
-                    inconsistent=acc.inconsistent,
-                    first_inconsistent=acc.first_inconsistent,
-                    contradictions=contradictions,
-                    first_contradiction=first,
-                    content=_content(series[name], label, name == topics.joint_states, robot),
-                    sampling=_sampling(name, acc.all_stamps, topics, robot),
-                )
-            )
+            reports.append(topic_report)
         else:
             stamps = np.array(log_times[name], dtype=np.int64)
             timing = _timing(stamps, np.arange(count), None, 'log')
@@ -540,13 +485,15 @@ def inspect_bag(
     reports = with_nominal_lines(reports, series, topics, robot, gravity)
     order = (f'metadata: {info.order_note.removeprefix(f"{path}: ")}',) if info.order_note else ()
     report = BagReport(
-        metadata_mismatches=order + _metadata_mismatches(path, info.topics, every),
+        metadata_mismatches=order
+        + metadata_mismatches(path, info.topics, every)
+        + log_time_problems(every),
         several_types=several_types,
         path=path,
         storage=info.storage,
         files=info.files,
         start_ns=info.start_ns,
-        start_iso=_iso_utc(info.start_ns),
+        start_iso=iso_utc(info.start_ns),
         duration_s=info.duration_ns * 1e-9,
         message_count=sum(len(times) for times in every.values()),
         robot_name=robot.name if robot else None,

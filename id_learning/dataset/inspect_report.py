@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Literal
 
 from id_learning.bag import JOINT_STATE, JointStateSeries
+from id_learning.dataset.accelerations import AccelerationExcess
 from id_learning.dataset.plausibility import SCALE_PEAK_FACTOR, TORQUE_FACTOR
 from id_learning.dataset.recording import joint_name_mismatch
 from id_learning.errors import BagError
@@ -119,6 +120,9 @@ class JointReport:
         effort_peak_ratio: the largest |effort| over that bound [-] (above 1 train refuses).
         effort_kind: what the effort was checked as: 'current' [A] or 'torque' [N*m]; None
             when it was not.
+        acceleration_beyond: on the joint states, the accelerations a controller sends along
+            the motion beyond ``ACCELERATION_FACTOR`` x the joint's limit (the predictor's
+            gate; train refuses the bag); None when none is, or not judged.
     """
 
     name: str
@@ -130,6 +134,7 @@ class JointReport:
     effort_outside_limits: float | None = None
     effort_peak_ratio: float | None = None
     effort_kind: str | None = None
+    acceleration_beyond: AccelerationExcess | None = None
 
 
 @dataclass(frozen=True)
@@ -154,6 +159,9 @@ class TopicReport:
             each, the refusals marked.
         sampling: how the topic's sampling contradicts the robot's IPO period
             (``content.sampling_problem``), or None.
+        invalid_stamps: messages whose header stamp is no time (``nanosec`` >= 1e9, a
+            negative ``sec``: ``bag.header_stamp_problem``); train, the replay and the
+            predictor refuse them. first_invalid_stamp: the first, described, or None.
     """
 
     name: str
@@ -168,6 +176,8 @@ class TopicReport:
     first_contradiction: str | None = None
     content: tuple[str, ...] = ()
     sampling: str | None = None
+    invalid_stamps: int = 0
+    first_invalid_stamp: str | None = None
 
 
 @dataclass(frozen=True)
@@ -363,6 +373,11 @@ def _topic_problems(topic: TopicReport) -> list[str]:
         )
     if topic.undecodable:
         lines.append(f'{topic.name}: {topic.undecodable} message(s) do not deserialize')
+    if topic.invalid_stamps:
+        lines.append(
+            f'{topic.name}: {topic.invalid_stamps} invalid header stamp(s), the first at '
+            f'{topic.first_invalid_stamp} (train, the replay and the predictor refuse them)'
+        )
     names = [joint.name for joint in topic.joints]
     if repeated := list(dict.fromkeys(name for name in names if names.count(name) > 1)):
         lines.append(
@@ -397,6 +412,8 @@ def _topic_problems(topic: TopicReport) -> list[str]:
                 )
         if joint.effort_outside_limits:
             lines.append(_effort_problem(topic.name, joint))
+        if joint.acceleration_beyond is not None:
+            lines.append(joint.acceleration_beyond.describe(topic.name, joint.name))
     lines += [f'{topic.name}: {line}' for line in topic.content]
     return lines
 

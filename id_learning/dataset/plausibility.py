@@ -421,11 +421,15 @@ def _check_rate(
     values: np.ndarray,
     bound: tuple[np.ndarray, float, str, str],
     where: str,
+    *,
+    derived: bool = False,
 ) -> None:
     """Refuse |values| beyond factor x limit; ``bound`` is (limit, factor, name, unit).
 
     What the values are is judged on the joint's worst sample, and on every joint: a column
     whose peak lies far beyond while read as degrees it fits is in degrees (``rate_in_degrees``).
+    ``derived``: the values are differentiated from velocities that passed their own check, so
+    their unit is right: too high a value is a limit or noise question.
     """
     limit, factor, name, unit = bound
     found = _beyond(values, factor * limit)
@@ -451,16 +455,21 @@ def _check_rate(
         others = f'; {len(joints_beyond)} joints exceed ({", ".join(joints_beyond)})'
     degree_unit = unit.replace('rad', 'deg')
     plural = 'velocities' if name == 'velocity' else f'{name}s'
-    raise DatasetError(
-        f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
-        f'{name} {value:.6g} {unit} exceeds {factor:g} x its limit: {excess} ({count} '
-        f'samples of this joint){others}; '
-        + beyond_hint(
+    hint = (
+        f'differentiated from velocities within their limits: check limits.{name} in the robot '
+        "config (--robot; if the arm's are wider, correct them there) and the velocities' noise"
+        if derived
+        else beyond_hint(
             max(share, worst),
             degrees,
             f'the {plural} are in {degree_unit}, they must be in {unit}',
             what=degree_unit,
         )
+    )
+    raise DatasetError(
+        f'{where}: sample {sample} (stamp {int(stamps[sample])} ns), joint {joints[column]}: '
+        f'{name} {value:.6g} {unit} exceeds {factor:g} x its limit: {excess} ({count} '
+        f'samples of this joint){others}; {hint}'
     )
 
 
@@ -561,8 +570,11 @@ def check_accelerations(
 ) -> None:
     """Refuse accelerations beyond ``ACCELERATION_FACTOR`` times their limits (as SampleGate).
 
+    The accelerations are differentiated from checked velocities: one too high is a limit (or
+    noise) question, never a unit one.
+
     Raises:
         DatasetError: the first one, naming sample, stamp, joint and value.
     """
     bound = (limits.acceleration, ACCELERATION_FACTOR, 'acceleration', 'rad/s^2')
-    _check_rate(joints, np.asarray(stamps_ns), a, bound, where)
+    _check_rate(joints, np.asarray(stamps_ns), a, bound, where, derived=True)

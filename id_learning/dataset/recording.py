@@ -30,6 +30,7 @@ from id_learning.bag import (
     encode_joint_state,
     read_joint_states,
 )
+from id_learning.dataset.accelerations import check_controller_accelerations
 from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.content import check_content
 from id_learning.dataset.plausibility import (
@@ -292,7 +293,9 @@ def load_recording(
 
     current = None
     if require_current:
-        currents = read_joint_states(path, topics.motor_currents, progress=progress)
+        currents = read_joint_states(
+            path, topics.motor_currents, progress=progress, fields=('effort',)
+        )
         where_mc = f'{path}: {topics.motor_currents}'
         order_mc = _reorder(currents, robot.joints, where_mc)
         if currents.effort is None:
@@ -414,7 +417,7 @@ def _check_motion(
     where: str,
     starts: tuple[int, ...],
 ) -> None:
-    """The robot's limits (and its URDF's, to name a narrow config) and the consistency gate."""
+    """Limits (the URDF's name a narrow config), consistency, the predictor's acceleration gate."""
     check_limits(
         robot.joints,
         stamps_ns,
@@ -427,6 +430,7 @@ def _check_motion(
     KinematicConsistency.for_robot(robot).check(
         stamps_ns, position, velocity, where=where, starts=starts
     )
+    check_controller_accelerations(robot, stamps_ns, position, velocity, where=where)
 
 
 def _segment_starts(path: Path, stamps_ns: np.ndarray) -> tuple[int, ...]:

@@ -119,7 +119,7 @@ def _through_filter_tables(
             ' The floor is the RMS of the filtered label minus the filtered noise-free torque '
             '(twin ground truth): no model can go below it.'
             if floor is not None
-            else ''
+            else _no_floor_because(dataset)
         ),
         '',
         markdown_table(['model', *joints], through),
@@ -162,6 +162,18 @@ def _through_filter_tables(
         markdown_table(['model', *(f'{j} filtered / unfiltered' for j in joints)], truth),
         '',
     ]
+
+
+def _no_floor_because(dataset: Dataset) -> str:
+    """Why a twin's ground truth gave no floor here ('' for data without one, a real robot's)."""
+    notes = dataset.extra.get('ground_truth_notes') or []
+    if not notes:
+        return ''
+    return (
+        ' No label-noise floor and no errors against the noise-free torque: '
+        + '; '.join(notes)
+        + '.'
+    )
 
 
 def _normalised_and_study_way_tables(

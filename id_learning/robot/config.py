@@ -23,6 +23,7 @@ from id_learning.config_io import (
     float_vector,
     load_yaml_mapping,
     not_a_file,
+    number_hint,
     range_problem,
     topic_name_problem,
 )
@@ -242,7 +243,13 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
 
     period = data['ipo_period_s']
     if range_problem(period, low=1e-5, high=1.0):  # a str or bool is no period either
-        raise ConfigError(f'{where}: ipo_period_s must be in [1e-5, 1] s, got {period!r}')
+        kind = type(period).__name__.replace('str', 'string')
+        raise ConfigError(
+            f'{where}: ipo_period_s must be in [1e-5, 1] s, got {period!r}'
+            if isinstance(period, (int, float)) and not isinstance(period, bool)
+            else f'{where}: ipo_period_s must be in [1e-5, 1] s and a number, not a {kind}: '
+            f'got {period!r}{number_hint(period, "s")}'
+        )
     cutoff, smoothing = _cutoffs(data, n, float(period), where)
 
     locked = data.get('locked_joints') or {}
@@ -250,9 +257,10 @@ def robot_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> 
         raise ConfigError(f'{where}: locked_joints: expected a mapping joint name -> position')
     for joint, value in locked.items():
         if range_problem(value):
+            text = ', a string, not a number' if isinstance(value, str) else ''
             raise ConfigError(
                 f'{where}: locked_joints: expected a mapping joint name -> position [rad or m], '
-                f'a finite number; {joint}: {value!r}'
+                f'a finite number; {joint}: {value!r}{text}{number_hint(value, "rad or m")}'
             )
     overlap = sorted(set(locked) & set(joints))
     if overlap:

@@ -33,6 +33,7 @@ from id_learning.twin import read_noise_free_torque
 
 __all__ = [
     'DATA_WARNINGS',
+    'GROUND_TRUTH_NOTES',
     'Samples',
     'bag_of',
     'bag_sha256',
@@ -179,8 +180,13 @@ def load_datasets(
                     'resample.min_segment_s to drop short segments (reported), or a larger '
                     'resample.max_gap_s to keep them joined'
                 ) from err
-            clean = read_noise_free_torque(bag, config.target, dataset.stamps_ns)
+            clean, ignored = read_noise_free_torque(bag, dataset)
+            if ignored and ignored not in warnings:
+                _LOG.warning('%s', ignored)
+                warnings.append(ignored)
             extra = {**dataset.extra, 'bag': str(bag), DATA_WARNINGS: warnings}
+            if ignored:
+                extra[GROUND_TRUTH_NOTES] = [ignored]
             datasets.append(replace(dataset, tau_clean=clean, extra=extra))
         _LOG.info(
             '%s: %d samples in %d segment(s)',
@@ -191,7 +197,43 @@ def load_datasets(
     refuse_shared_samples(
         samples, 'the same motion would be in the training and the test part; give each once'
     )
-    return datasets
+    return _note_partial_ground_truth(datasets)
+
+
+#: ``Dataset.extra`` key of why a twin's ground truth was not used: the reasons, each once.
+GROUND_TRUTH_NOTES = 'ground_truth_notes'
+
+
+def _note_partial_ground_truth(datasets: list[Dataset]) -> list[Dataset]:
+    """Say so when only some bags carry a twin's noise-free torque, on every dataset.
+
+    Joined data has a label-noise floor only when every part has its noise-free torque, so a
+    ground truth for some of the bags gives none at all: a warning names the bags with and
+    without one, and it goes into each dataset's warnings and ground-truth notes.
+    """
+    with_truth = list(dict.fromkeys(bag_of(d) for d in datasets if d.tau_clean is not None))
+    without = list(dict.fromkeys(bag_of(d) for d in datasets if d.tau_clean is None))
+    if not with_truth or not without:
+        return datasets
+    carry = 'carries' if len(with_truth) == 1 else 'carry'
+    note = (
+        f'of the bags, only {", ".join(with_truth)} {carry} a twin ground truth (noise-free '
+        f'torque); {", ".join(without)} {"does" if len(without) == 1 else "do"} not: the joined '
+        'data gets no label-noise floor and no errors against the truth; evaluate the bags with '
+        'a ground truth on their own for those figures'
+    )
+    _LOG.warning('%s', note)
+    return [
+        replace(
+            d,
+            extra={
+                **d.extra,
+                DATA_WARNINGS: [*d.extra.get(DATA_WARNINGS, ()), note],
+                GROUND_TRUTH_NOTES: [*d.extra.get(GROUND_TRUTH_NOTES, ()), note],
+            },
+        )
+        for d in datasets
+    ]
 
 
 def bag_of(dataset: Dataset) -> str:
@@ -457,7 +499,13 @@ def _joined(
         tau_clean=stack('tau_clean') if has_clean else None,
         regularise_report=regularise_report,
         source=' + '.join(d.source for d in datasets),
-        extra={'segments': segments, DATA_WARNINGS: data_warnings(datasets)},
+        extra={
+            'segments': segments,
+            DATA_WARNINGS: data_warnings(datasets),
+            GROUND_TRUTH_NOTES: list(
+                dict.fromkeys(n for d in datasets for n in d.extra.get(GROUND_TRUTH_NOTES, ()))
+            ),
+        },
     )
 
 

@@ -13,7 +13,9 @@ from typing import Any
 import numpy as np
 import yaml
 
+from id_learning.dataset.preprocess import Dataset
 from id_learning.dataset.recording import write_recording
+from id_learning.dataset.statistics import estimate_noise
 from id_learning.errors import DatasetError
 from id_learning.output_kinds import OutputError, os_reason
 from id_learning.twin.simulate import (
@@ -24,7 +26,13 @@ from id_learning.twin.simulate import (
     TwinResult,
 )
 
-__all__ = ['GroundTruth', 'read_ground_truth', 'read_noise_free_torque', 'write_twin_output']
+__all__ = [
+    'NOISE_ALLOWANCE',
+    'GroundTruth',
+    'read_ground_truth',
+    'read_noise_free_torque',
+    'write_twin_output',
+]
 
 _LOG = logging.getLogger(__name__)
 
@@ -134,33 +142,179 @@ def write_twin_output(
     return out
 
 
-def read_noise_free_torque(
-    bag: Path | str, target: str, stamps_ns: np.ndarray
-) -> np.ndarray | None:
-    """The twin's noise-free label torque at the given stamps, or None for a bag without it.
+#: A ground truth belongs to a recording when the recorded labels differ from its noise-free
+#: torque by the sensor noise alone: the twin records clean torque plus white noise (and the
+#: current quantisation), so their difference has the labels' own white-noise level. Its RMS
+#: over N samples scatters by about 1 / sqrt(2 N) (a few % here); this factor leaves room for
+#: that and for an under-estimated noise level, while the ground truth of another motion is
+#: off by the torque itself (ten times the noise and more).
+NOISE_ALLOWANCE = 2.0
+
+
+def read_noise_free_torque(bag: Path | str, dataset: Dataset) -> tuple[np.ndarray | None, str]:
+    """The twin's noise-free label torque at a preprocessed recording's stamps, if it is its own.
+
+    A ground truth beside the bag is used only when it provably belongs to the recording: it
+    holds every one of its stamps, ground_truth.json describes the same simulation as the
+    arrays, and the labels differ from it by no more than the sensor noise
+    (``NOISE_ALLOWANCE`` times the larger of the noise the twin states and the labels' own
+    white level above the motion's band). Otherwise it is ignored, with the reason.
 
     Args:
-        bag: a bag folder written by ``write_twin_output``.
-        target: 'motor' (tau_u) or 'joint' (joint torque).
-        stamps_ns: (N,) the stamps wanted (a preprocessed recording's grid).
+        bag: the bag folder the dataset was loaded from.
+        dataset: one preprocessed segment of it (its target, stamps and raw labels).
 
     Returns:
-        (N, n) noise-free tau_u or joint torque [N*m]; None when the bag holds no ground truth
-        or it lacks one of the stamps (the recording was edited after the twin wrote it).
+        ((N, n) noise-free tau_u or joint torque [N*m], '') for a ground truth of this
+        recording; (None, '') for a bag without one; (None, why) for one ignored: the reason
+        names the file, the mismatch and what is missing because of it.
+
+    Raises:
+        DatasetError: ground_truth.npz is unreadable or lacks the target's arrays.
     """
-    path = Path(bag) / GROUND_TRUTH_ARRAYS
+    folder = Path(bag)
+    path, json_path = folder / GROUND_TRUTH_ARRAYS, folder / GROUND_TRUTH_JSON
+    ignored = 'ignored: no label-noise floor and no errors against the truth for this bag'
     if not path.is_file():
-        return None
-    key = 'tau_u_clean' if target == 'motor' else 'tau_joint_clean'
+        if json_path.is_file():
+            return None, f'{json_path}: has no {path.name} beside it; {ignored}'
+        return None, ''
+    key = 'tau_u_clean' if dataset.target == 'motor' else 'tau_joint_clean'
     try:
         with np.load(path) as arrays:
-            stamps, clean = arrays['stamps_ns'], arrays[key]
-    except (KeyError, OSError, ValueError, zipfile.BadZipFile) as err:
+            stamps, clean = np.asarray(arrays['stamps_ns']), np.asarray(arrays[key])
+            motor = np.asarray(arrays['tau_u_clean']) if 'tau_u_clean' in arrays.files else None
+    except (KeyError, OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
         raise DatasetError(
             f'{path}: unreadable ground truth ({type(err).__name__}: {err})'
         ) from err
-    rows = np.searchsorted(stamps, stamps_ns)
-    if rows.max(initial=0) >= len(stamps) or not np.array_equal(stamps[rows], stamps_ns):
+    info = _json_object(json_path)
+    order = _column_order(info, dataset.joints)
+    mismatch = _stamp_mismatch(stamps, clean, dataset) or _json_mismatch(info, motor)
+    if mismatch:
+        return None, f'{path} does not belong to this recording: {mismatch}; {ignored}'
+    torque: np.ndarray = clean[np.searchsorted(stamps, dataset.stamps_ns)][:, order]
+    mismatch = _label_mismatch(torque.astype(float), dataset, _stated_noise(info, dataset, order))
+    if mismatch:
+        return None, f'{path} does not belong to this recording: {mismatch}; {ignored}'
+    return torque.astype(float), ''
+
+
+def _stamp_mismatch(stamps: np.ndarray, clean: np.ndarray, dataset: Dataset) -> str:
+    """Why the arrays cannot hold the recording's samples ('' when they hold every stamp)."""
+    n = len(dataset.joints)
+    if stamps.ndim != 1 or clean.shape != (len(stamps), n):
+        return (
+            f'it holds {clean.shape} noise-free torques for {stamps.shape} stamps, expected '
+            f'(samples, {n}) for the joints {", ".join(dataset.joints)}'
+        )
+    wanted = np.asarray(dataset.stamps_ns)
+    rows = np.minimum(np.searchsorted(stamps, wanted), max(len(stamps) - 1, 0))
+    missing = np.flatnonzero(stamps[rows] != wanted) if len(stamps) else np.arange(len(wanted))
+    if not missing.size:
+        return ''
+    span = f'{int(stamps[0])} to {int(stamps[-1])} ns' if len(stamps) else 'no stamp'
+    return (
+        f'it lacks {missing.size} of the {len(wanted)} sample stamps (the first at sample '
+        f'{int(missing[0])}, {int(wanted[missing[0]])} ns; it covers {span}, '
+        f'{len(stamps)} samples)'
+    )
+
+
+def _column_order(info: dict[str, Any] | None, joints: tuple[str, ...]) -> list[int]:
+    """The arrays' columns in the dataset's joint order (the twin's order, as the JSON names it).
+
+    The twin's order where the JSON does not name the same joints (a mismatch is then found).
+    """
+    names = info.get('joints') if info else None
+    if isinstance(names, list) and sorted(map(str, names)) == sorted(joints):
+        return [[str(x) for x in names].index(j) for j in joints]
+    return list(range(len(joints)))
+
+
+def _json_object(path: Path) -> dict[str, Any] | None:
+    """ground_truth.json as a mapping, or None (missing or damaged: its noise is not used)."""
+    try:
+        info = json.loads(path.read_text(encoding='utf-8'))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         return None
-    torque: np.ndarray = clean[rows].astype(float)
-    return torque
+    return info if isinstance(info, dict) else None
+
+
+def _json_mismatch(info: dict[str, Any] | None, tau_u_clean: np.ndarray | None) -> str:
+    """Why ground_truth.json describes another simulation than the arrays ('' when the same).
+
+    The JSON states the RMS of every joint's noise-free tau_u; the arrays hold it (as float32).
+    """
+    stated = _vector(info, 'tau_u_clean_rms_nm') if info else None
+    if stated is None or tau_u_clean is None:
+        return ''
+    motor = np.asarray(tau_u_clean, dtype=float)
+    if motor.ndim != 2 or len(stated) != motor.shape[1] or not len(motor):
+        return ''
+    held = np.sqrt(np.mean(motor**2, axis=0))
+    if np.allclose(held, stated, rtol=1e-4, atol=1e-3):
+        return ''
+    j = int(np.argmax(np.abs(held - stated)))
+    names = info.get('joints') if info else None
+    named = isinstance(names, list) and len(names) == len(held)
+    name = str(names[j]) if named and names else f'joint #{j + 1}'
+    return (
+        f'the {GROUND_TRUTH_JSON} beside it states an RMS noise-free tau_u of {stated[j]:.4g} '
+        f'N*m for {name}, the arrays hold {held[j]:.4g}: the two files are of different '
+        'simulations'
+    )
+
+
+def _label_mismatch(torque: np.ndarray, dataset: Dataset, stated: np.ndarray | None) -> str:
+    """Why the labels are not the noise-free torque plus sensor noise ('' when they are)."""
+    residual = np.asarray(dataset.tau_raw, dtype=float) - torque
+    off = np.sqrt(np.mean(residual**2, axis=0))
+    noise = estimate_noise(
+        dataset.tau_raw, dataset.cutoff_hz, dataset.period_s, dataset.filter_order
+    ).raw_std_nm
+    if stated is not None:
+        noise = np.maximum(noise, stated)
+    # float32 storage rounds the torque by ~1e-7 of its size
+    allowed = NOISE_ALLOWANCE * noise + 1e-6 * (np.max(np.abs(torque), axis=0) + 1.0)
+    bad = ~(off <= allowed)  # NaN counts as off
+    if not bad.any():
+        return ''
+    j = int(np.argmax(np.where(bad, off / allowed, -np.inf)))
+    worst = int(np.argmax(np.abs(residual[:, j])))
+    return (
+        f'the labels differ from its noise-free torque by {off[j]:.3g} N*m RMS on '
+        f'{dataset.joints[j]} (up to {residual[worst, j]:.3g} at sample {worst}, '
+        f'{int(dataset.stamps_ns[worst])} ns), where sensor noise of {noise[j]:.3g} N*m allows '
+        f'{allowed[j]:.3g}: the ground truth of another simulation or another motion'
+    )
+
+
+def _stated_noise(
+    info: dict[str, Any] | None, dataset: Dataset, order: list[int]
+) -> np.ndarray | None:
+    """The per-joint label noise [N*m] ground_truth.json states (dataset order), or None."""
+    noise = info.get('noise') if info else None
+    if not isinstance(noise, dict):
+        return None
+    n = len(dataset.joints)
+    if dataset.target == 'motor':
+        parts = [
+            _vector(noise, 'current_noise_std_as_tau_u_nm'),
+            _vector(noise, 'current_quantisation_std_as_tau_u_nm'),
+        ]
+    else:
+        parts = [_vector(noise, 'joint_torque_noise_std')]
+    if any(p is None or p.shape != (n,) for p in parts):
+        return None
+    out: np.ndarray = np.sqrt(sum(p**2 for p in parts if p is not None))
+    return out[order]
+
+
+def _vector(mapping: dict[str, Any], key: str) -> np.ndarray | None:
+    """A finite float vector under ``key``, or None when absent or not one."""
+    try:
+        value = np.asarray(mapping.get(key), dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return value if value.ndim == 1 and np.all(np.isfinite(value)) else None

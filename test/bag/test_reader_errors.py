@@ -18,8 +18,8 @@ from id_learning.bag import (
     iter_typed,
     read_joint_states,
 )
+from id_learning.bag.distinct import check_distinct
 from id_learning.bag.messages import typestore
-from id_learning.bag.reader import check_distinct
 from id_learning.dataset.recording import write_recording
 from id_learning.errors import BagError, ConfigError
 
@@ -180,3 +180,38 @@ def test_a_topic_of_two_types_is_refused_naming_both_with_counts(
     kinds = [msgtype for topic, msgtype, _, _ in iter_typed(mixed, TOPICS) if topic == TOPICS[0]]
     assert sorted(set(kinds)) == [JOINT_STATE, 'std_msgs/msg/String']
     assert len(kinds) == 61
+
+
+def test_the_motor_currents_are_read_from_effort_alone(tmp_path, mabi):
+    """Position and velocity of /motor_currents are documented as ignored: a converter that
+    fills them with anything (three values for six joints) does not stop a recording."""
+    import numpy as np
+
+    from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state, read_joint_states
+    from id_learning.dataset.recording import load_recording
+    from id_learning.errors import DatasetError
+
+    recording = sine_recording(200)
+    path = tmp_path / 'bag'
+    with BagWriter(path) as writer:
+        for topic in ('/joint_states', '/motor_currents'):
+            writer.add_topic(topic, JOINT_STATE)
+        for k, stamp in enumerate(recording.stamps_ns.tolist()):
+            log_ns = int(recording.stamps_ns[0]) + k * 8_000_000
+            joints, position, velocity = (
+                recording.joints,
+                recording.position[k],
+                recording.velocity[k],
+            )
+            state = encode_joint_state(stamp, joints, position, velocity, np.empty(0))
+            odd = encode_joint_state(stamp, joints, np.zeros(2), np.ones(3), recording.current[k])
+            writer.write('/joint_states', log_ns, state)
+            writer.write('/motor_currents', log_ns, odd)
+    with pytest.raises(DatasetError, match='position has 2 values for 6 joints'):
+        read_joint_states(path, '/motor_currents')
+    currents = read_joint_states(path, '/motor_currents', fields=('effort',))
+    assert currents.position is None
+    assert currents.velocity is None
+    np.testing.assert_allclose(currents.effort, recording.current)
+    loaded = load_recording(path, mabi)
+    np.testing.assert_allclose(loaded.current, recording.current)

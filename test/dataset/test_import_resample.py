@@ -27,7 +27,7 @@ from id_learning.training.datasets import combine_datasets, load_datasets
 
 REPO = Path(__file__).resolve().parents[2]
 FREQUENCIES_HZ = np.array([0.3, 0.45, 0.6, 0.8, 0.9, 1.1])
-AMPLITUDE_RAD = 0.5
+AMPLITUDE_RAD = 0.3  # the fastest joint (1.1 Hz) stays below 2 x its acceleration limit
 CURRENT_HZ, NOISE_HZ = 2.0, 200.0
 
 

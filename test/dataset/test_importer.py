@@ -102,8 +102,8 @@ def test_example_mapping_round_trips_a_deg_ms_trace_to_si_through_the_bag(
     # One motion the arm can make: poses inside the limits, velocities their derivative.
     centre = np.degrees(rng.uniform(0.5 * lower, 0.5 * upper, 6))
     phase = 2.0 * np.pi * 1.5 * 0.008 * np.arange(n)[:, None] + rng.uniform(0, 6.28, 6)
-    q_deg = centre + 10.0 * np.sin(phase)
-    v_deg_s = 10.0 * 2.0 * np.pi * 1.5 * np.cos(phase)
+    q_deg = centre + 2.0 * np.sin(phase)  # 3.1 rad/s^2 at most: within every joint's gate
+    v_deg_s = 2.0 * 2.0 * np.pi * 1.5 * np.cos(phase)
     i_a = rng.uniform(-5.0, 5.0, (n, 6))
     time_ms = 1234.5 + 8.0 * np.arange(n)
     header = ['time_ms']
