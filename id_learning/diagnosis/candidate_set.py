@@ -312,7 +312,9 @@ class CandidateSet:
         forms = [self.specs[form] for form in [label, *self._variants_of(label)]]
         design_of = functools.partial(self.design_over, y, n_eff=n_eff)
         best = choose_form(self.problem, others, forms, design_of)
-        if best is not self.specs[label]:
+        if best.label in self.specs and best.label != label:
+            self._swap(best.label, best)  # another form: the selected one stays a candidate
+        elif best is not self.specs[label]:
             self._swap(label, best)
         return best.label
 
