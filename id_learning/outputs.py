@@ -87,6 +87,7 @@ __all__ = [
     'folder_holds',
     'foreign_entries',
     'incomplete_reason',
+    'named_path',
     'os_reason',
     'output_lock',
     'partial_path',
@@ -107,13 +108,17 @@ INCOMPLETE_FORMAT = 'id_learning.incomplete/1'
 _HELD: dict[Path, int] = {}
 
 
+def named_path(out: Path) -> Path:
+    """``out``, resolved where its last part is no name (``.``, ``x/..``): siblings use it."""
+    named = Path(out).resolve() if Path(out).name in ('', '.', '..') else Path(out)
+    if not named.name:
+        raise OutputError(f'{out}: the root folder is never an output; name a folder under it')
+    return named
+
+
 def partial_path(out: Path) -> Path:
     """``<out>.partial``: where ``out`` is written until it is complete."""
-    return out.with_name(out.name + PARTIAL_SUFFIX)
-
-
-def _lock_path(out: Path) -> Path:
-    return out.with_name(out.name + LOCK_SUFFIX)
+    return named_path(out).with_name(named_path(out).name + PARTIAL_SUFFIX)
 
 
 def write_text_atomic(path: Path, text: str) -> None:
@@ -252,7 +257,7 @@ def check_target(
 
 
 def _check_target(out: Path, inputs: Sequence[Path], folder: bool, option: str) -> Path:
-    if '..' in out.parts:  # 'a/../b' is b: never create a, then leave it
+    if '..' in out.parts or not out.name:  # 'a/../b' is b: never create a; '.': its name
         out = out.resolve()
     if out.is_symlink():
         if not out.exists():
@@ -444,7 +449,7 @@ def _locked(out: Path, option: str = '--out') -> Iterator[None]:
     Raises:
         OutputError: another process holds it (named by its pid), or it cannot be created.
     """
-    path = _lock_path(out)
+    path = named_path(out).with_name(named_path(out).name + LOCK_SUFFIX)
     for _ in range(5):  # a holder may remove the file between our open and our flock
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -482,7 +487,7 @@ def _locked(out: Path, option: str = '--out') -> Iterator[None]:
 
 def _held_key(out: Path) -> Path:
     """The lock of ``out`` as one key however ``out`` is spelled (relative, through links)."""
-    return Path(os.path.realpath(out.parent)) / (out.name + LOCK_SUFFIX)
+    return Path(os.path.realpath(named_path(out).parent)) / (named_path(out).name + LOCK_SUFFIX)
 
 
 @contextlib.contextmanager

@@ -108,8 +108,13 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 def cmd_bag_recover(args: argparse.Namespace) -> int:
     """Rebuild a torn bag (killed recorder) into a valid one."""
     from id_learning.bag.recover import recover_bag
+    from id_learning.outputs import named_path
 
-    report = recover_bag(Path(args.bag), Path(args.out) if args.out else None)
+    # '.' (recovering in place, standing in the bag) has no name to build the files' names from
+    bag = Path(args.bag)
+    report = recover_bag(
+        named_path(bag) if bag.exists() else bag, named_path(Path(args.out)) if args.out else None
+    )
     print(report.summary())
     return 0
 

@@ -38,6 +38,7 @@ _SECONDS_DEFAULTS = {
     'train_seconds': DEMO_SECONDS_PER_MODEL,
     'online_seconds': 30.0,
     'closed_loop_seconds': 60.0,
+    'models': DEMO_MODELS,
 }
 
 
@@ -54,6 +55,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         [
             (option, '--skip-training', 'nothing is trained')
             for option in (
+                '--models',
                 '--train-seconds',
                 '--online-seconds',
                 '--closed-loop-seconds',
@@ -273,7 +275,6 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     options.preprocessing_option(p)
     p.add_argument(
         '--models',
-        default=DEMO_MODELS,
         help=f'comma-separated model kinds to train (default: {DEMO_MODELS})',
     )
     p.add_argument(

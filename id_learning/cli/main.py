@@ -23,6 +23,7 @@ from id_learning.cli.data import add_data_commands
 from id_learning.cli.demo import add_demo_command
 from id_learning.cli.diagnose import add_diagnose_command
 from id_learning.cli.options import empty_paths
+from id_learning.cli.streams import Guarded, failure
 from id_learning.cli.sweep import add_sweep_command
 from id_learning.cli.train import add_train_commands
 from id_learning.errors import IdLearningError
@@ -174,15 +175,48 @@ def main(argv: Sequence[str] | None = None) -> int:
     Ctrl-C (SIGINT) and SIGTERM print one line saying what is left where and exit with
     130 and 143 (128 + the signal's number): the writers clean up as for any failure. A closed
     standard output (``id-learning inspect BAG | head -1``, also under ``--help``) ends the
-    command quietly with 141 (``stdout_closed``); the writers clean up alike.
+    command quietly with 141 (``stdout_closed``); the writers clean up alike. A standard output
+    or error that cannot be written otherwise (closed when the tool started, a full disk) does
+    not stop the command: what it wrote is kept, one line says what could not be shown, on the
+    stream that still works, and the status is 1 where the command succeeded
+    (``cli.streams``).
     """
+    real = sys.stdout, sys.stderr
+    out, err = Guarded(real[0]), Guarded(real[1])
+    sys.stdout, sys.stderr = out, err
+    stopped: SystemExit | None = None
     try:
         try:
-            return _run(argv)
-        finally:  # a closed pipe raises here, not at the interpreter's exit (after --help too)
-            sys.stdout.flush()
-    except BrokenPipeError:
-        return stdout_closed()
+            try:
+                code = _run(argv)
+            except SystemExit as stop:  # --help, --version, a usage error
+                stopped = stop
+                code = stop.code if isinstance(stop.code, int) else 0 if stop.code is None else 2
+            finally:  # a closed pipe raises here, not at the interpreter's exit (after --help too)
+                out.flush()
+                err.flush()
+        except BrokenPipeError:
+            return stdout_closed()
+        result = _unwritten(code, out, err)
+    finally:
+        sys.stdout, sys.stderr = real
+    if stopped is not None and result == code:
+        raise stopped  # argparse's own exit, as callers of main() expect it
+    return result
+
+
+def _unwritten(code: int, out: Guarded, err: Guarded) -> int:
+    """``code``, or 1 after one line on what could not be written (on the stream that works)."""
+    problems = [p for p in (failure('output', out), failure('error', err)) if p is not None]
+    if not problems:
+        return code
+    line = f'id-learning: error: {"; ".join(problems)}\n'
+    for stream in (err, out):
+        if stream.error is None and stream.stream is not None:
+            stream.write(line)
+            stream.flush()
+            break
+    return code or 1
 
 
 def _run(argv: Sequence[str] | None) -> int:

@@ -349,7 +349,7 @@ class PredictorNodeConfig:
         'The reference is stale after this many IPO cycles without a valid sample [cycles]: '
         'the node stops publishing and says so; history is reset when it resumes.',
         low=1,
-        high=10**9,
+        high=10**6,  # PredictorConfig's bound on its counts
     )
     max_age_s: float = param(
         0.1,

@@ -168,11 +168,17 @@ def resolve_overrides(
         ConfigError: hyper-parameters for a kind not in ``kinds``, an unavailable device, an
             unknown kind or an unknown hyper-parameter; refused before any bag is loaded.
     """
-    from id_learning.models.registry import make_config
+    from id_learning.models.registry import MODEL_KINDS, make_config
 
-    unknown = sorted(set(hyper) - set(kinds))
+    unknown = sorted(set(hyper) - set(MODEL_KINDS))
     if unknown:
-        raise ConfigError(f'hyper-parameters given for kinds that are not trained: {unknown}')
+        raise ConfigError(
+            f'hyper-parameters given for unknown model kind(s) {unknown}; '
+            f'known kinds: {sorted(MODEL_KINDS)}'
+        )
+    untrained = sorted(set(hyper) - set(kinds))
+    if untrained:
+        raise ConfigError(f'hyper-parameters given for kinds that are not trained: {untrained}')
     resolved_device = str(select_device(device))
     overrides = {
         kind: model_overrides(kind, hyper, max_seconds=max_seconds, device=resolved_device)

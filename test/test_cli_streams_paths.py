@@ -1,0 +1,66 @@
+"""Probe 7 A, B, F, H: '.' as an output, unwritable standard streams, hyper-file kinds, demo."""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from id_learning.cli.main import main
+from id_learning.cli.streams import Guarded, failure
+from id_learning.outputs import named_path, partial_path
+
+
+@given(st.lists(st.sampled_from(['.', '..', 'a', 'b']), min_size=0, max_size=5))
+def test_named_path_always_has_a_name(parts: list[str]) -> None:
+    path = Path('/nonexistent/a/b/c/d/e/f', *parts)  # deep enough: '..' never reaches '/'
+    named = named_path(path)
+    assert named.name not in ('', '.', '..')
+    assert os.path.realpath(named) == os.path.realpath(path)
+    assert partial_path(path).parent.resolve() == named.parent.resolve()
+
+
+class _Full(io.StringIO):
+    def write(self, text: str) -> int:
+        raise OSError(28, 'No space left on device')
+
+
+def test_guarded_notes_the_first_failure() -> None:
+    closed = Guarded(None)
+    closed.write('x')
+    assert failure('output', closed) == 'cannot write the standard output: it is closed'
+    full = Guarded(_Full())
+    full.write('x')
+    full.write('y')
+    assert failure('output', full) == 'cannot write the standard output: No space left on device'
+    assert failure('output', Guarded(io.StringIO())) is None
+
+
+def test_version_on_a_full_stdout_is_one_line_and_1(monkeypatch: pytest.MonkeyPatch) -> None:
+    err = io.StringIO()
+    monkeypatch.setattr('sys.stdout', _Full())
+    monkeypatch.setattr('sys.stderr', err)
+    assert main(['--version']) == 1
+    assert err.getvalue() == (
+        'id-learning: error: cannot write the standard output: No space left on device\n'
+    )
+
+
+def test_demo_refuses_models_with_skip_training(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ['demo', '--skip-training', '--skip-diagnosis', '--models', 'mlp', '--out', 'x']
+    assert main(argv) == 2
+    assert '--models means nothing with --skip-training' in capsys.readouterr().err
+
+
+def test_hyper_file_unknown_kind(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from id_learning.errors import ConfigError
+    from id_learning.training.fitting import resolve_overrides
+
+    with pytest.raises(ConfigError, match=r"unknown model kind\(s\) \['transformer'\]; known"):
+        resolve_overrides(['mlp'], {'transformer': {}}, max_seconds=None, device='cpu')
+    with pytest.raises(ConfigError, match='kinds that are not trained'):
+        resolve_overrides(['mlp'], {'lstm': {}}, max_seconds=None, device='cpu')
