@@ -141,12 +141,13 @@ def _check_metadata(path: Path) -> None:
         BagError: names metadata.yaml and why, or the bag, the entry and why.
     """
     try:
-        (path / 'metadata.yaml').read_bytes().decode('utf-8')
+        text = (path / 'metadata.yaml').read_bytes().decode('utf-8')
     except UnicodeDecodeError as err:
         raise BagError(
             f'{path / "metadata.yaml"}: not a text YAML file (byte {err.start} is not UTF-8: '
             f'binary or damaged); {RECOVER_HINT}'
         ) from err
+    _check_metadata_shape(path / 'metadata.yaml', text)
     for entry in _listed_files(path):  # [] when unreadable: rosbags names what is wrong
         why = 'an absolute path' if PurePath(entry).is_absolute() else 'outside the bag folder'
         if PurePath(entry).is_absolute() or os.path.normpath(entry).split(os.sep)[0] == os.pardir:
@@ -155,6 +156,29 @@ def _check_metadata(path: Path) -> None:
                 f'its storage files in its own folder: copy the file in and list it by name '
                 f'({PurePath(entry).name!r})'
             )
+
+
+def _check_metadata_shape(file: Path, text: str) -> None:
+    """Refuse a metadata.yaml that is empty or not a mapping holding rosbag2_bagfile_information.
+
+    Text that is not YAML is left to rosbags, which names the line.
+
+    Raises:
+        BagError: names the file, what it holds instead, and the recover hint.
+    """
+    try:
+        meta = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return
+    if meta is None:
+        what = 'is empty' if not text.strip() else 'holds no YAML value (only comments)'
+    elif not isinstance(meta, dict):
+        what = f'holds a {type(meta).__name__}, not a mapping'
+    elif not isinstance(meta.get('rosbag2_bagfile_information'), dict):
+        what = 'has no rosbag2_bagfile_information mapping'
+    else:
+        return
+    raise BagError(f'{file} {what}; {RECOVER_HINT}')
 
 
 def _storage_failure(err: BaseException) -> str | None:

@@ -50,6 +50,9 @@ __all__ = [
     'FLOOR_SHARE',
     'LAG_PERIODS',
     'RELATIVE',
+    'SCALE_LIMIT',
+    'SCALE_MIN_TRAVEL',
+    'SCALE_WINDOW_S',
     'STALE_S',
     'WINDOW_S',
     'ConsistencyStream',
@@ -68,6 +71,14 @@ STALE_S = 0.01
 WINDOW_S = 0.05
 #: Noise and quantisation allowed (share of the velocity limit; per period for positions).
 FLOOR_SHARE = 0.05
+#: The windows the whole-recording scale check compares over [s].
+SCALE_WINDOW_S = 0.2
+#: The largest factor allowed between the integrated velocities and the position change of a
+#: whole recording (at consistency_scale 1; a rounded gear ratio is a few per cent).
+SCALE_LIMIT = 1.5
+#: Travel a joint must make (sum of |position change| over the windows) before its scale is
+#: judged [rad or m]: below it noise and quantisation could dominate.
+SCALE_MIN_TRAVEL = 0.05
 
 
 def gap_starts(stamps_ns: np.ndarray, period_s: float, gap_periods: float) -> tuple[int, ...]:
@@ -214,6 +225,61 @@ class KinematicConsistency:
         out.append(np.concatenate([np.zeros((1, q.shape[1])), mismatch / tolerance]))
         return out[0], out[1], out[2]
 
+    def scale_errors(
+        self,
+        stamps_ns: np.ndarray,
+        q: np.ndarray,
+        v: np.ndarray,
+        *,
+        starts: tuple[int, ...] = (0,),
+    ) -> list[tuple[str, float, float]]:
+        """(joint, factor, travel) of each joint whose velocities are a multiple of its rate.
+
+        A scale error (deg/s for rad/s, a factor 2, a reversed sign) stays inside the local
+        tolerances while the motion is slow, so it is judged over the whole recording: in
+        windows of ``SCALE_WINDOW_S`` within each segment, the velocity integral I against the
+        position change dq, factor = sum(I dq) / sum(dq^2) (a least-squares slope; 1 when they
+        agree). A joint is judged once it travels ``SCALE_MIN_TRAVEL``; it fails outside
+        [1 / limit, limit], limit = max(``SCALE_LIMIT``, 1 + 2 relative).
+        """
+        t = (np.asarray(stamps_ns, dtype=np.int64) - int(stamps_ns[0])) * 1e-9
+        bounds = [*sorted(set(starts) | {0}), len(t)]
+        dqs, integrals = [], []
+        for begin, end in itertools.pairwise(bounds):
+            if end - begin < 2:
+                continue
+            ts, qs, vs = t[begin:end], q[begin:end], v[begin:end]
+            steps = 0.5 * (vs[1:] + vs[:-1]) * np.diff(ts)[:, None]
+            cum = np.concatenate([np.zeros((1, q.shape[1])), np.cumsum(steps, axis=0)])
+            stride = max(1, round(SCALE_WINDOW_S / self.period_s))
+            marks = np.arange(0, end - begin, stride)
+            if marks[-1] != end - begin - 1:
+                marks = np.append(marks, end - begin - 1)
+            dqs.append(np.diff(qs[marks], axis=0))
+            integrals.append(np.diff(cum[marks], axis=0))
+        if not dqs:
+            return []
+        dq, integral = np.concatenate(dqs), np.concatenate(integrals)
+        travel = np.abs(dq).sum(axis=0)
+        limit = max(SCALE_LIMIT, 1.0 + 2.0 * self.relative)
+        out = []
+        for j, name in enumerate(self.joints):
+            if not travel[j] >= SCALE_MIN_TRAVEL:
+                continue
+            factor = float(np.dot(integral[:, j], dq[:, j]) / np.dot(dq[:, j], dq[:, j]))
+            if not (1.0 / limit <= factor <= limit):
+                out.append((name, factor, float(travel[j])))
+        return out
+
+    def describe_scale(self, errors: list[tuple[str, float, float]]) -> str:
+        """One phrase naming each joint whose velocities are a multiple of its positions' rate."""
+        parts = [
+            f'{name}: its velocities integrate to {factor:.3g} x its position change '
+            f'(over {travel:.3g} rad of travel)'
+            for name, factor, travel in errors
+        ]
+        return '; '.join(parts)
+
     def failing(
         self,
         stamps_ns: np.ndarray,
@@ -300,6 +366,16 @@ class KinematicConsistency:
         """
         found = self.first_failure(stamps_ns, q, v, a, starts=starts)
         if found is None:
+            scale = self.scale_errors(stamps_ns, q, v, starts=starts)
+            if scale:
+                raise DatasetError(
+                    f'{where}: the velocities contradict the positions over the whole '
+                    f'recording by a factor: {self.describe_scale(scale)}; the limit is '
+                    f'{max(SCALE_LIMIT, 1.0 + 2.0 * self.relative):.3g} x either way. A '
+                    'velocity in another unit (deg/s for rad/s), of the motor rather than the '
+                    'joint side, or of a wrongly scaled column does not describe the motion '
+                    'the positions record'
+                )
             return
         sample, count, worst = found
         if self.scale < 1.0:

@@ -1,39 +1,36 @@
 """replay: play a bag as the controller would publish it, at the recorded IPO pace.
 
-The selected span of the bag is loaded once. Messages are grouped into cycles by their header
-stamp (``timing: stamp``; the bag contract's topics share one stamp per IPO cycle) or by their log
-time (``timing: log_time``). Cycle k is published at the absolute deadline
+The selected span of the bag is loaded once. Messages are grouped into cycles by their header stamp
+(``timing: stamp``; the bag contract's topics share one stamp per IPO cycle) or by their log time
+(``timing: log_time``). Cycle k is published at the absolute deadline
 
     t_k = t_start + (key_k - key_first) / rate
 
-on the monotonic clock, waiting with a timed wait on each deadline (never sleep(period), so
-errors do not accumulate). A late cycle is published at once and the schedule is kept. Each
-cycle publishes, in order: /clock (the cycle's stamp, for use_sim_time), the bag's original
-serialized bytes of each message (rclpy publishes bytes as they are), then the reference.
+on the monotonic clock, waiting with a timed wait on each deadline (never sleep(period), so errors
+do not accumulate). A late cycle is published at once and the schedule is kept. Each cycle
+publishes, in order: /clock (the cycle's stamp, for use_sim_time), the bag's original serialized
+bytes of each message (rclpy publishes bytes as they are), then the reference.
 
 The reference (``reference_mode``) is built up front from the ``reference_source`` joint states
-with ``predictor.reference_from_states``, as a controller would send it (``reference_inputs``):
-by default recorded q and v smoothed far above the motion's band (the robot's
-``input_smoothing_hz``, the inputs models are fitted and scored on; not the labels' 0.3-1.2 Hz
-low-pass), and a = central differences of v over the stamps (the replay knows the whole
-trajectory, like the controller's interpolator). It is published as a one-point
-trajectory_msgs/JointTrajectory (q, v, a) or a sensor_msgs/JointState (q, v), stamped with the
-sample's stamp.
+with ``predictor.reference_from_states``, as a controller would send it (``reference_inputs``): by
+default recorded q and v smoothed far above the motion's band (the robot's ``input_smoothing_hz``,
+the inputs models are fitted and scored on; not the labels' 0.3-1.2 Hz low-pass), and a = central
+differences of v over the stamps (the replay knows the whole trajectory, like the controller's
+interpolator). It is published as a one-point trajectory_msgs/JointTrajectory (q, v, a) or a
+sensor_msgs/JointState (q, v), stamped with the sample's stamp.
 
-A header stamp that is no time (``nanosec`` >= 1e9 or a negative ``sec``) refuses the bag,
-naming the message, wherever the replay reads stamps (every topic with ``timing: stamp``, the
-reference source always): folded into nanoseconds it would be another time. Topics that are only
-played (``timing: log_time``) go out as recorded; the predictor refuses such stamps itself.
-The stamps read pass train's timing checks first, in the bag's order (``replay_span``): one that
-repeats or goes backwards, or a hole inside the span in the reference source, refuses the bag,
-naming it (never re-sorted silently, never left to show up as an impossible acceleration).
-A reference source sampled off the robot's IPO period is refused (without a reference, stamp
-timing only warns); with ``timing: log_time``, log times that do not advance refuse the bag.
+A header stamp that is no time (``nanosec`` >= 1e9 or a negative ``sec``) refuses the bag, naming
+the message, wherever the replay reads stamps (every topic with ``timing: stamp``, the reference
+source always). Topics only played (``timing: log_time``) go out as recorded. A reference source of
+other joints than the robot config's is refused first; then the stamps pass train's timing checks,
+in the bag's order (``replay_span``): one that repeats or goes backwards, or a hole inside the span
+in the reference source, refuses the bag, naming it. A reference source sampled off the robot's IPO
+period is refused; with ``timing: log_time``, log times that do not advance refuse it.
 
-Jitter: for every cycle the lateness (publish time minus its deadline) is recorded; the median,
-99th percentile and maximum [ms] and the number of cycles later than one IPO period are logged at
-the end and published on /diagnostics. With ``loop`` the bag starts again one period after its
-last cycle (/clock then jumps back).
+Jitter: each cycle's lateness (publish time minus its deadline) is recorded; the median, 99th
+percentile and maximum [ms] and the cycles later than one IPO period are logged at the end and
+published on /diagnostics. With ``loop`` the bag starts again one period after its last cycle
+(/clock then jumps back).
 
 Usage: ``ros2 run id_learning replay --ros-args -p bag:=bags/default -p rate:=1.0``.
 """
@@ -177,13 +174,7 @@ def _reference_bytes(
     except DatasetError as err:
         raise BagError(f'{err}; nothing is played from an impossible reference') from err
     inputs = None
-    if config.reference_inputs != 'recorded':
-        if set(names) != set(robot.joints) or len(names) != len(robot.joints):
-            raise BagError(
-                f'{config.bag}: joints {list(names)} are not the robot {robot.name} joints '
-                f'{list(robot.joints)}; set reference_inputs recorded or robot_config'
-            )
-        # The robot's cut-offs are in its joint order; the bag may use another.
+    if config.reference_inputs != 'recorded':  # the robot's cut-offs, in the bag's joint order
         order = [robot.joints.index(name) for name in names]
         if config.reference_inputs == 'study':
             inputs = InputDefinition.study(robot.lowpass_cutoff_hz[order])
@@ -225,6 +216,20 @@ def _reference_bytes(
     return out
 
 
+def _check_joint_names(config: ReplayConfig, robot: RobotConfig, data: bytes) -> None:
+    """Refuse a reference of other joints than the robot's, before the timing (as train does)."""
+    try:  # foreign bytes are refused, with the message's number, in _reference_bytes
+        names = decode_joint_state(data).name
+    except Exception:
+        names = robot.joints
+    if config.reference_inputs != 'recorded' and sorted(names) != sorted(robot.joints):
+        raise BagError(
+            f'{config.bag}: {config.reference_source} joints {list(names)} are not the robot '
+            f'{robot.name} joints {list(robot.joints)}; set robot_config to the robot of the '
+            'bag, or reference_inputs recorded'
+        )
+
+
 def check_smoothing(config: ReplayConfig, robot: RobotConfig) -> None:
     """Refuse a reference_smoothing_hz the robot config would refuse as input_smoothing_hz.
 
@@ -248,13 +253,12 @@ def check_smoothing(config: ReplayConfig, robot: RobotConfig) -> None:
 def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     """Load the replayed span of a bag into cycles.
 
-    Only the span (and, for the reference, ``REFERENCE_PAD_S`` on either side) is kept in
-    memory; reading stops once the bag is past it.
+    Only the span (with ``REFERENCE_PAD_S`` around it for the reference) is read and kept.
 
     Raises:
         BagError: the bag is unreadable, lacks a topic, or a message has no header stamp with
-            ``timing: stamp``; a requested topic (or the reference source) yields no message in
-            the span, or its type in metadata.yaml differs from the storage's.
+            ``timing: stamp``; a topic yields no message in the span, or its type in
+            metadata.yaml differs from the storage's; the reference's joints are not the robot's.
         ConfigError: the span is empty, or reference_smoothing_hz is refused (``check_smoothing``).
     """
     check_smoothing(config, robot)
@@ -324,7 +328,8 @@ def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
     def inside(key: int) -> bool:
         return key >= start and (stop is None or key <= stop)
 
-    if has_reference and states:  # train's timing checks first, in the bag's order
+    if has_reference and states:  # the joints, then train's timing checks, in the bag's order
+        _check_joint_names(config, robot, states[0][1])
         stretch = source_stretch(
             f'{path}: {config.reference_source}',
             [(key, stamp, inside(key)) for key, _, stamp in states],

@@ -79,3 +79,14 @@ def test_unpaired_tail_ignores_complete_cycles_and_single_topics() -> None:
     said = unpaired_tail(path, ('/a', '/b'), [[0, 1], [0, -1], [0]], [0, 8, 16])
     assert said is not None
     assert 'last 2 cycle(s) (stamps from 8 ns) lack /b' in said
+
+
+def test_a_robot_config_of_other_joints_is_refused_before_the_timing(bag: Path) -> None:
+    """Another robot's config (another IPO period too) is refused naming the joints, not a gap."""
+    from id_learning.robot.config import load_robot_config
+
+    panda = load_robot_config(Path(__file__).parents[2] / 'config' / 'panda.yaml')
+    with pytest.raises(BagError, match=r'joints \[.*\] are not the robot panda joints') as caught:
+        build_plan(ReplayConfig(bag=str(bag)), panda)
+    assert 'gap' not in str(caught.value)
+    assert 'IPO' not in str(caught.value)

@@ -58,7 +58,8 @@ def test_an_old_ground_truth_without_json_is_still_judged(twins, tmp_path: Path)
     folder = _write(tmp_path / 'other', own.recording.stamps_ns, other.tau_u_clean, None)
     torque, why = read_noise_free_torque(folder, dataset)
     assert torque is None
-    assert 'ground_truth.npz does not belong to this recording: the labels differ' in why
+    assert 'ground_truth.npz does not belong to this recording, or its labels are computed' in why
+    assert 'the labels differ' in why
 
 
 def test_another_simulations_arrays_beside_its_json_are_refused(twins, tmp_path: Path) -> None:
@@ -187,3 +188,19 @@ def test_columns_follow_the_json_joint_names(twins, tmp_path: Path) -> None:
     assert why == ''
     assert torque is not None
     np.testing.assert_allclose(torque, own.tau_u_clean[:, order], rtol=1e-6, atol=1e-3)
+
+
+def test_labels_scaled_by_the_drive_constants_blame_the_config(twins, tmp_path: Path) -> None:
+    """The stamps and the JSON match but the labels are a multiple of the truth (gear ratio 1):
+    the message points at the robot config's drive constants and names each joint's factor."""
+    (own, _), dataset = twins
+    folder = _write(tmp_path, own.recording.stamps_ns, own.tau_u_clean, own.parameters)
+    scaled = replace(dataset, tau_raw=np.asarray(dataset.tau_raw) * 0.01)
+    torque, why = read_noise_free_torque(folder, scaled)
+    assert torque is None
+    assert 'holds every stamp of this recording' in why
+    assert 'gear_ratio x torque_constant x current' in why
+    factors = why.split('multiple of the truth: ')[1].split(';')[0].split(', ')
+    assert [name for name, _ in (f.split() for f in factors)] == list(dataset.joints)
+    assert all(abs(float(f.split()[1]) - 0.01) < 5e-4 for f in factors)
+    assert 'another simulation or another motion' not in why
