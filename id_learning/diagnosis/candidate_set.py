@@ -309,7 +309,7 @@ class CandidateSet:
         """A selected effect in its form that predicts held-out best (``choose_form``)."""
         label = selected[index]
         others = {g: self.columns[g] for g in selected if g != label}
-        forms = [self.specs[form] for form in [label, *self._variants_of(label)]]
+        forms = [self.specs[t] for t in self.testable if t == label or self.variants(label, t)]
         design_of = functools.partial(self.design_over, y, n_eff=n_eff)
         best = choose_form(self.problem, others, forms, design_of)
         if best.label in self.specs and best.label != label:

@@ -108,8 +108,9 @@ def choose_form(
     The selection takes a form greedily, the one that helps most on the training part when it
     enters; fitted beside the effects that entered after it, another may do better (a twin's
     balancer entered as a counterweight before the friction was in). Each form is refined
-    (``refine_setting``) and judged on the held-out part. ``forms[0]`` is the selected one; it
-    gives way only to a form that leaves ``FORM_SWITCH_SHARE`` less held-out error.
+    (``refine_setting``) and judged on the held-out part. ``forms[0]`` is the library's first
+    form (the link torque's friction, the balancer); it gives way only to a form that leaves
+    ``FORM_SWITCH_SHARE`` less held-out error, whichever entered the selection.
     Once the link-side effects have a fit, a form that grows with the model's link torque is
     judged so (``Effect.model_load_settings``): beside a payload the URDF's link torque alone
     would lose to gravity's on the wrist for want of the payload, not of the form.
@@ -126,7 +127,7 @@ def choose_form(
         judged.append((fit.rss['test'], spec))
     best = min(judged, key=lambda item: item[0])
     if best[0] > (1.0 - FORM_SWITCH_SHARE) * judged[0][0]:
-        return judged[0][1]  # within the noise the selected form stays
+        return judged[0][1]  # within the noise the first form stays
     return best[1]
 
 
