@@ -27,9 +27,20 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_twin_output(simulate(config), config, tmp_path_factory.mktemp('bag') / 'twin')
 
 
+#: Runs the rest of its command line with SIGINT and SIGTERM at their defaults, as a terminal's
+#: foreground job has them: a suite started in the background (``nohup ... &``) passes SIGINT
+#: on ignored, and a program leaves an ignored signal ignored (as Python itself does).
+AS_FROM_A_TERMINAL = [
+    sys.executable, '-c',
+    'import os, signal, sys\n'
+    'for number in (signal.SIGINT, signal.SIGTERM): signal.signal(number, signal.SIG_DFL)\n'
+    'os.execv(sys.executable, [sys.executable, *sys.argv[1:]])',
+]  # fmt: skip
+
+
 def _cli(*argv: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
-        [sys.executable, '-m', 'id_learning.cli', *argv],
+        [*AS_FROM_A_TERMINAL, '-m', 'id_learning.cli', *argv],
         stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, cwd=REPO,
     )  # fmt: skip
 
@@ -131,7 +142,7 @@ def _slow_start(tmp_path: Path) -> subprocess.Popen[str]:
         "entry.PROGRAMS['slow'] = ('slow_program', 'main'); sys.exit(entry.run('slow'))"
     )
     return subprocess.Popen(
-        [sys.executable, '-c', code], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
+        [*AS_FROM_A_TERMINAL, '-c', code], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
         text=True, cwd=REPO,
     )  # fmt: skip
 
@@ -197,7 +208,7 @@ def test_ctrl_c_while_a_node_starts_is_one_line_never_a_traceback(
 
     words = [word.replace('OUT', str(tmp_path / 'bag')) for word in parameters]
     process = subprocess.Popen(
-        [sys.executable, '-m', 'id_learning.entry', node, '--ros-args', *words],
+        [*AS_FROM_A_TERMINAL, '-m', 'id_learning.entry', node, '--ros-args', *words],
         env=node_environment(random_domain()), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True, cwd=tmp_path,
     )  # fmt: skip
