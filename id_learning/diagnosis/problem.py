@@ -240,12 +240,13 @@ class ResidualProblem:
     def _quantities_for_library(self) -> None:
         probe = [EffectSpec(name) for name in self.config.effects]
         derivatives, regressor = needs_derivatives(probe), needs_regressor(probe)
+        gravity = self._reads_load()
         all_rows = [kept_rows(d, self.trim, self.step, self.config) for d in self.datasets]
         self._check_length(all_rows)
         for dataset, rows in zip(self.datasets, all_rows, strict=True):
             q, v, a, jerk = column_motion(dataset)
             quantities = self.model.evaluate(
-                q, v, a, jerk, derivatives=derivatives, regressor=regressor
+                q, v, a, jerk, derivatives=derivatives, regressor=regressor, gravity=gravity
             )
             nominal = as_label(quantities.tau_nominal, dataset)
             smooth = self._smooth(dataset)
@@ -293,10 +294,14 @@ class ResidualProblem:
     def _smooth(self, dataset: Dataset) -> NominalQuantities:
         """Quantities along the filtered motion, for the testability of switching effects."""
         q, v, a = dataset.study.q, dataset.study.v, dataset.study.a
-        if any(effect(name).reads_link_torque for name in self.config.effects):
-            return self.model.evaluate(q, v, a)
+        if self._reads_load():
+            return self.model.evaluate(q, v, a, gravity=True)
         zeros = np.zeros_like(q)  # only the load-dependent columns read the torques
         return NominalQuantities(q, v, a, zeros, zeros, zeros, zeros, tau_gravity=zeros)
+
+    def _reads_load(self) -> bool:
+        """Whether a candidate grows with a load (link torque or gravity's): only friction does."""
+        return any(effect(name).reads_link_torque for name in self.config.effects)
 
     def joined_quantities(self) -> NominalQuantities:
         """Training rows of every recording, for choices that look at the whole excitation."""
@@ -314,7 +319,7 @@ class ResidualProblem:
             tau_rigid=join('tau_rigid'),
             tau_rotor=join('tau_rotor'),
             tau_nominal=join('tau_nominal'),
-            tau_gravity=join('tau_gravity'),
+            tau_gravity=join('tau_gravity') if self._reads_load() else None,
         )
 
     def part(self, key: str, part: str) -> np.ndarray:

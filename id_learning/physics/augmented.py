@@ -17,6 +17,7 @@ from id_learning.physics.terms import (
     EffectSpec,
     effect_columns,
     needs_derivatives,
+    needs_gravity,
     needs_regressor,
     whole_model_delay,
     whole_model_scale,
@@ -85,6 +86,7 @@ class AugmentedModel:
             None if jerk is None else np.atleast_2d(jerk),
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
+            gravity=needs_gravity(specs),
         )
         tau = self._additive(quantities, self.terms)
         tau[:, self._fallback] = quantities.tau_nominal[:, self._fallback]
@@ -175,6 +177,7 @@ class AugmentedModel:
             a - delay * jerk,
             derivatives=needs_derivatives(specs),
             regressor=needs_regressor(specs),
+            gravity=needs_gravity(specs),
         )
         out: np.ndarray = self._additive(back, others, None, folded) - quantities.tau_nominal - now
         return out
@@ -212,6 +215,7 @@ class AugmentedModel:
             folded.append((JOINT_COLUMNS[name], joints, settings, theta))  # one joint effect
         specs = [spec for spec, _ in rest]
         derivatives, regressor = needs_derivatives(specs), needs_regressor(specs)
+        gravity = needs_gravity(specs)
         nominal, additive, fallback = self.nominal, self._additive, self._fallback
 
         def folded_torque(qs: NominalQuantities) -> np.ndarray:
@@ -222,8 +226,9 @@ class AugmentedModel:
 
         def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             qs = nominal.evaluate(
-                q[None], v[None], a[None], derivatives=derivatives, regressor=regressor
-            )
+                q[None], v[None], a[None], derivatives=derivatives, regressor=regressor,
+                gravity=gravity,
+            )  # fmt: skip
             out: np.ndarray = additive(qs, rest, qs.tau_nominal.copy(), folded_torque)[0]
             out[fallback] = qs.tau_nominal[0, fallback]
             return out

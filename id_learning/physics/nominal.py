@@ -116,6 +116,7 @@ class NominalModel:
         *,
         derivatives: bool = False,
         regressor: bool = False,
+        gravity: bool = False,
     ) -> NominalQuantities:
         """Evaluate the nominal model along a motion.
 
@@ -126,6 +127,7 @@ class NominalModel:
             jerk: (N, n) joint jerks [rad/s^3]; zero if None.
             derivatives: also compute d tau / d q, d tau / d v and M(q).
             regressor: also compute the inertial-parameter regressor.
+            gravity: also compute g(q) (friction growing with gravity's torque reads it).
         """
         q, v, a = (np.asarray(x, dtype=float) for x in (q, v, a))
         jerk = np.zeros_like(a) if jerk is None else np.asarray(jerk, dtype=float)
@@ -150,7 +152,7 @@ class NominalModel:
             dtau_dv=dv,
             mass=mass,
             regressor=self.dynamics.regressor(q, v, a) if regressor else None,
-            tau_gravity=self.dynamics.gravity(q),
+            tau_gravity=self.dynamics.gravity(q) if gravity else None,
         )
 
     def _derivatives(

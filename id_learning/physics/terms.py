@@ -32,6 +32,7 @@ __all__ = [
     'gravity_loaded_joints',
     'load_slope',
     'needs_derivatives',
+    'needs_gravity',
     'needs_regressor',
     'uses_model_load',
     'whole_model_delay',
@@ -129,6 +130,11 @@ def needs_derivatives(specs: list[EffectSpec]) -> bool:
     (A delay of the whole model's form is evaluated at the state it holds back.)
     """
     return any(effect(spec.name).needs_derivatives(spec.settings) for spec in specs)
+
+
+def needs_gravity(specs: list[EffectSpec]) -> bool:
+    """Whether any candidate reads the URDF's gravity torque."""
+    return any(effect(spec.name).needs_gravity(spec.settings) for spec in specs)
 
 
 def needs_regressor(specs: list[EffectSpec]) -> bool:

@@ -34,7 +34,7 @@ def quantities(model):
     limits = model.robot.limits
     q = rng.uniform(limits.position_lower, limits.position_upper, (200, model.robot.n_joints))
     v = rng.normal(0.0, 0.5, q.shape)
-    return model.evaluate(q, v, rng.normal(0.0, 2.0, q.shape))
+    return model.evaluate(q, v, rng.normal(0.0, 2.0, q.shape), gravity=True)
 
 
 def column(model, quantities, name: str, **form) -> np.ndarray:
@@ -152,7 +152,8 @@ def test_every_form_carries_into_a_saved_model_and_its_online_torque(model, quan
     q, v, a = quantities.q[:30], quantities.v[:30], quantities.a[:30]
     batch = augmented.torque(q, v, a)
     expected = quantities.tau_nominal[:30] + sum(
-        effect_columns(spec, model.evaluate(q, v, a), model) @ theta for spec, theta in terms
+        effect_columns(spec, model.evaluate(q, v, a, gravity=True), model) @ theta
+        for spec, theta in terms
     )
     np.testing.assert_allclose(batch, expected, rtol=1e-12, atol=1e-9)
     one = augmented.sample_function()

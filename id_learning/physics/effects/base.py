@@ -196,6 +196,11 @@ class Effect:
         del settings
         return False
 
+    def needs_gravity(self, settings: Mapping[str, Any]) -> bool:
+        """Whether its columns read the URDF's gravity torque (``NominalQuantities``)."""
+        del settings
+        return False
+
     def model_load_settings(self, settings: Mapping[str, Any]) -> dict[str, Any] | None:
         """Its settings growing with the whole model's link torque; None: no such form."""
         del settings

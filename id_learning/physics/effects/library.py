@@ -259,6 +259,9 @@ class LoadDependentFriction(_SignedFriction):
     def uses_model_load(self, settings: Mapping[str, Any]) -> bool:
         return settings.get('load') == 'model'
 
+    def needs_gravity(self, settings: Mapping[str, Any]) -> bool:
+        return settings.get('load') == 'gravity'
+
     def model_load_settings(self, settings: Mapping[str, Any]) -> dict[str, Any] | None:
         """The link torque's form grows with the whole model's; gravity's stays the URDF's."""
         if settings.get('load') == 'gravity':
