@@ -273,6 +273,7 @@ def _check_target(out: Path, inputs: Sequence[Path], folder: bool, option: str) 
     if not folder and out.is_dir():
         raise OutputError(f'{out}: is a folder; name a file for {option}')
     _refuse_inputs(out, inputs, option)
+    _refuse_inside_results(out, option)
     _probe_parent(out, option)
     return out
 
@@ -330,8 +331,19 @@ def bag_output(
         yield check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag, option=option)
 
 
-def _refuse_inside_results(out: Path) -> None:
-    """Refuse a file inside a result folder or a bag, at any depth (another command's)."""
+def _being_written_here(folder: Path) -> bool:
+    """Whether ``folder`` is a ``.partial`` result this process is writing (a demo's steps)."""
+    if not folder.name.endswith(PARTIAL_SUFFIX):
+        return False
+    marker = read_marker(folder) if (folder / INCOMPLETE_FILE).is_file() else None
+    return marker is not None and marker.get('pid') == os.getpid()
+
+
+def _refuse_inside_results(out: Path, option: str) -> None:
+    """Refuse an ``out`` inside a result folder or a bag, at any depth (another command's).
+
+    A result this process is writing is the exception: a command's steps write into it.
+    """
     for depth, parent in enumerate(out.resolve().parents):
         try:
             held = folder_holds(parent) if parent.is_dir() else Holding('empty')
@@ -339,14 +351,24 @@ def _refuse_inside_results(out: Path) -> None:
             if depth == 0:
                 raise OutputError(f'{parent}: {os_reason(err)}') from err
             continue  # an ancestor that cannot be listed says nothing
-        if held.kind in ('empty', 'foreign'):
+        if held.kind in ('empty', 'foreign') or _being_written_here(parent):
             continue
-        # Above the file's own folder, a document alone may be a user's: a result there says
+        # Above the output's own folder, a document alone may be a user's: a result there says
         # so by its manifest, its marker or run.json; a bag by its files.
         ours = {MANIFEST_FILE, INCOMPLETE_FILE, 'run.json'} & {e.name for e in parent.iterdir()}
         if depth and held.kind not in ('bag', 'torn bag') and not ours:
             continue
-        raise OutputError(f'{out}: {parent} holds {held.describe()}; write the file elsewhere')
+        raise OutputError(
+            f'{out}: lies inside {parent}, which holds {held.describe()}; nothing is written '
+            f'into another result or a bag: choose another {option}'
+        )
+
+
+def _check_suffix(path: Path, suffixes: Sequence[str]) -> None:
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise OutputError(
+            f'{path}: not a file type that can be written here; use one of {", ".join(suffixes)}'
+        )
 
 
 def check_file_output(
@@ -363,12 +385,9 @@ def check_file_output(
     replaced only with ``force``; never one inside a result folder or a bag (another command's).
     ``option``: the option that gave ``out`` (the tool's one file output is ``inspect --plot``).
     """
+    _check_suffix(Path(out), suffixes)  # the name given, then the file a link points to
     out = check_target(Path(out), inputs=inputs, folder=False, option=option)
-    if suffixes and out.suffix.lower() not in suffixes:
-        raise OutputError(
-            f'{out}: not a file type that can be written here; use one of {", ".join(suffixes)}'
-        )
-    _refuse_inside_results(out)
+    _check_suffix(out, suffixes)
     if out.exists() and not force:
         raise OutputError(f'{out}: exists; choose another {option}, or pass --force to replace it')
     return out

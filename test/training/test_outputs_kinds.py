@@ -225,18 +225,39 @@ def test_force_never_deletes_a_user_file_inside_an_interrupted_partial(tmp_path)
     assert sorted(p.name for p in out.iterdir()) == [MANIFEST_FILE, 'models', 'run.json']
 
 
-def test_a_plot_is_refused_anywhere_inside_a_result_or_a_bag(tmp_path):
+def test_no_output_is_written_anywhere_inside_a_result_or_a_bag(tmp_path):
     with result_folder(tmp_path / 'run', command='train') as folder:
         (folder.work / 'run.json').write_text('{}')
         (folder.work / 'models' / 'mlp').mkdir(parents=True)
-    with pytest.raises(OutputError, match=r'run holds a train run'):
-        check_file_output(tmp_path / 'run' / 'models' / 'mlp' / 'x.png')
     bag = _folder(tmp_path, 'bag', 'metadata.yaml', 'bag_0.mcap')
-    with pytest.raises(OutputError, match=r'bag holds a bag'):
-        check_file_output(bag / 'x.png')
+    torn = _folder(tmp_path, 'torn', 'torn_0.mcap')
+    inside = {
+        tmp_path / 'run' / 'models' / 'mlp': r'run, which holds a train run',
+        bag: r'bag, which holds a bag',
+        bag / 'deeper' / 'still': r'bag, which holds a bag',
+        torn: r'torn, which holds a torn bag',
+    }
+    for parent, holder in inside.items():
+        for check in (
+            lambda p: check_file_output(p / 'x.png'),
+            lambda p: check_bag_output(p / 'inner', option='output:=PATH'),
+            lambda p: check_output(p / 'inner', kind='evaluation'),
+        ):
+            with pytest.raises(OutputError, match=rf'(inner|x\.png): lies inside .*{holder}'):
+                check(parent)
+    assert not (bag / 'deeper').exists()
+    assert not (bag / 'inner').exists()
     user = _folder(tmp_path, 'mine', 'metrics.json')  # a user's document, no manifest
     (user / 'plots').mkdir()
     assert check_file_output(user / 'plots' / 'x.png') == user / 'plots' / 'x.png'
+    assert check_output(user / 'plots' / 'eval', kind='evaluation') == user / 'plots' / 'eval'
+
+
+def test_a_command_writes_its_steps_inside_its_own_partial_result(tmp_path):
+    with result_folder(tmp_path / 'demo', command='demo') as folder:  # noqa: SIM117 (uses folder)
+        with result_folder(folder.work / 'run', command='train') as inner:
+            (inner.work / 'run.json').write_text('{}')
+    assert (tmp_path / 'demo' / 'run' / 'run.json').is_file()
 
 
 def test_a_dotdot_path_creates_no_folder_it_leaves(tmp_path, monkeypatch):
