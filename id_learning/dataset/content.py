@@ -24,6 +24,8 @@ warns with these lines, ``inspect`` lists them as problems.
   generous ``NOMINAL_SLOPE_FACTOR``); near -1 names a sign (the joint's current sign, or gravity
   acting otherwise than in the URDF: a robot mounted upside down), a factor 1e-3 or 1e3 a unit or
   scale. Warned (``gravity_findings``).
+- A label that is one-signed and comes down to zero without crossing it while its joint moves
+  both ways has lost its sign (a magnitude recorded): warned (``sign_findings``).
 
 ``sampling_problem`` is the timing counterpart inspect and the replay share: a topic sampled at
 another period than the robot's IPO period.
@@ -50,6 +52,9 @@ __all__ = [
     'SATURATION_MIN_SAMPLES',
     'SATURATION_MIN_SHARE',
     'SATURATION_NEIGHBOURS',
+    'SIGN_LOST_OPPOSITE_SHARE',
+    'SIGN_LOST_REVERSAL_SHARE',
+    'SIGN_LOST_ZERO_SHARE',
     'STILL_NOISE_FACTOR',
     'STILL_SPAN_RAD',
     'Finding',
@@ -63,6 +68,7 @@ __all__ = [
     'position_noise',
     'sampling_problem',
     'saturated_levels',
+    'sign_findings',
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -103,7 +109,7 @@ class Finding:
     Attributes:
         joint: the joint's name ('' for a finding about every joint).
         kind: 'constant' (label), 'saturated' (label), 'still' (one joint), 'no_motion' (all),
-            'nominal_sign' or 'nominal_scale' (label against the nominal model).
+            'nominal_sign' or 'nominal_scale' (label against the nominal model), 'sign_lost'.
         refuses: training and diagnosis refuse the recording for it (else a warning).
         text: one line naming the joint, the value and the span.
     """
@@ -327,6 +333,70 @@ def nominal_findings(
     return findings
 
 
+#: A label on one side of zero but for at most this share of the samples is one-signed.
+SIGN_LOST_OPPOSITE_SHARE = 1e-3
+#: ... and it reaches zero when its smallest magnitude is at most this share of its largest, or
+#: within two typical sample-to-sample steps (a magnitude turns back at zero within one step).
+SIGN_LOST_ZERO_SHARE = 0.01
+#: A joint moves both ways when it goes back by this share of its span after rising and rises
+#: by it after going back (largest retreat from a running extreme).
+SIGN_LOST_REVERSAL_SHARE = 0.2
+
+
+def _moves_both_ways(q: np.ndarray) -> bool:
+    span = float(q.max() - q.min())
+    if span < 10 * STILL_SPAN_RAD:
+        return False
+    back = float(np.max(np.maximum.accumulate(q) - q))
+    forth = float(np.max(q - np.minimum.accumulate(q)))
+    return min(back, forth) >= SIGN_LOST_REVERSAL_SHARE * span
+
+
+def sign_findings(
+    position: np.ndarray,
+    label: np.ndarray,
+    joints: Sequence[str],
+    *,
+    quantity: str = 'motor current',
+    unit: str = 'A',
+) -> list[Finding]:
+    """Joints whose label lost its sign: one-signed, reaching zero, while the joint goes both ways.
+
+    A joint that moves back and forth needs torque of both signs, unless gravity or a spring
+    holds it on one side, and then its torque stays away from zero. A label that comes down to
+    zero and turns back at it every time, never crossing (noise would cross), is a magnitude:
+    ``|I|`` or ``-|I|`` recorded for the signed value. Warned: the model learns nothing true
+    from it. ``position``, ``label``: (N, n) [rad] and [``unit``]; non-finite rows left out.
+    """
+    position = np.asarray(position, dtype=float)
+    label = np.asarray(label, dtype=float)
+    rows = np.isfinite(position).all(axis=1) & np.isfinite(label).all(axis=1)
+    position, label = position[rows], label[rows]
+    findings: list[Finding] = []
+    for j, joint in enumerate(joints):
+        column = label[:, j]
+        if column.size < 3 or not np.any(column):
+            continue
+        positive, negative = int((column > 0).sum()), int((column < 0).sum())
+        if min(positive, negative) > SIGN_LOST_OPPOSITE_SHARE * column.size:
+            continue
+        magnitude = np.abs(column)
+        near = max(SIGN_LOST_ZERO_SHARE * magnitude.max(), 2 * np.median(np.abs(np.diff(column))))
+        if magnitude.min() > near:
+            continue
+        if not _moves_both_ways(position[:, j]):
+            continue
+        side, extreme = ('<= 0', column.max()) if negative > positive else ('>= 0', column.min())
+        text = (
+            f'{joint}: the {quantity} is {side} in every sample (it comes to {extreme + 0.0:.4g} '
+            f'{unit} and turns back, never crossing zero) while the joint moves both ways: its '
+            f'sign is lost (a magnitude such as |I| or -|I| recorded); record the signed '
+            f'{quantity}'
+        )
+        findings.append(Finding(joint, 'sign_lost', False, text))
+    return findings
+
+
 #: The URDF's gravity torque (N, n) [N*m] at positions (N, n) [rad]: the dataset layer takes it
 #: from its caller (``physics.rigid_body.RigidBodyDynamics.gravity``), it builds no dynamics.
 GravityTorque = Callable[[np.ndarray], np.ndarray]
@@ -454,6 +524,8 @@ def check_content(
             label, joints, quantity=quantity, unit=unit, duration_s=duration_s
         )
     refusals = [finding.text for finding in findings if finding.refuses]
+    if label is not None and not refusals:
+        findings += sign_findings(position, label, joints, quantity=quantity, unit=unit)
     if nominal is not None and label is not None and not refusals:
         findings += gravity_findings(position, label, *nominal, quantity=quantity)
     if refusals:

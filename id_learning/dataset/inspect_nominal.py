@@ -1,7 +1,8 @@
-"""Inspect's judgement of the label against the URDF's gravity torque (``content``'s rule).
+"""Inspect's judgement of the label against the motion and the URDF's gravity torque.
 
 Kept apart from ``inspect`` so that the bag reading stays one module: this part only pairs the
-decoded series and adds ``content.gravity_findings`` lines to the label topic's report.
+decoded series and adds ``content.sign_findings`` and ``content.gravity_findings`` lines to
+the label topic's report.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 from id_learning.bag import JointStateSeries
-from id_learning.dataset.content import GravityTorque, gravity_findings
+from id_learning.dataset.content import GravityTorque, gravity_findings, sign_findings
 from id_learning.dataset.inspect_report import TopicReport
 from id_learning.dataset.plausibility import first_unpaired
 from id_learning.robot.config import RobotConfig, TopicConfig
@@ -48,8 +49,11 @@ def _nominal(
         return label_topic, ()
     q = states.position[:, [states.names.index(name) for name in robot.joints]]
     effort = label.effort[:, [label.names.index(name) for name in robot.joints]]
-    quantity = 'motor current' if label_topic == topics.motor_currents else 'joint torque'
-    findings = gravity_findings(q, effort, robot, gravity, quantity=quantity)
+    quantity, unit = (
+        ('motor current', 'A') if label_topic == topics.motor_currents else ('joint torque', 'N*m')
+    )
+    findings = sign_findings(q, effort, robot.joints, quantity=quantity, unit=unit)
+    findings += gravity_findings(q, effort, robot, gravity, quantity=quantity)
     return label_topic, tuple((finding.joint, finding.text) for finding in findings)
 
 

@@ -17,6 +17,7 @@ from id_learning.dataset.content import (
     check_content,
     gravity_findings,
     nominal_findings,
+    sign_findings,
 )
 from id_learning.dataset.inspect import inspect_bag
 from id_learning.dataset.recording import Recording, load_recording, write_recording
@@ -166,3 +167,4 @@ def test_fresh_twin_recordings_of_each_robot_raise_no_finding(name: str) -> None
     )
     recording = simulate(config).recording
     assert gravity_findings(recording.position, recording.current, robot, gravity_of(robot)) == []
+    assert sign_findings(recording.position, recording.current, robot.joints) == []
