@@ -30,6 +30,7 @@ __all__ = [
     'KINDS',
     'MANIFEST_FILE',
     'NAME_RESERVE',
+    'PARTIAL_SUFFIX',
     'RESULT_KINDS',
     'SWEEP_FILES',
     'WRITTEN_ENTRIES',
@@ -42,10 +43,14 @@ __all__ = [
     'os_reason',
     'read_marker',
     'refuse_any_but_results',
+    'refuse_inside_results',
     'refuse_long_names',
     'refuse_unwritten',
     'write_manifest',
 ]
+
+#: Where a result is written until it is complete (``outputs.result_folder``).
+PARTIAL_SUFFIX = '.partial'
 
 INCOMPLETE_FILE = 'incomplete.json'
 #: The manifest of a complete result folder: its command, kind and top-level entries.
@@ -412,4 +417,37 @@ def refuse_long_names(out: Path, option: str = '--out') -> None:
         raise OutputError(
             f'{out}: path too long: {size} bytes as an absolute path, at most '
             f'{path_max - NAME_RESERVE} can be written there; choose a shorter {option}'
+        )
+
+
+def _being_written_here(folder: Path) -> bool:
+    """Whether ``folder`` is a ``.partial`` result this process is writing (a demo's steps)."""
+    if not folder.name.endswith(PARTIAL_SUFFIX):
+        return False
+    marker = read_marker(folder) if (folder / INCOMPLETE_FILE).is_file() else None
+    return marker is not None and marker.get('pid') == os.getpid()
+
+
+def refuse_inside_results(out: Path, option: str) -> None:
+    """Refuse an ``out`` inside a result folder or a bag, at any depth (another command's).
+
+    A result this process is writing is the exception: a command's steps write into it.
+    """
+    for depth, parent in enumerate(out.resolve().parents):
+        try:
+            held = folder_holds(parent) if parent.is_dir() else Holding('empty')
+        except OSError as err:
+            if depth == 0:
+                raise OutputError(f'{parent}: {os_reason(err)}') from err
+            continue  # an ancestor that cannot be listed says nothing
+        if held.kind in ('empty', 'foreign') or _being_written_here(parent):
+            continue
+        # Above the output's own folder, a document alone may be a user's: a result there says
+        # so by its manifest, its marker or run.json; a bag by its files.
+        ours = {MANIFEST_FILE, INCOMPLETE_FILE, 'run.json'} & {e.name for e in parent.iterdir()}
+        if depth and held.kind not in ('bag', 'torn bag') and not ours:
+            continue
+        raise OutputError(
+            f'{out}: lies inside {parent}, which holds {held.describe()}; nothing is written '
+            f'into another result or a bag: choose another {option}'
         )

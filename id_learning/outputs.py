@@ -53,6 +53,7 @@ from id_learning.output_kinds import (
     KINDS,
     MANIFEST_FILE,
     NAME_RESERVE,
+    PARTIAL_SUFFIX,
     Holding,
     OutputError,
     check_kind,
@@ -62,6 +63,7 @@ from id_learning.output_kinds import (
     os_reason,
     read_marker,
     refuse_any_but_results,
+    refuse_inside_results,
     refuse_long_names,
     refuse_unwritten,
     write_manifest,
@@ -99,7 +101,6 @@ __all__ = [
 
 _LOG = logging.getLogger(__name__)
 
-PARTIAL_SUFFIX = '.partial'
 LOCK_SUFFIX = '.lock'
 #: Where a replaced result waits, for a moment, to be removed.
 REPLACED_SUFFIX = '.replaced'
@@ -273,7 +274,7 @@ def _check_target(out: Path, inputs: Sequence[Path], folder: bool, option: str) 
     if not folder and out.is_dir():
         raise OutputError(f'{out}: is a folder; name a file for {option}')
     _refuse_inputs(out, inputs, option)
-    _refuse_inside_results(out, option)
+    refuse_inside_results(out, option)
     _probe_parent(out, option)
     return out
 
@@ -329,39 +330,6 @@ def bag_output(
     make_parent(out)
     with output_lock(out, option=option):
         yield check_bag_output(out, overwrite=overwrite, inputs=inputs, flag=flag, option=option)
-
-
-def _being_written_here(folder: Path) -> bool:
-    """Whether ``folder`` is a ``.partial`` result this process is writing (a demo's steps)."""
-    if not folder.name.endswith(PARTIAL_SUFFIX):
-        return False
-    marker = read_marker(folder) if (folder / INCOMPLETE_FILE).is_file() else None
-    return marker is not None and marker.get('pid') == os.getpid()
-
-
-def _refuse_inside_results(out: Path, option: str) -> None:
-    """Refuse an ``out`` inside a result folder or a bag, at any depth (another command's).
-
-    A result this process is writing is the exception: a command's steps write into it.
-    """
-    for depth, parent in enumerate(out.resolve().parents):
-        try:
-            held = folder_holds(parent) if parent.is_dir() else Holding('empty')
-        except OSError as err:
-            if depth == 0:
-                raise OutputError(f'{parent}: {os_reason(err)}') from err
-            continue  # an ancestor that cannot be listed says nothing
-        if held.kind in ('empty', 'foreign') or _being_written_here(parent):
-            continue
-        # Above the output's own folder, a document alone may be a user's: a result there says
-        # so by its manifest, its marker or run.json; a bag by its files.
-        ours = {MANIFEST_FILE, INCOMPLETE_FILE, 'run.json'} & {e.name for e in parent.iterdir()}
-        if depth and held.kind not in ('bag', 'torn bag') and not ours:
-            continue
-        raise OutputError(
-            f'{out}: lies inside {parent}, which holds {held.describe()}; nothing is written '
-            f'into another result or a bag: choose another {option}'
-        )
 
 
 def _check_suffix(path: Path, suffixes: Sequence[str]) -> None:

@@ -79,6 +79,10 @@ SCALE_LIMIT = 1.5
 #: Travel a joint must make (sum of |position change| over the windows) before its scale is
 #: judged [rad or m]: below it noise and quantisation could dominate.
 SCALE_MIN_TRAVEL = 0.05
+#: How far back the stream's scale check looks (``ConsistencyStream``) [s]: a scaled stream
+#: fails once its joints travel ``SCALE_MIN_TRAVEL`` within it, a valid one is served again at
+#: the latest once the scaled windows have left it.
+SCALE_HORIZON_S = 2.0
 
 
 def gap_starts(stamps_ns: np.ndarray, period_s: float, gap_periods: float) -> tuple[int, ...]:
@@ -96,7 +100,10 @@ class Inconsistency:
 
     Attributes:
         joint: the joint's name.
-        quantity: 'position' (against the velocities) or 'velocity' (against the accelerations).
+        quantity: 'position' (against the velocities), 'velocity' (against the accelerations),
+            or 'scale' (the velocities' integral a multiple of the position change over the
+            stream's last ``SCALE_HORIZON_S``: ``change`` is the factor, ``tolerance`` the
+            largest allowed either way, ``expected`` 1).
         change: how far the quantity moved over the window [rad or rad/s].
         expected: how far the other signal says it moved [rad or rad/s].
         tolerance: the allowed mismatch [rad or rad/s].
@@ -113,6 +120,12 @@ class Inconsistency:
 
     def describe(self) -> str:
         """One line: what moved, what the other signal says, and the tolerance."""
+        if self.quantity == 'scale':
+            return (
+                f'the velocities of {self.joint} integrate to {self.change:.3g} x its position '
+                f'change over the last {self.window_s:.3g} s (at most {self.tolerance:.3g} x '
+                'either way: a unit, a gear ratio or a sign between the two signals)'
+            )
         unit = 'rad' if self.quantity == 'position' else 'rad/s'
         other = 'velocities' if self.quantity == 'position' else 'accelerations'
         if not self.recorded:
@@ -259,9 +272,17 @@ class KinematicConsistency:
             integrals.append(np.diff(cum[marks], axis=0))
         if not dqs:
             return []
-        dq, integral = np.concatenate(dqs), np.concatenate(integrals)
+        return self.judge_scale(np.concatenate(dqs), np.concatenate(integrals))
+
+    @property
+    def scale_limit(self) -> float:
+        """The largest factor allowed either way between velocity integral and position change."""
+        return max(SCALE_LIMIT, 1.0 + 2.0 * self.relative)
+
+    def judge_scale(self, dq: np.ndarray, integral: np.ndarray) -> list[tuple[str, float, float]]:
+        """``scale_errors`` of windows' position changes and velocity integrals (W, n)."""
         travel = np.abs(dq).sum(axis=0)
-        limit = max(SCALE_LIMIT, 1.0 + 2.0 * self.relative)
+        limit = self.scale_limit
         out = []
         for j, name in enumerate(self.joints):
             if not travel[j] >= SCALE_MIN_TRAVEL:
@@ -371,7 +392,7 @@ class KinematicConsistency:
                 raise DatasetError(
                     f'{where}: the velocities contradict the positions over the whole '
                     f'recording by a factor: {self.describe_scale(scale)}; the limit is '
-                    f'{max(SCALE_LIMIT, 1.0 + 2.0 * self.relative):.3g} x either way. A '
+                    f'{self.scale_limit:.3g} x either way. A '
                     'velocity in another unit (deg/s for rad/s), of the motor rather than the '
                     'joint side, or of a wrongly scaled column does not describe the motion '
                     'the positions record'
@@ -399,11 +420,69 @@ class KinematicConsistency:
         )
 
 
+class _ScaleWatch:
+    """The whole-recording scale check on a stream, over its last ``SCALE_HORIZON_S``.
+
+    Windows of ``SCALE_WINDOW_S`` sum the position change and the velocity integral of the
+    pairs of samples that passed the local gate and were followed by a full window of samples
+    that passed it too (the local gate looks that far back): a jump, a hole or a short
+    contradiction is the local gate's, it never poisons the scale.
+    """
+
+    def __init__(self, gate: KinematicConsistency) -> None:
+        self.gate = gate
+        self.stride = max(1, round(SCALE_WINDOW_S / gate.period_s))
+        self.horizon = max(1, round(SCALE_HORIZON_S / SCALE_WINDOW_S))  # windows
+        self._windows: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=self.horizon)
+        self._dq = np.zeros(len(gate.joints))
+        self._integral = np.zeros(len(gate.joints))
+        self._count, self._pairs = 0, 0
+        self._pending: deque[tuple[np.ndarray, np.ndarray]] = deque()
+        self.failure: Inconsistency | None = None
+
+    def forget_pending(self) -> None:
+        """Pairs not yet confirmed are dropped (a hole: nothing after them will judge them)."""
+        self._pending.clear()
+
+    def add(self, pair: tuple[np.ndarray, np.ndarray] | None, passed: bool) -> None:
+        """One sample: its pair's position change and velocity integral (None: no pair)."""
+        if not passed:
+            self._pending.clear()
+        elif pair is not None:
+            self._pending.append(pair)
+        if len(self._pending) > self.gate.window:
+            dq, integral = self._pending.popleft()
+            self._dq += dq
+            self._integral += integral
+            self._pairs += 1
+        self._count += 1
+        if self._count < self.stride:
+            return
+        if self._pairs:
+            self._windows.append((self._dq, self._integral))
+            self._judge()
+        self._dq, self._integral = np.zeros_like(self._dq), np.zeros_like(self._integral)
+        self._count, self._pairs = 0, 0
+
+    def _judge(self) -> None:
+        dq = np.stack([w[0] for w in self._windows])
+        integral = np.stack([w[1] for w in self._windows])
+        errors = self.gate.judge_scale(dq, integral)
+        if not errors:
+            self.failure = None
+            return
+        name, factor, _ = max(errors, key=lambda e: np.inf if e[1] <= 0 else max(e[1], 1 / e[1]))
+        span = len(self._windows) * self.stride * self.gate.period_s
+        self.failure = Inconsistency(name, 'scale', factor, 1.0, self.gate.scale_limit, span)
+
+
 class ConsistencyStream:
     """The gate sample by sample (the predictor).
 
     Holds the samples of the last window and their velocity integral: ``check`` then ``push``
-    each sample, ``reset`` after a hole in the stamps.
+    each sample, ``reset`` after a hole in the stamps. Over the last ``SCALE_HORIZON_S`` it
+    also judges the velocities' scale against the positions (``KinematicConsistency``'s
+    whole-recording check): while a joint's factor is outside the limit, every sample fails.
     """
 
     def __init__(self, gate: KinematicConsistency) -> None:
@@ -411,10 +490,22 @@ class ConsistencyStream:
         # (stamp [ns], q, v, a or None, integral of v since the first [rad]), oldest first.
         self._history: deque[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]]
         self._history = deque(maxlen=gate.window)
+        self._scale = _ScaleWatch(gate)
+        self._passed = True
+
+    @property
+    def recovery_samples(self) -> int:
+        """After samples scaled against their positions, valid ones pass from at most this-th.
+
+        The scaled windows have left the horizon then (the one in progress, and ``horizon``
+        more; a pair counts a local window after it).
+        """
+        return self._scale.stride * (self._scale.horizon + 1) + self.gate.window + 1
 
     def reset(self) -> None:
         """Forget the history: the next sample is compared with none."""
         self._history.clear()
+        self._scale.forget_pending()
 
     def check(
         self, stamp_ns: int, q: np.ndarray, v: np.ndarray, a: np.ndarray | None
@@ -423,6 +514,13 @@ class ConsistencyStream:
 
         Stamps must increase (the caller's stamp guard).
         """
+        found = self._local(stamp_ns, q, v, a)
+        self._passed = found is None
+        return found if found is not None else self._scale.failure
+
+    def _local(
+        self, stamp_ns: int, q: np.ndarray, v: np.ndarray, a: np.ndarray | None
+    ) -> Inconsistency | None:
         history = self._history
         if not history:
             return None
@@ -464,9 +562,14 @@ class ConsistencyStream:
     def push(self, stamp_ns: int, q: np.ndarray, v: np.ndarray, a: np.ndarray | None) -> None:
         """Append a sample to the history (after ``check``, whether it passed or not)."""
         history = self._history
+        pair: tuple[np.ndarray, np.ndarray] | None = None
         if history:
-            last_stamp, _, last_v, _, last_integral = history[-1]
-            integral = last_integral + 0.5 * (last_v + v) * ((stamp_ns - last_stamp) * 1e-9)
+            last_stamp, last_q, last_v, _, last_integral = history[-1]
+            step = 0.5 * (last_v + v) * ((stamp_ns - last_stamp) * 1e-9)
+            integral = last_integral + step
+            pair = (q - last_q, step)
         else:
             integral = np.zeros_like(v, dtype=float)
         history.append((stamp_ns, q, v, a, integral))
+        self._scale.add(pair, self._passed)
+        self._passed = True

@@ -40,6 +40,7 @@ from id_learning.dataset.inspect_checks import (
     joint_accelerations,
     log_time_problems,
     metadata_mismatches,
+    velocity_scale_problem,
 )
 from id_learning.dataset.inspect_nominal import with_nominal_lines
 from id_learning.dataset.inspect_plot import plot_report
@@ -406,6 +407,7 @@ def _joint_state_report(
         first_invalid_stamp=acc.first_invalid_stamp,
         contradictions=contradictions,
         first_contradiction=first,
+        velocity_scale=None if contradictions else velocity_scale_problem(series, robot),
         content=_content(series, label, motion, robot),
         sampling=_sampling(name, acc.all_stamps, topics, robot),
     )

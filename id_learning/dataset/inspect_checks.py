@@ -8,6 +8,7 @@ metadata.yaml and the log times describe the messages the files hold.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -31,6 +32,7 @@ __all__ = [
     'joint_accelerations',
     'log_time_problems',
     'metadata_mismatches',
+    'velocity_scale_problem',
 ]
 
 NS_PER_S = 1_000_000_000
@@ -54,31 +56,57 @@ def joint_accelerations(
     return {name: e for name, e in zip(robot.joints, excess, strict=True) if e is not None}
 
 
-def consistency_failures(
-    series: JointStateSeries, robot: RobotConfig | None
-) -> tuple[int, str | None]:
-    """(samples failing the consistency gate, the first described) of the robot's joints.
+@dataclass(frozen=True)
+class _GateInput:
+    """A topic's samples as the consistency gate reads them, in the robot's joint order."""
 
-    Only where the topic names exactly the robot's joints with positions and velocities; rows
-    with a non-finite value, and stamps that do not increase, start a new segment (they are
-    reported on their own).
+    gate: KinematicConsistency
+    stamps: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    bad: np.ndarray
+    starts: tuple[int, ...]
+
+
+def _gate_input(series: JointStateSeries, robot: RobotConfig | None) -> _GateInput | None:
+    """Only where the topic names exactly the robot's joints with positions and velocities.
+
+    Rows with a non-finite value (zeroed, ``bad``), and stamps that do not increase, start a
+    new segment (they are reported on their own).
     """
     q, v = series.position, series.velocity
     if robot is None or q is None or v is None or set(series.names) != set(robot.joints):
-        return 0, None
+        return None
     if len(series.names) != len(robot.joints) or len(q) < 2:
-        return 0, None
+        return None
     order = [series.names.index(name) for name in robot.joints]
     stamps = np.asarray(series.stamps_ns, dtype=np.int64)
     q, v = q[:, order], v[:, order]
     bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(v).all(axis=1))
     bad[1:] |= np.diff(stamps) <= 0
-    gate = KinematicConsistency.for_robot(robot)
     breaks = np.flatnonzero(bad)  # a bad row is a segment of its own
     gaps = gap_starts(stamps, robot.ipo_period_s, GAP_PERIODS)
     starts = tuple(sorted({*gaps, *breaks.tolist(), *(breaks + 1).tolist()} - {len(stamps)}))
     clean_q, clean_v = np.where(bad[:, None], 0.0, q), np.where(bad[:, None], 0.0, v)
-    failing = gate.failing(stamps, clean_q, clean_v, starts=starts) & ~bad
+    gate = KinematicConsistency.for_robot(robot)
+    return _GateInput(gate, stamps, clean_q, clean_v, bad, starts)
+
+
+def consistency_failures(
+    series: JointStateSeries, robot: RobotConfig | None
+) -> tuple[int, str | None]:
+    """(samples failing the consistency gate, the first described) of the robot's joints."""
+    given = _gate_input(series, robot)
+    if given is None:
+        return 0, None
+    gate, stamps, clean_q, clean_v, starts = (
+        given.gate,
+        given.stamps,
+        given.q,
+        given.v,
+        given.starts,
+    )
+    failing = gate.failing(stamps, clean_q, clean_v, starts=starts) & ~given.bad
     if not failing.any():
         return 0, None
     k = int(np.argmax(failing))
@@ -96,6 +124,20 @@ def consistency_failures(
             f'tolerance {1 / gate.scale:.4g} x tighter): at 1 none does'
         )
     return int(failing.sum()), text
+
+
+def velocity_scale_problem(series: JointStateSeries, robot: RobotConfig | None) -> str | None:
+    """Joints whose velocities are a multiple of their positions' rate over the whole recording.
+
+    The loader's whole-recording check (``KinematicConsistency.scale_errors``): a factor such
+    as deg/s for rad/s, 2, or a reversed sign passes the sample-to-sample gate when the motion
+    is slow. None when every joint agrees, or the topic is not judged (``_gate_input``).
+    """
+    given = _gate_input(series, robot)
+    if given is None:
+        return None
+    errors = given.gate.scale_errors(given.stamps, given.q, given.v, starts=given.starts)
+    return given.gate.describe_scale(errors) if errors else None
 
 
 def iso_utc(stamp_ns: int) -> str:

@@ -154,6 +154,9 @@ class TopicReport:
         contradictions: samples whose positions, velocities and the samples before them do not
             describe one motion (``dataset.consistency``; with a robot, finite samples only).
         first_contradiction: the first of them, described (sample, joint, mismatch), or None.
+        velocity_scale: where no sample fails the gate, the joints whose velocities integrate
+            to a multiple of their position change over the whole recording (a unit, a factor,
+            a sign), described; or None.
         content: what the signal lacks (``dataset.content``: a constant or clipped label, a
             joint that does not move, a label against the URDF's gravity torque), one line
             each, the refusals marked.
@@ -174,6 +177,7 @@ class TopicReport:
     first_inconsistent: int | None = None
     contradictions: int = 0
     first_contradiction: str | None = None
+    velocity_scale: str | None = None
     content: tuple[str, ...] = ()
     sampling: str | None = None
     invalid_stamps: int = 0
@@ -393,6 +397,11 @@ def _topic_problems(topic: TopicReport) -> list[str]:
         lines.append(
             f'{topic.name}: {topic.contradictions} sample(s) do not follow from the ones before '
             f'them (train and replay refuse them), the first: {topic.first_contradiction}'
+        )
+    if topic.velocity_scale:
+        lines.append(
+            f'{topic.name}: the velocities contradict the positions over the whole recording '
+            f'by a factor (train and replay refuse it): {topic.velocity_scale}'
         )
     for joint in topic.joints:
         for key in FIELDS:

@@ -7,9 +7,10 @@ Guards, in the order they run (the first that fails decides):
    ahead than ``max_age_s`` against the stream's time base; ``resync_after`` such rejections in a
    row start a new time base (with one warning), so no stamp locks the stream out;
 3. plausible: a state an arm of these limits can be in (``dataset.plausibility.SampleGate``);
-4. consistent: the sample follows from the ones before it (``dataset.consistency``); one that
-   does not yields no model torque, nor do the ``rearm_samples`` consistent ones after it (or
-   after a new time base): they get the hold output instead;
+4. consistent: the sample follows from the ones before it, and the last 2 s of velocities
+   integrate to the positions' change (``dataset.consistency``); one that does not yields no
+   model torque, nor do the ``rearm_samples`` consistent ones after it (or after a new time
+   base): they get the hold output instead;
 5. range: inside the training range widened by ``range_margin``; 'fallback' blends in the
    physics prior's torque across the margin and publishes it alone beyond
    (``predictor.fallback``), 'warn' counts and predicts, 'reject' drops the sample;
@@ -22,7 +23,8 @@ A refused sample (1-3) leaves the history untouched. A gap of more than ``stale_
 periods between accepted samples, in stamps or in receive time, marks a stale episode; a gap in
 the stamps (a hole) also resets the history (acceleration estimate, LSTM window refilled with the
 first new sample, as the offline ``predict`` pads a run). After any bad sample a valid stream is
-served again from its ``recovery_samples``-th sample at the latest.
+served again from its ``recovery_samples``-th sample at the latest; after velocities scaled
+against their positions, from its ``scale_recovery_samples``-th.
 
 Inference (``inference``): 'numpy' (default) evaluates the model's float64 numpy path
 (``sample_predictor``, or the LSTM's ``sequence_predictor``), built once from the fitted weights;
@@ -156,9 +158,7 @@ class FeedForwardPredictor:
         self._estimator = CausalAccelerationEstimator(self.config.acceleration_cutoff_hz)
         self._sequence_model = as_sequence_model(model)
         self.is_sequence_model = self._sequence_model is not None
-        self.sequence_length = (
-            0 if self._sequence_model is None else self._sequence_model.sequence_length
-        )
+        self.sequence_length: int = getattr(self._sequence_model, 'sequence_length', 0)
         self._window: np.ndarray | None = None
         # Built once: exporting weights per sample would cost more than the prediction.
         self._sequence = (
@@ -179,13 +179,12 @@ class FeedForwardPredictor:
         self.fitting_inputs: InputDefinition | None = None
 
     def _consistency_stream(self, config: GuardConfig) -> ConsistencyStream | None:
-        limits = self._limits
-        if limits is None:
+        if self._limits is None:
             return None
-        gate = KinematicConsistency(
-            self.joint_names, limits, config.period_s, config.consistency_scale
+        scale = config.consistency_scale
+        return ConsistencyStream(
+            KinematicConsistency(self.joint_names, self._limits, config.period_s, scale)
         )
-        return ConsistencyStream(gate)
 
     def _output_stage(self, config: GuardConfig) -> OutputStage:
         slew = self._robot_limit / config.torque_rise_s
@@ -308,6 +307,13 @@ class FeedForwardPredictor:
         """After any bad sample, a valid stream is served again from at most its this-many-th."""
         window = 0 if self._consistency is None else self._consistency.gate.window
         return self.config.resync_after + window + self.config.rearm_samples + 1
+
+    @property
+    def scale_recovery_samples(self) -> int:
+        """The same after velocities scaled against their positions (``ConsistencyStream``)."""
+        stream = self._consistency
+        scaled = 0 if stream is None else stream.recovery_samples + self.config.rearm_samples + 1
+        return max(self.recovery_samples, scaled)
 
     @property
     def is_stale(self) -> bool:
@@ -504,13 +510,7 @@ class FeedForwardPredictor:
                 sample, Reject.NON_FINITE_OUTPUT, f'model returned non-finite torque {tau}'
             )
         tau, over, slewed = self.output.serve(tau, sample.stamp_ns)
-        is_clamped, is_slewed = bool(over.any()), bool(slewed.any())
-        if is_clamped:
-            counters.clamped_samples += 1
-            counters.clamped_per_joint += over
-        if is_slewed:
-            counters.slew_limited_samples += 1
-            counters.slew_limited_per_joint += slewed
+        is_clamped, is_slewed = counters.count_output(over, slewed)
         counters.predicted += 1
         self._served_q, self._served_receive_ns, self._hold_target = q, receive_ns, None
         return StepResult(

@@ -121,3 +121,14 @@ class PredictorCounters:
     def rejected(self) -> int:
         """All samples without a model torque."""
         return sum(self.rejects.values())
+
+    def count_output(self, over: np.ndarray, slewed: np.ndarray) -> tuple[bool, bool]:
+        """Count a served torque's clamped and slew-limited joints; (clamped, slew-limited)."""
+        is_clamped, is_slewed = bool(over.any()), bool(slewed.any())
+        if is_clamped:
+            self.clamped_samples += 1
+            self.clamped_per_joint += over
+        if is_slewed:
+            self.slew_limited_samples += 1
+            self.slew_limited_per_joint += slewed
+        return is_clamped, is_slewed

@@ -97,3 +97,26 @@ def test_a_joint_that_hardly_moves_is_not_judged(mabi) -> None:
     q[:, 0], v[:, 0] = 1e-4 * q[:, 0], 2e-4 * v[:, 0]  # x2, but 1e-4 of the travel
     assert mabi.joints[0] not in [name for name, _, _ in gate.scale_errors(stamps, q, v)]
     assert SCALE_LIMIT == 1.5  # the factors above (1.6, 0.6) are outside it either way
+
+
+def test_inspect_names_a_scaled_velocity_the_loader_refuses(mabi, tmp_path) -> None:
+    from id_learning.dataset.inspect import inspect_bag
+    from id_learning.dataset.recording import Recording, load_recording, write_recording
+
+    stamps, q, v = motion(mabi, 7, 8.0, True)
+    current = np.sin(q + 0.3)  # any signed, moving label
+    stamps = stamps - stamps[0] + 1_767_225_600_000_000_000
+
+    def bag(velocity, name):
+        recording = Recording(mabi.joints, stamps, q, velocity, current, None, source=name)
+        return write_recording(recording, tmp_path / name)
+
+    scaled = v.copy()
+    scaled[:, 2] *= 2.0
+    problems = inspect_bag(bag(scaled, 'x2'), robot=mabi).problems
+    assert len(problems) == 1, problems
+    assert problems[0].startswith('/joint_states: the velocities contradict the positions')
+    assert 'joint_3: its velocities integrate to 2 x' in problems[0]
+    with pytest.raises(DatasetError, match=r'joint_3: its velocities integrate to 2 x'):
+        load_recording(tmp_path / 'x2', mabi)
+    assert inspect_bag(bag(v, 'clean'), robot=mabi).problems == ()

@@ -14,6 +14,7 @@ independent reference:
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import numpy as np
@@ -21,7 +22,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from id_learning.dataset.consistency import KinematicConsistency
+from id_learning.dataset.consistency import (
+    SCALE_MIN_TRAVEL,
+    SCALE_WINDOW_S,
+    KinematicConsistency,
+)
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.predictor import FeedForwardPredictor, GuardConfig, ReferenceSample, Reject
 
@@ -198,3 +203,56 @@ def test_a_jump_to_another_motion_is_held_then_served_once_consistent(mabi):
     served_again = 20 + window
     assert all(r.reject is not None for r in results[20:served_again])
     assert all(r.reject is None for r in results[served_again:])
+
+
+SCALES = [2.0, 0.5, 3.0, 1 / 3, np.pi / 180, 180 / np.pi, -1.0, 1.6, 0.6]
+
+
+def scaled_stream(n: int, n_scaled: int, scale: float, joint: int, phase: float, rate: float):
+    """A motion whose first ``n_scaled`` samples carry one joint's velocity times ``scale``.
+
+    That joint travels at a steady ``rate`` [rad/s], the others swing (0.3 rad, 1 rad/s).
+    """
+    names = tuple(f'joint_{j}' for j in range(1, 7))
+    stream = []
+    for k in range(n):
+        t = k * PERIOD_NS * 1e-9
+        angle = t + phase + np.arange(6)
+        q, v, a = 0.3 * np.sin(angle), 0.3 * np.cos(angle), -0.3 * np.sin(angle)
+        q[joint], v[joint], a[joint] = -0.5 + rate * t, rate, 0.0
+        if k < n_scaled:
+            v[joint] *= scale
+        stamp = 10**9 + k * PERIOD_NS
+        stream.append((ReferenceSample(stamp, names, q, v, a), 5 * 10**9 + k * PERIOD_NS))
+    return stream
+
+
+@settings(
+    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(scale=st.sampled_from(SCALES), joint=st.integers(0, 5), phase=st.floats(0.0, 6.28),
+       rate=st.floats(0.05, 0.4))  # fmt: skip
+def test_velocities_scaled_against_the_positions_are_gated_then_the_stream_recovers(
+    mabi, scale, joint, phase, rate
+):
+    predictor = predictor_for(mabi)
+    bound = predictor.scale_recovery_samples
+    n_scaled = bound
+    stream = scaled_stream(n_scaled + bound + 5, n_scaled, scale, joint, phase, rate)
+    results = [predictor.step(sample, receive) for sample, receive in stream]
+    scaled = results[:n_scaled]
+    # Judged once the joint has travelled SCALE_MIN_TRAVEL, at the end of a window: no scaled
+    # sample is served from there on (the sample-to-sample gate may refuse them before).
+    period_s = PERIOD_NS * 1e-9
+    judged = math.ceil(SCALE_MIN_TRAVEL / (rate * period_s)) + 2 * round(SCALE_WINDOW_S / period_s)
+    assert all(r.reject is Reject.INCONSISTENT for r in scaled[judged:])
+    named = [r.detail for r in scaled[judged:] if 'integrate to' in r.detail]
+    assert all(f'the velocities of joint_{joint + 1} integrate to' in d for d in named)
+    # The valid motion after them is served again from the stated bound on.
+    assert all(r.reject is None for r in results[n_scaled + bound - 1 :])
+
+
+def test_the_scale_bound_is_the_scale_horizon_and_the_rearm(mabi):
+    # 25 cycles a window (0.2 s), 10 windows (2 s): 11 windows + a 7-cycle local window + 1,
+    # then rearm_samples 2 + 1
+    assert predictor_for(mabi).scale_recovery_samples == 25 * 11 + 7 + 1 + 3
