@@ -74,13 +74,14 @@ class ClosedLoopResult:
     def summary(self) -> str:
         """The RMS tracking error per run and joint [mrad], and the improvement, as a table."""
         joints = self.document['joints']
-        width = max(len(name) for name in self.runs) + 2
-        lines = [f'{"RMS tracking error [mrad]":<{width}}' + ''.join(f'{j:>10}' for j in joints)]
+        head, gain = 'RMS tracking error [mrad]', f'improvement ({self.best_model})'
+        width = max(len(name) for name in (*self.runs, head, gain)) + 2
+        column = max(10, *(len(joint) + 2 for joint in joints))  # names never run together
+        lines = [f'{head:<{width}}' + ''.join(f'{j:>{column}}' for j in joints)]
         for name, run in self.runs.items():
-            lines.append(f'{name:<{width}}' + ''.join(f'{1e3 * x:>10.3f}' for x in run.rms))
+            lines.append(f'{name:<{width}}' + ''.join(f'{1e3 * x:>{column}.3f}' for x in run.rms))
         lines.append(
-            f'{"improvement (" + self.best_model + ")":<{width}}'
-            + ''.join(f'{x:>10.1f}' for x in self.improvement_best)
+            f'{gain:<{width}}' + ''.join(f'{x:>{column}.1f}' for x in self.improvement_best)
         )
         reference = self.document['reference']
         asked = reference.get('requested_duration_s')

@@ -52,3 +52,25 @@ def test_an_empty_list_of_models_is_refused_not_read_as_all(run, mabi, tmp_path)
         'rnea_lq,mlp), or leave it out for all\n'
     )
     assert not (tmp_path / 'cli').exists()
+
+
+def test_the_summary_table_keeps_long_joint_names_apart_and_under_their_figures(tmp_path):
+    import numpy as np
+
+    from id_learning.evaluation.closed_loop import Tracking
+    from id_learning.training.closed_loop_run import ClosedLoopResult
+
+    joints = ['shoulder_pan_joint', 'shoulder_lift_joint', 'wrist_3_joint']
+    error = np.array([[1e-3, 2e-3, 3e-3]] * 4)
+    tracking = Tracking(error, np.zeros_like(error), np.zeros(3, dtype=int))
+    reference = {'requested_duration_s': None, 'shortened': False, 'duration_s': 1.0,
+                 'part': 'the test part', 'bag': 'b', 'available_s': 1.0}  # fmt: skip
+    result = ClosedLoopResult(
+        {'feedback only': tracking, 'rnea_id': tracking}, 'rnea_id', np.ones(3),
+        {'joints': joints, 'reference': reference}, *(tmp_path / 'x' for _ in range(4)),
+    )  # fmt: skip
+    head, feedback, *_ = result.summary().splitlines()
+    assert head.split()[-3:] == joints
+    assert feedback.split()[-3:] == ['1.000', '2.000', '3.000']
+    for joint, figure in zip(joints, ['1.000', '2.000', '3.000'], strict=True):
+        assert head.index(joint) + len(joint) == feedback.index(figure) + len(figure)
