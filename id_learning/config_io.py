@@ -29,6 +29,7 @@ from id_learning.errors import ConfigError
 __all__ = [
     'MAX_CONFIG_BYTES',
     'check_keys',
+    'config_base',
     'describe_range',
     'finite_number',
     'float_vector',
@@ -82,6 +83,19 @@ _UniqueKeyLoader.add_implicit_resolver(
     ),
     list('-+0123456789.'),
 )
+
+
+def config_base(path: Path, value: object) -> Path:
+    """The folder a config file's relative path ``value`` is read from.
+
+    The config's own folder; for a config reached through a symbolic link, its target's folder
+    where ``value`` exists there and not beside the link (the author wrote it beside the file).
+    """
+    base = path.parent
+    if not isinstance(value, str) or Path(value).is_absolute() or (base / value).exists():
+        return base
+    real = path.resolve().parent
+    return real if (real / value).exists() else base
 
 
 def parse_yaml(text: str, where: str) -> Any:

@@ -19,6 +19,7 @@ import numpy as np
 
 from id_learning.config_io import (
     check_keys,
+    config_base,
     finite_number,
     float_vector,
     load_yaml_mapping,
@@ -446,7 +447,7 @@ def load_robot_config(path: Path | str) -> RobotConfig:
     """
     path = Path(path)
     data = load_yaml_mapping(path)
-    config = robot_config_from_dict(data, path.parent, str(path))
+    config = robot_config_from_dict(data, config_base(path, data.get('urdf')), str(path))
     return RobotConfig(**{**config.__dict__, 'source': path.resolve()})
 
 

@@ -18,7 +18,13 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from id_learning.config_io import check_keys, finite_number, float_vector, load_yaml_mapping
+from id_learning.config_io import (
+    check_keys,
+    config_base,
+    finite_number,
+    float_vector,
+    load_yaml_mapping,
+)
 from id_learning.dataset.recording import Recording
 from id_learning.errors import ConfigError
 from id_learning.physics.rigid_body import RigidBodyDynamics
@@ -146,7 +152,12 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
     robot_path = Path(str(data['robot']))
     if not robot_path.is_absolute():
         robot_path = base_dir / robot_path
-    robot = load_robot_config(robot_path)
+    try:
+        robot = load_robot_config(robot_path)
+    except ConfigError as err:
+        if robot_path.exists():
+            raise
+        raise ConfigError(f'{where}: robot {str(data["robot"])!r}: {err}') from err
     n = robot.n_joints
     excitation_data = data.get('excitation') or {}
     check_keys(
@@ -242,7 +253,7 @@ def load_twin_config(path: Path | str, overrides: dict[str, Any] | None = None) 
     path = Path(path)
     data = load_yaml_mapping(path)
     data.update(overrides or {})
-    return twin_config_from_dict(data, path.parent, str(path))
+    return twin_config_from_dict(data, config_base(path, data.get('robot')), str(path))
 
 
 @dataclass(frozen=True, eq=False)
