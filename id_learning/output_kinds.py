@@ -12,6 +12,7 @@ existed is judged by its kind alone. An output's names must fit the file system
 from __future__ import annotations
 
 import errno
+import fcntl
 import json
 import os
 from collections.abc import Sequence
@@ -28,6 +29,7 @@ __all__ = [
     'COMMAND_KINDS',
     'INCOMPLETE_FILE',
     'KINDS',
+    'LOCK_SUFFIX',
     'MANIFEST_FILE',
     'NAME_RESERVE',
     'PARTIAL_SUFFIX',
@@ -47,10 +49,13 @@ __all__ = [
     'refuse_long_names',
     'refuse_unwritten',
     'write_manifest',
+    'writer_of',
 ]
 
 #: Where a result is written until it is complete (``outputs.result_folder``).
 PARTIAL_SUFFIX = '.partial'
+#: The sibling a writer of ``<out>`` holds locked while it writes (``outputs.output_lock``).
+LOCK_SUFFIX = '.lock'
 
 INCOMPLETE_FILE = 'incomplete.json'
 #: The manifest of a complete result folder: its command, kind and top-level entries.
@@ -451,3 +456,28 @@ def refuse_inside_results(out: Path, option: str) -> None:
             f'{out}: lies inside {parent}, which holds {held.describe()}; nothing is written '
             f'into another result or a bag: choose another {option}'
         )
+
+
+def writer_of(folder: Path) -> str | None:
+    """The pid (as its lock file says) of a process writing ``folder`` now, or None.
+
+    Asked of a folder that looks torn: a bag or a result still being written is complete once
+    its writer ends, and is neither damaged nor to be recovered.
+    """
+    folder = Path(os.path.abspath(folder))
+    try:
+        fd = os.open(folder.with_name(folder.name + LOCK_SUFFIX), os.O_RDONLY)
+    except (OSError, ValueError):
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.read(fd, 64).decode(errors='replace').strip()
+        return holder or 'unknown'
+    except OSError:
+        return None
+    else:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)

@@ -51,6 +51,7 @@ from id_learning.output_kinds import (
     COMMAND_KINDS,
     INCOMPLETE_FILE,
     KINDS,
+    LOCK_SUFFIX,
     MANIFEST_FILE,
     NAME_RESERVE,
     PARTIAL_SUFFIX,
@@ -101,7 +102,6 @@ __all__ = [
 
 _LOG = logging.getLogger(__name__)
 
-LOCK_SUFFIX = '.lock'
 #: Where a replaced result waits, for a moment, to be removed.
 REPLACED_SUFFIX = '.replaced'
 INCOMPLETE_FORMAT = 'id_learning.incomplete/1'
@@ -353,7 +353,8 @@ def check_file_output(
     replaced only with ``force``; never one inside a result folder or a bag (another command's).
     ``option``: the option that gave ``out`` (the tool's one file output is ``inspect --plot``).
     """
-    _check_suffix(Path(out), suffixes)  # the name given, then the file a link points to
+    if not Path(out).is_dir():  # a folder is named as such (check_target)
+        _check_suffix(Path(out), suffixes)  # the name given, then the file a link points to
     out = check_target(Path(out), inputs=inputs, folder=False, option=option)
     _check_suffix(out, suffixes)
     if out.exists() and not force:

@@ -22,6 +22,7 @@ from id_learning.bag.reader_paths import BagReader, folder_is_no_bag, storage_fi
 from id_learning.bag.reader_storage import check_encodings, check_storage_types, order_by_time
 from id_learning.bag.reader_storage import listed_files as _listed_files
 from id_learning.errors import BagError, DatasetError
+from id_learning.output_kinds import writer_of
 
 __all__ = [
     'BagInfo',
@@ -94,6 +95,11 @@ def _open(path: Path) -> tuple[Reader, str | None]:
     if not (path / 'metadata.yaml').is_file():
         if (why := folder_is_no_bag(path)) is not None:
             raise BagError(f'{path}: {why}')
+        if (pid := writer_of(path)) is not None:
+            raise BagError(
+                f'{path}: being written by process {pid} (it holds {path.name}.lock): its '
+                'metadata.yaml comes when that process ends; read the bag then'
+            )
         raise BagError(f'{path}: not a complete rosbag2 folder (no metadata.yaml); {RECOVER_HINT}')
     _check_metadata(path)
     reader = BagReader(path)

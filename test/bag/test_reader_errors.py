@@ -215,3 +215,17 @@ def test_the_motor_currents_are_read_from_effort_alone(tmp_path, mabi):
     np.testing.assert_allclose(currents.effort, recording.current)
     loaded = load_recording(path, mabi)
     np.testing.assert_allclose(loaded.current, recording.current)
+
+
+def test_a_bag_still_being_written_is_named_so_not_torn(tmp_path: Path) -> None:
+    import os
+
+    from id_learning.bag import encode_joint_state
+
+    path = tmp_path / 'live'
+    with BagWriter(path) as writer:
+        writer.add_topic('/joint_states', JOINT_STATE)
+        writer.write('/joint_states', 10**9, encode_joint_state(10**9, ('a',), [0.0], [0.0], []))
+        with pytest.raises(BagError, match=rf'being written by process {os.getpid()} .*lock'):
+            bag_info(path)
+    assert bag_info(path).topic('/joint_states').count == 1
