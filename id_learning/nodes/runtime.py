@@ -15,6 +15,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from abc import abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import MISSING, fields
@@ -31,9 +32,12 @@ from id_learning.entry import stopped_while_starting
 from id_learning.errors import IdLearningError
 from id_learning.nodes import param_ros
 
-__all__ = ['ShellNode', 'close_spun_node', 'make_executor', 'run_node']
+__all__ = ['NameClash', 'ShellNode', 'close_spun_node', 'make_executor', 'run_node']
 
 SPIN_SLICE_S = 0.1
+#: When a node first looks for another of its name on the graph, and how often after [s]: a
+#: local graph query of tens of microseconds; discovery brings a peer within about a second.
+NAME_CHECK_S = (1.0, 2.0)
 
 _LOG = logging.getLogger(__name__)
 
@@ -64,6 +68,44 @@ class ShellNode(Node):
     @abstractmethod
     def close(self) -> None:
         """Finish work (files, reports); called once, before destroy_node."""
+
+
+class NameClash:
+    """Another node of this node's full name on the graph, said once in one error line.
+
+    Two nodes of one name share their parameters' and services' names: ``ros2 param set``
+    reaches either of them, and which one is not said. ROS lets the second start; both are
+    told, each with the remedy (``-r __node:=NAME``). ``poll`` looks ``first_s`` after the start,
+    then every ``every_s``, until it finds one.
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        now_s: Callable[[], float],
+        first_s: float = NAME_CHECK_S[0],
+        every_s: float = NAME_CHECK_S[1],
+    ) -> None:
+        self.node, self._now_s, self._every_s = node, now_s, every_s
+        self.next_s = now_s() + first_s
+        self.found = False
+
+    def poll(self) -> bool:
+        """Look when a check is due; whether a clash is found (now or before)."""
+        if self.found or self._now_s() < self.next_s:
+            return self.found
+        self.next_s = self._now_s() + self._every_s
+        node = self.node
+        me = (node.get_name(), node.get_namespace())
+        if node.get_node_names_and_namespaces().count(me) > 1:
+            self.found = True
+            full = node.get_fully_qualified_name()
+            node.get_logger().error(
+                f'another node is also named {full}: its parameters, services and reports '
+                "cannot be told from this one's (a parameter set may reach either); give each "
+                'node its own name: --ros-args -r __node:=NAME'
+            )
+        return self.found
 
 
 def make_executor(name: str) -> rclpy.executors.Executor:
@@ -194,10 +236,12 @@ def run_node(
         node = make_node()
         spinner = make_executor(node.executor_kind)
         spinner.add_node(node)
+        clash = NameClash(node, time.monotonic)
         # Short waits: Python runs signal handlers only between them. (Not
         # spin_until_future_complete with a timeout: each call adds a callback to the future.)
         while not (node.done.done() or stop.event.is_set()) and ok():
             spinner.spin_once(timeout_sec=SPIN_SLICE_S)
+            clash.poll()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except IdLearningError as err:
