@@ -10,6 +10,8 @@ from typing import Any
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
+from id_learning.header_stamps import NS_PER_S, header_stamp_problem
+
 __all__ = [
     'JOINT_STATE',
     'JointStateMessage',
@@ -23,7 +25,6 @@ __all__ = [
 ]
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
-NS_PER_S = 1_000_000_000
 
 
 @cache
@@ -63,20 +64,6 @@ def canonical_cdr(data: bytes | memoryview, msgtype: str) -> bytes:
     except (struct.error, UnicodeDecodeError, ValueError) as err:
         raise ValueError(f'not a CDR {msgtype}: {err}') from err
     return bytes(store.serialize_cdr(message, msgtype, little_endian=bool(raw[1])))
-
-
-def header_stamp_problem(sec: int, nanosec: int) -> str | None:
-    """What makes a header stamp no time, in words, or None for a valid one.
-
-    builtin_interfaces/Time holds ``nanosec`` in [0, 1e9) and, for a time since 1970, ``sec``
-    >= 0; folded into nanoseconds anything else reads as another time. Every door (the bag
-    readers, inspect, the replay and the predictor) refuses or reports such a stamp.
-    """
-    if not 0 <= nanosec < NS_PER_S:
-        return f'nanosec {nanosec} is not in [0, 1e9) (sec {sec})'
-    if sec < 0:
-        return f'sec {sec} is negative (nanosec {nanosec}): before 1970'
-    return None
 
 
 @dataclass(frozen=True, eq=False)

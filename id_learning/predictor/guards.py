@@ -3,9 +3,8 @@
 A sender's columns are reordered to the model's joint order by name (any order is accepted; the
 orders seen are cached, at most 64 of them, so a bad sender cannot grow the cache forever).
 
-A header stamp (builtin_interfaces/Time) is valid with ``0 <= nanosec < 1e9`` and ``sec >= 0``:
-``stamp_problem`` names what is wrong with another one, which folded into nanoseconds would be a
-different time (``nanosec = 1.5e9`` is 1.5 s later) rather than a refused one.
+A header stamp is judged by ``id_learning.header_stamps`` (``stamp_problem``), the rule the bag
+readers use too.
 """
 
 from __future__ import annotations
@@ -14,26 +13,17 @@ import math
 
 import numpy as np
 
+from id_learning.header_stamps import NS_PER_S
+from id_learning.header_stamps import header_stamp_problem as stamp_problem
 from id_learning.predictor.outcome import Reject
 from id_learning.predictor.sample import ReferenceSample
 
 __all__ = ['NS_PER_S', 'SampleCheck', 'stamp_problem']
 
-NS_PER_S = 1_000_000_000
-
 #: The column order of a sender whose joint order is the model's (no reordering).
 _IDENTITY = np.arange(0)
 #: A sample's (q, v, a) in the model's joint order; a None when the sample carries none.
 Checked = tuple[np.ndarray, np.ndarray, np.ndarray | None]
-
-
-def stamp_problem(sec: int, nanosec: int) -> str | None:
-    """What makes a header stamp invalid, in words, or None for a valid one."""
-    if not 0 <= nanosec < NS_PER_S:
-        return f'nanosec {nanosec} is not in [0, 1e9) (sec {sec})'
-    if sec < 0:
-        return f'sec {sec} is negative (nanosec {nanosec}): before 1970'
-    return None
 
 
 class SampleCheck:
