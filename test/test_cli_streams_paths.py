@@ -64,3 +64,54 @@ def test_hyper_file_unknown_kind(tmp_path: Path, capsys: pytest.CaptureFixture[s
         resolve_overrides(['mlp'], {'transformer': {}}, max_seconds=None, device='cpu')
     with pytest.raises(ConfigError, match='kinds that are not trained'):
         resolve_overrides(['mlp'], {'lstm': {}}, max_seconds=None, device='cpu')
+
+
+TWIN = str(Path(__file__).resolve().parents[1] / 'config' / 'twin_default.yaml')
+
+
+def test_simulate_writes_into_an_empty_current_folder_and_refuses_a_full_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    here = tmp_path / 'here'
+    here.mkdir()
+    monkeypatch.chdir(here)
+    assert main(['simulate', '--config', TWIN, '--out', '.', '--duration', '1', '--quiet']) == 0
+    assert (here / 'metadata.yaml').is_file()
+    full = tmp_path / 'full'
+    full.mkdir()
+    (full / 'keep.txt').write_text('mine')
+    monkeypatch.chdir(full)
+    capsys.readouterr()
+    assert main(['simulate', '--config', TWIN, '--out', '.', '--duration', '1', '--quiet']) == 2
+    said = capsys.readouterr().err
+    assert 'keep.txt' in said
+    assert 'Traceback' not in said
+    assert sorted(p.name for p in full.iterdir()) == ['keep.txt']
+
+
+def test_bag_recover_in_place_from_inside_the_torn_bag(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from support import sine_recording
+
+    from id_learning.bag import bag_info
+    from id_learning.dataset.recording import write_recording
+
+    bag = write_recording(sine_recording(50), tmp_path / 'torn')
+    (bag / 'metadata.yaml').unlink()
+    monkeypatch.chdir(bag)
+    assert main(['bag', 'recover', '.']) == 0
+    assert bag_info(bag).topic('/joint_states').count == 50
+
+
+@given(value=st.one_of(st.integers(-5, 2_000_000), st.just(True), st.floats(0.5, 3.0)))
+def test_stale_after_cycles_takes_the_integers_the_core_can_count(value: object) -> None:
+    from id_learning.errors import ConfigError
+    from id_learning.predictor import GuardConfig
+
+    valid = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 10**6
+    if valid:
+        assert GuardConfig(stale_after_cycles=value).stale_after_ns == round(value * 0.008e9)  # type: ignore[arg-type]
+    else:
+        with pytest.raises(ConfigError, match=r'stale_after_cycles must be an integer in \[1, '):
+            GuardConfig(stale_after_cycles=value)  # type: ignore[arg-type]
