@@ -378,13 +378,15 @@ def test_rnea_lq_holds_a_negative_coefficient_at_zero_and_says_so(mabi, caplog):
     model = RneaLqModel(RneaLqConfig(), mabi)
     positive = regressor @ [0.5, 2.0]
     np.testing.assert_allclose(model._solve(regressor, positive, names, 0), [0.5, 2.0])
-    negative = regressor @ [-0.5, 2.0] + 0.01 * rng.normal(size=500)
+    # Far beyond the noise, and most of the label: a finding (test_physics_signed.py has the
+    # negative estimates that are noise, or too small to matter, held quietly).
+    negative = regressor @ [-0.5, 0.02] + 0.01 * rng.normal(size=500)
     with caplog.at_level(logging.WARNING):
         theta = model._solve(regressor, negative, names, 1)
     assert theta[0] == 0.0
     assert theta[1] > 0
     assert 'joint_2: least squares put rotor_inertia_motor_side at -0.49' in caplog.text
-    assert '(a negative inertia)' in caplog.text
+    assert '(a negative inertia; t = -' in caplog.text
     # A column that is zero on the training rows (a joint that never moved) gets zero.
     regressor[:, 0] = 0.0
     assert model._solve(regressor, positive, names, 0)[0] == 0.0
