@@ -107,7 +107,7 @@ WRITTEN_ENTRIES = frozenset({
 })  # fmt: skip
 #: What a bag folder may hold besides its .mcap files: the twin's ground truth and config.
 BAG_EXTRAS = frozenset({'metadata.yaml', 'ground_truth.json', 'ground_truth.npz',
-                        'twin_config.yaml'})  # fmt: skip
+                        'twin_config.yaml', 'excitation.json', 'trajectory.csv'})  # fmt: skip
 #: What a sweep folder holds (``training.sweep``): the study, the best settings, the plots.
 SWEEP_FILES = frozenset({'best.yaml', 'optimisation_history.png', 'parameter_importances.png'})
 

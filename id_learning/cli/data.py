@@ -1,4 +1,4 @@
-"""The data subcommands: ``simulate``, ``import``, ``inspect`` and ``bag recover``.
+"""The data subcommands: ``simulate``, ``excitation``, ``import``, ``inspect``, ``bag recover``.
 
 Each makes or examines a bag; they share nothing with training, so they live apart from it.
 ``add_data_commands`` adds their parsers; the handlers import their work lazily.
@@ -14,6 +14,7 @@ from id_learning.cli import options
 __all__ = [
     'add_data_commands',
     'cmd_bag_recover',
+    'cmd_excitation',
     'cmd_import',
     'cmd_inspect',
     'cmd_simulate',
@@ -50,6 +51,37 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         f'wrote {result.recording.n_samples} samples '
         f'({result.recording.duration_s:.1f} s) to {args.out}; '
         f'effects: {", ".join(config.effects.enabled_names()) or "none"}'
+    )
+    return 0
+
+
+def cmd_excitation(args: argparse.Namespace) -> int:
+    """Design an excitation for identification; write it as a reference bag with its files."""
+    import numpy as np
+
+    from id_learning.outputs import bag_output
+    from id_learning.physics.excitation_design import design_for_identification, write_design
+    from id_learning.record.excitation import ExcitationConfig
+    from id_learning.twin.bounds import check_duration
+
+    robot = options.load_robot(args)
+    check_duration(args.duration, robot.ipo_period_s, robot.n_joints, '--duration')
+    config = ExcitationConfig(duration_s=args.duration)
+    with bag_output(Path(args.out), overwrite=args.force) as out:
+        rng = np.random.default_rng(args.seed)
+        design = design_for_identification(
+            config, robot, rng, candidates=args.candidates, progress=not args.quiet
+        )
+        write_design(design, robot, out)
+    report = design.report
+    print(
+        f'wrote {design.trajectory.duration_s:.1f} s ({len(design.trajectory.segments)} '
+        f"segments of {config.period_s:g} s) to {args.out}: the identification regressor's "
+        f'condition number is {report.condition:.4g} (a random design: '
+        f'{report.condition_random:.4g}, {report.columns} columns), joint-pair coverage '
+        f'{report.coverage:.0%} (random: {report.coverage_random:.0%}). Play it with the '
+        f'replay (bag:={args.out}), or simulate it (excitation: {{file: '
+        f'{Path(args.out) / "excitation.json"}}}); trajectory.csv holds the samples'
     )
     return 0
 
@@ -120,7 +152,7 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
 
 
 def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``simulate``, ``import``, ``inspect`` and ``bag`` to the subcommands ``sub``."""
+    """Add ``simulate``, ``excitation``, ``import``, ``inspect``, ``bag`` to the subcommands."""
     p = sub.add_parser('simulate', help='run the digital twin and write a bag with ground truth')
     p.add_argument(
         '--config', required=True, help='twin config YAML (e.g. config/twin_default.yaml)'
@@ -149,6 +181,25 @@ def add_data_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser(
+        'excitation',
+        help='design an excitation for identification: a reference bag the replay plays',
+    )
+    options.robot_option(p)
+    p.add_argument('--out', required=True, help='bag folder to write (with excitation.json)')
+    p.add_argument(
+        '--duration', type=options.positive_float, default=600.0,
+        help='length [s]; whole segments of 25 s and their rests (default 600)',
+    )  # fmt: skip
+    p.add_argument(
+        '--candidates', type=options.integer(1, 1000), default=16,
+        help='draws per segment the best is chosen from (default 16; 1: the random design)',
+    )  # fmt: skip
+    p.add_argument('--seed', type=options.seed, default=0, help='the draws (default 0)')
+    p.add_argument('--force', action='store_true', help='replace a bag already at --out')
+    p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.set_defaults(func=cmd_excitation)
 
     p = sub.add_parser('import', help='convert CSV/NPZ logs into one bag (column-mapping YAML)')
     p.add_argument(

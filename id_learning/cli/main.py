@@ -1,7 +1,7 @@
 """``id-learning``: the offline tool.
 
-Commands: simulate, import, inspect, bag, diagnose, train, evaluate, closed-loop, sweep, demo;
-see each command's --help.
+Commands: simulate, excitation, import, inspect, bag, diagnose, train, evaluate, closed-loop,
+sweep, demo; see each command's --help.
 """
 
 from __future__ import annotations
@@ -95,7 +95,7 @@ def _stat(path: Path | None) -> tuple[int, int] | None:
 
 def _written(args: argparse.Namespace) -> Path | None:
     """The bag, recovered bag or plot a command writes (None: no such output, or a result)."""
-    if args.command in ('simulate', 'import'):
+    if args.command in ('simulate', 'import', 'excitation'):
         return Path(args.out)
     if args.command == 'bag':  # in place, metadata.yaml is replaced last, and only then
         return Path(args.out) if args.out else Path(args.bag) / 'metadata.yaml'
@@ -144,7 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     parser.add_argument('-v', '--verbose', action='store_true', help='log debug messages')
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
-    add_data_commands(sub)  # simulate, import, inspect, bag
+    add_data_commands(sub)  # simulate, excitation, import, inspect, bag
     add_diagnose_command(sub)
     add_train_commands(sub)  # train, evaluate
     add_sweep_command(sub)

@@ -28,7 +28,10 @@ __all__ = [
     'ExcitationTrajectory',
     'FourierSegment',
     'check_bandwidth',
+    'check_limits',
     'design_excitation',
+    'home_pose',
+    'random_segment',
 ]
 
 CHECK_OVERSAMPLING = 8  # dense-grid points per IPO sample for the limit check
@@ -48,6 +51,8 @@ class ExcitationConfig:
         acceleration_fraction: share of the acceleration limit the excitation may reach.
         rest_s: time at rest at the home pose before each segment and at the end [s].
         home: home pose [rad], or None for the middle of the position limits.
+        file: a designed excitation (``excitation.json`` of ``id-learning excitation``) played
+            whole instead of drawing one; the settings above then do not apply.
     """
 
     duration_s: float = 600.0
@@ -58,6 +63,7 @@ class ExcitationConfig:
     acceleration_fraction: float = 0.8
     rest_s: float = 0.5
     home: tuple[float, ...] | None = None
+    file: str | None = None
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
@@ -210,7 +216,7 @@ class ExcitationTrajectory:
         return q, qd, qdd
 
 
-def _random_segment(
+def random_segment(
     rng: np.random.Generator,
     n: int,
     harmonics: int,
@@ -223,6 +229,11 @@ def _random_segment(
     acc_max: np.ndarray,
     grid: np.ndarray,
 ) -> FourierSegment:
+    """One segment of random coefficients, at rest at ``home`` at both ends, scaled into reach.
+
+    ``reach_low``/``reach_high``: how far below and above ``home`` it may go [rad];
+    ``vel_max``, ``acc_max``: its limits; ``grid``: the segment-local times they are met on.
+    """
     orders = np.arange(1, harmonics + 1)
     a = rng.standard_normal((n, harmonics))
     b = rng.standard_normal((n, harmonics))
@@ -251,6 +262,21 @@ def _random_segment(
     return FourierSegment(a, b, home + (b / (omega * orders)).sum(axis=1), omega)
 
 
+def home_pose(config: ExcitationConfig, limits: JointLimits) -> np.ndarray:
+    """The pose every segment starts and ends at: ``config.home``, or mid-range.
+
+    Raises:
+        ConfigError: it is not strictly inside the position limits.
+    """
+    lower, upper = limits.position_lower, limits.position_upper
+    home = 0.5 * (lower + upper) if config.home is None else np.asarray(config.home, dtype=float)
+    if home.shape != lower.shape or np.any(home <= lower) or np.any(home >= upper):
+        raise ConfigError(
+            f'excitation.home {home.tolist()} must lie strictly inside the position limits'
+        )
+    return home
+
+
 def design_excitation(
     config: ExcitationConfig,
     limits: JointLimits,
@@ -272,18 +298,14 @@ def design_excitation(
     """
     lower, upper = limits.position_lower, limits.position_upper
     n = len(lower)
-    home = 0.5 * (lower + upper) if config.home is None else np.asarray(config.home, dtype=float)
-    if home.shape != (n,) or np.any(home <= lower) or np.any(home >= upper):
-        raise ConfigError(
-            f'excitation.home {home.tolist()} must lie strictly inside the position limits'
-        )
+    home = home_pose(config, limits)
     check_bandwidth(config.base_frequency_hz, config.harmonics, period_s, 'excitation')
     omega = 2.0 * math.pi * config.base_frequency_hz
     grid = np.linspace(
         0.0, config.period_s, int(config.period_s / period_s * CHECK_OVERSAMPLING) + 1
     )
     segments = tuple(
-        _random_segment(
+        random_segment(
             rng,
             n,
             config.harmonics,

@@ -130,6 +130,9 @@ def write_twin_output(
         )
         raw = dict(config.raw)
         raw['robot'] = os.path.relpath(Path(config.robot_file).resolve(), out.resolve())
+        if config.excitation.file is not None:  # read beside the copy as beside the original
+            designed = os.path.relpath(Path(config.excitation.file).resolve(), out.resolve())
+            raw['excitation'] = {**(raw.get('excitation') or {}), 'file': designed}
         extras[2].write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
     except OSError as err:
         for path in extras:  # half a ground truth would be read as the whole

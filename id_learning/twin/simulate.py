@@ -173,6 +173,9 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
                 float_vector(excitation_data['home'], f'{where}: excitation.home', n).tolist()
             ),
         }
+    if excitation_data.get('file') is not None:  # relative to the config, as robot is
+        designed = Path(str(excitation_data['file']))
+        excitation_data['file'] = str(designed if designed.is_absolute() else base_dir / designed)
     try:
         excitation = ExcitationConfig(**excitation_data)
     except TypeError as err:
@@ -331,6 +334,26 @@ def random_streams(seed: int) -> list[np.random.Generator]:
     return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)]
 
 
+def _trajectory(config: TwinConfig, rng: np.random.Generator) -> ExcitationTrajectory:
+    """The excitation: the designed one of ``excitation.file``, else drawn from ``rng``."""
+    robot, excitation = config.robot, config.excitation
+    if excitation.file is not None:
+        from id_learning.physics.excitation_design import load_design
+
+        trajectory = load_design(Path(excitation.file), robot, 'excitation.file')
+        check_duration(
+            trajectory.duration_s, robot.ipo_period_s, robot.n_joints, 'excitation.file'
+        )
+        return trajectory
+    check_duration(
+        excitation.duration_s, robot.ipo_period_s, robot.n_joints, 'excitation.duration_s'
+    )
+    drawn = design_excitation(excitation, robot.limits, robot.ipo_period_s, rng)
+    if note := excitation.duration_note(robot.ipo_period_s):
+        _LOG.warning('%s', note)  # the rounding is said, not silent (see duration_note)
+    return drawn
+
+
 def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     """Simulate an excitation run of the twin.
 
@@ -340,18 +363,11 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
             (names joint and time).
     """
     robot, effects = config.robot, config.effects
-    check_duration(
-        config.excitation.duration_s, robot.ipo_period_s, robot.n_joints, 'excitation.duration_s'
-    )
     excitation_rng, _, noise_rng, sensor_rng = random_streams(config.seed)
     # The robot's hidden parameters come from their own seed, drawn as ``seed`` would draw them:
     # one robot, many recordings; robot_seed = seed reproduces the one-seed bags.
     parameter_rng = random_streams(config.true_robot_seed)[1]
-    trajectory: ExcitationTrajectory = design_excitation(
-        config.excitation, robot.limits, robot.ipo_period_s, excitation_rng
-    )
-    if note := config.excitation.duration_note(robot.ipo_period_s):
-        _LOG.warning('%s', note)  # the rounding is said, not silent (see duration_note)
+    trajectory = _trajectory(config, excitation_rng)
     n_samples = round(trajectory.duration_s / robot.ipo_period_s) + 1
     t = np.arange(n_samples) * robot.ipo_period_s
     q, v, a = trajectory.evaluate(t)
