@@ -76,12 +76,13 @@ def cmd_excitation(args: argparse.Namespace) -> int:
     report = design.report
     print(
         f'wrote {design.trajectory.duration_s:.1f} s ({len(design.trajectory.segments)} '
-        f"segments of {config.period_s:g} s) to {args.out}: the identification regressor's "
+        f"segment(s) of {config.period_s:g} s) to {args.out}: the identification regressor's "
         f'condition number is {report.condition:.4g} (a random design: '
         f'{report.condition_random:.4g}, {report.columns} columns), joint-pair coverage '
         f'{report.coverage:.0%} (random: {report.coverage_random:.0%}). Play it with the '
-        f'replay (bag:={args.out}), or simulate it (excitation: {{file: '
-        f'{Path(args.out) / "excitation.json"}}}); trajectory.csv holds the samples'
+        f'replay (-p bag:={args.out} -p "topics:=[\'/joint_states\']"), or simulate it '
+        f'(excitation: {{file: {Path(args.out) / "excitation.json"}}}); trajectory.csv holds '
+        'the samples'
     )
     return 0
 
