@@ -1,7 +1,7 @@
 """Computational efficiency per robot and model kind: fit time, online latency, memory, size.
 
     python benchmarks/efficiency.py [--robots mabi_max100,panda,ur5] [--models all]
-        [--seconds 120] [--max-seconds-per-model 60] [--samples 2000] [--seed 2026]
+        [--seconds 180] [--max-seconds-per-model 60] [--samples 2000] [--seed 2026]
 
 Per robot config (config/NAME.yaml) a seeded twin recording of ``--seconds`` is made the way
 ``real_robots.py`` makes its twins (``id-learning simulate``; MABI: config/twin_default.yaml,
@@ -340,7 +340,11 @@ def main() -> None:
         '--models', default='all', help='model kinds, comma-separated (all: every kind)'
     )
     parser.add_argument(
-        '--seconds', type=float, default=120.0, help='length of each twin recording [s]'
+        '--seconds',
+        type=float,
+        default=180.0,
+        help="length of each twin recording [s] (the MABI's training part must hold about 91 s "
+        'for the diagnosis that rnea_effects builds on)',
     )
     parser.add_argument(
         '--max-seconds-per-model', type=float, default=60.0, help='fit budget per kind [s]'
