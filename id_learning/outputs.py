@@ -353,6 +353,7 @@ def check_file_output(
     replaced only with ``force``; never one inside a result folder or a bag (another command's).
     ``option``: the option that gave ``out`` (the tool's one file output is ``inspect --plot``).
     """
+    refuse_long_names(Path(out), option)
     if not Path(out).is_dir():  # a folder is named as such (check_target)
         _check_suffix(Path(out), suffixes)  # the name given, then the file a link points to
     out = check_target(Path(out), inputs=inputs, folder=False, option=option)

@@ -82,9 +82,10 @@ def test_two_workers_on_one_sqlite_storage_leave_four_trials_in_one_study(bag, t
 
 
 def test_the_objective_is_the_validation_error_and_best_yaml_trains(bag, tmp_path, mabi):
-    result = run_sweep([bag], mabi, 'motor', 'rnea_lq', tmp_path, trials=3, progress=False, seed=0)
+    folder = tmp_path / 'sweep'
+    result = run_sweep([bag], mabi, 'motor', 'rnea_lq', folder, trials=3, progress=False, seed=0)
     assert result.finished == 3
-    assert result.storage == f'sqlite:///{(tmp_path / "sweep.db").resolve()}'
+    assert result.storage == f'sqlite:///{(folder / "sweep.db").resolve()}'
     assert {p.name for p in result.figures} == {
         'optimisation_history.png',
         'parameter_importances.png',
@@ -95,7 +96,8 @@ def test_the_objective_is_the_validation_error_and_best_yaml_trains(bag, tmp_pat
     data = TrainingData(dataset, mabi)
     model = make_model('rnea_lq', mabi, **result.best_params).fit(data)
     assert validation_error(model, data) == pytest.approx(result.best_value, rel=1e-9)
-    # train --hyper-file takes best.yaml; --hyper items override it.
+    # train --hyper-file takes best.yaml; --hyper items override it (beside the sweep: nothing
+    # is written into another command's result).
     out = tmp_path / 'run'
     code = cli([
         'train', '--bag', str(bag), '--models', 'rnea_lq', '--out', str(out), '--quiet',
