@@ -1,6 +1,8 @@
-"""Inputs given twice: the same file or bag, a copy of its bytes, or its messages restored.
+"""Inputs given twice: the same file or bag, its bytes, its messages, or samples cut from it.
 
-Training, evaluation or an import that reads one recording twice weighs it double.
+Training, evaluation or an import that reads one recording twice weighs it double; samples that
+two recordings (or two segments of one bag) share put the same motion into the training and the
+test part.
 """
 
 from __future__ import annotations
@@ -9,10 +11,19 @@ import hashlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from id_learning.bag.reader import bag_info, data_files, iter_raw
-from id_learning.errors import BagError, ConfigError
+import numpy as np
 
-__all__ = ['check_distinct']
+from id_learning.bag.reader import bag_info, data_files, iter_raw
+from id_learning.errors import BagError, ConfigError, DatasetError
+
+__all__ = [
+    'MIN_SHARED_SAMPLES',
+    'Samples',
+    'check_distinct',
+    'refuse_shared_samples',
+    'shared_samples',
+    'shared_stamps',
+]
 
 
 def _content_key(path: Path) -> tuple[int, tuple[str, ...]]:
@@ -106,3 +117,73 @@ def _message_key(path: Path) -> str:
         digest.update(f'{topic}\0{log_ns}\0{len(data)}\0'.encode())
         digest.update(data)
     return digest.hexdigest()
+
+
+#: A recording's samples, to tell whether two recordings hold the same ones: (name, stamps [ns],
+#: positions (N, n) [rad] in one joint order). The name says where it is (a bag, a segment).
+Samples = tuple[str, np.ndarray, np.ndarray]
+
+#: Two recordings that share this many moving samples hold the same motion. Fewer happen by
+#: chance: twin recordings leave one rest pose at one stamp by the same encoder count.
+MIN_SHARED_SAMPLES = 100
+
+
+def _row_keys(q: np.ndarray) -> np.ndarray:
+    """(N,) one comparable key per row of ``q``: its float64 bytes (-0.0 as 0.0)."""
+    rows = np.ascontiguousarray(q, dtype=np.float64) + 0.0
+    return rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel()
+
+
+def shared_samples(first: Samples, second: Samples) -> tuple[np.ndarray, np.ndarray]:
+    """The stamps [ns] in ``first`` and in ``second`` of the moving samples both hold.
+
+    Two recordings of one arm never hold the same moving sample: a sample equal in every joint
+    where the arm moves (its positions differ from the sample before in ``first``) means one
+    recording was cut from the other. Both may stamp it alike (a bag cut from another) or
+    shifted by a constant (an import of overlapping logs, whose files follow each other in the
+    bag): the pairs at the most common stamp shift are returned, in time order.
+    """
+    _, a_ns, a_q = first
+    _, b_ns, b_q = second
+    empty = np.empty(0, dtype=np.int64)
+    if len(a_ns) < 2 or not len(b_ns):
+        return empty, empty
+    moving = np.flatnonzero(np.any(a_q[1:] != a_q[:-1], axis=1)) + 1
+    _, in_a, in_b = np.intersect1d(
+        _row_keys(a_q)[moving], _row_keys(b_q), assume_unique=False, return_indices=True
+    )
+    if not in_a.size:
+        return empty, empty
+    a_at, b_at = np.asarray(a_ns)[moving[in_a]], np.asarray(b_ns)[in_b]
+    shifts, counts = np.unique(b_at - a_at, return_counts=True)
+    same = b_at - a_at == shifts[np.argmax(counts)]
+    order = np.argsort(a_at[same])
+    return a_at[same][order], b_at[same][order]
+
+
+def shared_stamps(first: Samples, second: Samples) -> np.ndarray:
+    """The stamps [ns] in ``first`` of the moving samples ``second`` holds too."""
+    return shared_samples(first, second)[0]
+
+
+def refuse_shared_samples(recordings: Sequence[Samples], why: str) -> None:
+    """Refuse two recordings that hold the same motion, naming both and the shared span.
+
+    Raises:
+        DatasetError: the first pair that shares ``MIN_SHARED_SAMPLES`` moving samples or more.
+    """
+    for i, first in enumerate(recordings):
+        for second in recordings[i + 1 :]:
+            in_first, in_second = shared_samples(first, second)
+            if in_first.size < MIN_SHARED_SAMPLES:
+                continue
+            span_s = (int(in_first[-1]) - int(in_first[0])) * 1e-9
+            where = f'stamps {int(in_first[0])} to {int(in_first[-1])} ns'
+            if in_second[0] != in_first[0]:
+                where += (
+                    f' in the first, {int(in_second[0])} to {int(in_second[-1])} ns in the second'
+                )
+            raise DatasetError(
+                f'{first[0]} and {second[0]} hold the same {in_first.size} samples ({where}, '
+                f'{span_s:.1f} s): {why}'
+            )

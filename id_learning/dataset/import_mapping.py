@@ -69,8 +69,9 @@ class ColumnSpec:
         unit: unit of the raw values, one of those allowed for the quantity.
         index: column of a 2-D NPZ array; None for a 1-D array.
         scale: factor applied after the unit conversion (e.g. -1 for an inverted axis).
-        offset: added last, in SI units (e.g. an encoder zero [rad]); ignored for time, which is
-            made relative to its first value.
+        offset: added last, in SI units (e.g. an encoder zero [rad]). For time it only tells
+            an absolute time column (seconds since the epoch) from a relative one
+            (``import_stamps.absolute_start_ns``): steps and grid do not depend on it.
     """
 
     column: str | int

@@ -81,6 +81,8 @@ class Gridded:
         holes: 'interpolate': (position before, position after, seconds) of each hole bridged.
         breaks: (position before, position after, seconds) of each pause that ends a segment.
         short: (first position, last position, seconds) of each segment dropped as too short.
+        start_ns: the time of grid slot 0 [ns since the epoch] when the log's time column is
+            absolute (``import_stamps.absolute_start_ns``), else None: the importer re-bases.
     """
 
     segments: list[Segment]
@@ -94,6 +96,7 @@ class Gridded:
     holes: list[tuple[int, int, float]] = field(default_factory=list)
     breaks: list[tuple[int, int, float]] = field(default_factory=list)
     short: list[tuple[int, int, float]] = field(default_factory=list)
+    start_ns: int | None = None
 
 
 def _samples_digest(grid: Gridded) -> str:

@@ -4,33 +4,84 @@ Controllers sample on a fixed grid (the IPO cycle); the jitter in logged time st
 the logging path, so under the 'snap' policy a stamp within ``jitter_tolerance`` periods of a grid
 point is moved onto it. Logs at another rate, or whose clock drifts, are resampled instead
 (``import_resample``).
+
+A time column that holds absolute times (seconds since the epoch, in any unit: its first value,
+with the column's scale and offset, falls between 2000 and 2038, where a message stamp's int32
+seconds end) keeps them: the bag's stamps are the log's own, to the microsecond
+(``absolute_start_ns``). Any other time column counts from some start of its own (a controller's
+uptime, the log's start) and the importer re-bases it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 
-from id_learning.dataset.import_mapping import UNITS, ImportMapping
+from id_learning.dataset.import_mapping import UNITS, ColumnSpec, ImportMapping
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
 
-__all__ = ['Snapped', 'grid_period_s', 'relative_times', 'snap_to_grid']
+__all__ = [
+    'Snapped',
+    'absolute_origin_ns',
+    'absolute_start_ns',
+    'grid_period_s',
+    'relative_times',
+    'snap_to_grid',
+    'time_s',
+]
 
 _PERIOD_RESOLUTION_NS = 100_000  # estimated periods are rounded to 0.1 ms
 _ROBOT_PERIOD_MATCH = 0.1  # a median step within 10 % of the robot's IPO period is that period
 _INTERPOLATE_HINT = 'or let import resample the log: resample: {method: interpolate}'
+#: Absolute times lie in this span [s since the epoch]: from 2000-01-01 (no controller counts its
+#: uptime in decades) to 2038-01-19, past which a message stamp's int32 seconds cannot go.
+_EPOCH_SPAN_S = (946_684_800, 2**31)
+#: An absolute start is kept to the microsecond: a float64 time column of epoch seconds resolves
+#: about 0.24 us, so finer digits are the float's, not the log's.
+_ABSOLUTE_RESOLUTION_NS = 1000
 
 
 @dataclass(frozen=True)
 class Snapped:
-    """Grid indices of the rows, and what snapping moved."""
+    """Grid indices of the rows, and what snapping moved.
+
+    ``origin_ns``: the time of slot 0 after the first row's [ns] (within the jitter tolerance).
+    """
 
     slots: np.ndarray
     max_jitter_s: float
     n_snapped: int
+    origin_ns: int = 0
+
+
+def time_s(raw: float, spec: ColumnSpec) -> float:
+    """A time column's value in seconds: raw * unit * scale + offset."""
+    return float(raw) * UNITS['time'][spec.unit] * spec.scale + spec.offset
+
+
+def absolute_start_ns(first_raw: float, mapping: ImportMapping) -> int | None:
+    """The first row's time [ns since the epoch] when the time column is absolute, else None.
+
+    Absolute means its first value in seconds (``time_s``) lies between 2000 and 2100: a
+    wall-clock time, kept as the bag's.
+    """
+    spec = mapping.time
+    if spec is None or not _EPOCH_SPAN_S[0] <= time_s(first_raw, spec) < _EPOCH_SPAN_S[1]:
+        return None
+    # In exact arithmetic: 1.7e18 ns in a float64 would be off by up to 128 ns.
+    ns_per_unit = round(UNITS['time'][spec.unit] * 1e9)
+    exact = Fraction(float(first_raw)) * ns_per_unit * Fraction(spec.scale)
+    return round(exact + Fraction(spec.offset) * 1_000_000_000)
+
+
+def absolute_origin_ns(start_ns: int, origin_ns: int = 0) -> int:
+    """The stamp of grid slot 0 [ns]: ``origin_ns`` after the first row, to the microsecond."""
+    half = _ABSOLUTE_RESOLUTION_NS // 2
+    return (start_ns + origin_ns + half) // _ABSOLUTE_RESOLUTION_NS * _ABSOLUTE_RESOLUTION_NS
 
 
 def relative_times(
@@ -179,4 +230,5 @@ def snap_to_grid(
         slots=slots - slots[0],
         max_jitter_s=float(np.abs(deviation).max()) * 1e-9,
         n_snapped=int(np.count_nonzero(deviation)),
+        origin_ns=phase + int(slots[0]) * period_ns,
     )

@@ -12,25 +12,29 @@ preprocessing and the train/test split treat as a recording of its own. Nothing 
 dropped silently: rows dropped by the NaN, implausible-value and beyond-limits policies (with
 column, joint and value), holes bridged by resampling, pauses that end a segment and segments too
 short to keep are all in the report. One log given twice is refused, also in other bytes (a
-reformatted, compressed or NPZ copy: the same samples after parsing).
+reformatted, compressed or NPZ copy: the same samples after parsing), and so are files that
+overlap, holding some of the same samples (``import_overlap``).
+
+The stamps are the log's own when its time column is absolute (since the epoch); other logs are
+re-based to ``DEFAULT_START_NS``, one file after the other. Each report says which.
 
 This module reads the mapped columns and writes the bag; the mapping and its checks are in
-``import_mapping.py``, the CSV and NPZ readers in ``import_readers.py``, the values and row checks
-in ``import_values.py``, the time base in ``import_stamps.py`` and ``import_resample.py``.
+``import_mapping.py``, the files a source names in ``import_sources.py``, the CSV and NPZ readers
+in ``import_readers.py``, the values and row checks in ``import_values.py``, the time base in
+``import_stamps.py`` and ``import_resample.py``, the report in ``import_report.py``.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import NamedTuple
 
 import numpy as np
 
-from id_learning.bag.distinct import check_distinct
 from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.import_mapping import (
     QUANTITIES,
@@ -39,14 +43,24 @@ from id_learning.dataset.import_mapping import (
     JointColumns,
     load_import_mapping,
 )
-from id_learning.dataset.import_readers import LogTable, is_float, log_suffix, read_table
+from id_learning.dataset.import_overlap import SourceRows, check_shared_rows
+from id_learning.dataset.import_readers import LogTable, is_float, read_table
+from id_learning.dataset.import_report import ImportReport, TimeBase
 from id_learning.dataset.import_resample import (
     Gridded,
     check_distinct_samples,
     interpolate_segments,
     slot_segments,
 )
-from id_learning.dataset.import_stamps import grid_period_s, relative_times, snap_to_grid
+from id_learning.dataset.import_sources import log_files
+from id_learning.dataset.import_stamps import (
+    absolute_origin_ns,
+    absolute_start_ns,
+    grid_period_s,
+    relative_times,
+    snap_to_grid,
+    time_s,
+)
 from id_learning.dataset.import_values import (
     Field,
     RowChecks,
@@ -55,6 +69,7 @@ from id_learning.dataset.import_values import (
     si_values,
     warn_narrow_floats,
 )
+from id_learning.dataset.inspect_checks import iso_utc
 from id_learning.dataset.plausibility import check_efforts, check_motion
 from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError, DatasetError
@@ -80,106 +95,6 @@ logger = logging.getLogger(__name__)
 DEFAULT_START_NS = 1_700_000_000 * 10**9
 #: The pause written between two files of one import [s] (at least; rounded up to the grid).
 SEGMENT_SEPARATION_S = 1.0
-_LOG_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat', '.log', '.npz')
-
-
-@dataclass
-class ImportReport:
-    """What the import of one log file did; ``summary()`` gives it in a few lines.
-
-    Attributes:
-        source: the imported log file.
-        out: the bag written.
-        n_rows_read: data rows in the log (without header, comment and blank lines).
-        n_rows_written: samples written to the bag from this file.
-        period_s: sampling period of the written stamps [s].
-        velocity_source: 'column' (mapped) or 'differentiated' (from position).
-        row_label: what row positions count: 'line' (1-based CSV line, header and comments
-            included) or 'row' (0-based NPZ array index).
-        dropped_rows: (position, reason) of each row dropped under the NaN, implausible-value or
-            beyond-limits policy; the reason names the column, its joint and the value.
-        method: the resample policy's method.
-        grid: what snapping or resampling did (steps, jitter, holes, pauses, short segments).
-    """
-
-    source: Path
-    out: Path
-    n_rows_read: int
-    n_rows_written: int
-    period_s: float
-    velocity_source: Literal['column', 'differentiated']
-    row_label: Literal['line', 'row'] = 'line'
-    dropped_rows: list[tuple[int, str]] = field(default_factory=list)
-    method: Literal['snap', 'interpolate'] = 'snap'
-    grid: Gridded | None = None
-
-    @property
-    def n_segments(self) -> int:
-        """Segments written from this file."""
-        return 0 if self.grid is None else len(self.grid.segments)
-
-    @property
-    def max_jitter_s(self) -> float:
-        """Largest |stamp - grid point| snapped [s]."""
-        return 0.0 if self.grid is None else self.grid.max_jitter_s
-
-    @property
-    def n_snapped(self) -> int:
-        """Stamps moved onto the grid."""
-        return 0 if self.grid is None else self.grid.n_snapped
-
-    @property
-    def n_gaps(self) -> int:
-        """Grid slots left empty inside segments (loading fills them)."""
-        return 0 if self.grid is None else self.grid.n_gaps
-
-    def _first_dropped(self) -> str:
-        """Per kind of dropped row (its reason up to the column), the count and the first one."""
-        kinds: dict[str, list[tuple[int, str]]] = {}
-        for row, reason in self.dropped_rows:
-            kinds.setdefault(reason.partition('column')[0], []).append((row, reason))
-        return ''.join(
-            f'\n    first of {len(rows)}: {self.row_label} {rows[0][0]}, {rows[0][1]}'
-            for rows in kinds.values()
-        )
-
-    def summary(self, max_positions: int = 5) -> str:
-        """Counts, and the first ``max_positions`` positions of each kind of loss."""
-        label = self.row_label
-
-        def listed(items: Sequence[tuple[int, int] | int], kind: str) -> str:
-            if not items:
-                return ''
-            shown = ', '.join(
-                f'{item[0]}-{item[1]}' if isinstance(item, tuple) else str(item)
-                for item in items[:max_positions]
-            )
-            more = ', ...' if len(items) > max_positions else ''
-            return f'\n  {len(items)} {kind}: {label}s {shown}{more}'
-
-        grid = self.grid or Gridded([], self.period_s, self.period_s, self.period_s)
-        if self.method == 'snap':
-            timing = (
-                f'{grid.n_snapped} stamps snapped (max jitter {grid.max_jitter_s * 1e3:.3g} ms), '
-                f'{grid.n_gaps} missing grid slots'
-            )
-        else:
-            timing = (
-                f'resampled from a median step of {grid.source_step_s * 1e3:.4g} ms (mean '
-                f'{grid.mean_step_s * 1e3:.4g} ms), {grid.n_filled} grid points bridged over '
-                f'{len(grid.holes)} holes'
-            )
-        return (
-            f'{self.source} -> {self.out}: {self.n_rows_written} samples in '
-            f'{self.n_segments} segment(s) from {self.n_rows_read} rows, '
-            f'{len(self.dropped_rows)} rows dropped; period {self.period_s * 1e3:g} ms, '
-            f'{timing}; velocity {self.velocity_source}'
-            + listed([row for row, _ in self.dropped_rows], 'rows dropped')
-            + self._first_dropped()
-            + listed([(a, b) for a, b, _ in grid.holes], 'holes bridged')
-            + listed([(a, b) for a, b, _ in grid.breaks], 'pauses that end a segment')
-            + listed([(a, b) for a, b, _ in grid.short], 'segments dropped as too short')
-        )
 
 
 # -- columns -> raw float matrix ------------------------------------------------------------------
@@ -323,34 +238,6 @@ def _check_efforts(recording: Recording, robot: RobotConfig, where: str) -> None
             )
 
 
-def log_files(sources: Sequence[Path | str]) -> list[Path]:
-    """The log files named: files as given, folders as their log files in name order.
-
-    Raises:
-        DatasetError: a source does not exist, or a folder holds no log file.
-        ConfigError: one log given twice (same file, or identical bytes), naming it.
-    """
-    files: list[Path] = []
-    for source in map(Path, sources):
-        if source.is_dir():
-            found = sorted(
-                p for p in source.iterdir() if p.is_file() and log_suffix(p) in _LOG_SUFFIXES
-            )
-            if not found:
-                raise DatasetError(
-                    f'{source}: no log files ({", ".join(_LOG_SUFFIXES)}, also gzipped) in '
-                    'this folder'
-                )
-            files.extend(found)
-        elif source.is_file():
-            files.append(source)
-        else:
-            raise DatasetError(f'{source}: no such log file or folder')
-    if not files:
-        raise DatasetError('no log file given')
-    return check_distinct(files, 'import')  # one log twice would be two segments of one motion
-
-
 def _grid(
     table: LogTable,
     raw: np.ndarray,
@@ -370,18 +257,30 @@ def _grid(
     label = table.row_label
     times = relative_times(raw[keep, 0], positions, mapping, table.source, label)
     period = grid_period_s(times, mapping, robot, table.source)
-    if policy.method == 'interpolate':
-        return interpolate_segments(times, kept, positions, period, policy)
+    start_ns = absolute_start_ns(raw[keep, 0][0], mapping)  # None: a relative time column
+    if policy.method == 'interpolate':  # grid slot 0 at the first row
+        grid = interpolate_segments(times, kept, positions, period, policy)
+        grid.start_ns = None if start_ns is None else absolute_origin_ns(start_ns)
+        return grid
     snapped = snap_to_grid(times, positions, period, mapping, where=table.source, label=label)
     grid = slot_segments(snapped.slots, kept, positions, period, policy)
     grid.max_jitter_s, grid.n_snapped = snapped.max_jitter_s, snapped.n_snapped
+    grid.start_ns = None if start_ns is None else absolute_origin_ns(start_ns, snapped.origin_ns)
     return grid
+
+
+class _File(NamedTuple):
+    """One log file read: on the grid, its report, and its kept rows as read."""
+
+    grid: Gridded
+    report: ImportReport
+    rows: SourceRows
 
 
 def _read_file(
     source: Path, mapping: ImportMapping, robot: RobotConfig | None, order: np.ndarray
-) -> tuple[Gridded, ImportReport]:
-    """One log file on the grid, with its report (``out`` and counts filled in by the caller)."""
+) -> _File:
+    """One log file on the grid, with its report (``out`` and stamps filled in by the caller)."""
     joints = tuple(mapping.joints[i] for i in order)
     table = read_table(source, mapping)
     fields = _fields(mapping, joints)
@@ -424,28 +323,88 @@ def _read_file(
         dropped_rows=dropped,
         method=mapping.resample.method if mapping.time is not None else 'snap',
         grid=grid,
+        first_time_s=None if mapping.time is None else time_s(raw[keep, 0][0], mapping.time),
     )
-    return grid, report
+    time = None if mapping.time is None else raw[keep, 0]
+    kept = {key: array[keep] for key, array in values.items()}
+    rows = SourceRows(source, table.row_label, positions[keep], time, kept)
+    return _File(grid, report, rows)
+
+
+def _time_base(grid: Gridded, report: ImportReport, start_ns: int | None) -> TimeBase:
+    """Why a file's stamps are re-based (when they are: see ``_origins``)."""
+    if start_ns is not None:
+        return 'given'
+    if grid.start_ns is not None:
+        return 'mixed'
+    return 'period' if report.first_time_s is None else 'relative'
+
+
+def _origins(files: Sequence[_File], start_ns: int | None) -> list[int]:
+    """The stamp [ns] of each file's grid slot 0; fills in each report's first stamp.
+
+    Files whose time column is absolute keep the log's time (unless ``start_ns`` is given);
+    otherwise the files follow one another from ``start_ns`` (default ``DEFAULT_START_NS``, so
+    that an import is deterministic), ``SEGMENT_SEPARATION_S`` apart.
+
+    Raises:
+        DatasetError: two files with absolute times overlap in time (names both and spans).
+    """
+    period_ns = round(files[0].grid.period_s * 1e9)
+    absolute = [f.grid.start_ns for f in files]
+    if start_ns is None and all(origin is not None for origin in absolute):
+        origins = [int(origin) for origin in absolute if origin is not None]
+        for file in files:
+            file.report.time_base = 'absolute'
+    else:
+        separation = math.ceil(SEGMENT_SEPARATION_S / files[0].grid.period_s)
+        origins, offset = [], 0
+        for file in files:
+            origins.append(
+                (DEFAULT_START_NS if start_ns is None else start_ns) + offset * period_ns
+            )
+            offset += int(file.grid.segments[-1].slots[-1]) + separation
+            file.report.time_base = _time_base(file.grid, file.report, start_ns)
+    for file, origin in zip(files, origins, strict=True):
+        file.report.start_ns = origin + int(file.grid.segments[0].slots[0]) * period_ns
+    _refuse_overlap_in_time(files, origins, period_ns)
+    return origins
+
+
+def _refuse_overlap_in_time(files: Sequence[_File], origins: list[int], period_ns: int) -> None:
+    """Refuse two files whose stamps overlap (absolute time columns of one stretch of time)."""
+    spans = sorted(
+        (
+            (f.report.start_ns, origin + int(f.grid.segments[-1].slots[-1]) * period_ns, f.report)
+            for f, origin in zip(files, origins, strict=True)
+        ),
+        key=lambda span: span[0],
+    )
+    for (_, last, before), (first, end, after) in itertools.pairwise(spans):
+        if first <= last:
+            raise DatasetError(
+                f'import: {after.source} ({iso_utc(first)} to {iso_utc(end)}) overlaps '
+                f"{before.source} (to {iso_utc(last)}) in time: the bag keeps the logs' "
+                'absolute times, and one bag cannot hold two logs of one stretch of time; import '
+                'them into separate bags'
+            )
 
 
 def _recording(
-    grids: Sequence[Gridded], joints: tuple[str, ...], start_ns: int, source: str
+    files: Sequence[_File], origins: Sequence[int], joints: tuple[str, ...], source: str
 ) -> Recording:
-    """The segments of every file one after the other on one grid, as one recording."""
-    period_s = grids[0].period_s
-    period_ns = round(period_s * 1e9)
-    separation = math.ceil(SEGMENT_SEPARATION_S / period_s)
+    """The segments of every file in time order on one grid, as one recording."""
+    period_ns = round(files[0].grid.period_s * 1e9)
     stamps: list[np.ndarray] = []
     starts: list[int] = []
     parts: list[dict[str, np.ndarray]] = []
-    offset, n_samples = 0, 0
-    for grid in grids:
-        for segment in grid.segments:
+    n_samples = 0
+    for origin, file in sorted(zip(origins, files, strict=True), key=lambda pair: pair[0]):
+        for segment in file.grid.segments:
             starts.append(n_samples)
             n_samples += len(segment.slots)
-            stamps.append(start_ns + (offset + segment.slots) * period_ns)
+            stamps.append(origin + segment.slots * period_ns)
             parts.append(segment.values)
-        offset += int(grid.segments[-1].slots[-1]) + separation
     velocity = [
         part['velocity']
         if 'velocity' in part
@@ -466,6 +425,10 @@ def _recording(
         source=source,
         segment_starts=tuple(starts),
     )
+
+
+def _time_column(mapping: ImportMapping) -> str:
+    return 'time' if mapping.time is None else str(mapping.time.column)
 
 
 def import_logs(
@@ -490,7 +453,9 @@ def import_logs(
         velocity_from_position: differentiate position along each segment when the mapping has
             no velocity columns.
         overwrite: replace an existing bag folder.
-        start_ns: stamp of the first sample [ns since epoch]; default ``DEFAULT_START_NS``.
+        start_ns: stamp of the first sample [ns since epoch], re-basing the logs' times. By
+            default a time column of absolute times (since the epoch) is kept as the stamps,
+            and other logs start at ``DEFAULT_START_NS``; each report says which it was.
 
     Returns:
         Per file, what was read, dropped, snapped or resampled, and written.
@@ -509,7 +474,6 @@ def import_logs(
             without ``overwrite``, or an input).
     """
     out = Path(out)
-    start_ns = DEFAULT_START_NS if start_ns is None else start_ns
     order = _joint_order(mapping, robot)
     if mapping.joints[0].velocity is None and not velocity_from_position:
         raise ConfigError(
@@ -517,17 +481,18 @@ def import_logs(
         )
     files = log_files(sources)
     read = [_read_file(source, mapping, robot, order) for source in files]
-    periods = {report.period_s for _, report in read}
+    periods = {file.report.period_s for file in read}
     if len(periods) > 1:
-        found = ', '.join(f'{r.source}: {r.period_s * 1e3:g} ms' for _, r in read)
+        found = ', '.join(f'{f.report.source}: {f.report.period_s * 1e3:g} ms' for f in read)
         raise DatasetError(
             f'the logs are on different sampling grids ({found}); set resample.period_s and '
             'resample.method: interpolate to put them on one'
         )
-    check_distinct_samples([grid for grid, _ in read], files)  # the same data in other bytes
+    check_distinct_samples([file.grid for file in read], files)  # the same data in other bytes
+    check_shared_rows([file.rows for file in read], _time_column(mapping))  # files that overlap
     where = str(files[0]) if len(files) == 1 else f'{files[0].parent} ({len(files)} files)'
     joints = tuple(mapping.joints[i].name for i in order)
-    recording = _recording([grid for grid, _ in read], joints, start_ns, where)
+    recording = _recording(read, _origins(read, start_ns), joints, where)
     # Nothing impossible reaches a bag: the plausibility gate (the robot's limits when known).
     check_motion(
         recording.joints,
@@ -545,7 +510,7 @@ def import_logs(
             starts=recording.segment_starts,
         )  # fmt: skip
     write_recording(recording, out, topics=robot.topics if robot else None, overwrite=overwrite)
-    reports = [report for _, report in read]
+    reports = [file.report for file in read]
     for report in reports:
         report.out = out
         logger.info('imported %s', report.summary())

@@ -21,6 +21,13 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from id_learning.bag.distinct import (
+    MIN_SHARED_SAMPLES,
+    Samples,
+    refuse_shared_samples,
+    shared_samples,
+    shared_stamps,
+)
 from id_learning.dataset.content import GravityTorque, gravity_findings
 from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler, PreprocessConfig, prepare_dataset
@@ -34,6 +41,7 @@ from id_learning.twin import read_noise_free_torque
 __all__ = [
     'DATA_WARNINGS',
     'GROUND_TRUTH_NOTES',
+    'MIN_SHARED_SAMPLES',
     'Samples',
     'bag_of',
     'bag_sha256',
@@ -49,6 +57,7 @@ __all__ = [
     'refuse_shared_samples',
     'seen_rows',
     'segment_rows',
+    'shared_samples',
     'shared_stamps',
     'training_data_summary',
 ]
@@ -163,7 +172,7 @@ def load_datasets(
             progress=progress,
             trim_unpaired_tail=trim_unpaired_tail,
         )
-        samples.append((str(bag), recording.stamps_ns, recording.position))
+        _refuse_shared_segments(samples, Path(bag), recording)  # before the work of preprocessing
         # What load_recording warned of (a still joint, a clipped label), for the report too.
         nominal = _nominal_findings(recording, robot, config.target, gravity)
         for text in nominal:  # load_recording logged the others
@@ -194,10 +203,41 @@ def load_datasets(
             recording.n_samples,
             len(recording.segment_starts),
         )
-    refuse_shared_samples(
-        samples, 'the same motion would be in the training and the test part; give each once'
-    )
     return _note_partial_ground_truth(datasets)
+
+
+_SHARED_WHY = 'the same motion would be in the training and the test part'
+
+
+def _refuse_shared_segments(known: list[Samples], bag: Path, recording: Recording) -> None:
+    """Refuse a segment of ``bag`` that holds samples of another segment or of an earlier bag.
+
+    Each segment is split on its own, so a motion in two of them (one bag imported from
+    overlapping logs, or a bag cut from another) would be in the training and the test part.
+    ``known`` (the earlier bags' segments) gets this bag's segments appended.
+
+    Raises:
+        DatasetError: names both bags or segments and the stamps they share.
+    """
+    segments = recording.segments()
+    new: list[Samples] = [
+        (
+            str(bag) if len(segments) == 1 else f'{bag} segment {k + 1} of {len(segments)}',
+            segment.stamps_ns,
+            segment.position,
+        )
+        for k, segment in enumerate(segments)
+    ]
+    for k, samples in enumerate(new):
+        for other in known:
+            refuse_shared_samples([other, samples], f'{_SHARED_WHY}; give each recording once')
+        for other in new[:k]:
+            refuse_shared_samples(
+                [other, samples],
+                f'{_SHARED_WHY}; the bag holds them twice (an import of logs that overlap): '
+                're-import it from logs cut without the overlap',
+            )
+    known.extend(new)
 
 
 #: ``Dataset.extra`` key of why a twin's ground truth was not used: the reasons, each once.
@@ -246,49 +286,6 @@ def datasets_by_bag(
 ) -> list[tuple[Path, list[int]]]:
     """Per bag, the indices of its datasets (its segments, in order) in ``datasets``."""
     return [(bag, [i for i, d in enumerate(datasets) if bag_of(d) == str(bag)]) for bag in bags]
-
-
-#: A recording's samples, to tell whether two bags hold the same ones: (bag, stamps [ns],
-#: positions (N, n) [rad] in one joint order).
-Samples = tuple[str, np.ndarray, np.ndarray]
-
-
-def shared_stamps(first: Samples, second: Samples) -> np.ndarray:
-    """The stamps [ns] at which two recordings hold the same moving sample.
-
-    Two recordings of one arm never share a stamp; twin recordings share stamps, and the rest
-    pose at them, but not the motion. Equal positions at a stamp where the arm moves (its
-    positions differ from the sample before) mean one recording was cut from the other.
-    """
-    _, a_ns, a_q = first
-    _, b_ns, b_q = second
-    both, in_a, in_b = np.intersect1d(a_ns, b_ns, assume_unique=True, return_indices=True)
-    same = np.all(a_q[in_a] == b_q[in_b], axis=1)
-    moving = np.any(a_q[in_a] != a_q[np.maximum(in_a - 1, 0)], axis=1)
-    out: np.ndarray = both[same & moving]
-    return out
-
-
-#: Two recordings that share this many moving samples hold the same motion. Fewer happen by
-#: chance: twin recordings leave one rest pose at one stamp by the same encoder count.
-MIN_SHARED_SAMPLES = 100
-
-
-def refuse_shared_samples(recordings: Sequence[Samples], why: str) -> None:
-    """Refuse two recordings that hold the same motion, naming both and the shared span.
-
-    Raises:
-        DatasetError: the first pair that shares ``MIN_SHARED_SAMPLES`` moving samples or more.
-    """
-    for i, first in enumerate(recordings):
-        for second in recordings[i + 1 :]:
-            shared = shared_stamps(first, second)
-            if shared.size >= MIN_SHARED_SAMPLES:
-                span_s = (int(shared[-1]) - int(shared[0])) * 1e-9
-                raise DatasetError(
-                    f'{first[0]} and {second[0]} hold the same {shared.size} samples (stamps '
-                    f'{int(shared[0])} to {int(shared[-1])} ns, {span_s:.1f} s): {why}'
-                )
 
 
 def _nominal_findings(

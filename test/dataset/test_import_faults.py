@@ -170,14 +170,24 @@ def test_the_same_samples_in_other_bytes_are_refused_naming_both_files(
     assert not (tmp_path / 'bag').exists()
 
 
-def test_logs_that_differ_in_one_value_are_two_recordings(tmp_path: Path) -> None:
+def test_a_copy_edited_in_one_value_is_refused_for_the_rows_it_still_shares(
+    tmp_path: Path,
+) -> None:
     values = log_values()
     good = write_csv(tmp_path / 'good.csv', values)
     other = {**values, 'q2': values['q2'].copy()}
     other['q2'][17] += 1e-9
-    reports = import_logs(
-        [good, write_csv(tmp_path / 'other.csv', other)], mapping(), tmp_path / 'bag'
-    )
+    edited = write_csv(tmp_path / 'other.csv', other)
+    # Not identical (one sample differs), but the other 39 samples would be in the bag twice.
+    with pytest.raises(
+        ConfigError,
+        match=rf'import: .*other\.csv lines 2-41 repeat {N_ROWS - 1} rows of .*good\.csv lines '
+        r'2-41 \(time column t_ms 0 to 312\): the files overlap',
+    ):
+        import_logs([good, edited], mapping(), tmp_path / 'bag')
+    # Two recordings of their own (another motion at the same times) are two segments.
+    own = write_csv(tmp_path / 'own.csv', log_values(seed=1))
+    reports = import_logs([good, own], mapping(), tmp_path / 'bag')
     assert [r.n_rows_written for r in reports] == [N_ROWS, N_ROWS]
 
 

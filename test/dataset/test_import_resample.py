@@ -176,7 +176,8 @@ def test_several_files_and_a_folder_become_one_bag_with_one_segment_each(
     for k in range(2):
         write_log(folder / f'run_{k}.csv', np.arange(0.0, 3.0, 0.008) + 100.0 * k, robot)
     (folder / 'notes.md').write_text('not a log\n', encoding='utf-8')
-    extra = write_log(tmp_path / 'extra.csv', np.arange(0.0, 2.0, 0.008), robot)
+    # Another stretch of the motion: a file that repeats rows of another is refused.
+    extra = write_log(tmp_path / 'extra.csv', np.arange(0.0, 2.0, 0.008) + 50.0, robot)
     reports = import_logs([folder, extra], mapping_for(robot), tmp_path / 'bag', robot=robot)
     assert [r.source.name for r in reports] == ['run_0.csv', 'run_1.csv', 'extra.csv']
     recording = load_recording(tmp_path / 'bag', robot)
@@ -353,8 +354,8 @@ def test_a_shuffled_split_draws_each_segment_of_a_bag_on_its_own(
     folder = tmp_path / 'logs'
     folder.mkdir()
     for k in range(2):
-        # Two runs of their own (the same log twice is refused): the second starts later.
-        write_log(folder / f'run_{k}.csv', np.arange(0.0, 12.0, 0.008) + k, robot)
+        # Two runs of their own (the same rows twice are refused): the second starts later.
+        write_log(folder / f'run_{k}.csv', np.arange(0.0, 12.0, 0.008) + 100.0 * k, robot)
     import_logs([folder], mapping_for(robot), tmp_path / 'bag', robot=robot)
     config = PreprocessConfig(target='motor', cutoff_hz=(2.0,) * 6, split='shuffled')
     first, second = load_datasets([tmp_path / 'bag'], robot, config, progress=False)
@@ -368,7 +369,7 @@ def test_a_segment_too_short_for_the_filter_names_the_remedy(
     tmp_path: Path, robot: RobotConfig
 ) -> None:
     write_log(tmp_path / 'long.csv', np.arange(0.0, 12.0, 0.008), robot)
-    write_log(tmp_path / 'short.csv', np.arange(0.0, 0.5, 0.008), robot)
+    write_log(tmp_path / 'short.csv', np.arange(0.0, 0.5, 0.008) + 50.0, robot)
     import_logs(
         [tmp_path / 'long.csv', tmp_path / 'short.csv'], mapping_for(robot), tmp_path / 'bag'
     )
