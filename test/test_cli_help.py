@@ -40,8 +40,8 @@ def test_the_demo_help_counts_the_kinds_it_trains_by_default():
     assert DEMO_MODELS in ' '.join(demo.format_help().split())
 
 
-def test_the_registry_holds_the_studys_seven_and_four_physics_kinds():
+def test_the_registry_holds_the_studys_seven_and_six_on_identified_physics():
     assert len(STUDY_MODELS) == 7
     assert set(MODEL_KINDS) - set(STUDY_MODELS) == {
-        'rnea_id', 'rnea_id_mlp', 'rnea_effects', 'rnea_effects_mlp'
+        'rnea_id', 'rnea_id_mlp', 'rnea_effects', 'rnea_effects_mlp', 'delan_id', 'lnn_mlp_id'
     }  # fmt: skip

@@ -1,9 +1,9 @@
 """The report's account of identified physics: what the data changed against the URDF.
 
-For a fitted model that carries ``physics.identified.IdentifiedPhysics`` (rnea_id, rnea_id_mlp):
-each body's mass and centre of mass, the payload, the drives against their datasheet, and the
-base parameters with their 95 % intervals, marked identified by the data or held at the CAD
-prior.
+For a fitted model that carries ``physics.identified.IdentifiedPhysics`` (rnea_id and the
+networks on it: rnea_id_mlp, delan_id, lnn_mlp_id): each body's mass and centre of mass, the
+payload, the drives against their datasheet, and the base parameters with their 95 % intervals,
+marked identified by the data or held at the CAD prior.
 """
 
 from __future__ import annotations

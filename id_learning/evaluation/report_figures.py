@@ -74,6 +74,8 @@ _EXTRA_COLOURS = {
     'rnea_effects': 'tab:olive',
     'rnea_id_mlp': '#1f3f8f',
     'rnea_effects_mlp': '#8b6914',
+    'delan_id': '#6a3d9a',
+    'lnn_mlp_id': '#b03060',
 }
 _SPARE_COLOURS = ('#2f4f4f', '#daa520', '#800000')
 #: Line styles cycled over the models, so that lines of the same level stay told apart.

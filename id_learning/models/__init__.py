@@ -1,8 +1,9 @@
 """Inverse-dynamics models: one interface (base), the kinds by name (registry), artifacts.
 
 The kinds (``MODEL_KINDS``): the study's seven (``STUDY_MODELS``), the identified physics and
-the diagnosed model (``rnea_id``, ``rnea_effects``), and each of these two with a network on top
-(``rnea_id_mlp``, ``rnea_effects_mlp``). Artifacts hold no pickle.
+the diagnosed model (``rnea_id``, ``rnea_effects``), each of these two with a network on top
+(``rnea_id_mlp``, ``rnea_effects_mlp``), and the Lagrangian networks initialised from the
+identified physics (``delan_id``, ``lnn_mlp_id``). Artifacts hold no pickle.
 
 The base classes import eagerly; the registry and artifact functions import on first use, so
 that ``import id_learning.models.base`` stays light and does not load every model family.

@@ -25,19 +25,21 @@ by its half range ``h_tau``).
 
 from __future__ import annotations
 
-from abc import abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
 import torch
 
+from id_learning.dataset.preprocess import MinMaxScaler
 from id_learning.errors import CheckpointError, ConfigError, DatasetError
 from id_learning.models.base import (
     ModelConfig,
     SamplePredictor,
     TorqueComponents,
 )
+from id_learning.models.blackbox import check_kind
 from id_learning.models.data import TrainingData
 from id_learning.models.delan import DelanNetwork, euler_lagrange_torque
 from id_learning.models.fitting import OptimConfig, select_device
@@ -52,6 +54,8 @@ __all__ = [
     'DelanConfig',
     'DelanModel',
     'DelanNetwork',
+    'LagrangianConfig',
+    'LagrangianModel',
     'LagrangianNetwork',
     'LagrangianScaling',
     'LnnConfig',
@@ -71,7 +75,7 @@ _DEVICES = ('auto', 'cpu', 'cuda')
 
 
 @dataclass(frozen=True)
-class _LagrangianConfig(ModelConfig):
+class LagrangianConfig(ModelConfig):
     """Settings shared by the Lagrangian models.
 
     Defaults: 2 hidden layers of 64 tanh units (the study's and the DeLaN reference's size and
@@ -187,8 +191,8 @@ class _LagrangianConfig(ModelConfig):
 
 
 @dataclass(frozen=True)
-class DelanConfig(_LagrangianConfig):
-    """DeLaN settings (see _LagrangianConfig for the shared ones).
+class DelanConfig(LagrangianConfig):
+    """DeLaN settings (see LagrangianConfig for the shared ones).
 
     Defaults differ from the shared ones where the heavy arm showed the need (rigid-body
     joint-torque twin recording, 10 min, through the filter; see docs/training.md): the fully
@@ -226,15 +230,15 @@ class DelanConfig(_LagrangianConfig):
 
 
 @dataclass(frozen=True)
-class LnnConfig(_LagrangianConfig):
-    """LNN settings (see _LagrangianConfig)."""
+class LnnConfig(LagrangianConfig):
+    """LNN settings (see LagrangianConfig)."""
 
     kind: Literal['lnn'] = 'lnn'
 
 
 @dataclass(frozen=True)
-class LnnMlpConfig(_LagrangianConfig):
-    """LNN+MLP settings (see _LagrangianConfig for the shared ones).
+class LnnMlpConfig(LagrangianConfig):
+    """LNN+MLP settings (see LagrangianConfig for the shared ones).
 
     Attributes:
         dissipation_width: units per hidden layer of the dissipation MLP.
@@ -242,31 +246,36 @@ class LnnMlpConfig(_LagrangianConfig):
         dissipation_activation: its activation.
     """
 
-    kind: Literal['lnn_mlp'] = 'lnn_mlp'
+    # str, not a Literal: the lnn_mlp_id config extends this one.
+    kind: str = 'lnn_mlp'
     dissipation_width: int = 64
     dissipation_depth: int = 2
     dissipation_activation: str = 'tanh'
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
+        check_kind(self)  # 'lnn_mlp', or a subclass's own kind
         super().__post_init__()
         for key in ('dissipation_width', 'dissipation_depth'):
             value = getattr(self, key)
             if not isinstance(value, int) or value < 1:
-                raise ConfigError(f'lnn_mlp: {key} must be an integer >= 1, got {value!r}')
+                raise ConfigError(f'{self.kind}: {key} must be an integer >= 1, got {value!r}')
 
     def _activation_keys(self) -> tuple[str, ...]:
         return ('activation', 'dissipation_activation')
 
 
-class _LagrangianModel(TorchModel[LagrangianNetwork]):
-    """Fit, predict, save and load shared by the three Lagrangian models.
+class LagrangianModel(TorchModel[LagrangianNetwork]):
+    """Fit, predict, save and load shared by the Lagrangian models.
 
     Fitted state: ``network_`` (on the CPU, float32), ``scaling_`` and ``history_``.
     """
 
-    config: _LagrangianConfig
+    config: LagrangianConfig
     history_key: ClassVar[str] = 'history'
+    #: The network the kind builds, and the config's keys it takes as keywords.
+    network_class: ClassVar[type[LagrangianNetwork]]
+    network_keys: ClassVar[tuple[str, ...]] = ('width', 'depth', 'activation', 'init')
 
     def __init__(self, config: ModelConfig, robot: RobotConfig) -> None:
         """Store the settings; no I/O, no fitting.
@@ -281,11 +290,13 @@ class _LagrangianModel(TorchModel[LagrangianNetwork]):
         super().__init__(config, robot)
         self.scaling_: LagrangianScaling | None = None
 
-    @abstractmethod
     def make_network(
         self, scaling: LagrangianScaling, generator: torch.Generator
     ) -> LagrangianNetwork:
         """Build an untrained network of this configuration, weights drawn from generator."""
+        build: Callable[..., LagrangianNetwork] = self.network_class
+        settings = {key: getattr(self.config, key) for key in self.network_keys}
+        return build(scaling, generator=generator, **settings)
 
     def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
         """Fit the torque to the labels; early stopping on the validation rows.
@@ -307,7 +318,10 @@ class _LagrangianModel(TorchModel[LagrangianNetwork]):
             )
         config = self.config
         device = select_device(config.device)
-        scaling = LagrangianScaling.from_dataset(dataset, balance=config.energy_balance)
+        target, loss_scale, learned = self.training_target(data)
+        scaling = LagrangianScaling.from_dataset(
+            dataset, balance=config.energy_balance, torque=learned
+        )
         network = self.make_network(scaling, torch.Generator().manual_seed(config.seed))
         q, v, a = (to_tensor(x, device) for x in (dataset.q, dataset.v, dataset.a))
         n = len(self.joint_names)
@@ -322,14 +336,26 @@ class _LagrangianModel(TorchModel[LagrangianNetwork]):
             network,
             predict,
             data,
-            dataset.tau,
-            scaling.torque.scale(),
+            target,
+            loss_scale,
             config=config,
             device=device,
             progress=progress,
         )
         self.scaling_ = scaling
         return self
+
+    def training_target(
+        self, data: TrainingData
+    ) -> tuple[np.ndarray, np.ndarray, MinMaxScaler | None]:
+        """What the network learns, for ``fit``: the labels, by default.
+
+        Returns:
+            The target (N, n) [N*m] on every sample, the loss's scale per joint (n,) [N*m] (the
+            study's: the labels' half range) and the target's range on the training part that
+            scales the network's torque (``LagrangianScaling``; None: the labels').
+        """
+        return data.dataset.tau, data.dataset.target_scaler.scale(), None
 
     def _evaluate(
         self, q: np.ndarray, v: np.ndarray, a: np.ndarray, *, parts: bool
@@ -394,7 +420,7 @@ class _LagrangianModel(TorchModel[LagrangianNetwork]):
         return {'scaling': self.scaling_.to_dict(), **self._history_metadata()}
 
 
-class DelanModel(_LagrangianModel):
+class DelanModel(LagrangianModel):
     """Deep Lagrangian Network: torque from a learned mass matrix M(q) and potential V(q).
 
     Components: inertial M a, Coriolis/centrifugal, gravity dV/dq; friction None (a
@@ -403,22 +429,8 @@ class DelanModel(_LagrangianModel):
 
     kind: ClassVar[str] = 'delan'
     config: DelanConfig
-
-    def make_network(
-        self, scaling: LagrangianScaling, generator: torch.Generator
-    ) -> LagrangianNetwork:
-        """Build an untrained network of this configuration, weights drawn from generator."""
-        config = self.config
-        return DelanNetwork(
-            scaling,
-            width=config.width,
-            depth=config.depth,
-            activation=config.activation,
-            diagonal_epsilon=config.diagonal_epsilon,
-            diagonal_shift=config.diagonal_shift,
-            generator=generator,
-            init=config.init,
-        )
+    network_class = DelanNetwork
+    network_keys = (*LagrangianModel.network_keys, 'diagonal_epsilon', 'diagonal_shift')
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """M(q) (B, n, n) [kg*m^2] for q (B, n) [rad]."""
@@ -428,7 +440,7 @@ class DelanModel(_LagrangianModel):
             return to_numpy(network.mass_matrix(to_tensor(q)))
 
 
-class LnnModel(_LagrangianModel):
+class LnnModel(LagrangianModel):
     """Black-box Lagrangian network: torque from the derivatives of one learned L(q, v).
 
     Components (a convention for a general L): inertial (d2L/dv2) a, gravity -dL/dq at v = 0,
@@ -437,41 +449,16 @@ class LnnModel(_LagrangianModel):
 
     kind: ClassVar[str] = 'lnn'
     config: LnnConfig
-
-    def make_network(
-        self, scaling: LagrangianScaling, generator: torch.Generator
-    ) -> LagrangianNetwork:
-        """Build an untrained network of this configuration, weights drawn from generator."""
-        config = self.config
-        return LnnNetwork(
-            scaling,
-            width=config.width,
-            depth=config.depth,
-            activation=config.activation,
-            generator=generator,
-            init=config.init,
-        )
+    network_class = LnnNetwork
 
 
-class LnnMlpModel(_LagrangianModel):
+class LnnMlpModel(LagrangianModel):
     """LNN plus an MLP h(q, v) for dissipative torques; components as LNN, friction = h."""
 
     kind: ClassVar[str] = 'lnn_mlp'
     config: LnnMlpConfig
-
-    def make_network(
-        self, scaling: LagrangianScaling, generator: torch.Generator
-    ) -> LagrangianNetwork:
-        """Build an untrained network of this configuration, weights drawn from generator."""
-        config = self.config
-        return LnnMlpNetwork(
-            scaling,
-            width=config.width,
-            depth=config.depth,
-            activation=config.activation,
-            dissipation_width=config.dissipation_width,
-            dissipation_depth=config.dissipation_depth,
-            dissipation_activation=config.dissipation_activation,
-            generator=generator,
-            init=config.init,
-        )
+    network_class = LnnMlpNetwork
+    network_keys = (
+        *LagrangianModel.network_keys,
+        *('dissipation_width', 'dissipation_depth', 'dissipation_activation'),
+    )

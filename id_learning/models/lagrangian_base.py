@@ -124,15 +124,22 @@ class LagrangianScaling:
         )
 
     @classmethod
-    def from_dataset(cls, dataset: Dataset, *, balance: float = 0.0) -> LagrangianScaling:
-        """Reuse the dataset's scalers (fitted on its training part): q and v columns, target."""
+    def from_dataset(
+        cls, dataset: Dataset, *, balance: float = 0.0, torque: MinMaxScaler | None = None
+    ) -> LagrangianScaling:
+        """Reuse the dataset's scalers (fitted on its training part): q and v columns, target.
+
+        ``torque``: the range of what the network learns where that is not the target (a
+        residual on a physics prior); None: the target's.
+        """
         inputs = dataset.input_scaler
         if inputs.low_ is None or inputs.high_ is None:
             raise DatasetError('the dataset input scaler is not fitted')
         n = len(dataset.joints)
         position = MinMaxScaler(inputs.low_[:n].copy(), inputs.high_[:n].copy())
         velocity = MinMaxScaler(inputs.low_[n : 2 * n].copy(), inputs.high_[n : 2 * n].copy())
-        torque = MinMaxScaler.from_dict(dataset.target_scaler.to_dict())
+        if torque is None:
+            torque = MinMaxScaler.from_dict(dataset.target_scaler.to_dict())
         energy = energy_scale(position.scale(), torque.scale())
         return cls(position, velocity, torque, energy, balance)
 

@@ -261,10 +261,16 @@ PHYSICAL_SIGNS: dict[str, dict[str, tuple[str, str, float, bool]]] = {
         'coulomb': ('Coulomb friction', 'N*m', 0.0, True),
     },
     'rnea_id': _IDENTIFIED,
-    'rnea_id_mlp': {f'physics.{name}': sign for name, sign in _IDENTIFIED.items()},
+    **{
+        kind: {f'physics.{name}': sign for name, sign in _IDENTIFIED.items()}
+        for kind in ('rnea_id_mlp', 'delan_id', 'lnn_mlp_id')
+    },
 }
 #: The body masses of an identified rigid body: every 10th inertial parameter (pinocchio's order).
-_THETA = {'rnea_id': 'theta', 'rnea_id_mlp': 'physics.theta'}
+_THETA = {
+    'rnea_id': 'theta',
+    **dict.fromkeys(('rnea_id_mlp', 'delan_id', 'lnn_mlp_id'), 'physics.theta'),
+}
 #: Values a convex solver leaves just beyond a bound it held (relative to the array's scale).
 _SOLVER_SLACK = 1e-6
 

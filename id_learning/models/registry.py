@@ -37,6 +37,12 @@ from id_learning.models.lagrangian import (
     LnnMlpModel,
     LnnModel,
 )
+from id_learning.models.lagrangian_id import (
+    DelanIdConfig,
+    DelanIdModel,
+    LnnMlpIdConfig,
+    LnnMlpIdModel,
+)
 from id_learning.models.physics import RneaLqConfig, RneaLqModel, RneaMlpConfig, RneaMlpModel
 from id_learning.robot.config import RobotConfig
 
@@ -56,6 +62,8 @@ MODEL_KINDS: dict[str, tuple[type[ModelConfig], type[InverseDynamicsModel]]] = {
     'rnea_effects_mlp': (RneaEffectsMlpConfig, RneaEffectsMlpModel),
     'rnea_id': (RneaIdConfig, RneaIdModel),
     'rnea_id_mlp': (RneaIdMlpConfig, RneaIdMlpModel),
+    'delan_id': (DelanIdConfig, DelanIdModel),
+    'lnn_mlp_id': (LnnMlpIdConfig, LnnMlpIdModel),
 }
 
 #: The reference study's seven models, in its table order.

@@ -8,7 +8,8 @@ A network extrapolates where it has seen no data; the rigid-body model does not.
 The prior, in order of preference: a physics artifact given to the predictor (an identified
 ``rnea_id``, ``rnea_effects`` or ``rnea_lq`` of the same robot and target); the identified
 ``rnea_id`` that ``train`` wrote beside the model in the same run; the model's own physics part
-(``rnea_mlp``, ``rnea_id_mlp``, ``rnea_effects_mlp``: their h is the network); the nominal model
+(``rnea_mlp``, ``rnea_id_mlp``, ``rnea_effects_mlp``: their h is the network; ``delan_id``,
+``lnn_mlp_id``: their Lagrangian residual is); the nominal model
 (URDF rigid body plus datasheet rotor inertia for motor torques). Friction is the largest term
 of a motor torque, and only an identified prior has it.
 """

@@ -110,8 +110,10 @@ FIT_ORDER = (
     'rnea_effects_mlp',
     'mlp',
     'lstm',
+    'delan_id',
     'delan',
     'lnn',
+    'lnn_mlp_id',
     'lnn_mlp',
 )
 

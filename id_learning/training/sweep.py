@@ -96,6 +96,8 @@ SEARCH_SPACES: dict[str, dict[str, Space]] = {
         'gain_std': ('log', 0.01, 0.2),
     },
     'rnea_id_mlp': _MLP,
+    'delan_id': _LAGRANGIAN,
+    'lnn_mlp_id': _LAGRANGIAN,
 }
 
 
