@@ -46,6 +46,7 @@ HYPER_RANGES: dict[str, tuple[float, float]] = {
     'eval_stride': _STRIDE,
     'seed': (0, 2**32 - 1),  # numpy's and Optuna's generators
     'iterations': (1, 100),
+    'joint_rounds': (0, 20),
     'learning_rate': (1e-12, 10.0),
     'weight_decay': (0.0, 10.0),
     'lr_decay': (1e-6, 1.0),

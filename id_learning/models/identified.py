@@ -10,7 +10,9 @@ the network learns only what the identified physics leaves.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import logging
+import time
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
@@ -22,12 +24,17 @@ from id_learning.models.identified_prior import (
     PHYSICS_PREFIX,
     IdentificationSettings,
     IdentifiedPrior,
+    identification_config,
 )
 from id_learning.models.network_common import NumpyNormalisedMlp
 from id_learning.models.physics import RneaMlpConfig, RneaMlpModel
+from id_learning.physics.identification import identify
+from id_learning.physics.identified import IdentifiedPhysics
 from id_learning.robot.config import RobotConfig
 
 __all__ = ['RneaIdConfig', 'RneaIdMlpConfig', 'RneaIdMlpModel', 'RneaIdModel']
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -103,9 +110,15 @@ class RneaIdModel(IdentifiedPrior):
 
 @dataclass(frozen=True)
 class RneaIdMlpConfig(IdentificationSettings, RneaMlpConfig):
-    """The Newtonian network's settings on top of the identified physics (see RneaIdConfig)."""
+    """The Newtonian network's settings on top of the identified physics (see RneaIdConfig).
+
+    ``joint_rounds``: after the physics then h, rounds in which the physics is identified again
+    on the labels less h (under the identification's constraints: physical bodies, the CAD
+    prior) and h fitted again on what the new physics leaves (0: physics first, then h).
+    """
 
     kind: Literal['rnea_id_mlp'] = 'rnea_id_mlp'
+    joint_rounds: int = 0
 
     def __post_init__(self) -> None:
         """Check the network's and the identification's settings."""
@@ -118,11 +131,62 @@ class RneaIdMlpModel(IdentifiedPrior, RneaMlpModel):
 
     kind: ClassVar[str] = 'rnea_id_mlp'
     config: RneaIdMlpConfig
+    _joint_physics: IdentifiedPhysics | None = None
 
     def training_physics(self, data: TrainingData) -> np.ndarray:
-        """Identify on the training part (shared with rnea_id); its torque on every sample."""
+        """Identify on the training part (shared with rnea_id); its torque on every sample.
+
+        In a joint round, the physics identified on the labels less h instead.
+        """
         ds = data.dataset
-        return self.identify(data).torque(ds.q, ds.v, ds.a)
+        physics = self._joint_physics or self.identify(data)
+        return physics.torque(ds.q, ds.v, ds.a)
+
+    def fit(self, data: TrainingData, *, progress: bool = False) -> Self:
+        """Physics, then h; then ``joint_rounds`` of both again, each on what the other leaves.
+
+        Alternating minimisation of one objective, the labels' error over the physics' and the
+        network's parameters together: each round identifies the physics on the labels less h
+        (filtered like them), with every constraint and prior of the identification, and fits
+        h on the labels less that physics. A round is kept only where it lowers the whole
+        model's error on the validation tail (an h that learned nothing would otherwise bend
+        the physics); the first that does not ends the rounds.
+        """
+        self._joint_physics = None
+        start, budget = time.perf_counter(), self.config.max_seconds
+        super().fit(data, progress=progress)
+        ds = data.dataset
+        settings = identification_config(self.config)
+        best, best_error = dict(self.__dict__), self._validation_error(data)
+        for done in range(self.config.joint_rounds):
+            if budget is not None and time.perf_counter() - start > budget / 2:
+                _LOG.warning(
+                    '%s: %d of %d joint rounds done within max_seconds %g s; the rest skipped',
+                    self.kind, done, self.config.joint_rounds, budget,
+                )  # fmt: skip
+                break
+            h = self.residual_torque(ds.q, ds.v)
+            if ds.is_through_filter:
+                h = ds.filter_like_labels(h)
+            self._joint_physics = identify(replace(ds, tau=ds.tau - h), self.robot, settings)
+            self.physics_ = self._joint_physics
+            super().fit(data, progress=progress)
+            error = self._validation_error(data)
+            if not error < best_error:
+                _LOG.info('%s: joint round %d did not lower the validation error', self.kind, done)
+                break
+            best, best_error = dict(self.__dict__), error
+        self.__dict__.update(best)
+        self._joint_physics = None
+        return self
+
+    def _validation_error(self, data: TrainingData) -> float:
+        """The whole model's normalised mean squared error on the validation tail."""
+        ds, rows = data.dataset, data.validation_rows
+        tau = self.predict(ds.q, ds.v, ds.a)
+        if ds.is_through_filter:
+            tau = ds.filter_like_labels(tau)
+        return float(np.mean(((tau[rows] - ds.tau[rows]) / ds.target_scaler.scale()) ** 2))
 
     def sample_predictor(self) -> SamplePredictor:
         """One sample's torque: the identified physics' path plus h in float64 numpy."""
