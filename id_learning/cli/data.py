@@ -7,6 +7,7 @@ Each makes or examines a bag; they share nothing with training, so they live apa
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from id_learning.cli import options
@@ -36,6 +37,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if args.joint_torque_sensors:
             overrides['joint_torque_sensors'] = True
         config = load_twin_config(args.config, overrides)
+        if args.duration is not None and config.excitation.file is not None:
+            from id_learning.errors import ConfigError
+
+            raise ConfigError(
+                f'--duration: {args.config} plays the designed excitation '
+                f"{config.excitation.file} whole; its length is the design's (design a "
+                'shorter one with id-learning excitation --duration)'
+            )
         if args.duration is not None:
             from dataclasses import replace
 
@@ -67,6 +76,9 @@ def cmd_excitation(args: argparse.Namespace) -> int:
     robot = options.load_robot(args)
     check_duration(args.duration, robot.ipo_period_s, robot.n_joints, '--duration')
     config = ExcitationConfig(duration_s=args.duration)
+    if note := config.duration_note(robot.ipo_period_s):
+        print(f'id-learning excitation: {note.replace("excitation.duration_s", "--duration")}',
+              file=sys.stderr)  # fmt: skip
     with bag_output(Path(args.out), overwrite=args.force) as out:
         rng = np.random.default_rng(args.seed)
         design = design_for_identification(
@@ -81,8 +93,8 @@ def cmd_excitation(args: argparse.Namespace) -> int:
         f'{report.condition_random:.4g}, {report.columns} columns), joint-pair coverage '
         f'{report.coverage:.0%} (random: {report.coverage_random:.0%}). Play it with the '
         f'replay (-p bag:={args.out} -p "topics:=[\'/joint_states\']"), or simulate it '
-        f'(excitation: {{file: {Path(args.out) / "excitation.json"}}}); trajectory.csv holds '
-        'the samples'
+        f'(excitation: {{file: {(Path(args.out) / "excitation.json").resolve()}}} in a twin '
+        'config; a relative path is read beside the config); trajectory.csv holds the samples'
     )
     return 0
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,6 +56,8 @@ __all__ = [
     'load_design',
     'write_design',
 ]
+
+_LOG = logging.getLogger(__name__)
 
 #: Bins per joint over the reachable position range; coverage counts the cells of joint pairs.
 COVERAGE_BINS = 8
@@ -257,7 +260,7 @@ def design_for_identification(
     trajectory = ExcitationTrajectory(
         tuple(d.segment for d in kept), home, config.period_s, config.rest_s
     )
-    check_limits(trajectory, limits, period_s / CHECK_OVERSAMPLING)
+    check_limits(trajectory, limits, period_s / CHECK_OVERSAMPLING, robot.joints)
     report = DesignReport(
         columns=draw.columns.count,
         condition=condition(_total([d.gram for d in kept])),
@@ -306,11 +309,76 @@ def write_design(design: ExcitationDesign, robot: RobotConfig, out: Path) -> Pat
     return out
 
 
+_DOCUMENT_KEYS = {'format', 'robot', 'joints', 'ipo_period_s', 'report', 'trajectory'}
+_TRAJECTORY_KEYS = {'home', 'period_s', 'rest_s', 'omega_rad_s', 'segments'}
+_SEGMENT_KEYS = {'a', 'b', 'q0'}
+
+
+def _keys(mapping: object, allowed: set[str], where: str) -> dict[str, Any]:
+    """``mapping`` as a dict holding exactly the ``allowed`` keys (names the odd ones)."""
+    if not isinstance(mapping, dict):
+        raise ConfigError(f'{where}: expected a mapping, got {type(mapping).__name__}')
+    if unknown := sorted(set(mapping) - allowed):
+        raise ConfigError(f'{where}: unknown key(s) {unknown}; known: {sorted(allowed)}')
+    if missing := sorted(allowed - set(mapping)):
+        raise ConfigError(f'{where}: missing key(s) {missing}')
+    return mapping
+
+
+def _array(value: object, shape: tuple[int, ...], where: str) -> np.ndarray:
+    """A finite float array of ``shape`` (-1: any length, the same for every such array)."""
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f'{where}: not an array of numbers: {err}') from err
+    fits = array.ndim == len(shape) and all(
+        n in (-1, size) for n, size in zip(shape, array.shape, strict=True)
+    )
+    if not fits or (len(shape) == 2 and array.shape[1] == 0):
+        wanted = ', '.join('harmonics' if n == -1 else str(n) for n in shape)
+        raise ConfigError(f'{where}: shape {array.shape}, expected ({wanted})')
+    if not np.isfinite(array).all():
+        raise ConfigError(f'{where}: holds a value that is not a finite number')
+    return array
+
+
+def _trajectory(data: object, n: int, where: str) -> ExcitationTrajectory:
+    """The designed trajectory of a document, every number checked (``load_design``)."""
+    data = _keys(data, _TRAJECTORY_KEYS, where)
+    period, rest, omega = (
+        float(_array(data[key], (), f'{where}.{key}'))
+        for key in ('period_s', 'rest_s', 'omega_rad_s')
+    )
+    if not period > 0 or not rest >= 0:
+        raise ConfigError(f'{where}: period_s {period:g} must be > 0 and rest_s {rest:g} >= 0')
+    if not math.isclose(omega * period, 2 * math.pi, rel_tol=1e-9):
+        raise ConfigError(f'{where}: omega_rad_s {omega:g} is not 2 pi / period_s {period:g}')
+    segments = data['segments']
+    if not isinstance(segments, list) or not segments:
+        raise ConfigError(f'{where}.segments: no segment: nothing would move')
+    parts = []
+    for k, given in enumerate(segments):
+        at = f'{where}.segments[{k}]'
+        segment = _keys(given, _SEGMENT_KEYS, at)
+        a = _array(segment['a'], (n, -1), f'{at}.a')
+        b = _array(segment['b'], a.shape, f'{at}.b')
+        parts.append(FourierSegment(a, b, _array(segment['q0'], (n,), f'{at}.q0'), omega))
+    if len({part.a.shape for part in parts}) > 1:
+        raise ConfigError(f'{where}.segments: the segments hold different numbers of harmonics')
+    return ExcitationTrajectory(tuple(parts), _array(data['home'], (n,), f'{where}.home'),
+                                period, rest)  # fmt: skip
+
+
 def load_design(path: Path, robot: RobotConfig, where: str) -> ExcitationTrajectory:
     """The trajectory of an ``excitation.json`` for ``robot``, checked against its limits.
 
+    Every key and number is checked (finite, shaped for the robot's joints, rests not
+    negative, at least one segment), and the file must be for the robot's joints and IPO
+    period; another robot name with the same joints is said in a warning.
+
     Raises:
-        ConfigError: unreadable, of another format, robot or joints, or beyond the limits.
+        ConfigError: unreadable, of another format, joints or period, damaged, or beyond the
+            limits (naming the key, the joint, the time).
     """
     try:
         document = json.loads(Path(path).read_text(encoding='utf-8'))
@@ -320,14 +388,23 @@ def load_design(path: Path, robot: RobotConfig, where: str) -> ExcitationTraject
         raise ConfigError(
             f'{where}: {path}: not an {DESIGN_FILE} written by id-learning excitation'
         )
-    if document.get('joints') != list(robot.joints):
+    document = _keys(document, _DOCUMENT_KEYS, f'{where}: {path}')
+    if document['joints'] != list(robot.joints):
         raise ConfigError(
-            f'{where}: {path}: designed for joints {document.get("joints")} of '
-            f'{document.get("robot")!r}, not {list(robot.joints)} of {robot.name!r}'
+            f'{where}: {path}: designed for joints {document["joints"]} of '
+            f'{document["robot"]!r}, not {list(robot.joints)} of {robot.name!r}'
         )
-    try:
-        trajectory = ExcitationTrajectory.from_dict(document['trajectory'])
-    except (KeyError, TypeError, ValueError) as err:
-        raise ConfigError(f'{where}: {path}: its trajectory is damaged: {err}') from err
-    check_limits(trajectory, robot.limits, robot.ipo_period_s / CHECK_OVERSAMPLING)
+    period = document['ipo_period_s']
+    if not isinstance(period, (int, float)) or not math.isclose(period, robot.ipo_period_s):
+        raise ConfigError(
+            f'{where}: {path}: designed for an IPO period of {period!r} s, {robot.name!r} has '
+            f'{robot.ipo_period_s:g} s: design it again for this robot'
+        )
+    if document['robot'] != robot.name:
+        _LOG.warning('%s: %s was designed for %r, played on %r (the same joints)',
+                     where, path, document['robot'], robot.name)  # fmt: skip
+    trajectory = _trajectory(
+        document['trajectory'], robot.n_joints, f'{where}: {path}: trajectory'
+    )
+    check_limits(trajectory, robot.limits, robot.ipo_period_s / CHECK_OVERSAMPLING, robot.joints)
     return trajectory

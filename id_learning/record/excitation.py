@@ -324,11 +324,18 @@ def design_excitation(
     return trajectory
 
 
-def check_limits(trajectory: ExcitationTrajectory, limits: JointLimits, step_s: float) -> None:
+def check_limits(
+    trajectory: ExcitationTrajectory,
+    limits: JointLimits,
+    step_s: float,
+    joints: tuple[str, ...] | None = None,
+) -> None:
     """Evaluate the trajectory on a dense grid and raise if any limit is exceeded.
 
+    ``joints``: their names, for the message (else ``joint_<k>`` counted from 1).
+
     Raises:
-        ConfigError: names the quantity, joint index, time and value.
+        ConfigError: names the quantity, the joint, the time, the value and by how much.
     """
     t = np.arange(0.0, trajectory.duration_s + step_s, step_s)
     q, qd, qdd = trajectory.evaluate(t)
@@ -338,10 +345,14 @@ def check_limits(trajectory: ExcitationTrajectory, limits: JointLimits, step_s: 
         ('velocity', qd, -limits.velocity, limits.velocity),
         ('acceleration', qdd, -limits.acceleration, limits.acceleration),
     ):
-        bad = (values < low - tolerance) | (values > high + tolerance)
+        bad = ~((values >= low - tolerance) & (values <= high + tolerance))  # NaN is bad too
         if bad.any():
             k, j = (int(x) for x in np.argwhere(bad)[0])
+            joint = joints[j] if joints is not None else f'joint_{j + 1}'
+            value = float(values[k, j])
+            excess = max(low[j] - value, value - high[j])
+            beyond = '' if not np.isfinite(value) else f' (by {excess:.3g})'
             raise ConfigError(
-                f'excitation exceeds the {name} limit of joint {j} at t = {t[k]:.3f} s: '
-                f'{values[k, j]:.4g} outside [{low[j]:.4g}, {high[j]:.4g}]'
+                f'excitation exceeds the {name} limit of {joint} at t = {t[k]:.3f} s: '
+                f'{value:.6g} outside [{low[j]:.6g}, {high[j]:.6g}]{beyond}'
             )

@@ -174,6 +174,11 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
             ),
         }
     if excitation_data.get('file') is not None:  # relative to the config, as robot is
+        if others := sorted(set(excitation_data) - {'file'}):
+            raise ConfigError(
+                f'{where}: excitation: file plays a designed excitation whole, so {others} '
+                'would not apply: remove them (the design holds its own length and shape)'
+            )
         designed = Path(str(excitation_data['file']))
         excitation_data['file'] = str(designed if designed.is_absolute() else base_dir / designed)
     try:

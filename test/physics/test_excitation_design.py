@@ -108,7 +108,7 @@ def test_a_design_for_other_joints_or_damaged_is_refused(design, mabi, tmp_path)
     document = json.loads((out / DESIGN_FILE).read_text())
     del document['trajectory']['segments'][0]['a']
     (out / DESIGN_FILE).write_text(json.dumps(document))
-    with pytest.raises(ConfigError, match='its trajectory is damaged'):
+    with pytest.raises(ConfigError, match=r"segments\[0\]: missing key\(s\) \['a'\]"):
         load_design(out / DESIGN_FILE, mabi, 'excitation.file')
 
 
@@ -120,7 +120,6 @@ def test_the_twin_plays_a_designed_file(design, mabi, tmp_path):
     twin = tmp_path / 'twin.yaml'
     twin.write_text(
         config_text.replace('robot: mabi_max100.yaml', f'robot: {REPO}/config/mabi_max100.yaml')
-        + '\n# designed\n'
     )
     designed = {'excitation': {'file': str(Path(out.name) / DESIGN_FILE)}, 'effects': {}}
     config = load_twin_config(twin, designed)
@@ -135,10 +134,75 @@ def test_the_command_writes_a_bag_and_says_its_figures(tmp_path, capsys):
     out = tmp_path / 'designed'
     argv = ['excitation', '--out', str(out), '--duration', '30', '--candidates', '2', '--quiet']
     assert main(argv) == 0
-    said = capsys.readouterr().out
+    said, warned = capsys.readouterr()
+    assert '--duration 30 s became 26 s' in warned
+    assert str((out / DESIGN_FILE).resolve()) in said  # a path that works from any config
     assert 'condition number is' in said
     assert 'a random design:' in said
     assert (out / 'metadata.yaml').is_file()
     assert (out / DESIGN_FILE).is_file()
     assert main(argv) == 2  # an existing bag is replaced only with --force
     assert main([*argv, '--force']) == 0
+    twin = tmp_path / 'twin.yaml'
+    robot = REPO / 'config' / 'mabi_max100.yaml'
+    twin.write_text(f'robot: {robot}\nexcitation: {{file: designed/{DESIGN_FILE}}}\n')
+    capsys.readouterr()
+    simulate = ['simulate', '--config', str(twin), '--out', str(tmp_path / 'b')]
+    assert main([*simulate, '--duration', '5']) == 2
+    assert 'plays the designed excitation' in capsys.readouterr().err
+
+
+def _edited(out: Path, edit) -> Path:
+    document = json.loads((out / DESIGN_FILE).read_text())
+    edit(document)
+    (out / DESIGN_FILE).write_text(json.dumps(document))
+    return out / DESIGN_FILE
+
+
+@pytest.mark.parametrize(
+    ('edit', 'match'),
+    [
+        (lambda d: d['trajectory']['segments'][0]['a'][0].__setitem__(0, float('nan')),
+         r'segments\[0\]\.a: holds a value that is not a finite number'),
+        (lambda d: d['trajectory'].__setitem__('rest_s', -1.0), r'rest_s -1 >= 0'),
+        (lambda d: d['trajectory'].__setitem__('segments', []), 'no segment: nothing would move'),
+        (lambda d: d.__setitem__('ipo_period_s', 0.004), r'IPO period of 0\.004 s'),
+        (lambda d: d.__setitem__('extra', 1), r"unknown key\(s\) \['extra'\]"),
+        (lambda d: d['trajectory']['segments'][0].pop('q0'), r"missing key\(s\) \['q0'\]"),
+        (lambda d: d['trajectory']['segments'][0].__setitem__('b', [[0.0]] * 6),
+         r'segments\[0\]\.b: shape \(6, 1\), expected \(6, 3\)'),
+        (lambda d: d['trajectory'].__setitem__('omega_rad_s', 1.0), 'not 2 pi / period_s'),
+    ],
+)  # fmt: skip
+def test_every_number_of_a_played_design_is_checked(design, mabi, tmp_path, edit, match):
+    path = _edited(write_design(design, mabi, tmp_path / 'excite'), edit)
+    with pytest.raises(ConfigError, match=match):
+        load_design(path, mabi, 'excitation.file')
+
+
+def test_a_design_named_for_another_robot_of_the_same_joints_is_said(
+    design, mabi, tmp_path, caplog
+):
+    path = _edited(write_design(design, mabi, tmp_path / 'excite'),
+                   lambda d: d.__setitem__('robot', 'mabi_copy'))  # fmt: skip
+    load_design(path, mabi, 'excitation.file')
+    assert "designed for 'mabi_copy', played on 'mabi_max100'" in caplog.text
+
+
+def test_limits_name_the_joint_and_the_excess(design, mabi, tmp_path):
+    def tripled(document):
+        segment = document['trajectory']['segments'][0]
+        segment['a'] = (3 * np.array(segment['a'])).tolist()
+
+    fast = _edited(write_design(design, mabi, tmp_path / 'excite'), tripled)
+    with pytest.raises(ConfigError, match=r'limit of joint_\d at t = .* \(by [0-9.e+-]+\)'):
+        load_design(fast, mabi, 'excitation.file')
+
+
+def test_settings_beside_a_designed_file_are_refused_naming_them(design, mabi, tmp_path):
+    from id_learning.twin import load_twin_config
+
+    write_design(design, mabi, tmp_path / 'excite')
+    played = {'excitation': {'file': str(tmp_path / 'excite' / DESIGN_FILE), 'duration_s': 60}}
+    with pytest.raises(ConfigError, match=r"so \['duration_s'\] would not apply"):
+        load_twin_config(REPO / 'config' / 'twin_default.yaml', played)

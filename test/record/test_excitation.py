@@ -209,7 +209,7 @@ def test_check_limits_names_the_quantity_a_tripled_segment_exceeds(quantity: str
     )
     check_limits(trajectory, test_limits, PERIOD_S)  # precondition: the design itself passes
 
-    with pytest.raises(ConfigError, match=rf'exceeds the {quantity} limit of joint \d at t = '):
+    with pytest.raises(ConfigError, match=rf'exceeds the {quantity} limit of joint_\d at t = '):
         check_limits(scaled(trajectory, 2, 3.0), test_limits, PERIOD_S)
 
 
