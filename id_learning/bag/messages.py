@@ -1,4 +1,10 @@
-"""CDR encoding of the message types the bag contract uses, without rclpy (through rosbags)."""
+"""CDR encoding of the message types the bag contract uses, without rclpy (through rosbags).
+
+Also the one judgement on the order of a topic's messages that the readers share
+(``clock_step``): a rosbag2 reader returns messages in log-time order (the recorder's clock),
+but a JointState's header stamp is the sample's time. When the recorder's clock stepped back
+while recording, the two orders differ, and header-stamp order is the one that holds.
+"""
 
 from __future__ import annotations
 
@@ -14,9 +20,11 @@ from id_learning.header_stamps import NS_PER_S, header_stamp_problem
 
 __all__ = [
     'JOINT_STATE',
+    'ClockStep',
     'JointStateMessage',
     'JointStateSeries',
     'canonical_cdr',
+    'clock_step',
     'decode_joint_state',
     'encode_joint_state',
     'header_stamp_problem',
@@ -142,3 +150,88 @@ class JointStateSeries:
     position: np.ndarray | None
     velocity: np.ndarray | None
     effort: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
+class ClockStep:
+    """A topic whose log times step back where its header stamps advance: read in stamp order.
+
+    Attributes:
+        order: (N,) the positions of the messages in log-time order, in header-stamp order.
+        sample: the first sample (in header-stamp order) logged after the first step back.
+        step_ns: how far the log times step back there, against the header stamps' advance
+            [ns] (> 0): the size of the step of the recorder's clock.
+        steps: how many times the log times step back in header-stamp order.
+        backward: how many times the header stamps step back in log-time order.
+    """
+
+    order: np.ndarray
+    sample: int
+    step_ns: int
+    steps: int
+    backward: int
+
+    def describe(self, topic: str) -> str:
+        """The finding in words, naming the topic, the sample and the size of the step.
+
+        The reader adds what it did about it (read in header-stamp order).
+        """
+        more = f' ({self.steps} times in all)' if self.steps > 1 else ''
+        return (
+            f'{topic}: the log times step back by {self.step_ns * 1e-9:.3f} s at sample '
+            f'{self.sample}{more} while the header stamps advance (a clock step on the recording '
+            f'machine): in log-time order the header stamps would step back {self.backward} '
+            'times'
+        )
+
+
+#: A step longer than this many median steps breaks a time series (as ``inspect``'s gaps).
+_BREAK_STEPS = 1.5
+
+
+def _breaks(times: np.ndarray) -> int:
+    """How many steps of a time series are no regular step: backward, or a gap."""
+    steps = np.diff(times)
+    positive = steps[steps > 0]
+    gap = _BREAK_STEPS * float(np.median(positive)) if positive.size else np.inf
+    return int(np.count_nonzero((steps < 0) | (steps > gap)))
+
+
+def clock_step(stamps_ns: np.ndarray, log_ns: np.ndarray) -> ClockStep | None:
+    """Whether a topic's messages, in log-time order, are in header-stamp order after a clock step.
+
+    Header stamps that step back in log-time order have two explanations: the sender stamped
+    samples back (its clock stepped), or the recorder's clock stepped back and its log times
+    put later samples before or among earlier ones. The second is taken when header-stamp
+    order has strictly increasing stamps (no repeats), its log times step back, and it breaks
+    the two time series (header stamps and log times: a step back or a gap) fewer times than
+    log-time order does: one clock step on the recorder interleaves many samples (or leaves a
+    silence in the log times), one sample stamped back by its sender moves one. Where both
+    orders break as often (a single sample out of place), the data cannot tell the causes
+    apart and the header stamps are left to be refused.
+
+    Args:
+        stamps_ns: (N,) header stamps in log-time order [ns].
+        log_ns: (N,) their log times [ns].
+
+    Returns:
+        The step and the header-stamp order, or None: the stamps already increase, repeat, or
+        do not fit a clock step.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    logs = np.asarray(log_ns, dtype=np.int64)
+    backward = int(np.count_nonzero(np.diff(stamps) < 0))
+    if not backward:
+        return None
+    order = np.argsort(stamps, kind='stable')
+    back = np.flatnonzero(np.diff(logs[order]) < 0)
+    if np.any(np.diff(stamps[order]) <= 0) or not back.size:
+        return None
+    if _breaks(stamps[order]) + _breaks(logs[order]) >= _breaks(stamps) + _breaks(logs):
+        return None
+    k = int(back[0]) + 1
+    advance = int(stamps[order[k]] - stamps[order[k - 1]])
+    logged = int(logs[order[k]] - logs[order[k - 1]])
+    return ClockStep(
+        order=order, sample=k, step_ns=advance - logged, steps=int(back.size), backward=backward
+    )

@@ -17,7 +17,13 @@ from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 from tqdm import tqdm
 
-from id_learning.bag.messages import JOINT_STATE, JointStateSeries, decode_joint_state, typestore
+from id_learning.bag.messages import (
+    JOINT_STATE,
+    JointStateSeries,
+    clock_step,
+    decode_joint_state,
+    typestore,
+)
 from id_learning.bag.reader_paths import BagReader, folder_is_no_bag, storage_files
 from id_learning.bag.reader_storage import check_encodings, check_storage_types, order_by_time
 from id_learning.bag.reader_storage import listed_files as _listed_files
@@ -458,7 +464,9 @@ def read_joint_states(
     """Read and stack every sensor_msgs/JointState on a topic.
 
     ``fields``: the arrays read (and checked); the others come back None, whatever they hold
-    (the motor currents' topic carries its values in effort alone).
+    (the motor currents' topic carries its values in effort alone). The samples come in
+    log-time order, unless the recorder's clock stepped back while recording (``clock_step``):
+    then in header-stamp order, with a warning naming the topic, the sample and the step.
 
     Raises:
         BagError: missing topic, wrong message type, corrupt file.
@@ -526,14 +534,18 @@ def read_joint_states(
         logs.append(log_ns)
     if names is None:
         raise DatasetError(f'{path}: topic {topic} has no messages')
+    step = clock_step(np.array(stamps, dtype=np.int64), np.array(logs, dtype=np.int64))
+    order = np.arange(len(stamps)) if step is None else step.order
+    if step is not None:
+        _LOG.warning('%s: %s; read in header-stamp order', path, step.describe(topic))
 
     def stacked(key: str) -> np.ndarray | None:
-        return np.vstack(wanted[key]) if lengths.get(key) else None
+        return np.vstack(wanted[key])[order] if lengths.get(key) else None
 
     return JointStateSeries(
         topic=topic,
-        stamps_ns=np.array(stamps, dtype=np.int64),
-        log_ns=np.array(logs, dtype=np.int64),
+        stamps_ns=np.array(stamps, dtype=np.int64)[order],
+        log_ns=np.array(logs, dtype=np.int64)[order],
         names=names,
         position=stacked('position'),
         velocity=stacked('velocity'),

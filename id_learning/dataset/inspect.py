@@ -28,6 +28,7 @@ from id_learning.bag import (
     decode_joint_state,
     iter_typed,
 )
+from id_learning.bag.messages import clock_step
 from id_learning.dataset.content import (
     GravityTorque,
     label_findings,
@@ -247,6 +248,8 @@ class _JointStateTopic:
     lengths: dict[str, int] = field(default_factory=dict)
     all_stamps: list[int] = field(default_factory=list)
     all_index: list[int] = field(default_factory=list)
+    all_logs: list[int] = field(default_factory=list)
+    clock_step: str | None = None
     stamps: list[int] = field(default_factory=list)
     logs: list[int] = field(default_factory=list)
     rows: dict[str, list[np.ndarray]] = field(default_factory=lambda: {key: [] for key in FIELDS})
@@ -269,6 +272,7 @@ class _JointStateTopic:
                 self.first_invalid_stamp = f'sample {index}: {msg.stamp_problem}'
         self.all_stamps.append(msg.stamp_ns)
         self.all_index.append(index)
+        self.all_logs.append(log_ns)
         if self.names is None:
             self.names = msg.name
             self.lengths = {key: len(getattr(msg, key)) for key in FIELDS}
@@ -286,6 +290,32 @@ class _JointStateTopic:
         for key, rows in self.rows.items():
             if self.lengths[key]:
                 rows.append(np.asarray(getattr(msg, key), dtype=np.float64))
+
+    def to_header_order(self) -> None:
+        """Put the samples in header-stamp order where the recorder's clock stepped back.
+
+        The finding (``bag.clock_step``) goes to ``clock_step``; the samples are then numbered
+        in header-stamp order, as train numbers them. Else they stay in log-time order.
+        """
+        step = clock_step(
+            np.array(self.all_stamps, dtype=np.int64), np.array(self.all_logs, dtype=np.int64)
+        )
+        if step is None:
+            return
+        self.all_stamps = [self.all_stamps[k] for k in step.order]
+        self.all_logs = [self.all_logs[k] for k in step.order]
+        self.all_index = list(range(len(self.all_stamps)))
+        kept = np.argsort(np.array(self.stamps, dtype=np.int64), kind='stable')
+        self.stamps = [self.stamps[k] for k in kept]
+        self.logs = [self.logs[k] for k in kept]
+        self.rows = {
+            key: [rows[k] for k in kept] if rows else rows for key, rows in self.rows.items()
+        }
+        span_s = (self.all_stamps[-1] - self.all_stamps[0]) * 1e-9
+        self.clock_step = (
+            f'{step.describe(self.topic)}; timed here in header-stamp order, as train reads it: '
+            f'the header stamps span {span_s:.3f} s (start and duration above are log times)'
+        )
 
     def series(self) -> JointStateSeries:
         names = self.names or ()
@@ -405,6 +435,7 @@ def _joint_state_report(
         first_inconsistent=acc.first_inconsistent,
         invalid_stamps=acc.invalid_stamps,
         first_invalid_stamp=acc.first_invalid_stamp,
+        clock_step=acc.clock_step,
         contradictions=contradictions,
         first_contradiction=first,
         velocity_scale=None if contradictions else velocity_scale_problem(series, robot),
@@ -464,6 +495,8 @@ def inspect_bag(
         every[topic, msgtype].append(log_ns)
         if topic in decoded and msgtype == JOINT_STATE:
             decoded[topic].add(len(log_times[topic]) - 1, log_ns, data)
+    for accumulated in decoded.values():
+        accumulated.to_header_order()
     several_types = tuple(
         (name, tuple((kind, len(every[name, kind])) for kind in dict.fromkeys(kinds)))
         for name, kinds in types.items()

@@ -165,6 +165,9 @@ class TopicReport:
         invalid_stamps: messages whose header stamp is no time (``nanosec`` >= 1e9, a
             negative ``sec``: ``bag.header_stamp_problem``); train, the replay and the
             predictor refuse them. first_invalid_stamp: the first, described, or None.
+        clock_step: where the log times step back while the header stamps advance (a clock
+            step on the recorder, ``bag.clock_step``), the finding; the topic is then timed
+            and numbered in header-stamp order, as train reads it. Else None.
     """
 
     name: str
@@ -182,6 +185,7 @@ class TopicReport:
     sampling: str | None = None
     invalid_stamps: int = 0
     first_invalid_stamp: str | None = None
+    clock_step: str | None = None
 
 
 @dataclass(frozen=True)
@@ -359,6 +363,8 @@ def _topic_problems(topic: TopicReport) -> list[str]:
         lines.append(f'{topic.name}: no messages')
     if topic.sampling:
         lines.append(topic.sampling)
+    if topic.clock_step:
+        lines.append(topic.clock_step)
     if timing.gap_count:
         first = timing.gaps[0]
         lines.append(
