@@ -40,6 +40,9 @@ class ImportReport:
         time_base: where the stamps come from (``TimeBase``): kept from an absolute time column,
             or re-based.
         first_time_s: the time column's first value [s] (None without a time column).
+        has_current: whether motor currents were mapped (the bag then has ``currents_topic``).
+        has_joint_torque: whether joint torques were mapped (the joint states' effort).
+        currents_topic: the topic of the motor currents in the bag.
     """
 
     source: Path
@@ -55,6 +58,9 @@ class ImportReport:
     start_ns: int = 0
     time_base: TimeBase = 'relative'
     first_time_s: float | None = None
+    has_current: bool = True
+    has_joint_torque: bool = False
+    currents_topic: str = '/motor_currents'
 
     @property
     def n_segments(self) -> int:
@@ -99,6 +105,21 @@ class ImportReport:
             why = 'the start asked for' if self.time_base == 'given' else 'no time column'
         return f'stamps re-based ({why}): first sample at {first}'
 
+    def label_note(self) -> str:
+        """What train can learn from the bag, when it lacks motor currents ('' with them)."""
+        if self.has_current:
+            return ''
+        missing = f'no motor currents were mapped: the bag holds no {self.currents_topic}'
+        if self.has_joint_torque:
+            return (
+                f'\n  {missing}, so train refuses it for motor labels (the default); train with '
+                '--target joint (its joint torques), or map the currents'
+            )
+        return (
+            f'\n  {missing} and no joint torques, so train has no label in it: map the currents '
+            '(for --target motor, the default) or the joint torques (for --target joint)'
+        )
+
     def summary(self, max_positions: int = 5) -> str:
         """Counts, and the first ``max_positions`` positions of each kind of loss."""
         label = self.row_label
@@ -125,12 +146,18 @@ class ImportReport:
                 f'{grid.mean_step_s * 1e3:.4g} ms), {grid.n_filled} grid points bridged over '
                 f'{len(grid.holes)} holes'
             )
+        velocities = (
+            'from the mapped columns'
+            if self.velocity_source == 'column'
+            else 'differentiated from the positions'
+        )
         return (
             f'{self.source} -> {self.out}: {self.n_rows_written} samples in '
             f'{self.n_segments} segment(s) from {self.n_rows_read} rows, '
             f'{len(self.dropped_rows)} rows dropped; period {self.period_s * 1e3:g} ms, '
-            f'{timing}; velocity {self.velocity_source}'
+            f'{timing}; velocities {velocities}'
             f'\n  {self.time_note()}'
+            + self.label_note()
             + listed([row for row, _ in self.dropped_rows], 'rows dropped')
             + self._first_dropped()
             + listed([(a, b) for a, b, _ in grid.holes], 'holes bridged')

@@ -513,6 +513,10 @@ def import_logs(
     reports = [file.report for file in read]
     for report in reports:
         report.out = out
+        report.has_current = recording.current is not None
+        report.has_joint_torque = recording.joint_torque is not None
+        if robot is not None:
+            report.currents_topic = robot.topics.motor_currents
         logger.info('imported %s', report.summary())
     return reports
 

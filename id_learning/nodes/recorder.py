@@ -20,7 +20,9 @@ handed to the OS, see ``bag.writer``; it trails received by up to one flush peri
 on the way -- gaps in the publisher's sequence numbers while a topic has one publisher, which
 include messages a full subscription queue overwrote; with the events executor, the middleware's
 message-lost events) and lost (received, but never in the file because a write failed). They are
-published on /diagnostics every ``diagnostics_period_s``.
+published on /diagnostics every ``diagnostics_period_s``. A topic that has received nothing
+``SILENT_AFTER_S`` after another's first message is warned of once; the final summary is a
+warning naming each topic that received nothing (the bag lacks it).
 
 A write that fails (disk full, a file size limit) ends the recording: one error names the bag and
 the OS's reason, nothing more is written, the final summary gives per topic the messages
@@ -82,6 +84,8 @@ OUTPUT_OPTION, OVERWRITE_FLAG = 'output:=PATH', 'overwrite:=true'
 MIB = 1 << 20
 #: Messages taken from a subscription's queue per callback, beyond the one the executor hands.
 DRAIN_LIMIT = 256
+#: Seconds after the first message of any topic before a topic still without one is warned of.
+SILENT_AFTER_S = 5.0
 
 
 @dataclass
@@ -122,6 +126,9 @@ class Recorder(ShellNode):
         #: The failed write that ended the recording, or None.
         self.failure: BagError | None = None
         self._is_closed = False
+        #: When the first message of any topic was seen by a flush [monotonic s], or None.
+        self._first_message_s: float | None = None
+        self._said_silent = False
         qos = qos or sensor_qos(config.qos_depth, config.reliability)
         # rclpy's executors pass message info (the publisher's sequence number) to a
         # two-argument callback: a gap in the sequence is a message lost on the way, including
@@ -302,6 +309,7 @@ class Recorder(ShellNode):
             )
         for topic in self._is_single_publisher:
             self._is_single_publisher[topic] = self.count_publishers(topic) == 1
+        self._warn_silent()
         if self.failure is not None:
             return
         try:
@@ -311,6 +319,26 @@ class Recorder(ShellNode):
             return
         self.flushes += 1
         self._count_written()
+
+    def silent_topics(self) -> list[str]:
+        """The recorded topics that have received nothing so far."""
+        return [topic for topic, counts in self.counts.items() if not counts.received]
+
+    def _warn_silent(self) -> None:
+        """Once: a topic still silent ``SILENT_AFTER_S`` after another's first message."""
+        silent = self.silent_topics()
+        if self._said_silent or len(silent) == len(self.counts):
+            return
+        now = time.monotonic()
+        if self._first_message_s is None:
+            self._first_message_s = now
+        if silent and now - self._first_message_s >= SILENT_AFTER_S:
+            self._said_silent = True
+            self.get_logger().warning(
+                f'nothing received on {", ".join(silent)} for {SILENT_AFTER_S:g} s while other '
+                'topics arrive: the bag lacks it so far (is its publisher running, on that '
+                'name, with a matching QoS?)'
+            )
 
     def _on_set_parameters(self, parameters: Sequence[Any]) -> SetParametersResult:
         changed, reason = validate_change(self.config, {p.name: p.value for p in parameters})
@@ -438,6 +466,13 @@ class Recorder(ShellNode):
                 'written ones'
             )
             self.get_logger().error('\n'.join(lines))
+        elif silent := self.silent_topics():
+            them = 'it' if len(silent) == 1 else 'them'
+            lines.append(
+                f'nothing received on {", ".join(silent)}: the bag has no messages of {them} '
+                '(was its publisher running, on that name?)'
+            )
+            self.get_logger().warning('\n'.join(lines))
         else:
             self.get_logger().info('\n'.join(lines))
 

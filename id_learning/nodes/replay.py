@@ -84,7 +84,7 @@ from id_learning.nodes.replay_span import (
     source_stretch,
     stamp_notes,
 )
-from id_learning.nodes.runtime import ShellNode, run_node
+from id_learning.nodes.runtime import NameClash, ShellNode, run_node
 from id_learning.predictor.reference import reference_from_states
 from id_learning.predictor.timing import RollingStats
 from id_learning.robot.config import RobotConfig, load_robot_config
@@ -419,6 +419,9 @@ class Replay(ShellNode):
         self._stop = threading.Event()
         self._is_playing = False
         self._is_closed = False
+        # A replay may end before run_node's first name check (1 s): it also looks as it starts
+        # playing and as it finishes, when a twin would play alongside it (run_node shares it).
+        self.name_clash = NameClash(self, time.monotonic)
         self._diagnostics_timer = self.create_timer(
             config.diagnostics_period_s, self._publish_diagnostics
         )
@@ -462,6 +465,7 @@ class Replay(ShellNode):
         try:
             self._wait_for_subscribers()
             self._is_playing = True
+            self.name_clash.check_now()
             start_ns = time.monotonic_ns() + START_LEAD_NS
             while not self._stop.is_set():
                 start_ns = self._play_once(start_ns)
@@ -508,6 +512,7 @@ class Replay(ShellNode):
         # Reliable delivery of the last cycles before the process may exit.
         for publisher in self._all_publishers():
             publisher.wait_for_all_acked(Duration(seconds=2.0))
+        self.name_clash.check_now()
         self.get_logger().info(self.report())
         self._publish_diagnostics()
         if self.config.exit_when_done and not self.config.loop and not self.done.done():
@@ -587,12 +592,7 @@ class Replay(ShellNode):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Play a bag; returns the exit status when done (or on SIGINT/SIGTERM)."""
-    return run_node(
-        Replay,
-        args,
-        name='replay',
-        config_class=ReplayConfig,
-    )
+    return run_node(Replay, args, name='replay', config_class=ReplayConfig)
 
 
 if __name__ == '__main__':

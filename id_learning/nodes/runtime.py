@@ -94,6 +94,12 @@ class NameClash:
         """Look when a check is due; whether a clash is found (now or before)."""
         if self.found or self._now_s() < self.next_s:
             return self.found
+        return self.check_now()
+
+    def check_now(self) -> bool:
+        """Look now, whatever the schedule (a node whose work may end before the first look)."""
+        if self.found:
+            return True
         self.next_s = self._now_s() + self._every_s
         node = self.node
         me = (node.get_name(), node.get_namespace())
@@ -236,7 +242,8 @@ def run_node(
         node = make_node()
         spinner = make_executor(node.executor_kind)
         spinner.add_node(node)
-        clash = NameClash(node, time.monotonic)
+        # One watch per node: a node that looks itself at its own moments shares it.
+        clash = getattr(node, 'name_clash', None) or NameClash(node, time.monotonic)
         # Short waits: Python runs signal handlers only between them. (Not
         # spin_until_future_complete with a timeout: each call adds a callback to the future.)
         while not (node.done.done() or stop.event.is_set()) and ok():
