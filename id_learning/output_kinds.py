@@ -433,10 +433,25 @@ def _being_written_here(folder: Path) -> bool:
     return marker is not None and marker.get('pid') == os.getpid()
 
 
-def refuse_inside_results(out: Path, option: str) -> None:
-    """Refuse an ``out`` inside a result folder or a bag, at any depth (another command's).
+def _is_our_result(folder: Path) -> bool:
+    """Whether ``folder`` says by our manifest or incomplete marker that a command wrote it."""
+    try:
+        manifest = json.loads((folder / MANIFEST_FILE).read_text(encoding='utf-8'))
+    except (OSError, UnicodeDecodeError, ValueError):
+        manifest = None
+    if isinstance(manifest, dict) and manifest.get('format') == MANIFEST_FORMAT:
+        return True
+    return (folder / INCOMPLETE_FILE).is_file() and read_marker(folder) is not None
 
-    A result this process is writing is the exception: a command's steps write into it.
+
+def refuse_inside_results(out: Path, option: str, *, file: bool = False) -> None:
+    """Refuse an ``out`` inside another command's result or a bag, at any depth.
+
+    A result says so by its manifest or its incomplete marker, a bag by its files (metadata.yaml
+    and storage, nothing else): a user's folder that merely holds a ``metrics.json`` or a few
+    ``.mcap`` files is no result. A ``file`` (a plot) is held to more: in its own folder any
+    result document or storage file, above it a ``run.json`` too. A result this process is
+    writing is the exception: a command's steps write into it.
     """
     for depth, parent in enumerate(out.resolve().parents):
         try:
@@ -447,15 +462,18 @@ def refuse_inside_results(out: Path, option: str) -> None:
             continue  # an ancestor that cannot be listed says nothing
         if held.kind in ('empty', 'foreign') or _being_written_here(parent):
             continue
-        # Above the output's own folder, a document alone may be a user's: a result there says
-        # so by its manifest, its marker or run.json; a bag by its files.
-        ours = {MANIFEST_FILE, INCOMPLETE_FILE, 'run.json'} & {e.name for e in parent.iterdir()}
-        if depth and held.kind not in ('bag', 'torn bag') and not ours:
-            continue
-        raise OutputError(
-            f'{out}: lies inside {parent}, which holds {held.describe()}; nothing is written '
-            f'into another result or a bag: choose another {option}'
-        )
+        if file:
+            ours = {MANIFEST_FILE, INCOMPLETE_FILE, 'run.json'} & {
+                e.name for e in parent.iterdir()
+            }
+            refused = not depth or held.kind in ('bag', 'torn bag') or bool(ours)
+        else:
+            refused = held.kind == 'bag' or _is_our_result(parent)
+        if refused:
+            raise OutputError(
+                f'{out}: lies inside {parent}, which holds {held.describe()}; nothing is '
+                f'written into another result or a bag: choose another {option}'
+            )
 
 
 def writer_of(folder: Path) -> str | None:

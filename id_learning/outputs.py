@@ -274,7 +274,7 @@ def _check_target(out: Path, inputs: Sequence[Path], folder: bool, option: str) 
     if not folder and out.is_dir():
         raise OutputError(f'{out}: is a folder; name a file for {option}')
     _refuse_inputs(out, inputs, option)
-    refuse_inside_results(out, option)
+    refuse_inside_results(out, option, file=not folder)
     _probe_parent(out, option)
     return out
 

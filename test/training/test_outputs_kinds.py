@@ -230,12 +230,10 @@ def test_no_output_is_written_anywhere_inside_a_result_or_a_bag(tmp_path):
         (folder.work / 'run.json').write_text('{}')
         (folder.work / 'models' / 'mlp').mkdir(parents=True)
     bag = _folder(tmp_path, 'bag', 'metadata.yaml', 'bag_0.mcap')
-    torn = _folder(tmp_path, 'torn', 'torn_0.mcap')
     inside = {
         tmp_path / 'run' / 'models' / 'mlp': r'run, which holds a train run',
         bag: r'bag, which holds a bag',
         bag / 'deeper' / 'still': r'bag, which holds a bag',
-        torn: r'torn, which holds a torn bag',
     }
     for parent, holder in inside.items():
         for check in (
@@ -247,10 +245,22 @@ def test_no_output_is_written_anywhere_inside_a_result_or_a_bag(tmp_path):
                 check(parent)
     assert not (bag / 'deeper').exists()
     assert not (bag / 'inner').exists()
-    user = _folder(tmp_path, 'mine', 'metrics.json')  # a user's document, no manifest
-    (user / 'plots').mkdir()
-    assert check_file_output(user / 'plots' / 'x.png') == user / 'plots' / 'x.png'
-    assert check_output(user / 'plots' / 'eval', kind='evaluation') == user / 'plots' / 'eval'
+    # A plot is held to more: never beside storage files, even without metadata.yaml.
+    torn = _folder(tmp_path, 'torn', 'torn_0.mcap')
+    with pytest.raises(OutputError, match=r'x\.png: lies inside .*torn, which holds a torn bag'):
+        check_file_output(torn / 'x.png')
+
+
+def test_a_users_folder_that_merely_holds_result_names_takes_outputs(tmp_path):
+    mine = _folder(tmp_path, 'mine', 'metrics.json', 'summary.md', 'README')
+    logs = _folder(tmp_path, 'logs', 'a.mcap', 'b.mcap')  # standalone MCAP files, no bag
+    stray = _folder(tmp_path, 'home', 'run.json')
+    (stray / 'work').mkdir()
+    for parent in (mine, logs, stray / 'work'):
+        assert check_output(parent / 'run1', kind='train') == parent / 'run1'
+        assert check_bag_output(parent / 'rec') == parent / 'rec'
+    (mine / 'plots').mkdir()
+    assert check_file_output(mine / 'plots' / 'x.png') == mine / 'plots' / 'x.png'
 
 
 def test_a_command_writes_its_steps_inside_its_own_partial_result(tmp_path):
