@@ -83,6 +83,9 @@ SCALE_MIN_TRAVEL = 0.05
 #: fails once its joints travel ``SCALE_MIN_TRAVEL`` within it, a valid one is served again at
 #: the latest once the scaled windows have left it.
 SCALE_HORIZON_S = 2.0
+#: The stream judges a joint's scale once it travels this many times the integral a velocity
+#: bias at the local floor (``FLOOR_SHARE`` of the velocity limit) makes over the horizon.
+BIAS_MARGIN = 4.0
 
 
 def gap_starts(stamps_ns: np.ndarray, period_s: float, gap_periods: float) -> tuple[int, ...]:
@@ -279,13 +282,20 @@ class KinematicConsistency:
         """The largest factor allowed either way between velocity integral and position change."""
         return max(SCALE_LIMIT, 1.0 + 2.0 * self.relative)
 
-    def judge_scale(self, dq: np.ndarray, integral: np.ndarray) -> list[tuple[str, float, float]]:
-        """``scale_errors`` of windows' position changes and velocity integrals (W, n)."""
+    def judge_scale(
+        self, dq: np.ndarray, integral: np.ndarray, min_travel: np.ndarray | float = 0.0
+    ) -> list[tuple[str, float, float]]:
+        """``scale_errors`` of windows' position changes and velocity integrals (W, n).
+
+        ``min_travel``: per joint, the travel below which it is not judged (besides
+        ``SCALE_MIN_TRAVEL``).
+        """
         travel = np.abs(dq).sum(axis=0)
+        needed = np.maximum(SCALE_MIN_TRAVEL, np.broadcast_to(min_travel, travel.shape))
         limit = self.scale_limit
         out = []
         for j, name in enumerate(self.joints):
-            if not travel[j] >= SCALE_MIN_TRAVEL:
+            if not travel[j] >= needed[j]:
                 continue
             factor = float(np.dot(integral[:, j], dq[:, j]) / np.dot(dq[:, j], dq[:, j]))
             if not (1.0 / limit <= factor <= limit):
@@ -467,12 +477,15 @@ class _ScaleWatch:
     def _judge(self) -> None:
         dq = np.stack([w[0] for w in self._windows])
         integral = np.stack([w[1] for w in self._windows])
-        errors = self.gate.judge_scale(dq, integral)
+        span = len(self._windows) * self.stride * self.gate.period_s
+        # A velocity bias the local gate allows (its floor) shifts the integral by up to
+        # floor_v * span: judged only where the travel is 4 times that, so that no such bias
+        # moves the factor by more than a quarter (slow motion is the local floor's).
+        errors = self.gate.judge_scale(dq, integral, BIAS_MARGIN * self.gate.floor_v * span)
         if not errors:
             self.failure = None
             return
         name, factor, _ = max(errors, key=lambda e: np.inf if e[1] <= 0 else max(e[1], 1 / e[1]))
-        span = len(self._windows) * self.stride * self.gate.period_s
         self.failure = Inconsistency(name, 'scale', factor, 1.0, self.gate.scale_limit, span)
 
 
