@@ -53,6 +53,7 @@ __all__ = [
     'SATURATION_MIN_SHARE',
     'SATURATION_NEIGHBOURS',
     'SIGN_LOST_OPPOSITE_SHARE',
+    'SIGN_LOST_QUANTILE',
     'SIGN_LOST_REVERSAL_SHARE',
     'SIGN_LOST_ZERO_SHARE',
     'STILL_NOISE_FACTOR',
@@ -335,9 +336,11 @@ def nominal_findings(
 
 #: A label on one side of zero but for at most this share of the samples is one-signed.
 SIGN_LOST_OPPOSITE_SHARE = 1e-3
-#: ... and it reaches zero when its smallest magnitude is at most this share of its largest, or
-#: within two typical sample-to-sample steps (a magnitude turns back at zero within one step).
-SIGN_LOST_ZERO_SHARE = 0.01
+#: ... and it keeps coming to zero: its 1 % quantile of magnitude (exact zeros, a drive switched
+#: off, left out) is at most this share of its 99 % quantile. A magnitude spends a share of its
+#: time near zero at every crossing it folded; a label held off zero, however noisy, does not.
+SIGN_LOST_ZERO_SHARE = 0.05
+SIGN_LOST_QUANTILE = 0.01
 #: A joint moves both ways when it goes back by this share of its span after rising and rises
 #: by it after going back (largest retreat from a running extreme).
 SIGN_LOST_REVERSAL_SHARE = 0.2
@@ -363,8 +366,8 @@ def sign_findings(
     """Joints whose label lost its sign: one-signed, reaching zero, while the joint goes both ways.
 
     A joint that moves back and forth needs torque of both signs, unless gravity or a spring
-    holds it on one side, and then its torque stays away from zero. A label that comes down to
-    zero and turns back at it every time, never crossing (noise would cross), is a magnitude:
+    holds it on one side, and then its torque stays away from zero. A label that keeps coming
+    down to zero and turning back at it, never crossing (noise would cross), is a magnitude:
     ``|I|`` or ``-|I|`` recorded for the signed value. Warned: the model learns nothing true
     from it. ``position``, ``label``: (N, n) [rad] and [``unit``]; non-finite rows left out.
     """
@@ -380,15 +383,19 @@ def sign_findings(
         positive, negative = int((column > 0).sum()), int((column < 0).sum())
         if min(positive, negative) > SIGN_LOST_OPPOSITE_SHARE * column.size:
             continue
-        magnitude = np.abs(column)
-        near = max(SIGN_LOST_ZERO_SHARE * magnitude.max(), 2 * np.median(np.abs(np.diff(column))))
-        if magnitude.min() > near:
+        magnitude = np.abs(column[column != 0])  # exact zeros: a drive switched off
+        if magnitude.size < 3:
             continue
+        low, high = np.quantile(magnitude, [SIGN_LOST_QUANTILE, 1 - SIGN_LOST_QUANTILE])
+        if low > SIGN_LOST_ZERO_SHARE * high:
+            continue  # held away from zero (gravity, a spring), noise or not
         if not _moves_both_ways(position[:, j]):
             continue
         side, extreme = ('<= 0', column.max()) if negative > positive else ('>= 0', column.min())
+        others = min(positive, negative)
+        where = 'in every sample' if not others else f'in all but {others} samples'
         text = (
-            f'{joint}: the {quantity} is {side} in every sample (it comes to {extreme + 0.0:.4g} '
+            f'{joint}: the {quantity} is {side} {where} (it comes to {extreme + 0.0:.4g} '
             f'{unit} and turns back, never crossing zero) while the joint moves both ways: its '
             f'sign is lost (a magnitude such as |I| or -|I| recorded); record the signed '
             f'{quantity}'

@@ -118,3 +118,26 @@ def test_a_lost_sign_is_warned_on_load_and_listed_by_inspect(
     ]
     clean = write_recording(recording, tmp_path / 'clean')
     assert not [p for p in inspect_bag(clean, robot=mabi, gravity=gravity).problems if 'lost' in p]
+
+
+@given(seed=st.integers(0, 2**16), mean=st.floats(1.0, 5.0), noise_share=st.floats(0.05, 0.3),
+       off_share=st.floats(0.0, 0.3))  # fmt: skip
+def test_a_noisy_held_label_and_a_drive_switched_off_are_not_lost(
+    seed, mean, noise_share, off_share
+):
+    rng = np.random.default_rng(seed)
+    n = 4000
+    q = 0.5 * np.sin(2 * np.pi * 0.5 * np.arange(n) * PERIOD_S)
+    label = np.clip(mean + noise_share * mean * rng.standard_normal(n), 1e-9, None)  # held
+    label[: int(off_share * n)] = 0.0  # the drive off before the motion
+    assert sign_findings(q[:, None], label[:, None], ('joint_2',)) == []
+
+
+def test_a_magnitude_with_a_few_samples_across_zero_says_how_many():
+    n = 3000
+    t = np.arange(n) * PERIOD_S
+    q = 0.5 * np.sin(2 * np.pi * 0.3 * t)
+    label = np.abs(np.sin(2 * np.pi * 0.7 * t))
+    label[[100, 900]] = -0.001  # two stray samples
+    (finding,) = sign_findings(q[:, None], label[:, None], ('joint_3',))
+    assert 'is >= 0 in all but 2 samples' in finding.text
