@@ -43,7 +43,7 @@ from id_learning.dataset.import_mapping import (
     JointColumns,
     load_import_mapping,
 )
-from id_learning.dataset.import_overlap import SourceRows, check_shared_rows
+from id_learning.dataset.import_overlap import MIN_SHARED_ROWS, SourceRows, check_shared_rows
 from id_learning.dataset.import_readers import LogTable, is_float, read_table
 from id_learning.dataset.import_report import ImportReport, TimeBase
 from id_learning.dataset.import_resample import (
@@ -381,7 +381,13 @@ def _refuse_overlap_in_time(files: Sequence[_File], origins: list[int], period_n
         key=lambda span: span[0],
     )
     for (_, last, before), (first, end, after) in itertools.pairwise(spans):
-        if first <= last:
+        shared = (last - first) // period_ns + 1
+        if 0 < shared < MIN_SHARED_ROWS:  # a logger repeating the rows around a file change
+            logger.warning(
+                'import: %s repeats the last %d sample time(s) of %s (%s): kept once, from %s',
+                after.source, shared, before.source, iso_utc(last), before.source,
+            )  # fmt: skip
+        elif first <= last:
             raise DatasetError(
                 f'import: {after.source} ({iso_utc(first)} to {iso_utc(end)}) overlaps '
                 f"{before.source} (to {iso_utc(last)}) in time: the bag keeps the logs' "
@@ -398,13 +404,18 @@ def _recording(
     stamps: list[np.ndarray] = []
     starts: list[int] = []
     parts: list[dict[str, np.ndarray]] = []
-    n_samples = 0
+    n_samples, last = 0, None
     for origin, file in sorted(zip(origins, files, strict=True), key=lambda pair: pair[0]):
         for segment in file.grid.segments:
+            stamp = origin + segment.slots * period_ns
+            keep = slice(None) if last is None else stamp > last  # a repeated time kept once
+            if np.count_nonzero(np.ones_like(stamp, dtype=bool)[keep]) < 2:
+                continue
             starts.append(n_samples)
-            n_samples += len(segment.slots)
-            stamps.append(origin + segment.slots * period_ns)
-            parts.append(segment.values)
+            stamps.append(stamp[keep])
+            parts.append({key: value[keep] for key, value in segment.values.items()})
+            n_samples += len(stamps[-1])
+            last = int(stamps[-1][-1])
     velocity = [
         part['velocity']
         if 'velocity' in part

@@ -152,6 +152,16 @@ def test_absolute_files_that_overlap_in_time_are_refused_naming_both(tmp_path: P
         import_logs([a, b], mapping(), tmp_path / 'bag')
 
 
+def test_a_row_repeated_at_a_file_change_is_kept_once(tmp_path: Path, caplog) -> None:
+    a = write_log(tmp_path / 'a.csv', NEW_YEAR_2026_S + 0.008 * np.arange(200))
+    # The logger writes a's last row again as b's first (another seed: its own values).
+    b = write_log(tmp_path / 'b.csv', NEW_YEAR_2026_S + 0.008 * np.arange(199, 400), seed=1)
+    import_logs([a, b], mapping(), tmp_path / 'bag')
+    got = stamps(tmp_path / 'bag')
+    np.testing.assert_array_equal(got, NEW_YEAR_2026_S * 10**9 + PERIOD_NS * np.arange(400))
+    assert 'b.csv repeats the last 1 sample time(s) of' in caplog.text
+
+
 def test_an_absolute_file_among_relative_ones_is_re_based_saying_why(tmp_path: Path) -> None:
     absolute = write_log(tmp_path / 'a.csv', NEW_YEAR_2026_S + 0.008 * np.arange(100))
     relative = write_log(tmp_path / 'b.csv', 0.008 * np.arange(100), seed=1)
