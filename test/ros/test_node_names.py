@@ -33,7 +33,7 @@ def _poll_until(condition, deadline_s: float = DEADLINE_S) -> bool:
     while time.monotonic() < end:
         if condition():
             return True
-        time.sleep(0.05)
+        time.sleep(0.05)  # the poll interval of a wait with a deadline, not synchronisation
     return False
 
 
