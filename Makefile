@@ -15,7 +15,7 @@ ifneq ($(filter command line,$(origin BAG) $(origin OUT)),)
 $(error BAG and OUT are now DEMO_BAG and DEMO_OUT: make demo DEMO_BAG=path/to/bag DEMO_OUT=out/other)
 endif
 
-.PHONY: demo test lint typecheck docs venv clean bag
+.PHONY: demo test test-long lint typecheck docs venv clean bag
 
 venv: $(VENV)/.ready
 
@@ -29,7 +29,11 @@ demo: venv
 
 # pytest exits 5 when it collects no test: make treats that as the failure it is.
 test: venv typecheck docs
-	source tools/env.sh $(VENV) && $(PY) -m pytest -q test $(PYTEST_ARGS)
+	source tools/env.sh $(VENV) && $(PY) -m pytest -q test -m 'not long' $(PYTEST_ARGS)
+
+# The whole-model diagnosis cases of a minute and more each (about 8 min on 2 cores).
+test-long: venv
+	source tools/env.sh $(VENV) && $(PY) -m pytest -q test -m long $(PYTEST_ARGS)
 
 # mypy over id_learning/ (settings in pyproject.toml); `make test` runs it first.
 typecheck: venv

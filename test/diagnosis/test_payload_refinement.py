@@ -28,6 +28,7 @@ EFFECTS = {
 CHOSEN = ('viscous_friction', 'coulomb_friction', 'payload_mass', 'inertial_parameter_error')
 
 
+@pytest.mark.long
 def test_the_payload_keeps_its_mass_when_the_link_parameters_are_selected_beside_it():
     """The payload and the link parameters share the flange body's columns; only the links' CAD
     prior tells them apart. Refined without that prior, the links took mass at will and the

@@ -273,6 +273,7 @@ def test_datasheet_values_standing_in_for_a_missing_effect_do_not_move_the_param
         assert parameter['value'] == pytest.approx(1 / (1 + effect.coefficients[0]), abs=half)
 
 
+@pytest.mark.long
 def test_an_unconfirmed_balancer_stays_when_the_model_without_it_leaves_a_structured_remainder(
     every_effect_seed_11,
 ):
@@ -285,6 +286,7 @@ def test_an_unconfirmed_balancer_stays_when_the_model_without_it_leaves_a_struct
     assert result.structured_joints() == []
 
 
+@pytest.mark.long
 def test_a_payloads_centre_of_mass_does_not_run_away_while_it_is_refined(repo):
     """Every effect of the default twin, seed 18: the payload's centre of mass, refined in turn
     with its mass, went 0.33 m then 2.7 m out (further out, the mass column carries more
@@ -298,6 +300,7 @@ def test_a_payloads_centre_of_mass_does_not_run_away_while_it_is_refined(repo):
     assert np.linalg.norm(payload.spec.settings['com_guess_m']) <= 1.0
 
 
+@pytest.mark.long
 def test_the_selection_resumes_once_a_refinement_makes_a_candidate_plausible(repo):
     """Every effect of the default twin, seed 21 at 600 s: the link parameters were refused,
     the flange link's inertia changing by 0.19 kg*m^2, as long as the payload was a point mass.
@@ -317,6 +320,7 @@ def test_the_selection_resumes_once_a_refinement_makes_a_candidate_plausible(rep
             assert parameter['ci'][1] - parameter['ci'][0] < 0.2
 
 
+@pytest.mark.long
 def test_a_stribeck_hump_is_not_made_up_by_a_softer_turn_through_zero_speed(repo):
     """Every effect of the default twin, seed 10: the friction shape, judged beside humps at
     15 and 50 mrad/s, gave joint 1 a softer turn (10 mrad/s for 5); its refined hump then went
@@ -338,6 +342,7 @@ def test_a_stribeck_hump_is_not_made_up_by_a_softer_turn_through_zero_speed(repo
     assert velocity['ci'][0] <= effects['stribeck_friction']['velocity'][0] <= velocity['ci'][1]
 
 
+@pytest.mark.long
 def test_load_dependent_friction_and_the_link_terms_it_grows_with_settle_together(repo):
     """Every effect of the default twin, seed 15: the friction's load took the payload and the
     link changes from an earlier fit (the payload 30 kg there, 37.5 reported), and the
