@@ -1,8 +1,8 @@
 """replay: play a bag as the controller would publish it, at the recorded IPO pace.
 
-The selected span of the bag is loaded once. Messages are grouped into cycles by their header stamp
-(``timing: stamp``; the bag contract's topics share one stamp per IPO cycle) or by their log time
-(``timing: log_time``). Cycle k is published at the absolute deadline
+The selected span of the bag is loaded once (``replay_plan``). Messages are grouped into cycles by
+their header stamp (``timing: stamp``; the bag contract's topics share one stamp per IPO cycle) or
+by their log time (``timing: log_time``). Cycle k is published at the absolute deadline
 
     t_k = t_start + (key_k - key_first) / rate
 
@@ -21,10 +21,13 @@ sensor_msgs/JointState (q, v), stamped with the sample's stamp.
 
 A header stamp that is no time (``nanosec`` >= 1e9 or a negative ``sec``) refuses the bag, naming
 the message, wherever the replay reads stamps (every topic with ``timing: stamp``, the reference
-source always). Topics only played (``timing: log_time``) go out as recorded. A reference source of
-other joints than the robot config's is refused first; then the stamps pass train's timing checks,
-in the bag's order (``replay_span``): one that repeats or goes backwards, or a hole inside the span
-in the reference source, refuses the bag, naming it. A reference source sampled off the robot's IPO
+source always). Topics only played (``timing: log_time``) go out as recorded. With ``timing:
+stamp``, a topic whose log times step back while its header stamps advance (a clock step on the
+recorder, ``bag.messages.clock_step``) is played in header-stamp order, as train reads it, with one
+warning naming the step. A reference source of other joints than the robot config's is refused
+first; then the stamps pass train's timing checks, in play order (``replay_span``): one that
+repeats or goes backwards (a sender's stamps out of order), or a hole inside the span in the
+reference source, refuses the bag, naming it. A reference source sampled off the robot's IPO
 period is refused; with ``timing: log_time``, log times that do not advance refuse it.
 
 Jitter: each cycle's lateness (publish time minus its deadline) is recorded; the median, 99th
@@ -40,8 +43,6 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -54,20 +55,13 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from id_learning.bag import JOINT_STATE, bag_info, decode_joint_state, iter_raw
-from id_learning.dataset.consistency import KinematicConsistency, gap_starts
-from id_learning.dataset.inputs import InputDefinition
-from id_learning.dataset.plausibility import check_accelerations, check_motion
-from id_learning.errors import BagError, ConfigError, DatasetError
 from id_learning.nodes.endpoints import endpoint, refuse_clashing_topics
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     clock_message,
     diagnostic_array,
-    joint_state_message,
     message_class,
     serialize_exact,
-    trajectory_message,
 )
 from id_learning.nodes.params import (
     ReplayConfig,
@@ -77,17 +71,10 @@ from id_learning.nodes.params import (
     validate_change,
 )
 from id_learning.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, reference_qos, sensor_qos
-from id_learning.nodes.replay_span import (
-    check_timing,
-    check_topics_play,
-    header_stamp_ns,
-    source_stretch,
-    stamp_notes,
-)
+from id_learning.nodes.replay_plan import Cycle, ReplayPlan, build_plan
 from id_learning.nodes.runtime import NameClash, ShellNode, run_node
-from id_learning.predictor.reference import reference_from_states
 from id_learning.predictor.timing import RollingStats
-from id_learning.robot.config import RobotConfig, load_robot_config
+from id_learning.robot.config import load_robot_config
 
 __all__ = ['Cycle', 'Replay', 'ReplayPlan', 'build_plan', 'main']
 
@@ -95,281 +82,7 @@ NODE_NAME = 'replay'
 NS_PER_S = 1_000_000_000
 #: Lead time between the end of the set-up and the first deadline [ns].
 START_LEAD_NS = 20_000_000
-#: Joint states read beyond each end of the span for the reference's zero-phase filter [s].
-REFERENCE_PAD_S = 10.0
 _NO_VALUES = np.empty(0)
-
-
-@dataclass
-class Cycle:
-    """What is published at one deadline.
-
-    Attributes:
-        offset_ns: time after the first cycle at rate 1 [ns].
-        stamp_ns: the cycle's stamp, published on /clock [ns].
-        messages: (topic index, serialized bytes) in bag order, then the reference (index -1).
-    """
-
-    offset_ns: int
-    stamp_ns: int
-    messages: list[tuple[int, bytes]] = field(default_factory=list)
-
-
-@dataclass
-class ReplayPlan:
-    """The cycles of the replayed span and the topics they publish on."""
-
-    topics: tuple[str, ...]
-    msg_types: tuple[str, ...]
-    cycles: list[Cycle]
-    period_ns: int
-    #: What the node logs as warnings before playing (an unpaired tail).
-    warnings: tuple[str, ...] = ()
-
-    @property
-    def duration_ns(self) -> int:
-        """From the first to the last cycle at rate 1 [ns]."""
-        return self.cycles[-1].offset_ns if self.cycles else 0
-
-    @property
-    def message_count(self) -> int:
-        """Messages of the bag's topics (without /clock and the reference)."""
-        return sum(1 for cycle in self.cycles for index, _ in cycle.messages if index >= 0)
-
-
-def _reference_bytes(
-    config: ReplayConfig, robot: RobotConfig, states: list[bytes], keep: list[bool]
-) -> list[bytes | None]:
-    """Serialized reference messages built from the source topic's joint states, in order.
-
-    The reference is computed over all ``states`` (the span plus padding, so that the zero-phase
-    filter's edge transients fall outside the span) and serialized where ``keep`` is set.
-    """
-    decoded = []
-    for k, data in enumerate(states):
-        try:
-            decoded.append(decode_joint_state(data))
-        except Exception as err:  # foreign bytes: SerdeError and others
-            raise BagError(
-                f'{config.bag}: {config.reference_source} message {k} of the replayed span is '
-                f'not a valid JointState ({type(err).__name__}: {err})'
-            ) from err
-    if len(decoded) < 3:
-        raise BagError(
-            f'{config.bag}: {config.reference_source} has {len(decoded)} messages in the '
-            'replayed span; a reference needs at least 3'
-        )
-    names = decoded[0].name
-    if any(msg.name != names for msg in decoded):
-        raise BagError(f'{config.bag}: joint names change within {config.reference_source}')
-    stamps = np.array([msg.stamp_ns for msg in decoded], dtype=np.int64)
-    q = np.vstack([msg.position for msg in decoded])
-    v = np.vstack([msg.velocity for msg in decoded])
-    limits = None
-    if set(names) == set(robot.joints) and len(names) == len(robot.joints):
-        limits = robot.limits.take([robot.joints.index(name) for name in names])
-    try:
-        where = f'{config.bag}: {config.reference_source}'
-        check_motion(tuple(names), stamps, q, v, limits=limits, where=where)
-    except DatasetError as err:
-        raise BagError(f'{err}; nothing is played from an impossible reference') from err
-    inputs = None
-    if config.reference_inputs != 'recorded':  # the robot's cut-offs, in the bag's joint order
-        order = [robot.joints.index(name) for name in names]
-        if config.reference_inputs == 'study':
-            inputs = InputDefinition.study(robot.lowpass_cutoff_hz[order])
-        elif config.reference_smoothing_hz > 0:
-            inputs = InputDefinition.controller(np.full(len(names), config.reference_smoothing_hz))
-        else:
-            inputs = InputDefinition.controller(robot.input_smoothing_hz[order])
-    try:
-        reference = reference_from_states(
-            names, stamps, q, v, period_s=robot.ipo_period_s, inputs=inputs
-        )
-    except DatasetError as err:
-        raise BagError(f'{config.bag}: {config.reference_source}: {err}') from err
-    if limits is not None:  # the accelerations the predictor will be sent, bounded as it does
-        try:
-            check_accelerations(
-                tuple(names), reference.stamps_ns, reference.a, limits=limits, where=where
-            )
-            # Recorded positions and velocities must describe one motion (the predictor's gate).
-            KinematicConsistency.for_robot(robot, tuple(names)).check(
-                stamps, q, v, where=where, starts=gap_starts(stamps, robot.ipo_period_s, 3.0)
-            )
-        except DatasetError as err:
-            raise BagError(f'{err}; nothing is played from an impossible reference') from err
-    out: list[bytes | None] = []
-    for k, stamp in enumerate(reference.stamps_ns.tolist()):
-        if not keep[k]:
-            out.append(None)
-            continue
-        if config.reference_mode == 'trajectory':
-            msg: Any = trajectory_message(
-                stamp, names, reference.q[k], reference.v[k], reference.a[k]
-            )
-        else:
-            msg = joint_state_message(
-                stamp, names, position=reference.q[k], velocity=reference.v[k]
-            )
-        out.append(serialize_exact(msg))
-    return out
-
-
-def _check_joint_names(config: ReplayConfig, robot: RobotConfig, data: bytes) -> None:
-    """Refuse a reference of other joints than the robot's, before the timing (as train does)."""
-    try:  # foreign bytes are refused, with the message's number, in _reference_bytes
-        names = decode_joint_state(data).name
-    except Exception:
-        names = robot.joints
-    if config.reference_inputs != 'recorded' and sorted(names) != sorted(robot.joints):
-        raise BagError(
-            f'{config.bag}: {config.reference_source} joints {list(names)} are not the robot '
-            f'{robot.name} joints {list(robot.joints)}; set robot_config to the robot of the '
-            'bag, or reference_inputs recorded'
-        )
-
-
-def check_smoothing(config: ReplayConfig, robot: RobotConfig) -> None:
-    """Refuse a reference_smoothing_hz the robot config would refuse as input_smoothing_hz.
-
-    It must lie above the label cut-offs (the reference keeps the motion the labels smear:
-    models are fitted and scored on such inputs) and below the Nyquist frequency of the IPO.
-    """
-    hz, nyquist = config.reference_smoothing_hz, 0.5 / robot.ipo_period_s
-    if config.reference_mode == 'none' or config.reference_inputs != 'controller' or hz == 0:
-        return
-    cutoffs = robot.lowpass_cutoff_hz.tolist()
-    if not max(cutoffs) < hz < nyquist:
-        raise ConfigError(
-            f'node replay: reference_smoothing_hz {hz:g} Hz must lie above the label cut-offs '
-            f'lowpass_cutoff_hz {cutoffs} of robot config {robot.source or robot.name} (the '
-            'reference keeps the motion the labels smear, as input_smoothing_hz does) and below '
-            f"the Nyquist frequency {nyquist:g} Hz of the IPO period; 0: the robot config's "
-            f'input_smoothing_hz {robot.input_smoothing_hz.tolist()}'
-        )
-
-
-def build_plan(config: ReplayConfig, robot: RobotConfig) -> ReplayPlan:
-    """Load the replayed span of a bag into cycles.
-
-    Only the span (with ``REFERENCE_PAD_S`` around it for the reference) is read and kept.
-
-    Raises:
-        BagError: the bag is unreadable, lacks a topic, or a message has no header stamp with
-            ``timing: stamp``; a topic yields no message in the span, or its type in
-            metadata.yaml differs from the storage's; the reference's joints are not the robot's.
-        ConfigError: the span is empty, or reference_smoothing_hz is refused (``check_smoothing``).
-    """
-    check_smoothing(config, robot)
-    path = Path(config.bag)
-    info = bag_info(path)
-    has_reference = config.reference_mode != 'none'
-    needed = list(dict.fromkeys(config.topics))
-    if has_reference and config.reference_source not in needed:
-        needed.append(config.reference_source)
-    types = {name: info.topic(name).msgtype for name in needed}
-    if has_reference and types[config.reference_source] != JOINT_STATE:
-        raise BagError(
-            f'{path}: reference_source {config.reference_source} has type '
-            f'{types[config.reference_source]}, expected {JOINT_STATE}'
-        )
-    index = {topic: k for k, topic in enumerate(config.topics)}
-    pad = round(REFERENCE_PAD_S * NS_PER_S) if has_reference else 0
-    keyed: list[tuple[int, int, bytes]] = []  # (key, topic index, bytes) inside the span
-    states: list[tuple[int, bytes, int]] = []  # (key, bytes, stamp): the source, span + padding
-    firsts: dict[str, int] = {}  # the message number of each topic's first kept message
-    start = stop = None
-    log_to_key = 0
-    counts: dict[str, int] = {}  # messages of each topic read so far (for messages)
-    for topic, log_ns, data in iter_raw(path, needed):
-        counts[topic] = counts.get(topic, -1) + 1
-        # Stamps and log (receive) times of a recording differ by milliseconds: skip what lies
-        # more than a second before the span without decoding it.
-        if start is not None and log_ns + log_to_key < start - pad - NS_PER_S:
-            continue
-        key = log_ns
-        is_source = has_reference and topic == config.reference_source
-        if config.timing == 'stamp' or is_source:  # the reference carries the source's stamps
-            stamp = header_stamp_ns(data, types[topic], f'{path}: {topic} message {counts[topic]}')
-            if stamp is None:
-                raise BagError(
-                    f'{path}: {topic} ({types[topic]}) has no header stamp; use timing:=log_time'
-                )
-            key = stamp if config.timing == 'stamp' else log_ns
-        if start is None:
-            log_to_key = key - log_ns
-            start = key + round(config.start_offset_s * NS_PER_S)
-            if config.duration_s > 0:
-                stop = start + round(config.duration_s * NS_PER_S)
-        if stop is not None and key > stop + pad + NS_PER_S:
-            break  # the bag is in log-time order: nothing later belongs to the span
-        if is_source and start - pad <= key and (stop is None or key <= stop + pad):
-            firsts.setdefault('', counts[topic])
-            assert stamp is not None  # a source's stamp is always read, above
-            states.append((key, data, stamp))
-        if topic in index and key >= start and (stop is None or key <= stop):
-            firsts.setdefault(topic, counts[topic])
-            keyed.append((key, index[topic], data))
-    if start is None:
-        raise ConfigError(f'{path}: no messages on {needed}')
-
-    played = [sum(1 for _, i, _ in keyed if i == k) for k in range(len(config.topics))]
-    checked = [*config.topics, *([config.reference_source] if has_reference else [])]
-    if keyed:  # an empty span altogether is refused below as nothing to play
-        check_topics_play(
-            path,
-            checked,
-            [*played, *([len(states)] if has_reference else [])],
-            {topic.name: topic.count for topic in info.topics},
-            f'start_offset_s {config.start_offset_s} s, duration_s {config.duration_s} s',
-        )
-
-    def inside(key: int) -> bool:
-        return key >= start and (stop is None or key <= stop)
-
-    if has_reference and states:  # the joints, then train's timing checks, in the bag's order
-        _check_joint_names(config, robot, states[0][1])
-        stretch = source_stretch(
-            f'{path}: {config.reference_source}',
-            [(key, stamp, inside(key)) for key, _, stamp in states],
-            period_s=robot.ipo_period_s,
-            origin_ns=start - round(config.start_offset_s * NS_PER_S),
-            first=firsts[''],
-        )
-        states = sorted(states[stretch], key=lambda item: item[0])
-    check_timing(path, config.topics, config.timing, [item[:2] for item in keyed], firsts)
-    by_key: dict[int, Cycle] = {}
-    for key, topic_index, data in sorted(keyed, key=lambda item: item[0]):
-        by_key.setdefault(key, Cycle(0, key)).messages.append((topic_index, data))
-    if has_reference and states:
-        keep = [inside(key) for key, _, _ in states]
-        references = _reference_bytes(config, robot, [data for _, data, _ in states], keep)
-        for (key, _, _), reference in zip(states, references, strict=True):
-            if reference is not None:
-                by_key.setdefault(key, Cycle(0, key)).messages.append((-1, reference))
-    if not by_key:
-        raise ConfigError(
-            f'{path}: nothing to play after start_offset_s {config.start_offset_s} s '
-            f'(duration_s {config.duration_s} s)'
-        )
-    cycles = [by_key[key] for key in sorted(by_key)]
-    origin = cycles[0].stamp_ns
-    for cycle in cycles:
-        cycle.offset_ns = cycle.stamp_ns - origin
-    return ReplayPlan(
-        tuple(config.topics),
-        tuple(types[t] for t in config.topics),
-        cycles,
-        round(robot.ipo_period_s * NS_PER_S),
-        stamp_notes(
-            path,
-            config.topics,
-            config.timing,
-            [([i for i, _ in cycle.messages], cycle.stamp_ns) for cycle in cycles],
-            None if has_reference else robot.ipo_period_s,
-        ),
-    )
 
 
 class Replay(ShellNode):

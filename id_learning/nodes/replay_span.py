@@ -1,13 +1,14 @@
 """Checks of the replay's span: its timing, every requested topic plays, an unpaired tail.
 
-Timing (``check_stamp_order``, ``source_stretch``): the stamps the replay reads pass train's
-check first (``dataset.plausibility.check_stamps``), in the bag's order: a stamp that repeats or
-goes backwards refuses the bag, naming the sample (the replay never re-sorts a topic silently),
-and the reference source must be one stretch without holes (longer than ``MAX_GAP_PERIODS`` IPO
-periods, as train) across the played span: a hole in it is named, with the spans before and after
-it to play instead; a hole in the padding read around the span only ends the padding there.
-Without that, a hole or a swapped stamp shows up later as an acceleration or a consistency error
-that names neither.
+Timing (``check_stamp_order``, ``source_stretch``): the stamps the replay reads pass train's check
+first (``dataset.plausibility.check_stamps``), in play order (the bag's, or header-stamp order
+where a clock step on the recorder stepped the log times back: ``replay_plan``): a stamp that
+repeats or goes backwards refuses the bag, naming the sample (the replay never re-sorts stamps a
+sender put out of order), and the reference source must be one stretch without holes (longer than
+``MAX_GAP_PERIODS`` IPO periods, as train) across the played span: a hole in it is named, with the
+spans before and after it to play instead; a hole in the padding read around the span only ends the
+padding there. Without that, a hole or a swapped stamp shows up later as an acceleration or a
+consistency error that names neither.
 
 Sampling (``refuse_off_period``): the reference source's stamps must keep the robot's IPO period
 (``dataset.content.sampling_problem``, train's rule): the reference is filtered and differentiated
@@ -138,8 +139,8 @@ def check_topics_order(
     Args:
         path: the bag (for messages).
         topics: the played topics.
-        keyed: (stamp [ns], topic index) of each message in the span, as read.
-        firsts: each topic's message number of its first message in the span.
+        keyed: (stamp [ns], topic index) of each message in the span, in play order.
+        firsts: each topic's message number (in play order) of its first message in the span.
 
     Raises:
         BagError: names the topic, the sample and both stamps.
@@ -153,11 +154,11 @@ def check_topics_order(
 def check_stamp_order(
     where: str, stamps_ns: Sequence[int] | np.ndarray, *, first: int = 0, remedy: str = ''
 ) -> None:
-    """Refuse stamps that repeat or go backwards in the bag's order (train's check).
+    """Refuse stamps that repeat or go backwards in play order (train's check).
 
     Args:
         where: the bag and topic, for the message.
-        stamps_ns: the topic's header stamps as read (log-time order) [ns].
+        stamps_ns: the topic's header stamps in play order (``replay_plan``) [ns].
         first: the topic's message number of ``stamps_ns[0]`` (for the message).
         remedy: what plays such a bag, appended to the message.
 
@@ -170,7 +171,9 @@ def check_stamp_order(
         )
     except DatasetError as err:
         raise BagError(
-            f'{err}: nothing is played (the replay never re-sorts stamps){remedy}'
+            f'{err}: nothing is played (the replay never re-sorts stamps a sender put out of '
+            'order; with timing:=stamp it plays in header-stamp order only where the log times '
+            f'step back too: a clock step on the recorder){remedy}'
         ) from err
 
 
@@ -190,9 +193,9 @@ def source_stretch(
 
     Args:
         where: the bag and topic, for messages.
-        read: per message of the source as read (the span and the padding around it): its key
-            (its stamp, or its log time with ``timing: log_time``) [ns], its header stamp [ns],
-            and whether it is in the played span.
+        read: per message of the source in play order (the span and the padding around it):
+            its key (its stamp, or its log time with ``timing: log_time``) [ns], its header
+            stamp [ns], and whether it is in the played span.
         period_s: the IPO period [s].
         origin_ns: the key start_offset_s counts from [ns].
         first: the topic's message number of ``stamps_ns[0]`` (for messages).
