@@ -120,8 +120,12 @@ def _message_key(path: Path) -> str:
 
 
 #: A recording's samples, to tell whether two recordings hold the same ones: (name, stamps [ns],
-#: positions (N, n) [rad] in one joint order). The name says where it is (a bag, a segment).
-Samples = tuple[str, np.ndarray, np.ndarray]
+#: positions (N, n) [rad] in one joint order[, noisy (N, m) or None]). The name says where it is
+#: (a bag, a segment). ``noisy``: values each recording measures with its own sensor noise
+#: (motor currents, measured velocities), equal in two recordings only when one is a copy.
+Samples = (
+    tuple[str, np.ndarray, np.ndarray] | tuple[str, np.ndarray, np.ndarray, np.ndarray | None]
+)
 
 #: Two recordings that share this many moving samples hold the same motion. Fewer happen by
 #: chance: twin recordings leave one rest pose at one stamp by the same encoder count.
@@ -134,23 +138,42 @@ def _row_keys(q: np.ndarray) -> np.ndarray:
     return rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel()
 
 
+def _compared(first: Samples, second: Samples) -> tuple[np.ndarray, np.ndarray]:
+    """The rows compared: the positions, then the noisy values where both recordings have them.
+
+    Positions alone cannot tell a copy from a second run of one commanded motion (a twin's
+    positions are the trajectory's, quantised, in every run); the noisy values can.
+    """
+    a_q, b_q = first[2], second[2]
+    a_noisy = first[3] if len(first) == 4 else None
+    b_noisy = second[3] if len(second) == 4 else None
+    if a_noisy is None or b_noisy is None or a_noisy.shape[1] != b_noisy.shape[1]:
+        return a_q, b_q
+    return np.hstack([a_q, a_noisy]), np.hstack([b_q, b_noisy])
+
+
 def shared_samples(first: Samples, second: Samples) -> tuple[np.ndarray, np.ndarray]:
     """The stamps [ns] in ``first`` and in ``second`` of the moving samples both hold.
 
-    Two recordings of one arm never hold the same moving sample: a sample equal in every joint
-    where the arm moves (its positions differ from the sample before in ``first``) means one
-    recording was cut from the other. Both may stamp it alike (a bag cut from another) or
-    shifted by a constant (an import of overlapping logs, whose files follow each other in the
-    bag): the pairs at the most common stamp shift are returned, in time order.
+    A sample is held by both when all its values are equal: positions, and the noisy values
+    (currents, measured velocities) where both recordings give them. Only a copy holds
+    another recording's samples: a second run of the same commanded motion repeats the
+    positions (a twin's exactly) but not the sensors' noise. A copy may keep the stamps (a bag
+    cut from another) or shift them by a constant (a re-stamped copy; an import of overlapping
+    logs, whose files follow each other in the bag): the pairs at the most common stamp shift
+    are returned, in time order. Moving samples are those whose positions differ from the
+    sample before in ``first``. Without noisy values on both sides, positions alone decide,
+    and two runs of one noise-free trajectory look like copies.
     """
-    _, a_ns, a_q = first
-    _, b_ns, b_q = second
+    _, a_ns, a_q = first[:3]
+    b_ns = second[1]
     empty = np.empty(0, dtype=np.int64)
     if len(a_ns) < 2 or not len(b_ns):
         return empty, empty
+    a_rows, b_rows = _compared(first, second)
     moving = np.flatnonzero(np.any(a_q[1:] != a_q[:-1], axis=1)) + 1
     _, in_a, in_b = np.intersect1d(
-        _row_keys(a_q)[moving], _row_keys(b_q), assume_unique=False, return_indices=True
+        _row_keys(a_rows)[moving], _row_keys(b_rows), assume_unique=False, return_indices=True
     )
     if not in_a.size:
         return empty, empty

@@ -225,6 +225,12 @@ def _refuse_shared_segments(known: list[Samples], bag: Path, recording: Recordin
             str(bag) if len(segments) == 1 else f'{bag} segment {k + 1} of {len(segments)}',
             segment.stamps_ns,
             segment.position,
+            np.hstack(
+                [
+                    segment.velocity,
+                    *(x for x in (segment.current, segment.joint_torque) if x is not None),
+                ]
+            ),
         )
         for k, segment in enumerate(segments)
     ]

@@ -294,7 +294,8 @@ def _bag_samples(bag: Path, robot: RobotConfig) -> Samples:
     if states.position is None or set(states.names) != set(robot.joints):
         return str(bag), np.zeros(0, dtype=np.int64), np.zeros((0, robot.n_joints))
     order = [states.names.index(name) for name in robot.joints]
-    return str(bag), states.stamps_ns, states.position[:, order]
+    velocity = None if states.velocity is None else states.velocity[:, order]
+    return str(bag), states.stamps_ns, states.position[:, order], velocity
 
 
 def refuse_training_samples(
