@@ -261,10 +261,14 @@ def _check_target(out: Path, inputs: Sequence[Path], folder: bool, option: str) 
     if '..' in out.parts or not out.name:  # 'a/../b' is b: never create a; '.': its name
         out = out.resolve()
     if out.is_symlink():
-        if not out.exists():
+        if not out.exists():  # nothing is written through it: it may point into a lost disk
+            target = os.readlink(out)
+            if not Path(target).is_absolute():
+                target += f' ({out.resolve()})'
+            fix = 'create that folder, remove' if folder else 'remove'
             raise OutputError(
-                f'{out}: is a symbolic link to {os.readlink(out)}, which does not exist; '
-                'point it at a folder'
+                f'{out}: is a symbolic link to {target}, which does not exist (a dangling '
+                f'link); {fix} the link or choose another {option}'
             )
         out = out.resolve()
     if folder and out.exists() and not out.is_dir():
