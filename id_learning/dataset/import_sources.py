@@ -2,33 +2,121 @@
 
 A folder is read without its subfolders: a subfolder may hold a log of its own, a backup or an
 export, and which of them belong to this recording only the user knows. Nothing that looks like a
-log is left out without a word, though: a file with a log suffix in the folder is read (and
-refused when it is no log, naming it), and subfolders holding log files are named in a warning
-with the way to import them (name them as sources too). Files with other suffixes (a mapping, a
-README, a plot) are no logs and are passed over.
+log is left out without a word, though: subfolders holding log files are named in a warning with
+the way to import them (name them as sources too).
+
+A folder's file is a log when its suffix is a log's and its head reads as one (``log_problem``):
+a table whose rows split alike into cells that are mostly numbers. Notes beside the logs (a
+README.txt, a notes.log, a program's text log) are no table: they are named in one warning and
+skipped, and a folder where nothing reads as a log is refused, naming its files and why. A file
+given as a source is read whatever it holds (the reader names what is wrong with it). Files with
+other suffixes (a mapping, a README.md, a plot) are no logs and are passed over.
 """
 
 from __future__ import annotations
 
+import gzip
 import logging
+import zlib
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
 from id_learning.bag.distinct import check_distinct
-from id_learning.dataset.import_readers import log_suffix
+from id_learning.dataset.import_readers import is_float, log_suffix
 from id_learning.errors import DatasetError
 
-__all__ = ['LOG_SUFFIXES', 'log_files']
+__all__ = ['LOG_SUFFIXES', 'log_files', 'log_problem']
 
 logger = logging.getLogger(__name__)
 
 #: The suffixes of files a folder contributes (also gzipped: ``.csv.gz``).
 LOG_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat', '.log', '.npz')
-_NAMED = 5  # subfolders named in the warning, then a count
+_NAMED = 5  # subfolders (or files) named in a warning, then a count
+#: How much of a text file ``log_problem`` reads and judges [bytes]: hundreds of lines.
+_HEAD_BYTES = 1 << 16
+#: Field separators a log's rows split by (None: whitespace), as the reader sniffs them.
+_SEPARATORS = ('\t', ';', ',', None)
 
 
 def _is_log(path: Path) -> bool:
-    return path.is_file() and log_suffix(path) in LOG_SUFFIXES
+    return path.is_file() and log_suffix(path) in LOG_SUFFIXES and log_problem(path) is None
+
+
+def _is_number(cell: str, separator: str | None) -> bool:
+    # A decimal comma (1,5) where the comma separates no fields, as the importer reads it.
+    return is_float(cell) or (separator != ',' and is_float(cell.replace(',', '.')))
+
+
+def log_problem(path: Path) -> str | None:
+    """Why a text file is no log, in words; None when its head reads as one (or it is an NPZ).
+
+    A log is a table: in its first ``_HEAD_BYTES``, at least two rows split alike (by tab, ';',
+    ',' or whitespace) into cells of which two or more, and at least half, are numbers. Header,
+    comment and blank lines are passed over. Prose has no such rows, nor has a binary file. A
+    zip archive (an NPZ, whatever its name) is left to the reader, as the mapping's format says.
+    """
+    if log_suffix(path) == '.npz':
+        return None
+    try:
+        with path.open('rb') as stream:
+            head = stream.read(_HEAD_BYTES)
+        if head.startswith(b'\x1f\x8b'):
+            with gzip.open(path) as stream:
+                head = stream.read(_HEAD_BYTES)
+    except (OSError, EOFError, zlib.error):
+        return None  # the reader names why it cannot be read: never skipped for it
+    if head.startswith(b'PK'):
+        return None  # an NPZ named otherwise: the reader says what it is, or reads it
+    if b'\0' in head:
+        return 'binary, no text'
+    lines = head.decode('utf-8-sig', errors='replace').splitlines()
+    if len(head) == _HEAD_BYTES:
+        lines = lines[:-1]  # cut off by the read
+    lines = [line for line in lines if line.strip()]
+    if not lines:
+        return 'empty'
+    for separator in _SEPARATORS:
+        widths = Counter(
+            len(cells)
+            for cells in (
+                [cell.strip() for cell in line.split(separator) if cell.strip()] for line in lines
+            )
+            if 2 * sum(_is_number(cell, separator) for cell in cells) >= max(len(cells), 4)
+        )
+        if widths and widths.most_common(1)[0][1] >= 2:
+            return None
+    where = f'first {len(lines)} lines' if len(lines) > 1 else 'one line'
+    return f'no table of numbers in its {where}'
+
+
+def _skip_notes(folder: Path, files: Sequence[Path]) -> list[Path]:
+    """The files of ``folder`` that read as logs; the others are named in one warning.
+
+    Raises:
+        DatasetError: none reads as a log (names each file and why).
+    """
+    problems = {path: log_problem(path) for path in files}
+    logs = [path for path, problem in problems.items() if problem is None]
+    notes = [f'{path.name} ({problem})' for path, problem in problems.items() if problem]
+    if not logs:
+        raise DatasetError(
+            f'{folder}: no file in this folder reads as a log: {"; ".join(notes)}; give the log '
+            'files themselves as sources to have them read as logs'
+        )
+    if notes:
+        named = '; '.join(notes[:_NAMED]) + (
+            f'; ... ({len(notes)} in all)' * (len(notes) > _NAMED)
+        )
+        logger.warning(
+            '%s: skipped %d file%s that read as no log: %s; give a file as a source itself to '
+            'have it read as a log',
+            folder,
+            len(notes),
+            's' if len(notes) > 1 else '',
+            named,
+        )
+    return logs
 
 
 def _logs_below(folder: Path) -> int:
@@ -67,19 +155,22 @@ def _warn_subfolders(folder: Path, given: Sequence[Path]) -> None:
 def log_files(sources: Sequence[Path | str]) -> list[Path]:
     """The log files named: files as given, folders as their log files in name order.
 
-    A folder's subfolders are not read; those holding log files are named in a warning, unless
-    they are (or hold) sources themselves.
+    A folder's files that read as no log (``log_problem``: notes beside the logs) are named in
+    a warning and skipped. A folder's subfolders are not read; those holding log files are
+    named in a warning, unless they are (or hold) sources themselves.
 
     Raises:
         DatasetError: a source does not exist, or a folder holds no log file (it names the
-            subfolders that do).
+            subfolders that do, or its files that read as no log).
         ConfigError: one log given twice (same file, or identical bytes), naming it.
     """
     files: list[Path] = []
     given = [Path(source).resolve() for source in sources]
     for source in map(Path, sources):
         if source.is_dir():
-            found = sorted(p for p in source.iterdir() if _is_log(p))
+            found = sorted(
+                p for p in source.iterdir() if p.is_file() and log_suffix(p) in LOG_SUFFIXES
+            )
             if not found:
                 below = _logs_below(source)
                 raise DatasetError(
@@ -87,6 +178,7 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
                     'folder'
                     + (f'; {below} in its subfolders: give those as sources' if below else '')
                 )
+            found = _skip_notes(source, found)
             _warn_subfolders(source, given)
             files.extend(found)
         elif source.is_file():

@@ -66,8 +66,9 @@ def time_s(raw: float, spec: ColumnSpec) -> float:
 def absolute_start_ns(first_raw: float, mapping: ImportMapping) -> int | None:
     """The first row's time [ns since the epoch] when the time column is absolute, else None.
 
-    Absolute means its first value in seconds (``time_s``) lies between 2000 and 2100: a
-    wall-clock time, kept as the bag's.
+    Absolute means its first value in seconds (``time_s``) lies from 2000-01-01 up to
+    2038-01-19 03:14:08 UTC (``_EPOCH_SPAN_S``: 2**31 s, where a message stamp's int32 seconds
+    end): a wall-clock time, kept as the bag's.
     """
     spec = mapping.time
     if spec is None or not _EPOCH_SPAN_S[0] <= time_s(first_raw, spec) < _EPOCH_SPAN_S[1]:
