@@ -2,6 +2,10 @@
 
 Arrays are (B, n) in the robot's joint order: q [rad], v [rad/s], a [rad/s^2] -> tau [N*m],
 joint side; the torque is the model's target (tau_u from currents, or the measured joint torque).
+``predict`` gives it as the labels record it, which is what a model is fitted and scored on;
+``for_the_drive`` gives the model whose torque is what the drive needs at each instant: a label
+that lags the motion (currents measured late) is learned with its lag, which a feed-forward must
+leave out.
 Models follow the estimator contract: the constructor stores settings and does no I/O, fit()
 returns self, fitted state lives in attributes ending in ``_``.
 """
@@ -133,6 +137,15 @@ class InverseDynamicsModel(ABC):
             return tau
 
         return predict_one
+
+    def for_the_drive(self) -> InverseDynamicsModel:
+        """The model as feed-forward: its torque for the motion at the sample's own time.
+
+        Models that learn the labels' lag as a term of their own (``rnea_id`` and the networks
+        on it) return a copy without it; the others cannot tell it apart and return themselves.
+        The predictor, the online check and the closed loop serve this model.
+        """
+        return self
 
     def components(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> TorqueComponents:
         """Split the prediction into physical parts; by default nothing is separable."""

@@ -12,9 +12,10 @@ weights under ``PHYSICS_PREFIX``.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -181,6 +182,19 @@ class IdentifiedPrior(InverseDynamicsModel):
         require_fitted(self, self.physics_)
         assert self.physics_ is not None
         return self.physics_
+
+    def for_the_drive(self) -> InverseDynamicsModel:
+        """A copy whose physics leaves out the labels' delay: the torque the drive needs now.
+
+        The network's part, fitted on what the delayed physics leaves, is kept as it is (its
+        band is far below the delay's reach).
+        """
+        physics = self.identified_physics()
+        if not physics.delay_s:
+            return self
+        drive = copy.copy(self)
+        drive.physics_ = replace(physics, delay_s=0.0)
+        return drive
 
     def identified_mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """``identified_mass_matrix`` of the identified physics (B, n, n) [kg*m^2]."""

@@ -69,7 +69,7 @@ def load_setup(bag: Path, robot_config_path: Path, artifact: Path, notes: list[s
     from id_learning.training.trainer import preprocess_from_dict
 
     robot = load_robot_config(robot_config_path)
-    model = load_model(artifact, robot)
+    model = load_model(artifact, robot).for_the_drive()
     metadata = json.loads((artifact / 'model.json').read_text(encoding='utf-8'))
     if metadata.get('preprocessing'):
         preprocess = preprocess_from_dict(metadata['preprocessing'])

@@ -98,7 +98,7 @@ def _physics_artifact(path: Path, robot: RobotConfig, target: str) -> PhysicsFal
     from id_learning.models.artifact import METADATA_FILE, artifact_target
     from id_learning.models.registry import load_model
 
-    prior = load_model(path, robot)
+    prior = load_model(path, robot).for_the_drive()
     if is_network(prior):
         raise CheckpointError(
             f'{path}: a {prior.kind} model is a network, not a physics prior; give an '

@@ -120,7 +120,7 @@ class FeedForwardPredictor:
         """Keep the model and prepare the per-stream state."""
         if inference not in INFERENCE_BACKENDS:
             raise ValueError(f'inference must be one of {INFERENCE_BACKENDS}, got {inference!r}')
-        self.model = model
+        self.model = model.for_the_drive()
         self.fallback = fallback
         #: Online adaptation to drift (``adaptation.AdaptationLoop``); None: the model as fitted.
         self.adaptation: AdaptationLoop | None = None
@@ -229,7 +229,7 @@ class FeedForwardPredictor:
         config = config or GuardConfig(
             period_s=robot.ipo_period_s, consistency_scale=robot.consistency_scale
         )
-        model = load_model(Path(folder), robot)
+        model = load_model(Path(folder), robot).for_the_drive()
         metadata = json.loads((Path(folder) / METADATA_FILE).read_text(encoding='utf-8'))
         predictor = cls(
             model,

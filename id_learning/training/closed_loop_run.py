@@ -209,9 +209,9 @@ def closed_loop_run(
     offset_s = float(dataset.stamps_ns[start] - dataset.stamps_ns[0]) * 1e-9
     plant = TwinPlant(replace(twin, shift_start_s=twin.shift_start_s + offset_s))
     feed_forward = {
-        kind: load_model(run_dir / MODELS_DIR / kind, robot, kind, target=config.target).predict(
-            reference.q, reference.v, reference.a
-        )
+        kind: load_model(run_dir / MODELS_DIR / kind, robot, kind, target=config.target)
+        .for_the_drive()
+        .predict(reference.q, reference.v, reference.a)
         for kind in kinds
     }
     feed_forward[TRUE_DYNAMICS] = (

@@ -15,6 +15,7 @@ from id_learning.evaluation.physics_report import identified_physics_section
 from id_learning.models.data import TrainingData
 from id_learning.models.registry import load_model, make_model, save_model
 from id_learning.physics import RigidBodyDynamics
+from id_learning.record.excitation import ExcitationTrajectory
 from id_learning.twin import simulate
 
 QUICK_MLP = {'max_epochs': 3, 'device': 'cpu', 'width': 16, 'windows_per_batch': 1}
@@ -109,3 +110,46 @@ def test_rnea_mlp_on_joint_torques_adds_no_rotor_inertia(mabi):
     q, v, a = dataset.q[:5], dataset.v[:5], dataset.a[:5]
     assert model.components(q, v, a).rotor_inertia is None
     assert model.fitted_metadata()['target'] == 'joint'
+
+
+@pytest.mark.parametrize('kind', ['rnea_id', 'rnea_id_mlp'])
+def test_for_the_drive_leaves_out_the_labels_delay_and_nothing_else(kind, fitted, data, mabi):
+    model = fitted[kind]
+    delay = model.identified_physics().delay_s
+    assert 0.002 < delay < 0.006  # the twin's currents lag the motion by 4 ms
+    drive = model.for_the_drive()
+    assert drive.identified_physics().delay_s == 0.0
+    assert model.identified_physics().delay_s == delay  # the fitted model is left as it was
+    ds = data.dataset
+    rows = slice(0, 2000, 7)
+    q, v, a = ds.q[rows], ds.v[rows], ds.a[rows]
+    lag = model.identified_physics().parts(q, v, a)['delay']
+    np.testing.assert_allclose(drive.predict(q, v, a), model.predict(q, v, a) - lag, atol=1e-6)
+    one = drive.sample_predictor()
+    single = np.vstack([one(q[k], v[k], a[k]) for k in range(len(q))])
+    np.testing.assert_allclose(single, drive.predict(q, v, a), rtol=1e-6, atol=1e-3)
+    assert drive.for_the_drive() is drive
+
+
+def test_the_label_view_is_the_drive_torque_delayed(fitted, mabi):
+    """predict(t) ~ for_the_drive().predict(t - d) along a smooth motion, to first order."""
+    model = fitted['rnea_id']
+    delay = model.identified_physics().delay_s
+    trajectory = simulate(twin_config(40.0, seed=12)).parameters['excitation']
+    plan = ExcitationTrajectory.from_dict(trajectory)
+    t = np.linspace(5.0, 35.0, 400)
+    now = model.for_the_drive().predict(*plan.evaluate(t - delay))
+    label = model.predict(*plan.evaluate(t))
+    unshifted = model.for_the_drive().predict(*plan.evaluate(t))
+    # Friction flips make the first-order shift inexact near zero speed: judge the smooth rest.
+    _, v, _ = plan.evaluate(t)
+    smooth = np.all(np.abs(v) > 0.05, axis=1)
+    assert smooth.sum() > 50
+    error = np.sqrt(np.mean((label - now)[smooth] ** 2, axis=0))
+    without = np.sqrt(np.mean((label - unshifted)[smooth] ** 2, axis=0))
+    assert np.all(error < 0.2 * without + 1e-3), (error, without)
+
+
+def test_models_without_a_lag_of_their_own_serve_themselves(mabi):
+    model = make_model('rnea_lq', mabi)
+    assert model.for_the_drive() is model
