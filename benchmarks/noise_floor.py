@@ -8,7 +8,9 @@ recomputed from the bags with the run's stored preprocessing and the saved model
 inputs, low-passed like the labels, against the labels on the test part; the floor is the
 filtered label minus the filtered noise-free torque on the same rows. A ratio near 1 means the
 model is as good as the labels allow. The best model is the one with the lowest mean normalised
-test RMSE (the per-joint best is reported too).
+test RMSE (the per-joint best is reported too). Where the bags' twin config rebuilds the planned
+motion (``twin.needed_torque``), each model's error against the torque the drive needs (on the
+planned reference, without the label's delay, unfiltered) is given over the same floor too.
 
 Prints the table on stderr and the JSON document on stdout; writes docs/results/noise_floor.json
 and .md (not with ``--no-results``; ``--results-folder`` elsewhere).
@@ -40,6 +42,7 @@ from id_learning.training.trainer import (
     preprocess_from_dict,
     read_run,
 )
+from id_learning.twin.needed_torque import NEEDED_TORQUE_NOTES
 
 
 def main() -> None:
@@ -56,10 +59,13 @@ def main() -> None:
     if floor is None:
         raise DatasetError(f'{bags}: no ground_truth.npz; the noise floor needs twin bags')
     scale = dataset.target_scaler.scale()
-    rmse = {}
+    rmse, needed = {}, {}
     for kind in run['kinds']:
         model = load_model(args.run / 'models' / kind, robot, kind)
-        rmse[kind] = np.asarray(score_model(model, dataset, scale).metrics['rmse_nm'])
+        metrics = score_model(model, dataset, scale).metrics
+        rmse[kind] = np.asarray(metrics['rmse_nm'])
+        if 'rmse_needed_over_floor' in metrics:
+            needed[kind] = metrics['rmse_needed_over_floor']
     best = min(rmse, key=lambda k: float(np.mean(rmse[k] / scale)))
     per_joint_best = [min(rmse, key=lambda k, j=j: rmse[k][j]) for j in range(robot.n_joints)]
     document = {
@@ -77,6 +83,8 @@ def main() -> None:
             float(rmse[k][j] / floor[j]) for j, k in enumerate(per_joint_best)
         ],
         'ratio_to_noise_by_model': {k: (v / floor).tolist() for k, v in rmse.items()},
+        'needed_ratio_to_noise_by_model': needed,
+        'needed_torque_notes': dataset.extra.get(NEEDED_TORQUE_NOTES) or [],
         'bags': [str(bag) for bag in bags],
     }
     lines = report(document, settings_lines('noise_floor', parser, args))
@@ -124,6 +132,28 @@ def report(document: dict, settings: list[str]) -> list[str]:
         'Test RMSE through the filter / floor, per model:',
         '',
         *markdown_table(['model', *joints], rows),
+        '',
+        *needed_lines(document),
+    ]
+
+
+def needed_lines(document: dict) -> list[str]:
+    """Each model's error against the torque the drive needs over the floor, or why absent."""
+    if not document['needed_ratio_to_noise_by_model']:
+        why = '; '.join(document['needed_torque_notes']) or 'the bags give no planned motion'
+        return [f'No error against the torque the drive needs: {why}.']
+    return [
+        'Test RMSE against the torque the drive needs / floor, per model (the model on the '
+        'planned reference, against the noise-free torque at each sample time without the '
+        "label's delay, unfiltered):",
+        '',
+        *markdown_table(
+            ['model', *document['joints']],
+            [
+                [kind, *(number(x, '.3g') for x in ratios)]
+                for kind, ratios in document['needed_ratio_to_noise_by_model'].items()
+            ],
+        ),
     ]
 
 

@@ -19,6 +19,7 @@ from id_learning.evaluation.findings import (
     model_label,
 )
 from id_learning.evaluation.study import STUDY_CITATION, StudyTable
+from id_learning.twin.needed_torque import NEEDED_TORQUE_NOTES
 
 __all__ = [
     'MODES',
@@ -160,6 +161,46 @@ def _through_filter_tables(
         'flips).',
         '',
         markdown_table(['model', *(f'{j} filtered / unfiltered' for j in joints)], truth),
+        '',
+        *_needed_torque_table(dataset, metrics, kinds),
+    ]
+
+
+def _needed_torque_table(
+    dataset: Dataset, metrics: dict[str, dict[str, Any]], kinds: list[str]
+) -> list[str]:
+    """Errors against the torque the drive needs (twin), or one line saying why there are none."""
+    heading = '### The torque the drive needs (twin: planned reference, no label delay) [N·m]'
+    if not all('rmse_needed_nm' in metrics[k] for k in kinds):
+        notes = dataset.extra.get(NEEDED_TORQUE_NOTES) or [
+            'the metrics given lack it (scored before it existed); evaluate the run again'
+        ]
+        return [heading, '', 'Not computed: ' + '; '.join(notes) + '.', '']
+    torque = 'tau_u' if dataset.target == 'motor' else 'joint torque'
+    rows = [
+        [
+            model_label(k),
+            *(
+                f'{x:.3g} ({r:.2g}×)'
+                for x, r in zip(
+                    metrics[k]['rmse_needed_nm'], metrics[k]['rmse_needed_over_floor'], strict=True
+                )
+            ),
+        ]
+        for k in kinds
+    ]
+    return [
+        heading,
+        '',
+        'Each model on the motion a controller plans and sends as its reference (exact '
+        "positions in the encoder's coordinates, velocities and accelerations), against the "
+        f'noise-free {torque} that motion needs at each sample time: the label without its '
+        'delay (the currents lag the motion), with friction, cogging, offset and torque-constant '
+        'scale as in the label. The feed-forward error a drive would see, free of the '
+        'acceleration noise of inputs rebuilt from the recording; in brackets, as a multiple of '
+        'the label-noise floor.',
+        '',
+        markdown_table(['model', *dataset.joints], rows),
         '',
     ]
 

@@ -11,7 +11,10 @@ needs now, from the inputs a controller sends; it is judged where the labels can
 - against the truth (twin recordings, ``Dataset.tau_clean``): the filtered torque against the
   noise-free torque filtered the same way, and the unfiltered torque against the noise-free one;
 - the label-noise floor: the filtered labels against the filtered noise-free torque, the best
-  any model can do through the filter.
+  any model can do through the filter;
+- the torque the drive needs (twin recordings, ``twin.needed_torque``): the model on the planned
+  reference a controller sends, against the noise-free torque of that motion at each sample
+  time, without the label's delay: the feed-forward error a drive would see.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from id_learning.dataset.inputs import Motion
 from id_learning.dataset.preprocess import Dataset
 from id_learning.evaluation.metrics import error_metrics, rmse
 from id_learning.models.base import InverseDynamicsModel
+from id_learning.twin.needed_torque import needed_torque_of
 
 __all__ = ['ModelScore', 'label_noise_floor', 'predict_along', 'score_model', 'test_index']
 
@@ -68,6 +72,7 @@ class ModelScore:
         filtered: (M, n) the torque through the filter on the test rows [N*m].
         unfiltered: (M, n) the torque on a controller's inputs on the test rows [N*m].
         study_way: (M, n) the torque on the study's inputs on the test rows [N*m].
+        predicted_samples: how many samples the model was run on for these figures.
     """
 
     def __init__(
@@ -76,12 +81,14 @@ class ModelScore:
         filtered: np.ndarray,
         unfiltered: np.ndarray,
         study_way: np.ndarray,
+        predicted_samples: int,
     ) -> None:
         """Keep the figures and the predictions they came from."""
         self.metrics = metrics
         self.filtered = filtered
         self.unfiltered = unfiltered
         self.study_way = study_way
+        self.predicted_samples = predicted_samples
 
 
 def score_model(model: InverseDynamicsModel, dataset: Dataset, scale: np.ndarray) -> ModelScore:
@@ -97,17 +104,20 @@ def score_model(model: InverseDynamicsModel, dataset: Dataset, scale: np.ndarray
         (``rmse_nm``, ``rmse_normalised``, ...) and again as ``rmse_through_filter_nm``,
         ``rmse_through_filter_normalised`` and ``mean_rmse_through_filter_normalised``; the
         study's way in ``study_way``; with a noise-free torque ``rmse_true_through_filter_nm``,
-        ``rmse_true_nm`` and ``rmse_through_filter_over_floor``.
+        ``rmse_true_nm`` and ``rmse_through_filter_over_floor``; with the torque the drive
+        needs as well (a twin bag, ``twin.needed_torque_of``) ``rmse_needed_nm`` (the model on
+        the planned reference against it, unfiltered) and ``rmse_needed_over_floor``.
     """
     rows = test_index(dataset)
     torque = predict_along(model, dataset.controller, dataset.recording_rows())
     filtered = dataset.filter_like_labels(torque)[rows]
     through = error_metrics(filtered, dataset.tau[rows], scale).to_dict()
     if dataset.is_shuffled:  # scattered test rows: along each recording, then picked
-        study_runs = dataset.recording_rows()
+        test_runs = dataset.recording_rows()
     else:
-        study_runs = [np.arange(*s['test']) for s in dataset.extra.get('segments', [])] or [rows]
-    study = predict_along(model, dataset.study, study_runs)[rows]
+        test_runs = [np.arange(*s['test']) for s in dataset.extra.get('segments', [])] or [rows]
+    study = predict_along(model, dataset.study, test_runs)[rows]
+    predicted = len(dataset.tau) + sum(len(run) for run in test_runs)
     study_way = error_metrics(study, dataset.tau[rows], scale).to_dict()
     metrics: dict[str, object] = {
         **through,
@@ -129,7 +139,15 @@ def score_model(model: InverseDynamicsModel, dataset: Dataset, scale: np.ndarray
         floor = rmse(dataset.tau[rows], clean_filtered)
         metrics['rmse_true_through_filter_nm'] = rmse(filtered, clean_filtered).tolist()
         metrics['rmse_true_nm'] = rmse(torque[rows], clean).tolist()
+        floor = np.where(floor > 0, floor, np.nan)
         metrics['rmse_through_filter_over_floor'] = (
-            np.asarray(through['rmse_nm']) / np.where(floor > 0, floor, np.nan)
+            np.asarray(through['rmse_nm']) / floor
         ).tolist()
-    return ModelScore(metrics, filtered, torque[rows], study)
+        needed = needed_torque_of(dataset)
+        if needed is not None:
+            on_reference = predict_along(model.for_the_drive(), needed.reference, test_runs)[rows]
+            predicted += sum(len(run) for run in test_runs)
+            needed_rmse = rmse(on_reference, needed.torque[rows])
+            metrics['rmse_needed_nm'] = needed_rmse.tolist()
+            metrics['rmse_needed_over_floor'] = (needed_rmse / floor).tolist()
+    return ModelScore(metrics, filtered, torque[rows], study, predicted)

@@ -37,6 +37,12 @@ from id_learning.models.data import TrainingData
 from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 from id_learning.twin import read_noise_free_torque
+from id_learning.twin.needed_torque import (
+    NEEDED_TORQUE,
+    NEEDED_TORQUE_NOTES,
+    join_needed_torque,
+    needed_torque,
+)
 
 __all__ = [
     'DATA_WARNINGS',
@@ -196,6 +202,7 @@ def load_datasets(
             extra = {**dataset.extra, 'bag': str(bag), DATA_WARNINGS: warnings}
             if ignored:
                 extra[GROUND_TRUTH_NOTES] = [ignored]
+            extra |= _needed_torque_extra(bag, dataset) if clean is not None else {}
             datasets.append(replace(dataset, tau_clean=clean, extra=extra))
         _LOG.info(
             '%s: %d samples in %d segment(s)',
@@ -204,6 +211,15 @@ def load_datasets(
             len(recording.segment_starts),
         )
     return _note_partial_ground_truth(datasets)
+
+
+def _needed_torque_extra(bag: Path, dataset: Dataset) -> dict[str, Any]:
+    """The ``Dataset.extra`` entries of a twin bag's needed torque, or of why there is none."""
+    needed, why = needed_torque(bag, dataset)
+    if why:
+        _LOG.warning('%s', why)
+        return {NEEDED_TORQUE_NOTES: [why]}
+    return {} if needed is None else {NEEDED_TORQUE: needed}
 
 
 _SHARED_WHY = 'the same motion would be in the training and the test part'
@@ -480,6 +496,7 @@ def _joined(
     if fit_rows is not None:
         fit = fit_rows
     has_clean = all(d.tau_clean is not None for d in datasets)
+    needed = join_needed_torque(pieces)
     return Dataset(
         joints=first.joints,
         target=first.target,
@@ -508,6 +525,10 @@ def _joined(
             GROUND_TRUTH_NOTES: list(
                 dict.fromkeys(n for d in datasets for n in d.extra.get(GROUND_TRUTH_NOTES, ()))
             ),
+            NEEDED_TORQUE_NOTES: list(
+                dict.fromkeys(n for d in datasets for n in d.extra.get(NEEDED_TORQUE_NOTES, ()))
+            ),
+            **({} if needed is None else {NEEDED_TORQUE: needed}),
         },
     )
 

@@ -172,8 +172,7 @@ def evaluate_models(
             # Timed on a stretch in time (a shuffled split's test rows form none).
             stretches = segment_rows(dataset, 'all') if dataset.is_shuffled else rows
             a, b = max(stretches, key=lambda r: r[1] - r[0])
-            # Every sample is predicted twice (controller's and the study's inputs).
-            entry['inference_seconds_per_sample'] = seconds / (2 * len(dataset.tau))
+            entry['inference_seconds_per_sample'] = seconds / score.predicted_samples
             motion = dataset.controller
             entry.update(
                 measure_inference(
