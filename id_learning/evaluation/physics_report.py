@@ -2,8 +2,8 @@
 
 For a fitted model that carries ``physics.identified.IdentifiedPhysics`` (rnea_id and the
 networks on it: rnea_id_mlp, delan_id, lnn_mlp_id): each body's mass and centre of mass, the
-payload, the drives against their datasheet, and the base parameters with their 95 % intervals,
-marked identified by the data or held at the CAD prior.
+payload, the drives against their datasheet, the motor cogging found on the full band, and the
+base parameters with their 95 % intervals, marked identified by the data or held at the CAD prior.
 """
 
 from __future__ import annotations
@@ -108,6 +108,7 @@ def _section(kind: str, physics: IdentifiedPhysics, robot: RobotConfig) -> list[
             '',
         ]
     lines += _drives(physics, robot)
+    lines += _cogging(physics)
     lines += [
         '### Base parameters',
         '',
@@ -173,3 +174,60 @@ def _drives(physics: IdentifiedPhysics, robot: RobotConfig) -> list[str]:
         '',
         *_table(head, rows),
     ]
+
+
+def _cogging(physics: IdentifiedPhysics) -> list[str]:
+    """Per joint: the cogging ripple kept (period, amplitude, interval), or why none."""
+    found = physics.report.get('cogging')
+    lines = ['### Cogging', '']
+    if not found:
+        return [*lines, 'Not sought (identified before the full-band cogging stage).', '']
+    if found.get('skipped'):
+        return [*lines, f'Not sought: {found["skipped"]}.', '']
+    tried = ', '.join(str(p) for p in found.get('periods_tried', []))
+    lines += [
+        'A torque ripple s sin(p N q) + c cos(p N q) per joint (p periods per motor turn, N the '
+        "gear ratio, q at the labels' time), far above the label filter's band: fitted on the "
+        "training part's unfiltered labels less the identified torque, both sides high-passed "
+        f'at {_g(float(found.get("high_pass_hz", float("nan"))), 3)} Hz, for p in {{{tried}}}, '
+        'and kept where its amplitude reaches '
+        f'{_g(float(found.get("z_threshold", float("nan"))), 3)} standard errors (from blocks '
+        "of time; with few blocks the same tail probability under Student's t) and lowers that "
+        'residual on the held-out tail of the training part; the most significant '
+        'per joint, then fitted on the whole training part.',
+        '',
+    ]
+    rows = []
+    for entry in found.get('joints', []):
+        if entry.get('period'):
+            low, high = entry['amplitude_ci95_nm']
+            rows.append(
+                [
+                    entry['joint'],
+                    str(entry['period']),
+                    _g(entry['amplitude_nm'], 3),
+                    f'[{_g(low, 3)}, {_g(high, 3)}]',
+                    f'{entry["phase_rad"]:.3f}',
+                    _g(entry['z'], 3),
+                    _g(entry['held_out_gain'], 2),
+                ]
+            )
+            continue
+        strongest = entry.get('strongest') or {}
+        why = entry.get('why_none', 'none significant')
+        if strongest:
+            why += (
+                f' (strongest: p = {strongest["period"]}, '
+                f'{_g(strongest["amplitude_nm"], 2)} N·m, {_g(strongest["z"], 2)} SE)'
+            )
+        rows.append([entry['joint'], '–', f'none: {why}', '', '', '', ''])
+    head = [
+        'joint',
+        'periods per motor turn',
+        'amplitude [N·m]',
+        '95 % interval',
+        'phase [rad]',
+        'standard errors',
+        'held-out gain',
+    ]
+    return [*lines, *_table(head, rows)]

@@ -65,6 +65,8 @@ class IdentificationSettings:
         iterations: linearisations of the bilinear terms.
         confirm: balancers, the payload and bodies that leave their CAD prior's 95 % range
             enter only where the training part's held-out tail confirms them.
+        cogging: identify each motor's cogging on the full band of the labels (motor labels;
+            ``physics.cogging``).
     """
 
     friction: str = ','.join(FRICTION_LAWS)
@@ -77,6 +79,7 @@ class IdentificationSettings:
     gain_std: float = 0.05
     iterations: int = 3
     confirm: bool = True
+    cogging: bool = True
 
     def check_identification(self) -> None:
         """Check the identification settings (and a time budget, where the config has one).
@@ -111,6 +114,7 @@ def identification_config(config: IdentificationSettings) -> IdentificationConfi
         gain_std=config.gain_std,
         iterations=config.iterations,
         confirm=config.confirm,
+        cogging=config.cogging,
     )
 
 
@@ -124,7 +128,7 @@ def identified_components(
     inertial = scale * np.einsum('bij,bj->bi', dynamics.mass_matrix(q), a)
     gravity = scale * dynamics.gravity(q)
     coriolis = parts['rigid_body'] - inertial - gravity
-    rest = parts['balancer'] + parts['offset'] + parts['delay']
+    rest = parts['balancer'] + parts['offset'] + parts['delay'] + parts['cogging']
     return TorqueComponents(
         total=sum_parts(parts),
         inertial=inertial,

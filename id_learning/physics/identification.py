@@ -19,6 +19,9 @@ inertias, the label gains (torque-constant scales), friction per joint and torqu
   The report gives the base parameters (the identifiable combinations, ``base_parameters``)
   with 95 % intervals, which of them the recording identifies and which stayed at the prior, and
   the condition number of the base regressor.
+- Motor cogging, far above the label filter's band, is then found on the training part's
+  unfiltered labels less the identified torque (``physics.cogging``); ``report['cogging']`` says
+  per joint what was kept, or why nothing.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from __future__ import annotations
 import logging
 import time
 import warnings
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -38,6 +42,7 @@ from id_learning.physics.base_parameters import (
     base_parameters,
     pseudo_inertia_basis,
 )
+from id_learning.physics.cogging import fit_cogging
 from id_learning.physics.confirmation import (
     HELD_OUT_FRACTION,
     body_departures,
@@ -263,14 +268,15 @@ def identify(
     """Identify the rigid body and drives on the training part of ``dataset`` (module docstring).
 
     ``deadline`` (``time.perf_counter()`` seconds): past half the time to it, no claim is judged
-    (none is then confirmed) and the final fit is linearised once; ``report['cut_short']``
-    names what was cut.
+    (none is then confirmed) and the final fit is linearised once; past it, no cogging is
+    sought; ``report['cut_short']`` names what was cut.
 
     Raises:
         DatasetError: the training part is too short, or the solver finds no solution.
     """
     config = config or IdentificationConfig()
     start, cpu_start = time.perf_counter(), time.process_time()
+    end = deadline
     # What follows the judging (the final fit) costs about what came before it: steps start
     # only in the first half of the budget, so that the whole stays within it.
     deadline = None if deadline is None else start + _STEPS_SHARE * (deadline - start)
@@ -323,7 +329,7 @@ def identify(
             config.solver,
         )
     _LOG.info('identified %d parameters in %.1f s', len(layout), seconds)
-    return IdentifiedPhysics(
+    physics = IdentifiedPhysics(
         robot=robot,
         target=dataset.target,
         theta=problem.theta(x),
@@ -339,6 +345,27 @@ def identify(
         balancer_phase=np.array([problem.geometry.get(j, (0.5, 0.0))[1] for j in range(n)]),
         report=report,
     )
+    physics = _with_cogging(physics, dataset, config, end)
+    physics.report['seconds'] = time.perf_counter() - start
+    physics.report['cpu_seconds'] = time.process_time() - cpu_start
+    return physics
+
+
+def _with_cogging(
+    physics: IdentifiedPhysics, dataset: Dataset, config: IdentificationConfig, end: float | None
+) -> IdentifiedPhysics:
+    """The model with the cogging the full-band stage finds (``physics.cogging``)."""
+    report = physics.report
+    if not config.cogging:
+        report['cogging'] = {'skipped': 'switched off (identification.cogging)', 'joints': []}
+        return physics
+    if _past(end):
+        report['cut_short'].append('the search for cogging (none sought)')
+        report['cogging'] = {'skipped': 'past the time budget', 'joints': []}
+        return physics
+    found = fit_cogging(dataset, physics, config.cogging_periods)
+    report['cogging'] = found.report
+    return replace(physics, cogging=found.coefficients, cogging_periods=found.periods)
 
 
 def _bodies(

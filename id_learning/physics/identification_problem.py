@@ -33,7 +33,10 @@ from id_learning.physics.terms import gravity_loaded_joints
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import rotor_basis
 
-__all__ = ['PINNED_STD', 'IdentificationConfig', 'Layout', 'Problem']
+__all__ = ['COGGING_PERIODS', 'PINNED_STD', 'IdentificationConfig', 'Layout', 'Problem']
+
+#: Candidate cogging periods per motor turn: every one up to 12, and the diagnosis's higher ones.
+COGGING_PERIODS = (*range(1, 13), 18, 24, 36)
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,10 @@ class IdentificationConfig:
             its prior's 95 % range) on the training part's held-out tail, and hold what it does
             not confirm at its prior (``physics.confirmation``).
         significance: the level at which the held-out blocks confirm a claim (Holm-corrected).
+        cogging: after the fit through the filter, find each joint's motor cogging (a ripple
+            s sin(p N q) + c cos(p N q), far above the label filter's band) on the training
+            part's unfiltered labels (``physics.cogging``); motor labels only. False: none.
+        cogging_periods: candidate periods p per motor turn; at most one is kept per joint.
     """
 
     friction: tuple[str, ...] = FRICTION_LAWS
@@ -94,6 +101,8 @@ class IdentificationConfig:
     solver: str = 'CLARABEL'
     confirm: bool = True
     significance: float = 0.01
+    cogging: bool = True
+    cogging_periods: tuple[int, ...] = COGGING_PERIODS
 
     def __post_init__(self) -> None:
         """Check names and ranges, naming the key."""
@@ -115,6 +124,12 @@ class IdentificationConfig:
         if not 0 < self.significance < 0.5:
             raise ConfigError(
                 f'identification.significance must lie in (0, 0.5), got {self.significance}'
+            )
+        periods = self.cogging_periods
+        if not periods or not all(isinstance(p, int) and p >= 1 for p in periods):
+            raise ConfigError(
+                'identification.cogging_periods: need whole numbers of periods per motor turn '
+                f'>= 1, got {periods!r}'
             )
         for key in ('smoothing_velocity', 'rotor_rel_std', 'gain_std'):
             if not getattr(self, key) > 0:

@@ -1,7 +1,7 @@
 """The identified rigid-body and drive model: what ``physics.identification`` estimates.
 
     tau_u  = (1 + g) * (RNEA_theta(q, v, a) + N^2 a r) + balancer(q) + friction(v, tau_link)
-             + offset - d * rate(tau_link)
+             + offset - d * rate(tau_link) + cogging(q - d v)
     tau    = RNEA_theta(q, v, a) + balancer(q) + offset      (joint-torque labels: link side)
 
 theta: every body's inertial parameters (pinocchio's 10 per body); r: rotor inertia, motor side
@@ -11,7 +11,10 @@ that carry one (``physics.balancer``: its geometry, ratio and phase, and three f
 coefficients); friction per joint from the laws in ``FRICTION_LAWS``, with
 tau_link = RNEA_theta + balancer the load the load-dependent friction grows with; offset:
 current-sensor (or torque-sensor) offsets [N*m]; d: the labels' delay behind the positions [s],
-with rate(tau_link) = dtau_link/dq v + dtau_link/dv a (the part that needs the jerk left out).
+with rate(tau_link) = dtau_link/dq v + dtau_link/dv a (the part that needs the jerk left out);
+cogging: per joint at most one ripple s sin(p N q) + c cos(p N q), p periods per motor turn, N the
+gear ratio, evaluated at the labels' time q - d v (``physics.cogging`` finds it on the full band;
+with d = 0, the torque the drive needs now, at q).
 """
 
 from __future__ import annotations
@@ -31,7 +34,13 @@ from id_learning.physics.rigid_body import RigidBodyDynamics
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import rotor_inertia_joint_side, rotor_inertia_torque
 
-__all__ = ['FRICTION_LAWS', 'IdentifiedPhysics', 'friction_columns', 'sum_parts']
+__all__ = [
+    'FRICTION_LAWS',
+    'IdentifiedPhysics',
+    'cogging_basis',
+    'friction_columns',
+    'sum_parts',
+]
 
 #: Step of the central difference along (v, a) that gives the link torque's rate [s].
 RATE_STEP_S = 1e-4
@@ -73,6 +82,18 @@ def friction_columns(
     }
 
 
+def cogging_basis(q: np.ndarray, gear_ratio: float, period: int) -> np.ndarray:
+    """The sine and cosine of p N q (..., 2): a cogging ripple's columns at one joint's positions.
+
+    Args:
+        q: (...,) the joint's positions [rad].
+        gear_ratio: N, motor turns per joint turn.
+        period: p, ripple periods per motor turn.
+    """
+    phase = period * gear_ratio * np.asarray(q, dtype=float)
+    return np.stack([np.sin(phase), np.cos(phase)], axis=-1)
+
+
 @dataclass(frozen=True, eq=False)
 class IdentifiedPhysics:
     """An identified rigid-body and drive model (see the module docstring).
@@ -91,6 +112,9 @@ class IdentifiedPhysics:
         balancer: (n, 3) force coefficients of each joint's balancer [N*m] (zero rows: none).
         balancer_ratio: (n,) each balancer's ratio r of its arms.
         balancer_phase: (n,) each balancer's phase [rad].
+        cogging: (n, 2) each joint's cogging ripple, sine and cosine coefficients of p N q [N*m]
+            (empty: none; filled with zeros).
+        cogging_periods: (n,) its periods p per motor turn (0: none; empty: none).
         report: JSON-ready account of the identification (base parameters, intervals, ...).
     """
 
@@ -107,7 +131,17 @@ class IdentifiedPhysics:
     balancer: np.ndarray
     balancer_ratio: np.ndarray
     balancer_phase: np.ndarray
+    cogging: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    cogging_periods: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     report: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Give a model without cogging its zero rows (n, 2) and periods (n,)."""
+        n = self.robot.n_joints
+        if np.size(self.cogging_periods) == 0:
+            object.__setattr__(self, 'cogging', np.zeros((n, 2)))
+            object.__setattr__(self, 'cogging_periods', np.zeros(n, dtype=int))
+        object.__setattr__(self, 'cogging_periods', np.asarray(self.cogging_periods, dtype=int))
 
     @cached_property
     def dynamics(self) -> RigidBodyDynamics:
@@ -126,6 +160,16 @@ class IdentifiedPhysics:
         for j in np.flatnonzero(np.any(self.balancer != 0, axis=1)):
             basis = balancer_basis(q[..., j], self.balancer_ratio[j], self.balancer_phase[j])
             torque[..., j] = basis @ self.balancer[j]
+        return torque
+
+    def cogging_torque(self, q: np.ndarray) -> np.ndarray:
+        """The cogging ripples' torque (..., n) [N*m] at positions q (..., n) [rad]."""
+        q = np.asarray(q, dtype=float)
+        torque = np.zeros_like(q)
+        gear = self.robot.drives.gear_ratio
+        for j in np.flatnonzero(self.cogging_periods):
+            basis = cogging_basis(q[..., j], gear[j], int(self.cogging_periods[j]))
+            torque[..., j] = basis @ self.cogging[j]
         return torque
 
     def link_rate(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -164,6 +208,7 @@ class IdentifiedPhysics:
             'friction': friction,
             'offset': np.broadcast_to(self.offset, v.shape).copy(),
             'delay': delay,
+            'cogging': self.cogging_torque(q - self.delay_s * v),
         }
 
     def torque(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -184,6 +229,10 @@ class IdentifiedPhysics:
         offset, rnea = self.offset, pin.rnea
 
         balancer, delay, h = self.balancer_torque, self.delay_s, RATE_STEP_S
+        rippled = np.flatnonzero(self.cogging_periods)
+        ripple = self.cogging_periods[rippled] * self.robot.drives.gear_ratio[rippled]
+        ripple_sin, ripple_cos = self.cogging[rippled, 0], self.cogging[rippled, 1]
+        sin, cos = np.sin, np.cos
 
         def torque_one(q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
             rigid = rnea(model, data, q, v, a).copy()
@@ -198,6 +247,9 @@ class IdentifiedPhysics:
                 coefficients, friction_columns(laws, v, tau_link, eps, vs).values(), strict=True
             ):
                 tau += c * column
+            if len(rippled):
+                phase = ripple * (q[rippled] - delay * v[rippled])
+                tau[rippled] += ripple_sin * sin(phase) + ripple_cos * cos(phase)
             return tau
 
         return torque_one
@@ -214,6 +266,8 @@ class IdentifiedPhysics:
             'balancer': self.balancer,
             'balancer_ratio': self.balancer_ratio,
             'balancer_phase': self.balancer_phase,
+            'cogging': self.cogging,
+            'cogging_periods': self.cogging_periods,
         }
         out.update({f'friction.{law}': values for law, values in self.friction.items()})
         return {name: np.ascontiguousarray(value, dtype=float) for name, value in out.items()}
@@ -234,8 +288,12 @@ class IdentifiedPhysics:
     ) -> IdentifiedPhysics:
         """Rebuild from ``arrays`` and ``metadata`` output.
 
+        Arrays saved before the cogging was identified lack 'cogging' and 'cogging_periods':
+        the model then has none.
+
         Raises:
-            CheckpointError: an array is missing or has the wrong shape.
+            CheckpointError: an array is missing or has the wrong shape, or a cogging period is
+                no whole number >= 0.
         """
         n = robot.n_joints
         laws = tuple(metadata.get('friction_laws', ()))
@@ -246,11 +304,20 @@ class IdentifiedPhysics:
             **{f'friction.{law}': (n,) for law in laws},
             'balancer': (n, BALANCER_TERMS),
         }
+        cogging = {'cogging': (n, 2), 'cogging_periods': (n,)}
+        if cogging.keys() & arrays.keys():  # an artifact saved before the stage holds neither
+            expected |= cogging
         found = {name: np.shape(value) for name, value in arrays.items()}
         if found != expected or not set(laws) <= set(FRICTION_LAWS):
             raise CheckpointError(
                 f'identified physics: expected arrays {expected} for laws {list(laws)}, got '
                 f'{found}'
+            )
+        periods = np.asarray(arrays.get('cogging_periods', np.zeros(n)), dtype=float)
+        if not np.all((periods >= 0) & (periods == np.round(periods))):
+            raise CheckpointError(
+                f'identified physics: cogging periods per motor turn must be whole numbers >= 0, '
+                f'got {periods.tolist()}'
             )
         return cls(
             robot=robot,
@@ -266,5 +333,7 @@ class IdentifiedPhysics:
             balancer=np.asarray(arrays['balancer'], dtype=float),
             balancer_ratio=np.asarray(arrays['balancer_ratio'], dtype=float),
             balancer_phase=np.asarray(arrays['balancer_phase'], dtype=float),
+            cogging=np.asarray(arrays.get('cogging', np.zeros((n, 2))), dtype=float),
+            cogging_periods=periods.astype(int),
             report=dict(metadata.get('report') or {}),
         )

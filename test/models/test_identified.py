@@ -123,8 +123,15 @@ def test_for_the_drive_leaves_out_the_labels_delay_and_nothing_else(kind, fitted
     ds = data.dataset
     rows = slice(0, 2000, 7)
     q, v, a = ds.q[rows], ds.v[rows], ds.a[rows]
-    lag = model.identified_physics().parts(q, v, a)['delay']
+    label, now = (
+        model.identified_physics().parts(q, v, a),
+        drive.identified_physics().parts(q, v, a),
+    )
+    # The lag: the delay's term, and the cogging's phase (at q - d v in the labels, at q now).
+    lag = label['delay'] + label['cogging'] - now['cogging']
     np.testing.assert_allclose(drive.predict(q, v, a), model.predict(q, v, a) - lag, atol=1e-6)
+    for name in set(label) - {'delay', 'cogging'}:
+        np.testing.assert_array_equal(now[name], label[name])
     one = drive.sample_predictor()
     single = np.vstack([one(q[k], v[k], a[k]) for k in range(len(q))])
     np.testing.assert_allclose(single, drive.predict(q, v, a), rtol=1e-6, atol=1e-3)
