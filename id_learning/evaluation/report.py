@@ -72,11 +72,12 @@ from id_learning.evaluation.report_tables import (
     study_table,
     timing_table,
 )
-from id_learning.evaluation.scoring import score_model
+from id_learning.evaluation.scoring import predict_along, score_model
 from id_learning.evaluation.study import StudyTable
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.outputs import write_text_atomic
 from id_learning.robot.config import RobotConfig
+from id_learning.twin.needed_torque import needed_torque_of
 
 __all__ = [
     'DISSIPATION_FREE_SHARE',
@@ -98,6 +99,8 @@ __all__ = [
 OVERLAYS_DIR = 'torque_overlays'
 #: The error spectra (figure (g)).
 ERROR_SPECTRA_PNG = 'error_spectra.png'
+#: The spectra of the errors against the torque the drive needs (figure (g'), twin data).
+NEEDED_SPECTRA_PNG = 'needed_error_spectra.png'
 
 
 class Figure(NamedTuple):
@@ -285,7 +288,45 @@ def _signal_figures(
             ),
         )
     )
-    return figures
+    return figures + _needed_spectra(report, out)
+
+
+def _needed_spectra(report: ReportInput, out: Path) -> list[Figure]:
+    """Figure (g'): the spectra of each feed-forward's error against the torque the drive needs.
+
+    On a twin recording only (``twin.needed_torque``): each model as served to the drive
+    (``for_the_drive``) on the planned reference, against the noise-free torque at each sample
+    time, on the full band up to Nyquist, where the fast content a label filter hides shows.
+    """
+    ds = report.dataset
+    needed = needed_torque_of(ds)
+    if needed is None:
+        return []
+    index = _evaluated_index(report)
+    runs = [np.arange(a, b) for a, b in report.rows]
+    errors = {
+        kind: predict_along(model.for_the_drive(), needed.reference, runs)[index]
+        - needed.torque[index]
+        for kind, model in report.models.items()
+    }
+    plot_error_spectra(
+        errors=errors,
+        stretches=stretches_of(report.rows),
+        dataset=ds,
+        floor=None,
+        path=out / NEEDED_SPECTRA_PNG,
+        full_band=True,
+    )
+    return [
+        Figure(
+            NEEDED_SPECTRA_PNG,
+            "(g') Spectra of the feed-forward errors against the torque the drive needs",
+            'Each model as the predictor serves it, on the reference a controller sends (the '
+            "twin's planned motion), against the noise-free torque at each instant, up to "
+            'Nyquist: what friction flips and cogging leave shows here, not through the label '
+            'filter.',
+        )
+    ]
 
 
 def _evaluated_index(report: ReportInput) -> np.ndarray:

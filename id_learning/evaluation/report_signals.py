@@ -199,6 +199,7 @@ def plot_error_spectra(
     dataset: Dataset,
     floor: LabelFloor | None,
     path: Path,
+    full_band: bool = False,
 ) -> None:
     """The amplitude spectral density of each model's test error per joint, with the floor.
 
@@ -208,6 +209,8 @@ def plot_error_spectra(
         dataset: the data (joints, sample period, the label filter).
         floor: the label-noise floor, drawn as white noise through the label filter.
         path: the PNG to write.
+        full_band: errors of the torque the drive needs (unfiltered, up to Nyquist) rather
+            than through the label filter.
     """
     plt = pyplot()
     ds, kinds = dataset, list(errors)
@@ -238,7 +241,7 @@ def plot_error_spectra(
         if j >= n:
             ax.set_visible(False)
             continue
-        top_hz = min(0.5 / ds.period_s, 6.0 * float(ds.cutoff_hz[j]))
+        top_hz = 0.5 / ds.period_s if full_band else min(0.5 / ds.period_s, 6.0 * ds.cutoff_hz[j])
         band = (freqs > 0) & (freqs <= top_hz)
         for kind in kinds:
             ax.plot(
@@ -268,8 +271,13 @@ def plot_error_spectra(
             ax.set_xlabel('frequency [Hz]')
     handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc='outside lower center', ncol=min(len(labels), 4), fontsize=8)
+    what = (
+        'the feed-forward on the planned reference minus the torque the drive needs'
+        if full_band
+        else 'prediction through the label filter minus label'
+    )
     fig.suptitle(
-        'Amplitude spectral density of the test error (prediction through the label filter '
-        f'minus label; Welch, {segment_s:.0f} s segments)'
+        f'Amplitude spectral density of the test error ({what}; Welch, {segment_s:.0f} s '
+        'segments)'
     )
     save_figure(fig, path)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -131,3 +132,31 @@ def test_the_joined_reference_follows_the_joined_rows(twin_bag, mabi) -> None:
     step = 2 * np.pi / (2**20 * mabi.drives.gear_ratio)
     assert np.all(np.abs(needed.reference.q - dataset.controller.q) <= step)
     assert np.all(np.diff(dataset.stamps_ns[dataset.test_rows]) > 0)
+
+
+def test_the_report_draws_the_needed_error_spectra_on_a_twin_bag_only(
+    short_twin, twin_bag, mabi, tmp_path
+):
+    from id_learning.evaluation.report import NEEDED_SPECTRA_PNG, ReportInput, _needed_spectra
+
+    config, _ = short_twin
+    dataset = _load(twin_bag, mabi)
+
+    def report(data):
+        return ReportInput(
+            title='t',
+            robot=mabi,
+            dataset=data,
+            rows=[(data.n_train, len(data.q))],
+            evaluated_on='the test part',
+            target_scale=np.ones(6),
+            models={'true': TrueInverseDynamics(config), 'zero': Zero()},  # type: ignore[dict-item]
+            metrics={},
+        )
+
+    (figure,) = _needed_spectra(report(dataset), tmp_path)
+    assert figure.name == NEEDED_SPECTRA_PNG
+    assert (tmp_path / NEEDED_SPECTRA_PNG).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert 'the torque the drive needs' in figure.caption
+    without = replace(dataset, extra={})
+    assert _needed_spectra(report(without), tmp_path / 'none') == []
