@@ -105,10 +105,17 @@ def _demo_into(args: argparse.Namespace, robot: Any, bag: Path, folder: Any) -> 
     from id_learning.dataset.preprocess import PreprocessConfig, prepare_dataset
     from id_learning.dataset.recording import load_recording
     from id_learning.evaluation.data_summary import write_summary
+    from id_learning.physics.rigid_body import RigidBodyDynamics
 
     out, shown = folder.work, folder.out
     print(f'loading {bag} ...', flush=True)
-    recording = load_recording(bag, robot, require_current=args.target == 'motor', progress=True)
+    recording = load_recording(
+        bag,
+        robot,
+        require_current=args.target == 'motor',
+        progress=True,
+        gravity=RigidBodyDynamics.from_config(robot).gravity,
+    )
     if len(recording.segment_starts) > 1:
         raise DatasetError(
             f'{bag}: holds {len(recording.segment_starts)} segments; the demo summarises one '

@@ -79,10 +79,12 @@ def _diagnose_into(
     from id_learning.diagnosis import diagnose
     from id_learning.models.effects import RneaEffectsModel
     from id_learning.models.registry import save_model
+    from id_learning.physics.rigid_body import RigidBodyDynamics
 
     target = config.preprocess.target
     if recordings is None:
         recordings = []
+        gravity = RigidBodyDynamics.from_config(robot).gravity  # the sign check's, every bag
         for bag in bags:
             print(f'loading {bag} ...', flush=True)
             recordings.append(
@@ -92,6 +94,7 @@ def _diagnose_into(
                     require_current=target == 'motor',
                     progress=progress,
                     trim_unpaired_tail=trim_unpaired_tail,
+                    gravity=gravity,
                 )
             )
     print('diagnosing: nominal model vs measurements, forward selection of named effects ...',

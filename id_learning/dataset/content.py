@@ -62,6 +62,7 @@ __all__ = [
     'GravityTorque',
     'check_content',
     'gravity_findings',
+    'gravity_in_label_unit',
     'grid_slots',
     'label_findings',
     'motion_findings',
@@ -355,6 +356,29 @@ def _moves_both_ways(q: np.ndarray) -> bool:
     return min(back, forth) >= SIGN_LOST_REVERSAL_SHARE * span
 
 
+def _held_on_one_side(gravity: np.ndarray, low: float) -> bool:
+    """Gravity keeps one sign along the recording, at least half as far from zero as ``low``."""
+    finite = gravity[np.isfinite(gravity)]
+    one_signed = bool(finite.size) and (bool(np.all(finite > 0)) or bool(np.all(finite < 0)))
+    return one_signed and float(np.min(np.abs(finite))) >= 0.5 * low
+
+
+def gravity_in_label_unit(
+    position: np.ndarray, robot: RobotConfig, gravity: GravityTorque, quantity: str
+) -> np.ndarray:
+    """The URDF's gravity torque at (at most ``NOMINAL_MAX_SAMPLES`` of) the positions (N, n).
+
+    In the label's unit (A or N*m); rows with a non-finite position are left out.
+    """
+    position = np.asarray(position, dtype=float)
+    position = position[np.isfinite(position).all(axis=1)]
+    position = position[:: max(1, -(-len(position) // NOMINAL_MAX_SAMPLES))]
+    torque = np.asarray(gravity(position), dtype=float)
+    if quantity == 'motor current':
+        torque = torque / torque_per_ampere(robot.drives)
+    return torque
+
+
 def sign_findings(
     position: np.ndarray,
     label: np.ndarray,
@@ -362,6 +386,7 @@ def sign_findings(
     *,
     quantity: str = 'motor current',
     unit: str = 'A',
+    held: np.ndarray | None = None,
 ) -> list[Finding]:
     """Joints whose label lost its sign: one-signed, reaching zero, while the joint goes both ways.
 
@@ -370,6 +395,10 @@ def sign_findings(
     down to zero and turning back at it, never crossing (noise would cross), is a magnitude:
     ``|I|`` or ``-|I|`` recorded for the signed value. Warned: the model learns nothing true
     from it. ``position``, ``label``: (N, n) [rad] and [``unit``]; non-finite rows left out.
+    ``held``: (M, n) the URDF's gravity torque along the recording (at its positions, or every
+    k-th of them) in the label's unit, where known: a joint that gravity alone holds on one
+    side, as far from zero as the label comes, is one-signed by nature and not judged here
+    (``gravity_findings`` judges its sign).
     """
     position = np.asarray(position, dtype=float)
     label = np.asarray(label, dtype=float)
@@ -389,6 +418,8 @@ def sign_findings(
         low, high = np.quantile(magnitude, [SIGN_LOST_QUANTILE, 1 - SIGN_LOST_QUANTILE])
         if low > SIGN_LOST_ZERO_SHARE * high:
             continue  # held away from zero (gravity, a spring), noise or not
+        if held is not None and _held_on_one_side(np.asarray(held, dtype=float)[:, j], low):
+            continue
         if not _moves_both_ways(position[:, j]):
             continue
         side, extreme = ('<= 0', column.max()) if negative > positive else ('>= 0', column.min())
@@ -511,6 +542,7 @@ def check_content(
     duration_s: float | None = None,
     warn: bool = True,
     nominal: tuple[RobotConfig, GravityTorque] | None = None,
+    held_by: tuple[RobotConfig, GravityTorque] | None = None,
 ) -> tuple[str, ...]:
     """Refuse a recording without signal, log and return the warnings (module docstring).
 
@@ -520,7 +552,9 @@ def check_content(
         where: the recording (bag path), for the messages.
         warn: log the warnings (they are returned either way).
         nominal: the robot (in whose joint order ``joints`` are) and its gravity torque: adds
-            ``gravity_findings``.
+            ``gravity_findings``, and informs the sign check as ``held_by`` does.
+        held_by: the robot and its gravity torque for the sign check alone: a joint gravity
+            holds on one side is not suspected of a lost sign (``sign_findings``).
 
     Raises:
         DatasetError: a label column is constant, or no joint moves (every such line).
@@ -532,7 +566,9 @@ def check_content(
         )
     refusals = [finding.text for finding in findings if finding.refuses]
     if label is not None and not refusals:
-        findings += sign_findings(position, label, joints, quantity=quantity, unit=unit)
+        holder = nominal or held_by
+        held = None if holder is None else gravity_in_label_unit(position, *holder, quantity)
+        findings += sign_findings(position, label, joints, quantity=quantity, unit=unit, held=held)
     if nominal is not None and label is not None and not refusals:
         findings += gravity_findings(position, label, *nominal, quantity=quantity)
     if refusals:

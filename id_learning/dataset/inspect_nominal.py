@@ -11,7 +11,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 from id_learning.bag import JointStateSeries
-from id_learning.dataset.content import GravityTorque, gravity_findings, sign_findings
+from id_learning.dataset.content import (
+    GravityTorque,
+    gravity_findings,
+    gravity_in_label_unit,
+    sign_findings,
+)
 from id_learning.dataset.inspect_report import TopicReport
 from id_learning.dataset.plausibility import first_unpaired
 from id_learning.robot.config import RobotConfig, TopicConfig
@@ -52,7 +57,8 @@ def _nominal(
     quantity, unit = (
         ('motor current', 'A') if label_topic == topics.motor_currents else ('joint torque', 'N*m')
     )
-    findings = sign_findings(q, effort, robot.joints, quantity=quantity, unit=unit)
+    held = gravity_in_label_unit(q, robot, gravity, quantity)
+    findings = sign_findings(q, effort, robot.joints, quantity=quantity, unit=unit, held=held)
     findings += gravity_findings(q, effort, robot, gravity, quantity=quantity)
     return label_topic, tuple((finding.joint, finding.text) for finding in findings)
 

@@ -32,7 +32,7 @@ from id_learning.bag import (
 )
 from id_learning.dataset.accelerations import check_controller_accelerations
 from id_learning.dataset.consistency import KinematicConsistency
-from id_learning.dataset.content import check_content
+from id_learning.dataset.content import GravityTorque, check_content
 from id_learning.dataset.plausibility import (
     PAIRING_SHARE,
     check_efforts,
@@ -234,8 +234,12 @@ def load_recording(
     require_current: bool = True,
     progress: bool = False,
     trim_unpaired_tail: bool = False,
+    gravity: GravityTorque | None = None,
 ) -> Recording:
     """Read a bag in the contract into a Recording, validated and in the robot's joint order.
+
+    ``gravity``: the robot's gravity torque, where the caller has its dynamics: a joint that
+    gravity holds on one side is then not suspected of a lost sign (``content.sign_findings``).
 
     Joint columns are reordered by name when only the order differs. A torn recording may end
     with messages on one topic that have no partner on the other: they are refused unless
@@ -343,7 +347,8 @@ def load_recording(
         source=str(path),
         segment_starts=tuple(start for start in starts if start < len(states.stamps_ns)),
     )
-    return replace(recording, content_warnings=check_recording_content(recording))
+    held_by = None if gravity is None else (robot, gravity)
+    return replace(recording, content_warnings=check_recording_content(recording, held_by=held_by))
 
 
 def _check_paired(
@@ -380,7 +385,11 @@ def _check_paired(
 
 
 def check_recording_content(
-    recording: Recording, target: str | None = None, *, warn: bool = True
+    recording: Recording,
+    target: str | None = None,
+    *,
+    warn: bool = True,
+    held_by: tuple[RobotConfig, GravityTorque] | None = None,
 ) -> tuple[str, ...]:
     """``content.check_content`` of a recording: its positions and its label.
 
@@ -388,6 +397,7 @@ def check_recording_content(
         target: 'motor' (the currents are the label), 'joint' (the measured joint torques), or
             None: the currents when the recording has them, else the joint torques.
         warn: log the warnings (they are returned either way).
+        held_by: the robot and its gravity torque, for ``check_content``'s sign check.
 
     Raises:
         DatasetError: the label is constant in every sample of a joint, or no joint moves.
@@ -405,6 +415,7 @@ def check_recording_content(
         unit=unit,
         duration_s=recording.duration_s,
         warn=warn,
+        held_by=held_by,
     )
 
 

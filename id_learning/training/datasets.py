@@ -177,6 +177,7 @@ def load_datasets(
             require_current=config.target == 'motor',
             progress=progress,
             trim_unpaired_tail=trim_unpaired_tail,
+            gravity=gravity,
         )
         _refuse_shared_segments(samples, Path(bag), recording)  # before the work of preprocessing
         # What load_recording warned of (a still joint, a clipped label), for the report too.

@@ -141,3 +141,44 @@ def test_a_magnitude_with_a_few_samples_across_zero_says_how_many():
     label[[100, 900]] = -0.001  # two stray samples
     (finding,) = sign_findings(q[:, None], label[:, None], ('joint_3',))
     assert 'is >= 0 in all but 2 samples' in finding.text
+
+
+@given(
+    seed=st.integers(0, 2**16),
+    frequency=st.floats(0.1, 1.0),
+    amplitude=st.floats(0.05, 50.0),
+    hold=st.floats(1.0001, 1.6),
+)
+def test_a_label_gravity_holds_close_to_zero_is_not_lost_where_gravity_is_known(
+    seed, frequency, amplitude, hold
+):
+    q, label = signals(seed, int(3 / (frequency * PERIOD_S)), frequency, amplitude, 0.0)
+    gravity = -hold * amplitude * (1.0 + 0.2 * np.cos(q))  # one-signed along the motion
+    held = label + gravity
+    held = np.minimum(held, -1e-9)  # one-signed, as it comes (noise clipped at its edge)
+    assert sign_findings(q[:, None], held[:, None], ('joint_3',), held=gravity[:, None]) == []
+
+
+@given(sign=st.sampled_from([1.0, -1.0]), **SIGNALS)
+def test_a_magnitude_is_still_lost_where_gravity_crosses_zero(sign, **drawn):
+    q, label = _make(**drawn)
+    gravity = 0.5 * np.sin(q)  # crosses zero along the motion: it holds nothing on one side
+    findings = sign_findings(
+        q[:, None], sign * np.abs(label)[:, None], ('joint_1',), held=gravity[:, None]
+    )
+    assert [f.joint for f in findings] == ['joint_1']
+
+
+def test_a_twin_joint_that_gravity_holds_below_zero_is_not_called_lost(mabi) -> None:
+    """A 26 s default twin: joint_3's tau_u stays below zero, gravity holds it there."""
+    from support import twin_config
+
+    from id_learning.twin import simulate
+
+    recording = simulate(twin_config(26.0, seed=5)).recording
+    gravity = RigidBodyDynamics.from_config(mabi).gravity
+    warnings = check_content(
+        recording.position, recording.current, recording.joints, where='twin',
+        nominal=(mabi, gravity), warn=False,
+    )  # fmt: skip
+    assert not [w for w in warnings if 'sign is lost' in w]
