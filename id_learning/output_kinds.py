@@ -103,7 +103,7 @@ WRITTEN_ENTRIES = frozenset({
     'closed_loop.json', 'closed_loop.png', 'rmse_per_joint.png', 'abs_error_boxplot.png',
     'dissipative_axis1.png', 'torque_shares.png', 'torque_timeseries.png', 'excitation.png',
     'waterfall.png', 'residual_location.png', 'residual_time.png', 'error_spectra.png',
-    'torque_overlays', 'closed_loop_feed_forward.png',
+    'needed_error_spectra.png', 'torque_overlays', 'closed_loop_feed_forward.png',
 })  # fmt: skip
 #: What a bag folder may hold besides its .mcap files: the twin's ground truth and config.
 BAG_EXTRAS = frozenset({'metadata.yaml', 'ground_truth.json', 'ground_truth.npz',
