@@ -24,6 +24,15 @@ from id_learning.bag.messages import (
     decode_joint_state,
     typestore,
 )
+from id_learning.bag.metadata_file import (
+    METADATA_FILE,
+    RECOVER_HINT,
+    STORAGE_SUFFIXES,
+    bag_path_problem,
+    load_metadata,
+    metadata_text,
+    refuse_special_files,
+)
 from id_learning.bag.reader_paths import BagReader, folder_is_no_bag, storage_files
 from id_learning.bag.reader_storage import check_encodings, check_storage_types, order_by_time
 from id_learning.bag.reader_storage import listed_files as _listed_files
@@ -47,8 +56,6 @@ _LOG = logging.getLogger(__name__)
 _WARNED_UNLISTED: set[tuple[Path, tuple[str, ...]]] = set()
 #: Notes on misordered storage files already warned about (one warning per bag).
 _WARNED_ORDER: set[str] = set()
-
-RECOVER_HINT = 'if the recording was interrupted, `id-learning bag recover PATH` rebuilds it'
 
 
 @dataclass(frozen=True)
@@ -94,11 +101,13 @@ class BagInfo:
 
 def _open(path: Path) -> tuple[Reader, str | None]:
     """Open a bag, its storage files in time order; (reader, note on their order or None)."""
+    if (why := bag_path_problem(path)) is not None:
+        raise BagError(why)  # a device, a FIFO: said so, never read, no recover hint
     if not path.exists():
         raise BagError(f'{path}: no such bag')
     if path.is_file():
         raise BagError(f'{path}: expected a rosbag2 folder (with metadata.yaml), got a file')
-    if not (path / 'metadata.yaml').is_file():
+    if not (path / METADATA_FILE).exists():
         if (why := folder_is_no_bag(path)) is not None:
             raise BagError(f'{path}: {why}')
         if (pid := writer_of(path)) is not None:
@@ -144,23 +153,22 @@ def _open_reader(path: Path, reader: Reader) -> None:
 
 
 def _check_metadata(path: Path) -> None:
-    """Refuse a metadata.yaml that is not text, or that lists storage files outside the bag.
+    """Refuse a metadata.yaml that is no file or not text, or lists storage files outside the bag.
 
-    rosbags reads each listed file by its name from the bag folder, so an absolute entry or one
-    leading out of it (``../other/other_0.mcap``) names data the bag does not hold.
+    metadata.yaml is read under its cap (``metadata_file``); it and the storage files must be
+    regular files (a FIFO would block rosbags' read forever, a device never end). rosbags reads
+    each listed file by its name from the bag folder, so an absolute entry or one leading out of
+    it (``../other/other_0.mcap``) names data the bag does not hold.
 
     Raises:
-        BagError: names metadata.yaml and why, or the bag, the entry and why.
+        BagError: names metadata.yaml and why, a storage file and what it is, or the bag, the
+            entry and why.
     """
-    try:
-        text = (path / 'metadata.yaml').read_bytes().decode('utf-8')
-    except UnicodeDecodeError as err:
-        raise BagError(
-            f'{path / "metadata.yaml"}: not a text YAML file (byte {err.start} is not UTF-8: '
-            f'binary or damaged); {RECOVER_HINT}'
-        ) from err
-    _check_metadata_shape(path / 'metadata.yaml', text)
-    for entry in _listed_files(path):  # [] when unreadable: rosbags names what is wrong
+    refuse_special_files(path)  # metadata.yaml first: named as what it is, before a read
+    text = metadata_text(path)
+    _check_metadata_shape(path / METADATA_FILE, text)
+    listed = _listed_files(path)  # [] when unreadable: rosbags names what is wrong
+    for entry in listed:
         why = 'an absolute path' if PurePath(entry).is_absolute() else 'outside the bag folder'
         if PurePath(entry).is_absolute() or os.path.normpath(entry).split(os.sep)[0] == os.pardir:
             raise BagError(
@@ -168,6 +176,7 @@ def _check_metadata(path: Path) -> None:
                 f'its storage files in its own folder: copy the file in and list it by name '
                 f'({PurePath(entry).name!r})'
             )
+    refuse_special_files(path, listed)  # those in subfolders too
 
 
 def _check_metadata_shape(file: Path, text: str) -> None:
@@ -224,10 +233,9 @@ def _is_decode_error(err: BaseException) -> bool:
 def _compression_note(path: Path) -> str:
     """'; metadata.yaml claims ...' when it names a compression, else ''."""
     try:
-        meta = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
-        info = meta['rosbag2_bagfile_information']
+        info = load_metadata(path)['rosbag2_bagfile_information']
         fmt, mode = info.get('compression_format') or '', info.get('compression_mode') or ''
-    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+    except (BagError, yaml.YAMLError, KeyError, TypeError, AttributeError):
         return ''
     if not fmt:
         return ''
@@ -267,7 +275,9 @@ def data_files(path: Path) -> list[Path]:
     """
     if path.is_file():
         return [path]
-    return sorted(p for p in path.iterdir() if p.is_file() and p.suffix in {'.mcap', '.db3'})
+    if not path.is_dir():
+        return []  # a device, a FIFO: no data files (the readers name what it is)
+    return sorted(p for p in path.iterdir() if p.is_file() and p.suffix in STORAGE_SUFFIXES)
 
 
 def bag_info(path: Path | str) -> BagInfo:
@@ -304,13 +314,12 @@ def bag_custom_data(path: Path | str) -> dict[str, str]:
     Read from the file alone, without opening the bag's storage.
 
     Raises:
-        BagError: metadata.yaml is missing or not YAML.
+        BagError: metadata.yaml is missing, no regular file, over its cap, or not YAML.
     """
     path = Path(path)
     try:
-        text = (path / 'metadata.yaml').read_text(encoding='utf-8')
-        info = yaml.safe_load(text).get('rosbag2_bagfile_information', {})
-    except (OSError, ValueError, yaml.YAMLError, AttributeError) as err:  # ValueError: not UTF-8
+        info = load_metadata(path).get('rosbag2_bagfile_information', {})
+    except (yaml.YAMLError, AttributeError) as err:  # BagError names the file itself
         raise BagError(f'{path}: cannot read metadata.yaml: {err}') from err
     custom = info.get('custom_data') if isinstance(info, dict) else None
     return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}

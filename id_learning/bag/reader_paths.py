@@ -20,6 +20,7 @@ from pathlib import Path, PurePath
 import yaml
 from rosbags.rosbag2 import Reader
 
+from id_learning.bag.metadata_file import load_metadata
 from id_learning.bag.reader_storage import listed_files
 from id_learning.errors import BagError
 from id_learning.output_kinds import KINDS, folder_holds
@@ -74,13 +75,13 @@ def subfolder_view(path: Path) -> tempfile.TemporaryDirectory[str] | None:
             'different subfolders); the reader takes files by name: rename them apart'
         )
     try:
-        document = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
+        document = load_metadata(path)
         info = document['rosbag2_bagfile_information']
         info['relative_file_paths'] = names
         for item in info.get('files') or []:
             if isinstance(item, dict) and 'path' in item:
                 item['path'] = PurePath(str(item['path'])).name
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as err:
+    except (yaml.YAMLError, KeyError, TypeError) as err:  # BagError names the file itself
         raise BagError(f'{path / "metadata.yaml"}: cannot be read ({err})') from err
     view = tempfile.TemporaryDirectory(prefix=VIEW_PREFIX)
     try:

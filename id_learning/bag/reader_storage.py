@@ -21,6 +21,7 @@ from typing import Any
 
 import yaml
 
+from id_learning.bag.metadata_file import load_metadata
 from id_learning.errors import BagError
 
 __all__ = [
@@ -39,9 +40,9 @@ ROS2_ENCODING = 'cdr'
 def listed_files(path: Path) -> list[str]:
     """The storage files metadata.yaml lists (``relative_file_paths``); [] when unreadable."""
     try:
-        meta = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
+        meta = load_metadata(path)
         return [str(p) for p in meta['rosbag2_bagfile_information']['relative_file_paths']]
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
+    except (BagError, yaml.YAMLError, KeyError, TypeError):
         return []
 
 

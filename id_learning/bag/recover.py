@@ -38,6 +38,7 @@ import yaml
 from rosbags.typesys.base import TypesysError
 
 from id_learning.bag.messages import message_definition
+from id_learning.bag.metadata_file import bag_path_problem, load_metadata, refuse_special_files
 from id_learning.bag.reader import TopicInfo, bag_info
 from id_learning.bag.reader_paths import folder_is_no_bag, listed_paths
 from id_learning.bag.recover_scan import (
@@ -144,10 +145,10 @@ def _is_empty_folder(path: Path) -> bool:
 def _metadata_files(path: Path) -> set[str] | None:
     """File names ``metadata.yaml`` lists, or None when it is missing or unreadable."""
     try:
-        data = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
+        data = load_metadata(path)
         listed = data['rosbag2_bagfile_information']['relative_file_paths']
         return {Path(str(entry)).name for entry in listed}
-    except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError):  # ValueError: not UTF-8
+    except (BagError, yaml.YAMLError, KeyError, TypeError):
         return None
 
 
@@ -303,17 +304,22 @@ def recover_bag(
         What was scanned, recovered and discarded.
 
     Raises:
-        BagError: path is not a folder of ``.mcap`` files, a file is not MCAP, a type is unknown,
+        BagError: path is not a folder of ``.mcap`` files, metadata.yaml or a storage file is no
+            regular file (a FIFO, a device), a file is not MCAP, a type is unknown,
             no message could be read (``_refuse_empty``), ``out`` exists and is no empty folder,
             a folder to write cannot be written, or the rebuilt bag does not read back.
         OutputError: ``out`` is refused (``outputs.check_target``), or another process writes
             the folder recovered into (named by its pid).
     """
     path = Path(path)
+    if (why := bag_path_problem(path)) is not None:
+        raise BagError(why)
     if not path.is_dir():
         raise BagError(
             f'{path}: no such bag folder' if not path.exists() else f'{path}: not a folder'
         )
+    # A FIFO or device in a bag's place is no torn recording: refused before any read or scan.
+    refuse_special_files(path)
     files = _mcap_files(path)
     if not files:
         damaged = sorted(p.name for p in path.glob(f'*.mcap{DAMAGED_SUFFIX}'))

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from id_learning.bag.distinct import check_distinct
+from id_learning.config_io import special_kind
 from id_learning.dataset.import_readers import is_float, log_suffix
 from id_learning.errors import DatasetError
 
@@ -160,8 +161,9 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
     named in a warning, unless they are (or hold) sources themselves.
 
     Raises:
-        DatasetError: a source does not exist, or a folder holds no log file (it names the
-            subfolders that do, or its files that read as no log).
+        DatasetError: a source does not exist or is no file or folder (a device, a FIFO: named),
+            or a folder holds no log file (it names the subfolders that do, or its files that
+            read as no log).
         ConfigError: one log given twice (same file, or identical bytes), naming it.
     """
     files: list[Path] = []
@@ -183,6 +185,14 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
             files.extend(found)
         elif source.is_file():
             files.append(source)
+        elif (kind := special_kind(source)) is not None:
+            # A device may never end; a pipe cannot be read twice (its head judged, then read).
+            hint = (
+                'an import reads a log more than once: write it to a file and import that'
+                if kind.startswith('a FIFO')
+                else 'give a log file or a folder of them'
+            )
+            raise DatasetError(f'{source}: {kind}, not a log file or folder; {hint}')
         else:
             raise DatasetError(f'{source}: no such log file or folder')
     if not files:

@@ -18,9 +18,11 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from id_learning.config_io import read_capped
 from id_learning.errors import ConfigError
 
 __all__ = [
+    'MAX_STUDY_TABLE_BYTES',
     'MODEL_LABELS',
     'STUDY_CITATION',
     'STUDY_FINDINGS',
@@ -33,6 +35,11 @@ STUDY_CITATION = (
     'A Comparison Towards Efficient Inverse Dynamics Identification. 14th IFAC Symposium on '
     'Robotics, 2025. arXiv:2506.17994'
 )
+
+#: The largest study table read [bytes]: seven rows of six numbers and a few sentences are
+#: about 2 KiB; a file of a MiB is another file (a log, a device), read whole it could fill
+#: the memory.
+MAX_STUDY_TABLE_BYTES = 2**20
 
 
 @dataclass(frozen=True)
@@ -62,14 +69,17 @@ def load_study_table(path: Path | str, n_joints: int | None = None) -> StudyTabl
     """Read the study's Table 1 from JSON (module docstring).
 
     Raises:
-        ConfigError: the file is missing or unreadable, a key is missing, a model row has the
-            wrong number of values or a non-finite one, or the axes do not match ``n_joints``.
+        ConfigError: the file is missing or unreadable, a device, past
+            ``MAX_STUDY_TABLE_BYTES`` (``config_io.read_capped``) or not JSON, a key is
+            missing, a model row has the wrong number of values or a non-finite one, or the
+            axes do not match ``n_joints``.
     """
     path = Path(path)
+    text = read_capped(path, 'study table', MAX_STUDY_TABLE_BYTES)
     try:
-        data = json.loads(path.read_text(encoding='utf-8'))
-    except (OSError, ValueError) as err:
-        raise ConfigError(f'{path}: cannot read the study table: {err}') from err
+        data = json.loads(text.decode('utf-8'))
+    except ValueError as err:  # not UTF-8, not JSON
+        raise ConfigError(f'{path}: cannot read study table: {err}') from err
     if not isinstance(data, dict):
         raise ConfigError(f'{path}: the study table must be a JSON object')
     for key in ('rmse_normalised', 'joints'):

@@ -30,7 +30,7 @@ from safetensors import SafetensorError
 from safetensors.numpy import load_file, save_file
 
 from id_learning import __version__
-from id_learning.config_io import not_a_file
+from id_learning.config_io import not_a_file, read_capped
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import CheckpointError
 from id_learning.models.metadata_checks import DuplicateKeyError, check_metadata, loads_unique
@@ -307,21 +307,19 @@ def read_metadata(meta_path: Path) -> dict[str, Any]:
     """Read a model.json into a mapping, bounded in size and nesting.
 
     Raises:
-        CheckpointError: the file is unreadable, larger than ``MAX_METADATA_BYTES``, not valid
+        CheckpointError: the file is unreadable, no regular file (a FIFO, a device: named,
+            never waited on), larger than ``MAX_METADATA_BYTES``, not valid
             JSON, holds a key twice in one object, nested deeper than ``MAX_METADATA_DEPTH``, or
             not a JSON object; names it (and the key).
     """
     meta_path = Path(meta_path)
+    data = read_capped(
+        meta_path, 'model metadata', MAX_METADATA_BYTES, regular=True, error=CheckpointError
+    )
     try:
-        size = meta_path.stat().st_size
-        if size > MAX_METADATA_BYTES:
-            raise CheckpointError(
-                f'{meta_path}: {size} bytes, more than a model.json holds '
-                f'({MAX_METADATA_BYTES} at most)'
-            )
-        text = meta_path.read_text(encoding='utf-8')
-    except (OSError, UnicodeDecodeError) as err:
-        raise CheckpointError(f'{meta_path}: cannot read it: {err}') from err
+        text = data.decode('utf-8')
+    except UnicodeDecodeError as err:
+        raise CheckpointError(f'{meta_path}: cannot read model metadata: {err}') from err
     try:
         metadata = loads_unique(text)
     except DuplicateKeyError as err:

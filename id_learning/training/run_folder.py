@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from id_learning.config_io import not_a_file, read_capped
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler
 from id_learning.errors import CheckpointError
 from id_learning.models.artifact import _git_commit, robot_fingerprint
@@ -54,6 +55,9 @@ RUN_FILE = 'run.json'
 METRICS_FILE = 'metrics.json'
 REPORT_FILE = 'report.md'
 MODELS_DIR = 'models'
+#: The largest run.json read [bytes]: the run's settings, its bags and machine are a few KiB;
+#: a file of megabytes is no run document (and read whole it could fill the memory).
+MAX_RUN_DOCUMENT_BYTES = 16 * 2**20
 
 
 def machine_info() -> dict[str, Any]:
@@ -88,10 +92,28 @@ def _models_held(run_dir: Path, document: dict[str, Any] | None) -> str:
     return f'it holds {len(saved)}{of} model(s)'
 
 
+def _run_text(path: Path) -> str:
+    """A run's run.json as text: a regular file of at most ``MAX_RUN_DOCUMENT_BYTES``.
+
+    The run folder is ours: a FIFO there (which nobody may ever write) or a device is refused
+    at once, naming the file and what it is, instead of blocking or reading without end.
+
+    Raises:
+        CheckpointError: missing, no regular file, over the cap, or not UTF-8; names the file.
+    """
+    data = read_capped(
+        path, 'run document', MAX_RUN_DOCUMENT_BYTES, regular=True, error=CheckpointError
+    )
+    try:
+        return data.decode('utf-8')
+    except UnicodeDecodeError as err:
+        raise CheckpointError(f'{path}: not valid JSON: {err}') from err
+
+
 def _read_document(path: Path) -> dict[str, Any] | None:
     try:
-        document = loads_unique(path.read_text(encoding='utf-8'))
-    except (OSError, ValueError):  # a key given twice too: read_run names it
+        document = loads_unique(_run_text(path))
+    except (CheckpointError, ValueError):  # a key given twice too: read_run names it
         return None
     return document if isinstance(document, dict) else None
 
@@ -129,18 +151,22 @@ def read_run(run_dir: Path) -> dict[str, Any]:
     """Read a complete run folder's run.json.
 
     Raises:
-        CheckpointError: missing, not JSON, a key given twice, not a run document, or an
+        CheckpointError: missing, no regular file (a FIFO, a device: named), over
+            ``MAX_RUN_DOCUMENT_BYTES``, not JSON, a key given twice, not a run document, or an
             incomplete run.
     """
+    kind = not_a_file(run_dir)
+    if kind not in (None, 'a folder', 'no such file'):
+        raise CheckpointError(f'{run_dir}: {kind}, not a training run folder (train writes one)')
     refuse_incomplete_run(run_dir)
     path = Path(run_dir) / RUN_FILE
-    if not path.is_file():
+    if not path.exists():
         raise CheckpointError(f'{run_dir}: not a training run folder (no {RUN_FILE})')
     try:
-        document = loads_unique(path.read_text(encoding='utf-8'))
+        document = loads_unique(_run_text(path))
     except DuplicateKeyError as err:
         raise CheckpointError(f'{path}: {err}; the file was edited or is corrupt') from err
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+    except json.JSONDecodeError as err:
         raise CheckpointError(f'{path}: not valid JSON: {err}') from err
     if not isinstance(document, dict) or document.get('format') != RUN_FORMAT:
         raise CheckpointError(f'{path}: format is not {RUN_FORMAT!r}')

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from id_learning.config_io import read_capped, special_kind
 from id_learning.dataset.preprocess import Dataset
 from id_learning.dataset.recording import write_recording
 from id_learning.dataset.statistics import estimate_noise
@@ -35,6 +36,10 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
+
+#: The largest ground_truth.json read [bytes]: the twin's parameters, noise and excitation take
+#: about 40 KiB (a long excitation a few hundred); a file of megabytes was put there by hand.
+MAX_GROUND_TRUTH_JSON_BYTES = 16 * 2**20
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,16 +67,18 @@ def read_ground_truth(
             copied from another simulation does not); None: not checked.
 
     Raises:
-        DatasetError: ground_truth.json is not a JSON mapping, or ground_truth.npz is missing,
-            unreadable, lacks the target's array or holds other stamps (names the file).
+        DatasetError: a ground-truth file is no regular file (``_refuse_special``),
+            ground_truth.json is over its cap or not a JSON mapping, or ground_truth.npz is
+            missing, unreadable, lacks the target's array or holds other stamps (names the file).
     """
     folder = Path(bag)
     json_path, arrays_path = folder / GROUND_TRUTH_JSON, folder / GROUND_TRUTH_ARRAYS
+    _refuse_special(folder)
     if not json_path.is_file():
         return None
     try:
-        info = json.loads(json_path.read_text(encoding='utf-8'))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        info = json.loads(_json_text(json_path))
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise DatasetError(
             f'{json_path}: cannot read the twin ground truth: {err}; remove the file or '
             're-run simulate'
@@ -173,10 +180,13 @@ def read_noise_free_torque(bag: Path | str, dataset: Dataset) -> tuple[np.ndarra
         names the file, the mismatch and what is missing because of it.
 
     Raises:
-        DatasetError: ground_truth.npz is unreadable or lacks the target's arrays.
+        DatasetError: a ground-truth file is no regular file (``_refuse_special``),
+            ground_truth.json is over its cap, or ground_truth.npz is unreadable or lacks the
+            target's arrays.
     """
     folder = Path(bag)
     path, json_path = folder / GROUND_TRUTH_ARRAYS, folder / GROUND_TRUTH_JSON
+    _refuse_special(folder)
     ignored = 'ignored: no label-noise floor and no errors against the truth for this bag'
     if not path.is_file():
         if json_path.is_file():
@@ -246,11 +256,47 @@ def _column_order(info: dict[str, Any] | None, joints: tuple[str, ...]) -> list[
     return list(range(len(joints)))
 
 
+def _refuse_special(folder: Path) -> None:
+    """Refuse a ground-truth file beside a bag that is no regular file (a FIFO, a device, ...).
+
+    The twin writes both as files: a FIFO there would block the read, a link to a device
+    (``/dev/zero``) never end. Missing files pass (the readers say what that means).
+
+    Raises:
+        DatasetError: names the file and what it is.
+    """
+    for name in (GROUND_TRUTH_JSON, GROUND_TRUTH_ARRAYS):
+        if (kind := special_kind(folder / name)) is not None:
+            raise DatasetError(
+                f'{folder / name}: {kind}, not a regular file; the twin writes its ground truth '
+                'as files: remove it or re-run simulate'
+            )
+
+
+def _json_text(path: Path) -> str:
+    """ground_truth.json's text, read whole under ``MAX_GROUND_TRUTH_JSON_BYTES``.
+
+    Raises:
+        DatasetError: unreadable, no regular file or over the cap (names the file).
+        UnicodeDecodeError: not UTF-8.
+    """
+    data = read_capped(
+        path, 'twin ground truth', MAX_GROUND_TRUTH_JSON_BYTES, regular=True, error=DatasetError
+    )
+    return data.decode('utf-8')
+
+
 def _json_object(path: Path) -> dict[str, Any] | None:
-    """ground_truth.json as a mapping, or None (missing or damaged: its noise is not used)."""
+    """ground_truth.json as a mapping, or None (missing or damaged: its noise is not used).
+
+    Raises:
+        DatasetError: no regular file, or over its cap (``_json_text``).
+    """
+    if not path.exists():
+        return None
     try:
-        info = json.loads(path.read_text(encoding='utf-8'))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        info = json.loads(_json_text(path))
+    except (UnicodeDecodeError, json.JSONDecodeError):
         return None
     return info if isinstance(info, dict) else None
 

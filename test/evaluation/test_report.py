@@ -363,5 +363,5 @@ def test_a_bad_study_table_is_refused_naming_file_and_key(tmp_path, content, mes
 
 
 def test_a_missing_study_table_file_is_refused(tmp_path):
-    with pytest.raises(ConfigError, match='cannot read the study table'):
+    with pytest.raises(ConfigError, match='cannot read study table'):
         load_study_table(tmp_path / 'absent.json')

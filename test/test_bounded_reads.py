@@ -1,0 +1,284 @@
+"""Every file the tool reads whole is bounded, and every file of its own folders must be a file.
+
+A link to ``/dev/zero`` once made ``bag recover`` read until the kernel killed it; a FIFO in a
+bag or run folder, which nobody writes, made ``inspect`` and ``evaluate`` wait forever; 60 MB of
+comments in a metadata.yaml kept ``inspect`` parsing for minutes. Each case runs as a user runs
+it, in a process of its own with a deadline and a memory cap: a hang or an unbounded read fails
+the test instead of the machine, and the refusal must name the file and what it is.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import resource
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from support import REPO, sine_recording
+
+from id_learning.bag.metadata_file import MAX_BAG_METADATA_BYTES
+from id_learning.dataset.recording import write_recording
+from id_learning.evaluation.study import MAX_STUDY_TABLE_BYTES
+
+#: Seconds a refusal may take (the slowest command imports torch: about 3 s).
+DEADLINE_S = 60.0
+#: Address space of each run [bytes]: reading /dev/zero whole fails fast, not the machine.
+MEMORY_CAP = 4 * 2**30
+
+#: A function-level reader run in its own process: the error's text is its only output.
+_CALL = """
+import sys
+from pathlib import Path
+from id_learning.errors import IdLearningError
+try:
+    {call}
+except IdLearningError as err:
+    print(err, file=sys.stderr)
+    sys.exit(2)
+print('read without a refusal', file=sys.stderr)
+"""
+
+
+def _cap_memory() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
+
+
+def _run(argv: list[str]) -> tuple[subprocess.CompletedProcess[str], float]:
+    start = time.monotonic()
+    try:
+        result = subprocess.run(
+            [sys.executable, *argv],
+            capture_output=True,
+            stdin=subprocess.DEVNULL,
+            text=True,
+            cwd=REPO,
+            timeout=DEADLINE_S,
+            check=False,
+            preexec_fn=_cap_memory,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f'{argv}: no answer within {DEADLINE_S:g} s (it blocks or reads without end)')
+    return result, time.monotonic() - start
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_recording(sine_recording(1500), tmp_path_factory.mktemp('bounded') / 'bag')
+
+
+def _copy(bag: Path, to: Path) -> Path:
+    to.mkdir()
+    for file in bag.iterdir():
+        (to / file.name).write_bytes(file.read_bytes())
+    return to
+
+
+def _storage(folder: Path) -> Path:
+    return next(folder.glob('*.mcap'))
+
+
+def _to_device(file: Path) -> Path:
+    file.unlink(missing_ok=True)
+    file.symlink_to('/dev/zero')
+    return file
+
+
+def _to_fifo(file: Path) -> Path:
+    file.unlink(missing_ok=True)
+    os.mkfifo(file)
+    return file
+
+
+def _grow(file: Path, size: int) -> Path:
+    """Append comment lines until ``file`` is ``size`` bytes (real bytes: no sparse file)."""
+    line = b'# ' + b'x' * 97 + b'\n'
+    with file.open('ab') as stream:
+        stream.write(line * (size // len(line) + 1))
+    return file
+
+
+def _sparse(file: Path, size: int) -> Path:
+    with file.open('wb') as stream:
+        stream.truncate(size)
+    return file
+
+
+def _run_folder(tmp: Path, make: Callable[[Path], Path]) -> Path:
+    run = tmp / 'run'
+    run.mkdir()
+    make(run / 'run.json')
+    return run
+
+
+def _ground_truth(bag: Path, tmp: Path, make: Callable[[Path], Path], name: str) -> Path:
+    folder = _copy(bag, tmp / 'twin_bag')
+    (folder / 'ground_truth.json').write_text('{}')
+    (folder / 'ground_truth.npz').write_bytes(b'')
+    make(folder / name)
+    return folder
+
+
+def _cli(*args: str) -> list[str]:
+    return ['-m', 'id_learning.cli', *args]
+
+
+def _train(bag: Path, tmp: Path, *extra: str, command: str = 'train') -> list[str]:
+    """``train`` (or ``demo``, without its diagnosis) of an MLP on ``bag``, then ``extra``."""
+    skip = ['--skip-diagnosis'] if command == 'demo' else []
+    return _cli(command, '--bag', str(bag), '--out', str(tmp / 'out'), '--models', 'mlp',
+                *skip, *extra)  # fmt: skip
+
+
+def _evaluate(bag: Path, tmp: Path, run: str) -> list[str]:
+    return _cli('evaluate', '--run', run, '--bag', str(bag), '--out', str(tmp / 'out'))
+
+
+def _call(call: str) -> list[str]:
+    return ['-c', _CALL.format(call=call)]
+
+
+MAPPING = str(REPO / 'config' / 'import_example.yaml')
+
+
+# Each case: (how to build what is read, in tmp) -> (argv, the refusal's words as a pattern).
+CASES: dict[str, Callable[[Path, Path], tuple[list[str], str]]] = {
+    'inspect, metadata.yaml a link to /dev/zero': lambda bag, tmp: (
+        _cli('inspect', str(_to_device(_copy(bag, tmp / 'b') / 'metadata.yaml').parent)),
+        r'b/metadata\.yaml: a character device, not a regular file',
+    ),
+    'inspect, metadata.yaml a FIFO': lambda bag, tmp: (
+        _cli('inspect', str(_to_fifo(_copy(bag, tmp / 'b') / 'metadata.yaml').parent)),
+        r'b/metadata\.yaml: a FIFO \(named pipe\), not a regular file',
+    ),
+    'inspect, the .mcap a FIFO nobody writes': lambda bag, tmp: (
+        _cli('inspect', str(_to_fifo(_storage(_copy(bag, tmp / 'b'))).parent)),
+        r'b/bag_0\.mcap: a FIFO \(named pipe\), not a regular file',
+    ),
+    'inspect, metadata.yaml grown past its cap': lambda bag, tmp: (
+        _cli(
+            'inspect',
+            str(_grow(_copy(bag, tmp / 'b') / 'metadata.yaml', MAX_BAG_METADATA_BYTES).parent),
+        ),
+        r'b/metadata\.yaml: cannot read bag metadata: larger than 4 MiB',
+    ),
+    'inspect /dev/zero': lambda bag, tmp: (
+        _cli('inspect', '/dev/zero'),
+        r'^id-learning inspect: error: /dev/zero: a character device, not a bag folder',
+    ),
+    'inspect a FIFO given as the bag': lambda bag, tmp: (
+        _cli('inspect', str(_to_fifo(tmp / 'pipe'))),
+        r'pipe: a FIFO \(named pipe\), not a bag folder',
+    ),
+    'bag recover, metadata.yaml a link to /dev/zero': lambda bag, tmp: (
+        _cli(
+            'bag',
+            'recover',
+            str(_to_device(_copy(bag, tmp / 'b') / 'metadata.yaml').parent),
+            '--out',
+            str(tmp / 'out'),
+        ),
+        r'b/metadata\.yaml: a character device, not a regular file',
+    ),
+    'train, metadata.yaml a link to /dev/zero': lambda bag, tmp: (
+        _train(_to_device(_copy(bag, tmp / 'b') / 'metadata.yaml').parent, tmp),
+        r'b/metadata\.yaml: a character device, not a regular file',
+    ),
+    'bag recover /dev/zero': lambda bag, tmp: (
+        _cli('bag', 'recover', '/dev/zero'),
+        r'/dev/zero: a character device, not a bag folder',
+    ),
+    'train --study-table /dev/urandom': lambda bag, tmp: (
+        _train(bag, tmp, '--study-table', '/dev/urandom'),
+        r'/dev/urandom: cannot read study table: a character device, not a regular file',
+    ),
+    'train --study-table past its cap': lambda bag, tmp: (
+        _train(
+            bag, tmp, '--study-table', str(_sparse(tmp / 'big.json', MAX_STUDY_TABLE_BYTES + 1))
+        ),
+        r'big\.json: cannot read study table: larger than 1 MiB',
+    ),
+    'demo --study-table /dev/zero': lambda bag, tmp: (
+        _train(bag, tmp, '--study-table', '/dev/zero', command='demo'),
+        r'/dev/zero: cannot read study table: a character device',
+    ),
+    'evaluate, run.json a FIFO': lambda bag, tmp: (
+        _evaluate(bag, tmp, str(_run_folder(tmp, _to_fifo))),
+        r'run/run\.json: cannot read run document: a FIFO \(named pipe\), not a regular file',
+    ),
+    'evaluate, run.json a link to /dev/zero': lambda bag, tmp: (
+        _evaluate(bag, tmp, str(_run_folder(tmp, _to_device))),
+        r'run/run\.json: cannot read run document: a character device',
+    ),
+    'evaluate --run /dev/zero': lambda bag, tmp: (
+        _evaluate(bag, tmp, '/dev/zero'),
+        r'/dev/zero: a character device, not a training run folder',
+    ),
+    'import /dev/urandom': lambda bag, tmp: (
+        _cli('import', '/dev/urandom', '--mapping', MAPPING, '--out', str(tmp / 'i')),
+        r'/dev/urandom: a character device, not a log file or folder',
+    ),
+    'import a FIFO': lambda bag, tmp: (
+        _cli(
+            'import', str(_to_fifo(tmp / 'log.csv')), '--mapping', MAPPING, '--out', str(tmp / 'i')
+        ),
+        r'log\.csv: a FIFO \(named pipe\), not a log file or folder; an import reads a log',
+    ),
+    'read_ground_truth, ground_truth.json a link to /dev/zero': lambda bag, tmp: (
+        _call(
+            'from id_learning.twin.ground_truth import read_ground_truth; '
+            f'read_ground_truth({str(_ground_truth(bag, tmp, _to_device, "ground_truth.json"))!r}'
+            ", 'motor')"
+        ),
+        r'twin_bag/ground_truth\.json: a character device, not a regular file',
+    ),
+    'read_ground_truth, ground_truth.npz a FIFO': lambda bag, tmp: (
+        _call(
+            'from id_learning.twin.ground_truth import read_ground_truth; '
+            f'read_ground_truth({str(_ground_truth(bag, tmp, _to_fifo, "ground_truth.npz"))!r}'
+            ", 'motor')"
+        ),
+        r'twin_bag/ground_truth\.npz: a FIFO \(named pipe\), not a regular file',
+    ),
+    'read_metadata, model.json a FIFO': lambda bag, tmp: (
+        _call(
+            'from id_learning.models.artifact import read_metadata; '
+            f'read_metadata(Path({str(_to_fifo(tmp / "model.json"))!r}))'
+        ),
+        r'model\.json: cannot read model metadata: a FIFO \(named pipe\), not a regular file',
+    ),
+    'bag_custom_data, metadata.yaml a socket': lambda bag, tmp: (
+        _call(
+            'from id_learning.bag import bag_custom_data; '
+            f'bag_custom_data({str(_socket_metadata(bag, tmp))!r})'
+        ),
+        r'b/metadata\.yaml: cannot read bag metadata: a socket, not a regular file',
+    ),
+}
+
+
+def _socket_metadata(bag: Path, tmp: Path) -> Path:
+    folder = _copy(bag, tmp / 'b')
+    (folder / 'metadata.yaml').unlink()
+    server = socket.socket(socket.AF_UNIX)
+    server.bind(str(folder / 'metadata.yaml'))  # the file stays when the socket closes
+    server.close()
+    return folder
+
+
+@pytest.mark.parametrize('case', list(CASES))
+def test_a_file_that_is_no_file_or_too_large_is_refused_at_once_naming_it(
+    case: str, bag: Path, tmp_path: Path
+) -> None:
+    argv, expected = CASES[case](bag, tmp_path)
+    result, elapsed = _run(argv)
+    assert result.returncode != 0, result.stderr
+    assert re.search(expected, result.stderr, re.MULTILINE), result.stderr
+    assert 'Traceback' not in result.stderr
+    assert 'bag recover' not in result.stderr  # a device or a pipe is no torn recording
+    assert elapsed < DEADLINE_S
