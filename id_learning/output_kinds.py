@@ -22,6 +22,7 @@ from typing import Any
 
 import yaml
 
+from id_learning.config_io import read_capped
 from id_learning.errors import ConfigError
 
 __all__ = [
@@ -125,14 +126,24 @@ def os_reason(err: OSError) -> str:
     return err.strerror or (errno.errorcode.get(err.errno or 0) if err.errno else None) or str(err)
 
 
+#: The most bytes read of a marker, a manifest or a bag's metadata.yaml when judging a folder:
+#: ours are a few KiB; a larger one (or a device, a FIFO) is no valid one and is not read.
+_MAX_JUDGED_BYTES = 4 * 2**20
+
+
+def _judged_text(path: Path) -> str:
+    """The text of a small file a folder is judged by; ConfigError or OSError when refused."""
+    return read_capped(path, 'file', _MAX_JUDGED_BYTES, regular=True).decode('utf-8')
+
+
 def read_marker(folder: Path) -> dict[str, Any] | None:
     """The incomplete marker of ``folder``, or None; an unreadable marker still marks it."""
     path = folder / INCOMPLETE_FILE
     if not path.is_file():
         return None
     try:
-        document = json.loads(path.read_text(encoding='utf-8'))
-    except (OSError, ValueError):
+        document = json.loads(_judged_text(path))
+    except (OSError, ValueError, ConfigError):
         return {}
     return document if isinstance(document, dict) else {}
 
@@ -227,8 +238,8 @@ def _manifest_entries(folder: Path) -> set[str] | None:
     if not path.exists():
         return None
     try:
-        document = json.loads(path.read_text(encoding='utf-8'))
-    except (OSError, ValueError):
+        document = json.loads(_judged_text(path))
+    except (OSError, ValueError, ConfigError):
         return set()
     return _listed(document, 'entries') or set()
 
@@ -236,8 +247,8 @@ def _manifest_entries(folder: Path) -> set[str] | None:
 def _bag_entries(folder: Path) -> set[str] | None:
     """The files a bag's ``metadata.yaml`` lists, with ``BAG_EXTRAS``; None when it lists none."""
     try:
-        document = yaml.safe_load((folder / 'metadata.yaml').read_text(encoding='utf-8'))
-    except (OSError, yaml.YAMLError):
+        document = yaml.safe_load(_judged_text(folder / 'metadata.yaml'))
+    except (OSError, ValueError, yaml.YAMLError, ConfigError):
         return None
     info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
     listed = _listed(info, 'relative_file_paths')
@@ -436,8 +447,8 @@ def _being_written_here(folder: Path) -> bool:
 def _is_our_result(folder: Path) -> bool:
     """Whether ``folder`` says by our manifest or incomplete marker that a command wrote it."""
     try:
-        manifest = json.loads((folder / MANIFEST_FILE).read_text(encoding='utf-8'))
-    except (OSError, UnicodeDecodeError, ValueError):
+        manifest = json.loads(_judged_text(folder / MANIFEST_FILE))
+    except (OSError, ValueError, ConfigError):
         manifest = None
     if isinstance(manifest, dict) and manifest.get('format') == MANIFEST_FORMAT:
         return True

@@ -282,3 +282,17 @@ def test_a_file_that_is_no_file_or_too_large_is_refused_at_once_naming_it(
     assert 'Traceback' not in result.stderr
     assert 'bag recover' not in result.stderr  # a device or a pipe is no torn recording
     assert elapsed < DEADLINE_S
+
+
+def test_judging_what_an_output_folder_holds_reads_no_file_without_end(
+    bag: Path, tmp_path: Path
+) -> None:
+    """--force over a bag whose metadata.yaml is /dev/zero: judged (a bag) without reading it."""
+    target = _to_device(_copy(bag, tmp_path / 'b') / 'metadata.yaml').parent
+    config = REPO / 'config' / 'twin_default.yaml'
+    argv = _cli('simulate', '--config', str(config), '--out', str(target), '--force')
+    result, _ = _run([*argv, '--duration', '5', '--quiet'])
+    assert 'Traceback' not in result.stderr, result.stderr
+    assert result.returncode == 0, result.stderr
+    assert (target / 'metadata.yaml').is_file()
+    assert not (target / 'metadata.yaml').is_symlink()

@@ -238,23 +238,20 @@ def load_recording(
 ) -> Recording:
     """Read a bag in the contract into a Recording, validated and in the robot's joint order.
 
-    ``gravity``: the robot's gravity torque, where the caller has its dynamics: a joint that
-    gravity holds on one side is then not suspected of a lost sign (``content.sign_findings``).
-
     Joint columns are reordered by name when only the order differs. A torn recording may end
     with messages on one topic that have no partner on the other: they are refused unless
-    ``trim_unpaired_tail`` is set, in which case they are dropped with a warning.
+    ``trim_unpaired_tail`` is set, in which case they are dropped with a warning. ``gravity``:
+    the robot's, for the content check's sign (``content.sign_findings``).
 
     Raises:
         BagError: missing topic, wrong type, truncated or corrupt file.
         DatasetError: joint names differ, NaN/Inf samples (in the joint states' effort only
             when it is the label: with ``require_current`` it is left out with a warning),
-            stamps backwards/repeated/gapped,
-            positions or velocities beyond the robot's limits, currents or joint torques beyond
-            what its torque limits need, or the two topics' stamps do not match (each names
-            topic, joint and sample; ``dataset.plausibility``); a label (currents, else joint
-            torques) constant in every sample, or no joint moving (``dataset.content``, which
-            also logs a warning for a joint that does not move or a clipped label).
+            stamps backwards/repeated/gapped, positions or velocities beyond the robot's limits,
+            currents or joint torques beyond what its torque limits need, or the two topics'
+            stamps do not match (each names topic, joint and sample; ``dataset.plausibility``);
+            a label (currents, else joint torques) constant in every sample, or no joint moving
+            (``dataset.content``, which also warns of a still joint or a clipped label).
     """
     path = Path(path)
     topics = robot.topics
@@ -347,8 +344,8 @@ def load_recording(
         source=str(path),
         segment_starts=tuple(start for start in starts if start < len(states.stamps_ns)),
     )
-    held_by = None if gravity is None else (robot, gravity)
-    return replace(recording, content_warnings=check_recording_content(recording, held_by=held_by))
+    held = None if gravity is None else (robot, gravity)
+    return replace(recording, content_warnings=check_recording_content(recording, held_by=held))
 
 
 def _check_paired(
