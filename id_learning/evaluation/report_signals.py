@@ -277,7 +277,6 @@ def plot_error_spectra(
         else 'prediction through the label filter minus label'
     )
     fig.suptitle(
-        f'Amplitude spectral density of the test error ({what}; Welch, {segment_s:.0f} s '
-        'segments)'
+        f'Amplitude spectral density of the test error ({what}; Welch, {segment_s:.0f} s segments)'
     )
     save_figure(fig, path)
