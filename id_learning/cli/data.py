@@ -71,6 +71,7 @@ def cmd_excitation(args: argparse.Namespace) -> int:
     from id_learning.outputs import bag_output
     from id_learning.physics.excitation_design import design_for_identification, write_design
     from id_learning.record.excitation import ExcitationConfig
+    from id_learning.staged_bag import staged_bag
     from id_learning.twin.bounds import check_duration
 
     robot = options.load_robot(args)
@@ -84,7 +85,9 @@ def cmd_excitation(args: argparse.Namespace) -> int:
         design = design_for_identification(
             config, robot, rng, candidates=args.candidates, progress=not args.quiet
         )
-        write_design(design, robot, out)
+        # Written beside --out and moved there whole (bag, excitation.json, trajectory.csv).
+        with staged_bag(out, overwrite=args.force) as staged:
+            write_design(design, robot, staged)
     report = design.report
     print(
         f'wrote {design.trajectory.duration_s:.1f} s ({len(design.trajectory.segments)} '

@@ -75,6 +75,7 @@ from id_learning.dataset.recording import Recording, write_recording
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import amperes_per_newton_metre
+from id_learning.staged_bag import staged_bag
 
 __all__ = [
     'DEFAULT_START_NS',
@@ -482,7 +483,8 @@ def import_logs(
             backwards, repeated or (under 'snap') off the grid, no segment long enough, or files
             on different grids.
         OutputError: ``out`` is refused (``outputs.check_bag_output``: not a bag, or a bag
-            without ``overwrite``, or an input).
+            without ``overwrite``, or an input), or writing failed; ``out`` is then as it was
+            (the bag is written beside it and moved there whole: ``staged_bag``).
     """
     out = Path(out)
     order = _joint_order(mapping, robot)
@@ -520,7 +522,10 @@ def import_logs(
             recording.stamps_ns, recording.position, recording.velocity, where=where,
             starts=recording.segment_starts,
         )  # fmt: skip
-    write_recording(recording, out, topics=robot.topics if robot else None, overwrite=overwrite)
+    # Written beside ``out`` and moved there whole: an interrupted import leaves no bag that
+    # looks complete (``BagWriter`` closes a bag with its metadata however it is stopped).
+    with staged_bag(out, overwrite=overwrite, inputs=files) as staged:
+        write_recording(recording, staged, topics=robot.topics if robot else None)
     reports = [file.report for file in read]
     for report in reports:
         report.out = out
