@@ -29,6 +29,7 @@ import numpy as np
 from scipy import linalg
 from tqdm import tqdm
 
+from id_learning.config_io import read_capped
 from id_learning.errors import ConfigError
 from id_learning.physics.base_parameters import BaseParameters, base_parameters
 from id_learning.physics.rigid_body import RigidBodyDynamics
@@ -274,6 +275,8 @@ def design_for_identification(
 
 #: Beside the reference bag: the coefficients with the figures, and the samples for a CNC.
 DESIGN_FILE, TRAJECTORY_CSV = 'excitation.json', 'trajectory.csv'
+#: The largest design file read [bytes]: a day's design (3456 segments) takes about 7 MB.
+MAX_DESIGN_BYTES = 64 * 2**20
 
 
 def write_design(design: ExcitationDesign, robot: RobotConfig, out: Path) -> Path:
@@ -369,6 +372,42 @@ def _trajectory(data: object, n: int, where: str) -> ExcitationTrajectory:
                                 period, rest)  # fmt: skip
 
 
+def _read_document(path: Path, where: str) -> object:
+    """The JSON of a design file; a key given twice in one object is refused.
+
+    ``json`` keeps the last of two equal keys without a word: an edited file would play another
+    design than the one read.
+
+    Raises:
+        ConfigError: unreadable (a device, too large, not UTF-8), not JSON, or a repeated key.
+    """
+    try:
+        text = read_capped(path, 'a designed excitation', MAX_DESIGN_BYTES).decode('utf-8')
+    except ConfigError as err:  # names the file
+        raise ConfigError(f'{where}: {err}') from err
+    except UnicodeDecodeError as err:
+        raise ConfigError(f'{where}: {path}: cannot read a designed excitation: {err}') from err
+    at = f'{where}: {path}'
+    try:
+        return json.loads(text, object_pairs_hook=lambda pairs: _unique_keys(pairs, at))
+    except json.JSONDecodeError as err:
+        raise ConfigError(f'{at}: cannot read a designed excitation: {err}') from err
+
+
+def _unique_keys(pairs: list[tuple[str, Any]], where: str) -> dict[str, Any]:
+    """One JSON object's pairs as a dict; refuses a key given twice (naming it)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ConfigError(
+                f'{where}: the key {key!r} is given twice in one object ({json.dumps(out[key])} '
+                f'and {json.dumps(value)}): which one holds is ambiguous; keep one, or design '
+                'the excitation again'
+            )
+        out[key] = value
+    return out
+
+
 def load_design(path: Path, robot: RobotConfig, where: str) -> ExcitationTrajectory:
     """The trajectory of an ``excitation.json`` for ``robot``, checked against its limits.
 
@@ -377,13 +416,10 @@ def load_design(path: Path, robot: RobotConfig, where: str) -> ExcitationTraject
     period; another robot name with the same joints is said in a warning.
 
     Raises:
-        ConfigError: unreadable, of another format, joints or period, damaged, or beyond the
-            limits (naming the key, the joint, the time).
+        ConfigError: unreadable, a key given twice, of another format, joints or period,
+            damaged, or beyond the limits (naming the key, the joint, the time).
     """
-    try:
-        document = json.loads(Path(path).read_text(encoding='utf-8'))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise ConfigError(f'{where}: {path}: cannot read a designed excitation: {err}') from err
+    document = _read_document(Path(path), where)
     if not isinstance(document, dict) or document.get('format') != DESIGN_FORMAT:
         raise ConfigError(
             f'{where}: {path}: not an {DESIGN_FILE} written by id-learning excitation'

@@ -206,3 +206,31 @@ def test_settings_beside_a_designed_file_are_refused_naming_them(design, mabi, t
     played = {'excitation': {'file': str(tmp_path / 'excite' / DESIGN_FILE), 'duration_s': 60}}
     with pytest.raises(ConfigError, match=r"so \['duration_s'\] would not apply"):
         load_twin_config(REPO / 'config' / 'twin_default.yaml', played)
+
+
+@pytest.mark.parametrize(
+    ('written', 'given_twice', 'key'),
+    [
+        ('"ipo_period_s": 0.008', '"ipo_period_s": 0.004, "ipo_period_s": 0.008', 'ipo_period_s'),
+        ('"rest_s": ', '"rest_s": 2.0, "rest_s": ', 'rest_s'),
+    ],
+)
+def test_a_design_that_gives_a_key_twice_is_refused_naming_file_and_key(
+    design, mabi, tmp_path, written, given_twice, key
+):
+    """Probe 10's X01: json keeps the last of two equal keys without a word."""
+    path = write_design(design, mabi, tmp_path / 'excite') / DESIGN_FILE
+    text = path.read_text()
+    assert text.count(written) == 1
+    path.write_text(text.replace(written, given_twice))
+    with pytest.raises(
+        ConfigError, match=rf"^excitation\.file: {path}: the key '{key}' is given twice"
+    ):
+        load_design(path, mabi, 'excitation.file')
+
+
+def test_a_design_file_that_is_a_device_is_refused_unread(mabi, tmp_path):
+    path = tmp_path / DESIGN_FILE
+    path.symlink_to('/dev/zero')
+    with pytest.raises(ConfigError, match=rf'^excitation\.file: {path}: .*a character device'):
+        load_design(path, mabi, 'excitation.file')
