@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import gzip
+import logging
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -24,6 +25,8 @@ from id_learning.dataset.import_mapping import ImportMapping
 from id_learning.errors import ConfigError, DatasetError
 
 __all__ = ['LogTable', 'is_float', 'log_suffix', 'read_table']
+
+_LOG = logging.getLogger(__name__)
 
 # Sniffing order: tab and semicolon first, since a comma may be a decimal separator there.
 _SNIFF_DELIMITERS = ('tab', ';', ',', 'whitespace')
@@ -178,14 +181,14 @@ def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:
     if not data_rows:
         raise DatasetError(f'{source}: no data rows')
     header = names[0] if names else []
-    _check_unique_names(header, source)
+    repeated = _repeated_names(header, mapping, source)
     line_numbers = np.array([number for number, _ in numbered[first_data:]])
     _check_no_extra_cells(header or data_rows[0], data_rows, line_numbers, source)
     width = max(len(header), *(len(row) for row in data_rows))
     cells = np.array([row + [''] * (width - len(row)) for row in data_rows], dtype=object)
     keys: Sequence[str | int] = header or range(width)
     columns: dict[str | int, np.ndarray] = {
-        key: cells[:, j] for j, key in enumerate(keys) if key != ''
+        key: cells[:, j] for j, key in enumerate(keys) if key != '' and key not in repeated
     }
     return LogTable(source, columns, line_numbers)
 
@@ -257,12 +260,7 @@ def _check_header_row(row: list[str], line: int, mapping: ImportMapping, source:
     """
     if _looks_like_header(row):
         return
-    specs = [mapping.time] + [
-        getattr(joint, quantity)
-        for joint in mapping.joints
-        for quantity in ('position', 'velocity', 'current', 'torque')
-    ]
-    names = {spec.column for spec in specs if spec is not None and isinstance(spec.column, str)}
+    names = _mapped_names(mapping)
     if names and names <= set(row):
         return
     shown = ', '.join(row[:3]) + (', ...' if len(row) > 3 else '')
@@ -273,7 +271,35 @@ def _check_header_row(row: list[str], line: int, mapping: ImportMapping, source:
     )
 
 
-def _check_unique_names(names: list[str], source: Path) -> None:
-    duplicates = sorted({name for name in names if name and names.count(name) > 1})
-    if duplicates:
-        raise DatasetError(f'{source}: the header names columns {duplicates} more than once')
+def _mapped_names(mapping: ImportMapping) -> set[str]:
+    """The column names the mapping reads (time and every joint's quantities)."""
+    specs = [mapping.time] + [
+        getattr(joint, quantity)
+        for joint in mapping.joints
+        for quantity in ('position', 'velocity', 'current', 'torque')
+    ]
+    return {spec.column for spec in specs if spec is not None and isinstance(spec.column, str)}
+
+
+def _repeated_names(names: list[str], mapping: ImportMapping, source: Path) -> set[str]:
+    """The header's names given more than once, none of which the mapping reads.
+
+    A mapped name given twice is ambiguous: which column holds the values? An unmapped one
+    (two ``notes`` columns) is read by nobody, so it is said and left out.
+
+    Raises:
+        DatasetError: a mapped column name is given more than once (names it and the columns).
+    """
+    repeated = {name for name in names if name and names.count(name) > 1}
+    mapped = sorted(repeated & _mapped_names(mapping))
+    if mapped:
+        where = {name: [k for k, given in enumerate(names) if given == name] for name in mapped}
+        raise DatasetError(
+            f'{source}: the header names the mapped column(s) {mapped} more than once (at '
+            f'0-based positions {where}): which one holds the values is ambiguous; rename or '
+            'remove the others'
+        )
+    if repeated:
+        _LOG.warning('%s: the header names columns %s more than once; the mapping reads none of '
+                     'them, so they are left out', source, sorted(repeated))  # fmt: skip
+    return repeated
