@@ -39,6 +39,7 @@ __all__ = [
     'inertia_problems',
     'link_inertials',
     'parse_urdf',
+    'principal_moments_problem',
     'read_urdf',
 ]
 
@@ -181,6 +182,25 @@ def check_urdf_inertials(urdf: Path | str) -> list[str]:
     for line in lines:
         _LOG.warning('%s', line)
     return lines
+
+
+def principal_moments_problem(moments: np.ndarray) -> str | None:
+    """Why three principal moments of inertia about a centre of mass [kg*m^2] are no body's.
+
+    A rigid body's are each >= 0 and obey the triangle inequality I1 + I2 >= I3 in every
+    order: I_xx + I_yy = integral of (x^2 + y^2 + 2 z^2) dm >= integral of (x^2 + y^2) dm =
+    I_zz. All zero is a point mass. None when they are realisable (within rounding).
+    """
+    values = np.sort(np.asarray(moments, dtype=float))
+    shown = np.round(values, 9).tolist()
+    if values[0] < -_ZERO:
+        return f'principal moments {shown} kg*m^2: a negative moment (every one must be >= 0)'
+    if values[0] + values[1] < values[2] * (1 - _TOLERANCE) - _ZERO:
+        return (
+            f'principal moments {shown} kg*m^2 break the triangle inequality I1 + I2 >= I3 '
+            f'({values[0]:g} + {values[1]:g} < {values[2]:g}): no mass distribution has them'
+        )
+    return None
 
 
 def _problem(mass: float, inertia: np.ndarray) -> tuple[bool, str] | None:

@@ -35,7 +35,12 @@ from id_learning.robot.drives import (
     rotor_inertia_torque,
     torque_per_ampere,
 )
-from id_learning.twin.bounds import check_duration, check_excitation
+from id_learning.twin.bounds import (
+    check_drawn_masses,
+    check_duration,
+    check_excitation,
+    check_measurement,
+)
 from id_learning.twin.effects import (
     CoggingEffect,
     CoulombFriction,
@@ -115,6 +120,7 @@ class TwinConfig:
     robot_seed: int | None = None
     shift_start_s: float = 0.0
     raw: dict[str, Any] = field(default_factory=dict)
+    where: str = 'twin config'  # the config file, named in errors
 
     @property
     def true_robot_seed(self) -> int:
@@ -219,6 +225,7 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
             minimum=0.0,
         ),
     )
+    check_measurement(vars(measurement), robot, where)
     seed = data.get('seed', 0)
     start = data.get('start_time_ns', 1_767_225_600_000_000_000)  # 2026-01-01T00:00:00Z
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
@@ -249,6 +256,7 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
         robot_seed=robot_seed,
         shift_start_s=float(shift_start),
         raw=data,
+        where=where,
     )
 
 
@@ -297,9 +305,11 @@ def true_dynamics(config: TwinConfig, rng: np.random.Generator) -> RigidBodyDyna
     mass_draw = rng.standard_normal(masses.shape)
     com_draw = rng.standard_normal(coms.shape)
     if error.enabled:
-        dynamics = dynamics.with_masses_and_coms(
-            masses * (1.0 + error.mass_rel_std * mass_draw), coms + error.com_std_m * com_draw
-        )
+        drawn = masses * (1.0 + error.mass_rel_std * mass_draw)
+        bodies = list(dynamics.model.names[1:])
+        check_drawn_masses(masses, drawn, bodies, mass_rel_std=error.mass_rel_std,
+                           robot_seed=config.true_robot_seed, where=config.where)  # fmt: skip
+        dynamics = dynamics.with_masses_and_coms(drawn, coms + error.com_std_m * com_draw)
     payload = config.effects.get('payload_mass')
     assert isinstance(payload, PayloadMass)
     if payload.enabled and payload.mass_kg > 0:
