@@ -8,8 +8,6 @@ the motor shaft, ``rotor_inertia`` in kg*m^2 at the motor shaft. Everything else
 from __future__ import annotations
 
 import hashlib
-import os
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,13 +21,13 @@ from id_learning.config_io import (
     finite_number,
     float_vector,
     load_yaml_mapping,
-    not_a_file,
     number_hint,
     range_problem,
     topic_name_problem,
 )
 from id_learning.errors import ConfigError
 from id_learning.robot.urdf_checks import check_urdf
+from id_learning.robot.urdf_location import resolve_urdf
 
 __all__ = [
     'DriveConfig',
@@ -40,8 +38,6 @@ __all__ = [
     'load_robot_config',
     'resolve_urdf',
 ]
-
-EXAMPLE_ROBOT_DATA_SCHEME = 'example-robot-data://'
 
 # The reference study's per-axis cut-offs, used when a config gives none (6-axis robots only).
 STUDY_CUTOFF_HZ = (1.2, 0.3, 0.3, 0.7, 0.5, 0.7)
@@ -148,49 +144,6 @@ class RobotConfig:
     def urdf_sha256(self) -> str:
         """SHA-256 of the URDF file, to tie data and models to the exact robot description."""
         return hashlib.sha256(self.urdf_path.read_bytes()).hexdigest()
-
-
-def _example_robot_data_roots() -> list[Path]:
-    """Folders where the example-robot-data package keeps its robots (pip/cmeel, apt, robotpkg)."""
-    roots = [Path(entry) / 'cmeel.prefix/share/example-robot-data/robots' for entry in sys.path]
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
-        if prefix:
-            roots.append(Path(prefix) / 'share/example-robot-data/robots')
-    roots += [Path('/opt/openrobots/share/example-robot-data/robots')]
-    return [root for root in roots if root.is_dir()]
-
-
-def resolve_urdf(value: str, base_dir: Path, where: str = 'robot config') -> Path:
-    """Resolve a config's ``urdf`` entry to an existing file.
-
-    Args:
-        value: a path (relative to the config file's folder, or absolute) or
-            ``example-robot-data://<robot>_description/urdf/<file>.urdf``.
-        base_dir: folder of the config file.
-        where: the config file, named in errors.
-
-    Raises:
-        ConfigError: the file does not exist.
-    """
-    if value.startswith(EXAMPLE_ROBOT_DATA_SCHEME):
-        relative = value[len(EXAMPLE_ROBOT_DATA_SCHEME) :]
-        roots = _example_robot_data_roots()
-        for root in roots:
-            candidate = root / relative
-            if candidate.is_file():
-                return candidate.resolve()
-        raise ConfigError(
-            f'{where}: urdf {value!r}: not found in the example-robot-data package '
-            f'(searched {roots or "none"}); install it with `pip install example-robot-data` '
-            'or `apt install ros-jazzy-example-robot-data`'
-        )
-    path = Path(value)
-    if not path.is_absolute():
-        path = base_dir / path
-    kind = not_a_file(path)
-    if kind is not None and not kind.startswith('a FIFO'):  # a FIFO is read as it comes
-        raise ConfigError(f'{where}: urdf {value!r}: {path}: {kind}, not a URDF file')
-    return path.resolve()
 
 
 _TOP_KEYS = (
