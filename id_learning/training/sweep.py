@@ -414,13 +414,14 @@ def _engine_options(storage: str, timeout_s: float) -> dict[str, Any]:
 
 
 def _check_sqlite_folder(storage: str) -> None:
-    """Refuse a SQLite URL whose folder is missing or not writable, before any wait.
+    """Refuse a SQLite URL whose file or folder cannot be written, before any wait.
 
-    SQLite reports both as 'unable to open database file', which the retries would wait out
-    and then blame on a lock: the folder is the cause, and it is named at once.
+    SQLite reports a missing or read-only folder, and a folder named as the file, as 'unable to
+    open database file', which the retries would wait out and then blame on a lock; a
+    read-only file reaches optuna as 'invalid data in the commit'. The cause is named at once.
 
     Raises:
-        ConfigError: names the URL and the folder.
+        ConfigError: names the URL, the file or folder, and what it is.
     """
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import ArgumentError
@@ -441,6 +442,19 @@ def _check_sqlite_folder(storage: str) -> None:
         )
     if not os.access(folder, os.W_OK | os.X_OK):
         raise ConfigError(f'sweep: the storage {storage!r}: folder {folder} is not writable')
+    path = Path(database).absolute()
+    if path.is_dir():
+        raise ConfigError(
+            f'sweep: the storage {storage!r}: {path} is a folder, not a SQLite file; name a '
+            f'file (sqlite:///{path / "sweep.db"})'
+        )
+    if path.exists() and not path.is_file():
+        raise ConfigError(f'sweep: the storage {storage!r}: {path} is not a regular file')
+    if path.exists() and not os.access(path, os.R_OK | os.W_OK):  # also immutable, read-only fs
+        raise ConfigError(
+            f'sweep: the storage {storage!r}: {path} is read-only, and every trial is written '
+            'to it: make it writable, or copy it and name the copy'
+        )
 
 
 def _reason(err: Exception) -> str:
