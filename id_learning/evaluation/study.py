@@ -13,13 +13,13 @@ axes 1..6), ``joints``, and optionally ``source``, ``metric``, ``split_note`` an
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from id_learning.config_io import read_capped
 from id_learning.errors import ConfigError
+from id_learning.models.metadata_checks import loads_unique
 
 __all__ = [
     'MAX_STUDY_TABLE_BYTES',
@@ -71,14 +71,14 @@ def load_study_table(path: Path | str, n_joints: int | None = None) -> StudyTabl
     Raises:
         ConfigError: the file is missing or unreadable, a device, past
             ``MAX_STUDY_TABLE_BYTES`` (``config_io.read_capped``) or not JSON, a key is
-            missing, a model row has the wrong number of values or a non-finite one, or the
-            axes do not match ``n_joints``.
+            given twice or missing, a model row has the wrong number of values or a non-finite
+            one, or the axes do not match ``n_joints``.
     """
     path = Path(path)
     text = read_capped(path, 'study table', MAX_STUDY_TABLE_BYTES)
     try:
-        data = json.loads(text.decode('utf-8'))
-    except ValueError as err:  # not UTF-8, not JSON
+        data = loads_unique(text.decode('utf-8'))
+    except ValueError as err:  # not UTF-8, not JSON, a key given twice
         raise ConfigError(f'{path}: cannot read study table: {err}') from err
     if not isinstance(data, dict):
         raise ConfigError(f'{path}: the study table must be a JSON object')

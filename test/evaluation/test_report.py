@@ -365,3 +365,15 @@ def test_a_bad_study_table_is_refused_naming_file_and_key(tmp_path, content, mes
 def test_a_missing_study_table_file_is_refused(tmp_path):
     with pytest.raises(ConfigError, match='cannot read study table'):
         load_study_table(tmp_path / 'absent.json')
+
+
+def test_a_study_table_naming_a_model_twice_is_refused(tmp_path):
+    path = tmp_path / 'twice.json'
+    row = '[0.1, 0.1, 0.1, 0.1, 0.1, 0.1]'
+    path.write_text(
+        f'{{"joints": ["a", "b", "c", "d", "e", "f"], '
+        f'"rmse_normalised": {{"mlp": {row}, "mlp": {row.replace("0.1", "0.9")}}}}}'
+    )
+    with pytest.raises(ConfigError, match="key 'mlp' appears twice") as err:
+        load_study_table(path, n_joints=6)
+    assert str(path) in str(err.value)
