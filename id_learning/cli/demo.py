@@ -72,6 +72,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     options.model_kinds(args.models)  # unknown kinds refused even with --skip-training
     if args.twin:  # refused before the work, not after the training
         _check_twin(Path(args.twin), robot)
+    args.study_table = options.study_table(args, robot)  # read once, before the work
     bag = Path(args.bag or default_bag())
     inputs = [bag, *([Path(args.twin)] if args.twin else [])]
     with result_folder(Path(args.out), command='demo', force=args.force, inputs=inputs) as folder:
@@ -160,7 +161,7 @@ def _demo_into(args: argparse.Namespace, robot: Any, bag: Path, folder: Any) -> 
         max_seconds_per_model=args.train_seconds,
         device=args.device,
         preprocess=preprocess,
-        study_table=options.study_table(args, robot),
+        study_table=args.study_table,
     )
     print(metrics_table(run.metrics))
     print(f'report: {shown / "run" / "report.md"}', flush=True)
