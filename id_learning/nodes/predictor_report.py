@@ -209,9 +209,11 @@ def adaptation_loop(
             f'predicts the {target} target: set adaptation off'
         )
     settings = AdaptationConfig(time_constant_s=config.adaptation_time_constant_s)
-    return AdaptationLoop.for_robot(
+    loop = AdaptationLoop.for_robot(
         robot, core.joint_names, settings, inertia=config.adaptation == 'rls_inertia'
     )
+    loop.reference_source = config.input_topic
+    return loop
 
 
 def ahead_text(topic: str, ahead_ns: int) -> str:

@@ -44,6 +44,11 @@ import numpy as np
 from id_learning.errors import ConfigError
 from id_learning.physics.friction import coulomb
 from id_learning.predictor.adaptation_inertia import InertiaAdapter, stabilised
+from id_learning.predictor.adaptation_pairing import (
+    MEASURED_CAPACITY,
+    PREDICTION_CAPACITY,
+    StampPairing,
+)
 from id_learning.predictor.adaptation_store import (
     ADAPTATION_JSON,
     COLUMNS,
@@ -64,6 +69,16 @@ BOUND_SHARE = 0.1
 INERTIA_BOUND_SHARE = 0.5
 #: The adaptation's memory spans at least this many update periods.
 MIN_MEMORY_PERIODS = 10
+#: Currents expired unpaired in a row before the loop says that pairing keeps failing: 0.4 s at
+#: the 8 ms IPO period, far beyond a few lost messages.
+UNPAIRED_WARN_AFTER = 50
+
+#: What a served prediction leaves for its currents: (v, the rigid body's regressor or None, the
+#: model's tau_u); None for a cycle the physics prior served (nothing to learn from).
+_Served = tuple[np.ndarray, np.ndarray | None, np.ndarray] | None
+#: What a currents message leaves for its prediction: (tau_u [N*m], whether the reference was
+#: stale, the joint names, the topic).
+_Measured = tuple[np.ndarray, bool, tuple[str, ...], str]
 
 
 @dataclass(frozen=True)
@@ -256,32 +271,44 @@ class AdaptationLoop:
     """Pairs each prediction with the measured currents of the same IPO cycle, and adapts.
 
     The predictor hands every sample it serves to ``serve``, which adds the corrections and
-    remembers the model's tau_u and the state; the drive's currents of that cycle arrive later
-    with the same stamp (``measured``) and the pair updates the adapters. Only the last
-    ``capacity`` predictions are kept: currents older than that, or for a cycle never served,
-    are counted as unpaired and learnt nothing from.
+    remembers the model's tau_u and the state; the drive's currents of that cycle arrive with
+    the same stamp (``measured``), after the prediction from a drive, before it from a replay of
+    a bag, and the pair updates the adapters (``adaptation_pairing``: each side waits for the
+    other, a prediction ``capacity`` cycles, a current ``measured_capacity``). A pair completed by
+    a prediction is learnt from at the next currents message, off the path from reference to
+    torque. Currents that find no prediction of their stamp in time (a cycle never served, a
+    sender stamping them otherwise) are counted as unpaired and learnt nothing from; when
+    pairing keeps failing (``UNPAIRED_WARN_AFTER`` in a row) the loop says so once, with the
+    stamp offset it sees.
 
     Args:
         adapter: the friction RLS.
         torque_per_ampere: (n,) gear ratio times torque constant: tau_u = it * current.
-        capacity: predictions kept for pairing.
+        capacity: predictions kept waiting for their currents.
         inertia: the rigid body's RLS (a change of the base inertial parameters), or None.
+        measured_capacity: currents kept waiting for their prediction.
     """
 
     def __init__(
         self,
         adapter: FrictionAdapter,
         torque_per_ampere: np.ndarray,
-        capacity: int = 512,
+        capacity: int = PREDICTION_CAPACITY,
         inertia: InertiaAdapter | None = None,
+        measured_capacity: int = MEASURED_CAPACITY,
     ) -> None:
         """Start with nothing to pair."""
         self.adapter = adapter
         self.inertia = inertia
         self.torque_per_ampere = np.asarray(torque_per_ampere, dtype=float)
         self.capacity = capacity
-        self._pending: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]] = {}
-        self.unpaired = 0
+        self.pairing: StampPairing[_Served, _Measured] = StampPairing(capacity, measured_capacity)
+        #: Pairs a prediction completed, learnt from at the next currents (or at ``finish``).
+        self._ready: list[tuple[_Served, _Measured]] = []
+        #: Where the references come from, for the unpaired warning (the node's input topic).
+        self.reference_source = 'the reference topic (input_topic)'
+        self._said_unpaired = False
+        self._pairing_lines: list[str] = []
         #: Why the latest sample was frozen ('' if none was), for /diagnostics.
         self.frozen_reason = ''
         #: (kind, text) of each kind of freeze reason, the first time it occurs: the caller
@@ -291,10 +318,15 @@ class AdaptationLoop:
         #: What the stored file gave at start (``load``); None: not looked at.
         self.base: StoredBase | None = None
 
+    @property
+    def unpaired(self) -> int:
+        """Currents that found no prediction of their stamp in time."""
+        return self.pairing.unpaired
+
     def freeze(self, kind: str, reason: str) -> bool:
         """Count a sample nothing was learnt from and why; False, as an update learning nothing.
 
-        ``kind``: stale, names, length or non_finite (each kind is said once).
+        ``kind``: stale, fallback, names, length or non_finite (each kind is said once).
         """
         self.adapter.counters.frozen += 1
         self.frozen_reason = reason
@@ -318,7 +350,8 @@ class AdaptationLoop:
     ) -> np.ndarray:
         """The model's tau_u (n,) at a reference state (q, v, a) with the corrections added.
 
-        ``learn``: remember the sample for its currents (not while another model served it).
+        ``learn``: remember the sample for its currents (False while another model served it:
+        its currents are then taken and learnt nothing from).
         """
         q, v, a = state
         if self.inertia is not None:  # friction and rigid body, estimated together
@@ -327,11 +360,10 @@ class AdaptationLoop:
         else:
             regressor = None
             tau = tau_model + self.adapter.correction(v)
-        if learn:
-            pending = self._pending
-            pending[stamp_ns] = (v.copy(), regressor, tau_model.copy())
-            if len(pending) > self.capacity:
-                del pending[next(iter(pending))]  # dicts keep insertion order: the oldest goes
+        served = (v.copy(), regressor, tau_model.copy()) if learn else None
+        pair = self.pairing.predicted(stamp_ns, served)
+        if pair is not None:  # its currents came first: learnt from at the next ones
+            self._ready.append(pair)
         out: np.ndarray = tau
         return out
 
@@ -344,45 +376,92 @@ class AdaptationLoop:
         names: Sequence[str] = (),
         source: str = 'measured currents',
     ) -> bool:
-        """Learn from the currents (n,) [A] of one cycle; whether the friction adapter learnt.
+        """Take the currents (n,) [A] of one cycle; whether an adapter learnt in this call.
 
-        With the rigid body adapted too, the joint estimator (``InertiaAdapter``) learns alone.
-        ``names`` (the joints in order) and ``source`` (the topic) name a frozen sample's cause.
+        The currents pair with the prediction of their stamp, now or when it is served; a pair
+        that a prediction completed is learnt from first. With the rigid body adapted too, the
+        joint estimator (``InertiaAdapter``) learns alone. ``stale``: the reference is stale
+        (nothing is learnt from the pair). ``names`` (the joints in order) and ``source`` (the
+        topic) name a frozen sample's cause and an unpaired topic.
         """
-        pair = self._pending.pop(stamp_ns, None)
+        learnt = self.learn_ready()
+        measured = self.torque_per_ampere * np.asarray(currents, dtype=float)
+        pair = self.pairing.measured(stamp_ns, (measured, stale, tuple(names), source))
+        if not self._said_unpaired and self.pairing.unpaired_streak >= UNPAIRED_WARN_AFTER:
+            self._said_unpaired = True
+            self._pairing_lines.append(self._unpaired_line(source))
         if pair is None:
-            self.unpaired += 1
+            return learnt
+        return self._learn(*pair) or learnt
+
+    def learn_ready(self) -> bool:
+        """Learn from the pairs predictions completed since the last call; whether any learnt."""
+        if not self._ready:
             return False
-        v, regressor, tau_model = pair
-        measured = self.torque_per_ampere * currents
+        ready, self._ready = self._ready, []
+        learnt = False
+        for served, current in ready:
+            learnt = self._learn(served, current) or learnt
+        return learnt
+
+    def _learn(self, served: _Served, current: _Measured) -> bool:
+        """Update the active estimator from one pair; whether it learnt."""
+        measured, stale, names, source = current
+        if served is None:
+            return self.freeze(
+                'fallback', f"{source}: the physics prior served the cycle, not the model's torque"
+            )
         if stale:
             return self.freeze('stale', 'the reference is stale')
         if not np.isfinite(measured).all():
             bad = np.flatnonzero(~np.isfinite(measured)).tolist()
             which = [names[j] for j in bad] if len(names) == len(measured) else bad
             return self.freeze('non_finite', f'{source}: effort (current) of {which} not finite')
+        v, regressor, tau_model = served
         if self.inertia is not None and regressor is not None:
             return self.inertia.update(regressor, measured - tau_model)
         return self.adapter.update(v, measured, tau_model)
 
+    def _unpaired_line(self, source: str) -> str:
+        """Why the adaptation learns nothing when pairing keeps failing, with the offset seen."""
+        pairing, offset = self.pairing, self.pairing.offset_ns()
+        seen = (
+            'no prediction waits for currents: none was served to learn from'
+            if offset is None
+            else f"the latest one's stamp is {offset * 1e-6:+.3f} ms from the nearest served "
+            "prediction's"
+        )
+        return (
+            f'adaptation pairs no currents: the last {pairing.unpaired_streak} messages on '
+            f'{source} found no prediction of the same stamp among the references served from '
+            f'{self.reference_source} ({seen}); currents must carry the stamp of the reference '
+            f'cycle they answer, arriving within {pairing.measured_capacity} cycles before its '
+            f'prediction or {pairing.prediction_capacity} after (counted as adaptation_unpaired; '
+            'said once)'
+        )
+
     def take_reasons(self) -> list[tuple[bool, str]]:
         """(is a warning, log line) of each freeze reason new since the last call.
 
-        A stale reference is normal (the end of a motion): said at the info level.
+        A stale reference is normal (the end of a motion), and so is a cycle the physics prior
+        served: said at the info level. Then the unpaired warning, once.
         """
         lines = [
             (
-                kind != 'stale',
+                kind not in ('stale', 'fallback'),
                 f'adaptation learns nothing from a sample: {reason} (said once per kind; counted '
                 'as adaptation_frozen, the latest reason as adaptation_frozen_reason)',
             )
             for kind, reason in self.new_reasons
         ]
+        lines += [(True, line) for line in self._pairing_lines]
         self.new_reasons.clear()
+        self._pairing_lines.clear()
         return lines
 
     def finish(self, artifact: Path, joints: Sequence[str]) -> tuple[bool, str]:
         """``save`` at the end of a session: (is a warning, a line saying what was stored)."""
+        self.learn_ready()
         try:
             saved = self.save(artifact, tuple(joints))
         except OSError as err:
@@ -393,7 +472,8 @@ class AdaptationLoop:
         why = self.frozen_reason or 'no paired currents'
         return False, (
             f'adaptation accepted no update this session ({self.adapter.counters.frozen} '
-            f'frozen samples, the latest: {why}); {path} is left as it was'
+            f'frozen samples, the latest: {why}; {self.unpaired} currents unpaired); {path} is '
+            'left as it was'
         )
 
     def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
@@ -486,11 +566,13 @@ class AdaptationLoop:
     def report(self, joints: Sequence[str]) -> dict[str, object]:
         """Diagnostics key-values: counts and each joint's adapted parameters."""
         counters, inertia = self.adapter.counters, self.inertia
+        offset = self.pairing.offset_ns()
         values: dict[str, object] = {
             'adaptation_updates': counters.updates if inertia is None else inertia.updates,
             'adaptation_gated': counters.gated if inertia is None else inertia.gated,
             'adaptation_frozen': counters.frozen,
             'adaptation_unpaired': self.unpaired,
+            'adaptation_unpaired_offset_ms': 'none' if offset is None else offset * 1e-6,
             'adaptation_frozen_reason': self.frozen_reason or 'none',
             'adaptation_at_bounds': self.adapter.at_bounds if inertia is None else 0,
         }

@@ -459,3 +459,68 @@ def test_adaptation_learns_a_friction_offset_from_the_currents_and_saves_it_besi
     assert sorted(p.name for p in artifact.iterdir()) == sorted(
         p.name for p in tiny_artifacts['rnea_lq'].iterdir()
     )
+
+
+def test_adaptation_learns_from_a_replayed_bag_whose_currents_precede_each_reference(
+    nodes, listener, tiny_artifacts, mabi, tmp_path
+):
+    """The replay publishes each cycle's /motor_currents before its /reference: still paired.
+
+    The bag's currents carry 40 N*m on joint_1 more than the model: the predictor learns it.
+    """
+    import dataclasses
+    import shutil
+
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    artifact = tmp_path / 'rnea_lq'
+    shutil.copytree(tiny_artifacts['rnea_lq'], artifact)
+    model = load_model(artifact, mabi)
+    n = 400
+    recording = sine_recording(n)
+    a = np.gradient(recording.velocity, 0.008, axis=0)
+    tau = model.predict(recording.position, recording.velocity, a)
+    extra = np.zeros(6)
+    extra[0] = 40.0
+    per_ampere = mabi.drives.gear_ratio * mabi.drives.torque_constant
+    bag = write_recording(
+        dataclasses.replace(recording, current=(tau + extra) / per_ampere), tmp_path / 'bag'
+    )
+    listener.subscribe(DiagnosticArray, '/diagnostics')
+    predictor = nodes(
+        'predictor',
+        {
+            'artifact': str(artifact),
+            'input_topic': '/reference',
+            'input_depth': 100,
+            'diagnostics_period_s': 0.1,
+            'adaptation': 'rls',
+            'adaptation_time_constant_s': 5.0,
+        },
+    )
+    replay = nodes(
+        'replay',
+        {
+            'bag': str(bag),
+            'reference_topic': '/reference',
+            'publish_clock': False,
+            'wait_for_subscribers': 2,  # the predictor's reference and currents
+            'wait_timeout_s': STARTUP_S,
+        },
+    )
+    assert replay.wait(120) == 0
+
+    def diagnostics() -> dict:
+        return listener.diagnostics('id_learning/predictor') or {}
+
+    listener.wait_for(
+        lambda: int(diagnostics().get('adaptation_updates', 0)) >= n - 10,
+        30,
+        'the adaptation to learn from the replayed currents',
+    )
+    values = diagnostics()
+    assert int(values['adaptation_unpaired']) <= 2, values
+    learnt = float(values['adapted_offset_nm_joint_1'])
+    assert learnt + float(values['adapted_coulomb_level_nm_joint_1']) > 20.0, values
+    assert predictor.stop() == 0
+    assert 'adaptation pairs no currents' not in predictor.log()
