@@ -3,7 +3,9 @@
 ``declare_parameters`` declares every field of a node config (``nodes.param_schema``) with its
 description and constraints; before that it refuses what ROS would take without a word:
 
-- a ``--params-file`` with no section for the node (``refuse_foreign_params_files``);
+- a ``--params-file`` that repeats a key in one mapping (rcl keeps the later value without a
+  word; the package's other YAML readers refuse it) or that is no valid YAML, and one with no
+  section for the node (``refuse_foreign_params_files``);
 - a value given on the command line that the node could not use, even one a later ``-p`` or file
   replaces (``check_given_values``); and rcl keeps the first of two values of one parameter when
   the later one has another type (``-p rate:=10.0 -p rate:=fast`` played at 10): the node holds
@@ -24,9 +26,7 @@ import difflib
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, TypeVar
 
-import yaml
-
-from id_learning.config_io import read_capped
+from id_learning.config_io import parse_yaml, read_capped
 from id_learning.errors import ConfigError
 from id_learning.nodes.param_schema import (
     STRING_LIST,
@@ -62,22 +62,31 @@ COMMAND_LINE: list[str] | None = None
 
 
 def refuse_foreign_params_files(node: Node, args: Sequence[str] | None = None) -> None:
-    """Refuse a ``--params-file`` with no section for this node (a misspelt ``recordr:``).
+    """Refuse a ``--params-file`` that repeats a key, or has no section for this node.
 
-    rcl skips such a file without a word: the node would run on its defaults, a recorder
-    recording the default topics to the default folder.
+    rcl takes a key given twice in one mapping (``torque_rise_s: 0.05`` then ``torque_rise_s:
+    5.0``) and keeps the later value without a word; it skips a file with no section for the
+    node (a misspelt ``recordr:``) without a word too: the node would run on its defaults, a
+    recorder recording the default topics to the default folder. Each file is read as the
+    package reads its own YAML (``config_io.parse_yaml``), so a YAML fault rcl let pass is named
+    too.
 
     Args:
         args: the command line; None: ``COMMAND_LINE``.
 
     Raises:
-        ConfigError: names the file, its sections and the node, with the closest section.
+        ConfigError: names the node and the file; for a repeated key, the key and both lines;
+            for a file with no section for the node, its sections and the closest one.
     """
     for path in params_files(COMMAND_LINE if args is None else args):
         try:
-            data = yaml.safe_load(read_capped(path, 'parameter file').decode('utf-8'))
-        except (ConfigError, OSError, UnicodeDecodeError, yaml.YAMLError):
+            text = read_capped(path, 'parameter file').decode('utf-8')
+        except (ConfigError, UnicodeDecodeError):
             continue  # rcl read it before the node started; nothing to add here
+        try:
+            data = parse_yaml(text, str(path))
+        except ConfigError as err:
+            raise ConfigError(f'node {node.get_name()}: --params-file {err}') from None
         problem = params_file_problem(path, data, node.get_name(), node.get_namespace())
         if problem:
             raise ConfigError(f'node {node.get_name()}: {problem}')

@@ -241,6 +241,32 @@ def test_a_node_refuses_a_params_file_without_its_section_by_its_resolved_name(
         node.destroy_node()
 
 
+def test_a_node_refuses_a_params_file_that_gives_a_key_twice_naming_it_and_both_lines(
+    ros_context, tmp_path
+):
+    """rcl keeps the later value without a word; the package's YAML readers refuse it."""
+    from rclpy.node import Node
+
+    path = tmp_path / 'p.yaml'
+    path.write_text('predictor:\n  ros__parameters:\n    artifact: a\n    torque_rise_s: 0.05\n'
+                    '    torque_rise_s: 5.0\n')  # fmt: skip
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('predictor:\n  ros__parameters:\n    artifact: [a\n')
+    node = Node('predictor', context=ros_context)
+    try:
+        twice = r"node predictor: --params-file .*p.yaml: duplicate key 'torque_rise_s' at "
+        twice += 'lines 4 and 5'
+        with pytest.raises(ConfigError, match=twice):
+            refuse_foreign_params_files(node, ['--ros-args', '--params-file', str(path)])
+        with pytest.raises(ConfigError, match=r'broken.yaml: not valid YAML'):
+            refuse_foreign_params_files(node, ['--ros-args', '--params-file', str(broken)])
+        path.write_text('predictor:\n  ros__parameters:\n    torque_rise_s: 0.05\n'
+                        'replay:\n  ros__parameters:\n    torque_rise_s: 0.05\n')  # fmt: skip
+        refuse_foreign_params_files(node, ['--ros-args', '--params-file', str(path)])  # apart
+    finally:
+        node.destroy_node()
+
+
 # -- integers for doubles -------------------------------------------------------------------------
 @pytest.fixture
 def ros_context():
@@ -280,6 +306,8 @@ def test_an_integer_for_a_double_parameter_stays_a_double_at_start_and_at_runtim
 # -- refused at start, in one line ----------------------------------------------------------------
 def test_nodes_refuse_clashing_topics_and_a_params_file_for_another_node_in_one_line(tmp_path):
     (tmp_path / 'typo.yaml').write_text('recordr:\n  ros__parameters:\n    output: mine\n')
+    (tmp_path / 'twice.yaml').write_text('recorder:\n  ros__parameters:\n    output: mine\n'
+                                         '    output: yours\n')  # fmt: skip
     # One predictor only (it imports torch: seconds); the same checks run in-process above.
     cases = {
         'output_on_input': ('predictor', ['-p', 'artifact:=a', '-p', 'output_topic:=/reference'],
@@ -287,6 +315,8 @@ def test_nodes_refuse_clashing_topics_and_a_params_file_for_another_node_in_one_
         'recorder_typo': ('recorder', ['--params-file', 'typo.yaml'],
                           'typo.yaml: no section of it is for node /recorder (did you mean '
                           'recorder for recordr?)'),
+        'recorder_twice': ('recorder', ['--params-file', 'twice.yaml'],
+                           "--params-file twice.yaml: duplicate key 'output' at lines 3 and 4"),
         'rosout_as_string': ('recorder', ['-p', 'output:=rosout', '-p', "topics:=['/rosout']",
                                           '-p', "msg_types:=['std_msgs/msg/String']"],
                              "topics[0] '/rosout': ROS 2 refused the topic"),
@@ -316,7 +346,7 @@ def test_nodes_refuse_clashing_topics_and_a_params_file_for_another_node_in_one_
         assert f'error: node {cases[case][0]}: {message}' in stderr, (case, stderr)
         assert 'Traceback' not in stdout + stderr, (case, stderr)
     # Refused before anything was written: no bag, neither the file's nor the default one.
-    assert sorted(path.name for path in tmp_path.iterdir()) == ['typo.yaml']
+    assert sorted(path.name for path in tmp_path.iterdir()) == ['twice.yaml', 'typo.yaml']
 
 
 # -- the predictor names what it cannot take and counts what it lost ------------------------------
