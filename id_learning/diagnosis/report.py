@@ -402,12 +402,15 @@ def render_summary(result: DiagnosisResult) -> str:
     if structured:
         lines.append(f'  unexplained structured remainder on: {", ".join(structured)}')
     width = max([24, *(len(label) + 2 for label, _ in result.waterfall)])
-    head = f'{"held-out RMSE [N*m]":<{width}}' + ''.join(f'{j:>10}' for j in joints)
+    column = max([10, *(len(joint) + 2 for joint in joints)])  # names never run together
+    head = f'{"held-out RMSE [N*m]":<{width}}' + ''.join(f'{j:>{column}}' for j in joints)
     rows = [('nominal', result.rmse_before_nm)]
     rows += [(f'+ {label}', rmse) for label, rmse in result.waterfall]
     rows.append(('noise level (estimate)', result.noise.filtered_std_nm))
     lines += ['waterfall:', head]
-    lines += [f'{name:<{width}}' + ''.join(f'{x:>10.3g}' for x in rmse) for name, rmse in rows]
+    lines += [
+        f'{name:<{width}}' + ''.join(f'{x:>{column}.3g}' for x in rmse) for name, rmse in rows
+    ]
     return '\n'.join(lines)
 
 

@@ -4,6 +4,7 @@ scoring in benchmarks/diagnosis_scoring.py), its report, and its failure paths."
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -17,6 +18,7 @@ from id_learning.diagnosis import (
     filtered_prediction,
     run_diagnosis,
 )
+from id_learning.diagnosis.report import render_summary
 from id_learning.errors import ConfigError, DatasetError, RobotModelError
 from id_learning.physics import AugmentedModel, EffectSpec
 from id_learning.twin import simulate
@@ -138,6 +140,12 @@ def test_a_seven_joint_robot_is_diagnosed_too(repo):
     assert len(result.joints) == 7
     assert named(result) == {('viscous_friction', 'panda_joint2')}
     assert result.effects[0].coefficients[0] == pytest.approx(0.5, rel=0.1)
+    # The summary's table keeps the 12-character names apart, each over its figures.
+    lines = render_summary(result).splitlines()
+    head, nominal = lines[lines.index('waterfall:') + 1 :][:2]
+    assert head.split()[-7:] == list(result.joints)
+    ends = [[m.end() for m in re.finditer(r'\S+', line)][-7:] for line in (head, nominal)]
+    assert ends[0] == ends[1]
 
 
 def test_cogging_above_the_cut_off_is_untestable_not_absent():
