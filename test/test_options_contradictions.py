@@ -44,6 +44,8 @@ def test_refuse_contradictions_forms() -> None:
         (['demo', '--skip-training', '--train-seconds', '5'], ('--train-seconds', 'skip')),
         (['demo', '--skip-training', '--online-seconds', '1'], ('--online-seconds', 'skip')),
         (['diagnose', '--effects', 'cogging,cogging'], ('--effects', 'cogging given twice')),
+        (['train', '--models', 'mlp', '--hyper', 'mlp.device=cuda', '--device', 'cpu'],
+         ('--hyper mlp.device=cuda contradicts --device cpu',)),
     ],
 )  # fmt: skip
 def test_cli_refuses(argv: list[str], words: tuple[str, ...], tmp_path, capsys) -> None:
@@ -63,3 +65,19 @@ def test_sweep_empty_study_name(tmp_path, capsys) -> None:
 def test_inspect_force_without_a_plot_is_refused(capsys):
     assert main(['inspect', 'bags/default', '--force']) == 2
     assert '--force' in capsys.readouterr().err
+
+
+def test_a_hyper_file_device_contradicting_device_is_refused_unless_an_item_replaces_it(
+    tmp_path, capsys
+) -> None:
+    path = tmp_path / 'best.yaml'
+    path.write_text('mlp:\n  device: cuda\n')
+    argv = ['train', '--models', 'mlp', '--hyper-file', str(path), '--device', 'cpu',
+            '--bag', str(tmp_path / 'no_bag'), '--out', str(tmp_path / 'o')]  # fmt: skip
+    assert main(argv) == 2
+    assert f'--hyper-file {path} (mlp.device: cuda) contradicts --device cpu' in (
+        capsys.readouterr().err
+    )
+    assert main([*argv, '--hyper', 'mlp.device=cpu']) == 2  # the bag, now
+    assert 'contradicts' not in capsys.readouterr().err
+    options.refuse_two_devices({'mlp': {'device': 'cuda'}}, 'auto', '')  # its own choice

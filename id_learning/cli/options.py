@@ -39,6 +39,7 @@ __all__ = [
     'preprocessing_option',
     'refuse_contradictions',
     'refuse_two_budgets',
+    'refuse_two_devices',
     'robot_option',
     'split_seed',
     'target_option',
@@ -300,14 +301,42 @@ def refuse_two_budgets(
     Raises:
         ConfigError: names both options and their values.
     """
-    if max_seconds is None:
-        return
+    if max_seconds is not None:
+        option = f'--max-seconds-per-model {max_seconds:g}'
+        _refuse_two(hyper, 'max_seconds', max_seconds, option, given_as)
+
+
+def refuse_two_devices(hyper: dict[str, dict[str, Any]], device: str, given_as: str) -> None:
+    """Refuse a kind's ``device`` hyper-parameter that disagrees with --device cpu or cuda.
+
+    Both set the device a fit runs on; neither silently wins. --device auto (the default)
+    leaves a kind's own choice standing; an equal value is no contradiction.
+
+    Args:
+        hyper: per kind, hyper-parameters.
+        device: --device: auto, cpu or cuda.
+        given_as: how the hyper-parameter was given, with ``{kind}`` and ``{value}`` fields.
+
+    Raises:
+        ConfigError: names both options and their values.
+    """
+    if device != 'auto':
+        _refuse_two(hyper, 'device', device, f'--device {device}', given_as)
+
+
+#: The hyper-parameters a run-wide option also sets, and what they set.
+_RUN_WIDE = {'max_seconds': 'the time budget', 'device': 'the device'}
+
+
+def _refuse_two(
+    hyper: dict[str, dict[str, Any]], key: str, value: object, option: str, given_as: str
+) -> None:
+    """Refuse a kind's hyper-parameter ``key`` that differs from ``value``, given as ``option``."""
     for kind, values in hyper.items():
-        value = values.get('max_seconds')
-        if 'max_seconds' in values and value != max_seconds:
+        if key in values and values[key] != value:
             raise ConfigError(
-                f'{given_as.format(kind=kind, value=value)} contradicts --max-seconds-per-model '
-                f'{max_seconds:g}: both set the time budget of each {kind} fit; give one'
+                f'{given_as.format(kind=kind, value=values[key])} contradicts {option}: both set '
+                f'{_RUN_WIDE[key]} of each {kind} fit; give one'
             )
 
 

@@ -75,6 +75,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from id_learning.training import train_run
 
     options.refuse_contradictions(args, [options.SPLIT_SEED_CONTRADICTION])
+    hyper = _merged_hyper(args)  # its contradictions refused before anything is read
     robot = options.load_robot(args)
     run = train_run(
         options.bag_paths(args.bag),
@@ -82,7 +83,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         args.target,
         options.model_kinds(args.models),
         Path(args.out),
-        hyper=_merged_hyper(args),
+        hyper=hyper,
         max_seconds_per_model=args.max_seconds_per_model,
         progress=not args.quiet,
         device=args.device,
@@ -163,23 +164,38 @@ def _merged_hyper(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
 
     Raises:
         ConfigError: a kind's max_seconds in either disagrees with --max-seconds-per-model
-            (``options.refuse_two_budgets``).
+            (``options.refuse_two_budgets``), or its device with --device cpu or cuda
+            (``options.refuse_two_devices``).
     """
     path = getattr(args, 'hyper_file', None)
     from_file = options.hyper_file(path)
     items = options.hyper_parameters(args.hyper)
     budget = getattr(args, 'max_seconds_per_model', None)
+    device = getattr(args, 'device', 'auto')
     options.refuse_two_budgets(items, budget, '--hyper {kind}.max_seconds={value}')
-    overridden = {kind for kind, values in items.items() if 'max_seconds' in values}
+    options.refuse_two_devices(items, device, '--hyper {kind}.device={value}')
     options.refuse_two_budgets(
-        {kind: values for kind, values in from_file.items() if kind not in overridden},
+        _not_overridden(from_file, items, 'max_seconds'),
         budget,
         f'--hyper-file {path} ({{kind}}.max_seconds: {{value}})',
+    )
+    options.refuse_two_devices(
+        _not_overridden(from_file, items, 'device'),
+        device,
+        f'--hyper-file {path} ({{kind}}.device: {{value}})',
     )
     merged = from_file
     for kind, values in items.items():
         merged.setdefault(kind, {}).update(values)
     return merged
+
+
+def _not_overridden(
+    from_file: dict[str, dict[str, Any]], items: dict[str, dict[str, Any]], key: str
+) -> dict[str, dict[str, Any]]:
+    """The file's hyper-parameters of the kinds whose ``key`` no --hyper item replaces."""
+    overridden = {kind for kind, values in items.items() if key in values}
+    return {kind: values for kind, values in from_file.items() if kind not in overridden}
 
 
 def add_train_arguments(p: argparse.ArgumentParser) -> None:
