@@ -70,6 +70,7 @@ def param(
     low_open: bool = False,
     high_open: bool = False,
     topic: bool = False,
+    non_empty: str = '',
 ) -> Any:
     """A dataclass field with the metadata of a ROS parameter and what it may hold.
 
@@ -81,6 +82,7 @@ def param(
         low, high, low_open, high_open: the range of a number (None: unbounded); NaN and inf
             are always refused.
         topic: a ROS topic name (each item of a list; an empty string means off).
+        non_empty: for a list that may not be empty, what to give instead ('' : it may be).
     """
     bounds = None if low is None and high is None else (low, high, low_open, high_open)
     if choices:
@@ -93,6 +95,7 @@ def param(
             'choices': choices,
             'range': bounds,
             'topic': topic,
+            'non_empty': non_empty,
         },
     )
 
@@ -121,6 +124,8 @@ def check_schema(config: DataclassInstance) -> None:
 
 def _schema_problem(item: dataclasses.Field[Any], value: Any, types: Mapping[str, Any]) -> str:
     """What is wrong with a field's value by its schema ('' if nothing), naming the field."""
+    if item.metadata.get('non_empty') and isinstance(value, tuple | list) and not value:
+        return f'{item.name}: an empty list; {item.metadata["non_empty"]}'
     choices = item.metadata.get('choices')
     if choices and value not in choices:
         return f'{item.name} must be one of {list(choices)}, got {value!r}'

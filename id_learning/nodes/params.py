@@ -89,10 +89,15 @@ class RecorderConfig:
     )
     overwrite: bool = param(False, 'Replace a bag at output (only a bag: nothing else).')
     topics: tuple[str, ...] = param(
-        ('/joint_states', '/motor_currents'), 'Topics to record (the bag contract).', topic=True
+        ('/joint_states', '/motor_currents'),
+        'Topics to record (the bag contract).',
+        topic=True,
+        non_empty='give at least one topic to record',
     )
     msg_types: tuple[str, ...] = param(
-        (JOINT_STATE, JOINT_STATE), 'Message type of each topic, as pkg/msg/Type.'
+        (JOINT_STATE, JOINT_STATE),
+        'Message type of each topic, as pkg/msg/Type.',
+        non_empty='give one pkg/msg/Type per topic',
     )
     reliability: str = param(
         'reliable',
@@ -145,13 +150,7 @@ class RecorderConfig:
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
-        check_schema(self)
-        if not self.topics:
-            raise ConfigError('topics: an empty list; give at least one topic to record')
-        if not self.msg_types:
-            raise ConfigError(
-                f'msg_types: an empty list; give one pkg/msg/Type per topic of {list(self.topics)}'
-            )
+        check_schema(self)  # an empty topics or msg_types list among the rest
         if len(self.topics) != len(self.msg_types):
             raise ConfigError(
                 f'topics and msg_types need one entry per topic, got {list(self.topics)} and '
