@@ -431,7 +431,15 @@ def _rebuild(
     staging_root.mkdir(parents=True)
     try:
         staged = staging_root / name
-        written = _write(staged, files, topics)
+        try:
+            written = _write(staged, files, topics)
+        except BagError as err:  # the writer's words name the hidden folder, removed below
+            found = re.search(r'writing failed: (.+?)(?:;| \(|$)', str(err))
+            raise BagError(
+                f'{target or path}: the recovered bag could not be written '
+                f'({found.group(1) if found else err}): nothing was written there, and {path} '
+                'is as it was; free space (or choose another --out) and recover again'
+            ) from err
         if written != scans:
             raise BagError(f'{path}: the files changed while being recovered; try again')
         if target is not None:

@@ -152,3 +152,21 @@ def test_a_command_holding_the_bag_lets_its_own_writer_in_and_refuses_simulate(t
             writer.add_topic('/joint_states', JOINT_STATE)
         assert (tmp_path / 'deep' / 'bag.lock').exists()  # still the command's
     assert sorted(p.name for p in (tmp_path / 'deep').iterdir()) == ['bag']
+
+
+def test_a_recovery_onto_a_full_disk_names_its_target_and_leaves_all_as_it_was(
+    short_twin, tmp_path
+):
+    _, result = short_twin
+    torn = write_recording(result.recording, tmp_path / 'torn')
+    (torn / 'metadata.yaml').unlink()  # torn: its recorder never closed it
+    before = sorted(p.name for p in torn.iterdir())
+    out = tmp_path / 'out'
+    done = _run('-m', 'id_learning.cli', 'bag', 'recover', str(torn), '--out', str(out),
+                limit=PID_ONLY_BYTES)  # fmt: skip
+    line = _one_error_line(done)
+    assert f'{out}: the recovered bag could not be written (File too large)' in line
+    assert '.recovering' not in line  # the hidden staging folder is gone: not named
+    assert '(id-learning bag recover)' not in line  # the command that just failed
+    assert sorted(p.name for p in torn.iterdir()) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['torn']
