@@ -8,7 +8,6 @@ bag, the excerpt within it, the offline prediction on it and the replay's window
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -64,13 +63,14 @@ def load_setup(bag: Path, robot_config_path: Path, artifact: Path, notes: list[s
         CheckpointError: the artifact is invalid or not for this robot.
     """
     from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.models.artifact import METADATA_FILE, read_metadata
     from id_learning.models.registry import load_model
     from id_learning.robot.config import load_robot_config
     from id_learning.training.trainer import preprocess_from_dict
 
     robot = load_robot_config(robot_config_path)
     model = load_model(artifact, robot).for_the_drive()
-    metadata = json.loads((artifact / 'model.json').read_text(encoding='utf-8'))
+    metadata = read_metadata(artifact / METADATA_FILE)
     if metadata.get('preprocessing'):
         preprocess = preprocess_from_dict(metadata['preprocessing'])
     else:

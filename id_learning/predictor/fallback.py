@@ -16,7 +16,6 @@ of a motor torque, and only an identified prior has it.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -95,7 +94,7 @@ def physics_fallback(
 
 
 def _physics_artifact(path: Path, robot: RobotConfig, target: str) -> PhysicsFallback:
-    from id_learning.models.artifact import METADATA_FILE, artifact_target
+    from id_learning.models.artifact import METADATA_FILE, artifact_target, read_metadata
     from id_learning.models.registry import load_model
 
     prior = load_model(path, robot).for_the_drive()
@@ -104,7 +103,7 @@ def _physics_artifact(path: Path, robot: RobotConfig, target: str) -> PhysicsFal
             f'{path}: a {prior.kind} model is a network, not a physics prior; give an '
             'rnea_id, rnea_effects or rnea_lq artifact'
         )
-    prior_target = artifact_target(json.loads((path / METADATA_FILE).read_text('utf-8')))
+    prior_target = artifact_target(read_metadata(path / METADATA_FILE))
     if prior_target != target:
         raise CheckpointError(
             f'{path}: fitted on {prior_target} torques, the served model on {target} torques'
