@@ -76,11 +76,12 @@ def staged_bag(
         try:
             try:
                 yield staged
-            except IdLearningError as err:
-                raise type(err)(f'{err}; {_as_it_was(target)}') from err
+            except IdLearningError as err:  # the hidden folder, removed below, is not named
+                said = str(err).replace(str(staged), str(target))
+                raise type(err)(f'{said}; {_as_it_was(target)}') from err
             except OSError as err:
-                raise OutputError(f'{err.filename or staged}: {os_reason(err)} (writing '
-                                  f'{target}); {_as_it_was(target)}') from err  # fmt: skip
+                raise OutputError(f'{target}: {os_reason(err)} (writing it); '
+                                  f'{_as_it_was(target)}') from err  # fmt: skip
             left = _as_it_was(target)
             if not (staged / 'metadata.yaml').is_file():  # the caller wrote no bag
                 raise OutputError(f'{target}: no complete bag was written; {left}')

@@ -24,11 +24,12 @@ __all__ = [
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run the digital twin and write a bag with its ground truth."""
-    from id_learning.outputs import bag_output
+    from id_learning.staged_bag import staged_bag
     from id_learning.twin import load_twin_config, simulate, write_twin_output
 
-    # One writer per bag from the check to the ground truth beside it.
-    with bag_output(Path(args.out), overwrite=args.force, inputs=[Path(args.config)]) as out:
+    # One writer per bag from the check to the ground truth beside it, written beside --out and
+    # moved there whole: an interrupted simulation leaves no bag that looks complete.
+    with staged_bag(Path(args.out), overwrite=args.force, inputs=[Path(args.config)]) as out:
         overrides = {}
         if args.seed is not None:
             overrides['seed'] = args.seed
@@ -55,7 +56,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             excitation = replace(config.excitation, duration_s=args.duration)
             config = replace(config, excitation=excitation)
         result = simulate(config, progress=not args.quiet)
-        write_twin_output(result, config, out, overwrite=args.force)
+        write_twin_output(result, config, out, place=Path(args.out))
     print(
         f'wrote {result.recording.n_samples} samples '
         f'({result.recording.duration_s:.1f} s) to {args.out}; '

@@ -115,11 +115,18 @@ def read_ground_truth(
 
 
 def write_twin_output(
-    result: TwinResult, config: TwinConfig, out: Path | str, *, overwrite: bool = False
+    result: TwinResult,
+    config: TwinConfig,
+    out: Path | str,
+    *,
+    overwrite: bool = False,
+    place: Path | str | None = None,
 ) -> Path:
     """Write the bag plus ground truth (JSON parameters, NPZ noise-free torques) and the config.
 
-    The ground-truth files sit inside the bag folder, where rosbag2 tools ignore them.
+    The ground-truth files sit inside the bag folder, where rosbag2 tools ignore them. ``place``:
+    the folder the bag will be read in, where it is written elsewhere first (``staged_bag``);
+    the config copy's relative paths are written for it (default: ``out``).
     """
     out = Path(out)
     write_recording(result.recording, out, config.robot.topics, overwrite=overwrite)
@@ -136,9 +143,10 @@ def write_twin_output(
             tau_joint_clean=result.tau_joint_clean.astype(np.float32),
         )
         raw = dict(config.raw)
-        raw['robot'] = os.path.relpath(Path(config.robot_file).resolve(), out.resolve())
+        home = Path(place or out).resolve()  # where the copy will be read: its paths from there
+        raw['robot'] = os.path.relpath(Path(config.robot_file).resolve(), home)
         if config.excitation.file is not None:  # read beside the copy as beside the original
-            designed = os.path.relpath(Path(config.excitation.file).resolve(), out.resolve())
+            designed = os.path.relpath(Path(config.excitation.file).resolve(), home)
             raw['excitation'] = {**(raw.get('excitation') or {}), 'file': designed}
         extras[2].write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
     except OSError as err:

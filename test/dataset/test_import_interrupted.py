@@ -1,4 +1,4 @@
-"""An import stopped while it writes leaves no bag that looks complete (probe 10, L04/L05).
+"""An import or a simulation stopped while it writes leaves no bag that looks complete (L04/L05).
 
 The bag is written beside ``--out`` (``staged_bag``) and moved there once whole: a Ctrl-C leaves
 ``--out`` as it was, a kill leaves only a hidden folder the next import removes.
@@ -176,3 +176,19 @@ def test_a_staging_folder_holding_something_foreign_is_never_removed(tmp_path: P
     assert foreign.read_text() == 'mine'
     assert not out.exists()
     assert not out.with_name(out.name + LOCK_SUFFIX).exists()
+
+
+def test_a_simulation_interrupted_while_writing_leaves_no_bag(tmp_path: Path) -> None:
+    from id_learning.twin import load_twin_config
+
+    out = tmp_path / 'bag'
+    config = str(REPO / 'config' / 'twin_default.yaml')
+    argv = ['simulate', '--config', config, '--out', str(out), '--duration', '5', '--quiet']
+    status, lines = _stop(_half_written(argv), signal.SIGINT)
+    assert status == 130, lines
+    assert not out.exists()  # before: a bag of 50 samples that looked complete
+    assert list(tmp_path.iterdir()) == []
+    rerun = _cli(*argv)
+    assert rerun.returncode == 0, rerun.stderr
+    # The copy of the twin config, written in the hidden folder, reads its robot from here.
+    assert load_twin_config(out / 'twin_config.yaml').robot.n_joints == 6
