@@ -153,6 +153,7 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
         kinds=kinds,
         progress=not args.quiet,
         force=args.force,
+        bag=Path(args.bag) if args.bag else None,
     )
     print(result.summary())
     print(f'closed loop: {result.json_path}; plot: {result.plot_path}')
@@ -275,6 +276,11 @@ def add_train_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument(
         '--twin',
         help="twin config of the plant (default: the twin_config.yaml beside the run's bag)",
+    )
+    p.add_argument(
+        '--bag',
+        help='a twin recording the run was not trained on, tracked from its start on its own '
+        "twin (default: the test part of the run's first training bag)",
     )
     p.add_argument(
         '--duration',

@@ -40,7 +40,13 @@ from id_learning.models.registry import load_model
 from id_learning.outputs import check_output, result_folder
 from id_learning.robot.config import RobotConfig, how_robots_differ
 from id_learning.training.datasets import load_datasets, preprocess_from_dict, segment_rows
-from id_learning.training.run_folder import MODELS_DIR, read_run, training_bag
+from id_learning.training.run_folder import (
+    MODELS_DIR,
+    is_training_bag,
+    read_run,
+    refuse_training_samples,
+    training_bag,
+)
 from id_learning.twin import load_twin_config
 from id_learning.twin.plant import TwinPlant
 from id_learning.twin.simulate import TWIN_CONFIG_COPY
@@ -106,10 +112,17 @@ def _twin_config_path(bag: Path, twin_config: Path | None) -> Path:
 
 
 def _reference_rows(
-    dataset: Dataset, config: PreprocessConfig, samples: int
+    dataset: Dataset, config: PreprocessConfig, samples: int, unseen: bool = False
 ) -> tuple[int, int, int, str]:
-    """The reference's rows [start, stop) (at most ``samples``), its part's end, and the part."""
-    if dataset.is_shuffled:  # its test samples are scattered: the last share in time
+    """The reference's rows [start, stop) (at most ``samples``), its part's end, and the part.
+
+    ``unseen``: a recording the run was not trained on, tracked from its start (its first
+    segment).
+    """
+    if unseen:
+        start, end = segment_rows(dataset, 'all')[0]
+        part = 'a recording the run was not trained on, from its start'
+    elif dataset.is_shuffled:  # its test samples are scattered: the last share in time
         start, end = round(config.train_fraction * len(dataset.q)), len(dataset.q)
         part = 'the last share in time (a shuffled split: it holds training samples too)'
     else:
@@ -119,7 +132,13 @@ def _reference_rows(
 
 
 def _tracked(
-    dataset: Dataset, config: PreprocessConfig, bag: Path, period_s: float, asked: float | None
+    dataset: Dataset,
+    config: PreprocessConfig,
+    bag: Path,
+    period_s: float,
+    asked: float | None,
+    *,
+    unseen: bool = False,
 ) -> dict[str, Any]:
     """What the reference tracks (closed_loop.json's ``reference``), ``asked`` seconds of it.
 
@@ -130,7 +149,7 @@ def _tracked(
         ConfigError: fewer than 2 samples to track.
     """
     seconds = DEFAULT_DURATION_S if asked is None else asked
-    start, stop, end, part = _reference_rows(dataset, config, round(seconds / period_s))
+    start, stop, end, part = _reference_rows(dataset, config, round(seconds / period_s), unseen)
     if stop - start < 2:
         raise ConfigError(f'{bag}: {stop - start} samples of the test part to track')
     available = (end - start) * period_s
@@ -163,6 +182,7 @@ def closed_loop_run(
     force: bool = False,
     run_name: Path | None = None,
     report: Path | None = None,
+    bag: Path | None = None,
 ) -> ClosedLoopResult:
     """Track the run's test motion on the twin with each model's feed-forward; write the results.
 
@@ -175,6 +195,9 @@ def closed_loop_run(
     records it, where ``run_dir`` is read inside another command's partial folder (the demo's).
     ``report``: a report.md to add the closed-loop section to once ``out`` is complete (the
     demo's run report, inside its own partial folder), its links pointing into ``out``.
+    ``bag``: a recording of the twin to track instead of the run's test part: from its start
+    when the run was not trained on it (one that holds training samples is refused), its test
+    part when it is one of the run's training bags; its twin config is the plant's.
 
     Raises:
         CheckpointError: the run is incomplete, or it or a model does not fit the robot.
@@ -187,10 +210,14 @@ def closed_loop_run(
     if kinds is not None and not kinds:
         raise ConfigError('no model kind named: name some, or leave the kinds out for all')
     run = read_run(run_dir)
-    check_output(out, force=force, inputs=[run_dir], kind='closed-loop')  # before the loop
+    inputs = [run_dir, *([Path(bag)] if bag is not None else [])]
+    check_output(out, force=force, inputs=inputs, kind='closed-loop')  # before the loop
     if run.get('robot', {}).get('joints') != list(robot.joints):
         raise CheckpointError(f'{run_dir}: the run is not for robot {robot.name}')
-    bag = training_bag(run, run_dir)
+    unseen = bag is not None and not is_training_bag(Path(bag), run)
+    if bag is not None and unseen:
+        refuse_training_samples([Path(bag)], run, run_dir, robot)
+    bag = Path(bag) if bag is not None else training_bag(run, run_dir)
     twin_path = _twin_config_path(bag, twin_config)
     twin = load_twin_config(twin_path)
     difference = how_robots_differ(robot, twin.robot)
@@ -202,7 +229,7 @@ def closed_loop_run(
         raise ConfigError(f'{run_dir}: no model(s) {unknown} in the run; it has {run["kinds"]}')
     config = preprocess_from_dict(run['preprocessing'])
     dataset = load_datasets([bag], robot, config, progress=False)[0]
-    tracked = _tracked(dataset, config, bag, robot.ipo_period_s, duration_s)
+    tracked = _tracked(dataset, config, bag, robot.ipo_period_s, duration_s, unseen=unseen)
     start, stop = tracked['rows']
     reference = dataset.controller.take(slice(start, stop))
     # The plant's friction warms up from where the reference starts in the recording.

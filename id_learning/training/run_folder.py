@@ -36,6 +36,7 @@ __all__ = [
     'REPORT_FILE',
     'RUN_FILE',
     'RUN_FORMAT',
+    'is_training_bag',
     'machine_info',
     'metrics_document',
     'read_run',
@@ -324,6 +325,11 @@ def _bag_samples(bag: Path, robot: RobotConfig) -> Samples:
     return str(bag), states.stamps_ns, states.position[:, order], velocity
 
 
+def is_training_bag(bag: Path, run: dict[str, Any]) -> bool:
+    """Whether ``bag`` is one of the run's training bags (by its content's hash)."""
+    return bag_sha256(bag) in {e.get('sha256') for e in run['training_data']['bags']}
+
+
 def refuse_training_samples(
     bags: list[Path], run: dict[str, Any], run_dir: Path, robot: RobotConfig
 ) -> None:
@@ -336,7 +342,7 @@ def refuse_training_samples(
         DatasetError: names the bag, the training bag and the shared span.
     """
     trained_on = run['training_data']['bags']
-    new = [bag for bag in bags if bag_sha256(bag) not in {e.get('sha256') for e in trained_on}]
+    new = [bag for bag in bags if not is_training_bag(bag, run)]
     if not new:
         return
     training: list[Samples] = []

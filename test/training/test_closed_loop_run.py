@@ -39,3 +39,29 @@ def test_closed_loop_tracks_the_test_motion_better_with_feed_forward(run, mabi, 
     (bare / 'run.json').write_text(json.dumps(meta))
     with pytest.raises(ConfigError, match=r'twin_config\.yaml.*pass --twin'):
         closed_loop_run(bare, mabi, tmp_path / 'y', progress=False)
+
+
+def test_closed_loop_tracks_another_recording_from_its_start_on_its_own_twin(
+    run, bags, mabi, tmp_path
+):
+    from support import twin_config
+
+    from id_learning.twin import simulate, write_twin_output
+
+    config = twin_config(30.0, seed=13)
+    unseen = write_twin_output(simulate(config), config, tmp_path / 'unseen')
+    result = closed_loop_run(
+        run.out, mabi, tmp_path / 'loop', duration_s=4.0, progress=False, bag=unseen
+    )
+    reference = json.loads(result.json_path.read_text())['reference']
+    assert reference['bag'] == str(unseen)
+    assert reference['rows'] == [0, 500]
+    assert 'not trained on' in reference['part']
+    assert str(unseen / 'twin_config.yaml') == result.document['twin_config']
+    # A training bag given as --bag is tracked on its test part, as without it.
+    again = closed_loop_run(
+        run.out, mabi, tmp_path / 'again', duration_s=4.0, progress=False, bag=bags[0]
+    )
+    default = closed_loop_run(run.out, mabi, tmp_path / 'default', duration_s=4.0, progress=False)
+    assert again.document['reference']['rows'] == default.document['reference']['rows']
+    assert again.document['reference']['rows'][0] > 0
