@@ -17,11 +17,9 @@ subprocess whose wall time is recorded:
 3. ``evaluate`` the run on the whole unseen recording: per kind and joint the RMSE through the
    label filter over the label-noise floor, the RMSE against the torque the drive needs on the
    planned reference over the same floor, and the normalised RMSE (the training labels' scale);
-4. ``closed-loop`` on the twin: ``closed-loop`` tracks the run's own test part (the last 30 % of
-   ``bags/default`` in time, motion no model was fitted on) and takes no other recording, so
-   the loop runs there, not on the unseen recording; per kind its tracking RMS over the true
-   inverse dynamics', and its improvement (feedback alone's RMS over its own) against
-   ``rnea_id``'s.
+4. ``closed-loop --bag`` on the twin: the unseen recording tracked from its start on its own
+   twin; per kind its tracking RMS over the true inverse dynamics', and its improvement
+   (feedback alone's RMS over its own) against ``rnea_id``'s.
 
 Then the acceptance checks, each pass or fail with its figure: ``rnea_id_mlp`` within 1.5 x
 the floor on every joint through the filter, ``delan_id`` and ``lnn_mlp_id`` within 3 x; each
@@ -387,13 +385,11 @@ def report(document: dict[str, Any], settings: list[str]) -> list[str]:
         lines += [
             "## (c) Closed loop: tracking RMS / the true inverse dynamics'",
             '',
-            f'`id-learning closed-loop` tracks {reference["duration_s"]:g} s of '
-            f'{reference["part"]} of `{repo_path(reference["bag"])}` on its twin (rows '
-            f'{reference["rows"][0]} to {reference["rows"][1]}): the last 30 % in time of the '
-            'training recording, which no model was fitted on, but not the unseen recording of '
-            "(a) and (b): `closed-loop` tracks only the run's own test part and takes no other "
-            "recording. Position P / velocity PI at the IPO period, each model's tau_u as "
-            'feed-forward; 1 is as good as the true inverse dynamics.',
+            f'`id-learning closed-loop --bag` tracks {reference["duration_s"]:g} s of '
+            f'{reference["part"]}, the unseen recording of (a) and (b), on its twin (rows '
+            f'{reference["rows"][0]} to {reference["rows"][1]}). Position P / velocity PI at the '
+            "IPO period, each model's tau_u as feed-forward; 1 is as good as the true inverse "
+            'dynamics.',
             '',
             *per_joint_table(
                 {
@@ -577,7 +573,7 @@ def build_parser() -> argparse.ArgumentParser:
         '--max-seconds-per-model', type=float, default=150.0, help='each fit [s] (train)'
     )
     parser.add_argument(
-        '--closed-loop-seconds', type=float, default=60.0, help='of the test part tracked [s]'
+        '--closed-loop-seconds', type=float, default=60.0, help='unseen motion tracked [s]'
     )
     parser.add_argument('--study-table', type=Path, default=DEFAULT_STUDY_TABLE)
     parser.add_argument(
@@ -632,7 +628,7 @@ def main() -> int:
         )  # fmt: skip
         steps['closed-loop'] = run_step(
             'closed-loop',
-            cli('closed-loop', '--run', run, '--out', loop, '--duration',
+            cli('closed-loop', '--run', run, '--bag', unseen_bag, '--out', loop, '--duration',
                 args.closed_loop_seconds, '--quiet', '--force'),
             work / 'closed_loop.log',
             loop / 'closed_loop.json' if reuse else None,
