@@ -111,9 +111,17 @@ class ForeignPublishers:
         self.matching: dict[str, list[str]] = {}
         #: Per topic shared now: since when (time.monotonic() [s]), or None once said.
         self._shared: dict[str, float | None] = {}
+        #: Foreign publishers whose node discovery has not named yet: since when [s].
+        self._unnamed: dict[Foreign, float] = {}
+        #: The foreign types ever found, by topic (named or not).
+        self._types: set[tuple[str, str]] = set()
 
     def look(self) -> list[Foreign]:
-        """Look at the graph; returns the publishers found for the first time."""
+        """Look at the graph; returns the publishers found for the first time.
+
+        One whose node discovery has not named yet waits ``NAME_WAIT_S`` for its name, so that
+        a publisher is said once, by its node's name.
+        """
         present = []
         matching: dict[str, list[str]] = {}
         for topic, expected in self.expected.items():
@@ -128,13 +136,25 @@ class ForeignPublishers:
         self.present = sorted(
             set(present), key=lambda item: (item.topic, item.node, item.msg_type)
         )
-        new = [item for item in self.present if item not in self.seen]
+        self._types.update((item.topic, item.msg_type) for item in self.present)
+        now = time.monotonic()
+        self._unnamed = {
+            item: self._unnamed.get(item, now)
+            for item in self.present
+            if UNKNOWN_NODE in item.node and item not in self.seen
+        }
+        new = [
+            item
+            for item in self.present
+            if item not in self.seen
+            and (UNKNOWN_NODE not in item.node or now - self._unnamed[item] >= NAME_WAIT_S)
+        ]
         self.seen.update(new)
         return new
 
     def types_seen(self, topic: str) -> list[str]:
         """The foreign types ever found on a topic, sorted."""
-        return sorted({item.msg_type for item in self.seen if item.topic == topic})
+        return sorted({msg_type for name, msg_type in self._types if name == topic})
 
     def shared(self, topic: str) -> list[str]:
         """The nodes of several publishers of the expected type on ``topic``, else [].

@@ -181,3 +181,32 @@ def test_several_publishers_are_said_once_per_episode_and_wait_for_their_names(m
         '3 publishers on /r (node /a, node /b twice): why'
     )
     assert 'a node not discovered yet' in shared_text('/r', ['/a', f'/{unknown}'], 'why')
+
+
+def test_a_publisher_of_another_type_is_said_once_by_its_name(monkeypatch):
+    """Discovery may show it first without its node's name: it waits for the name (CI race)."""
+    from types import SimpleNamespace
+
+    from id_learning.nodes import endpoints
+    from id_learning.nodes.endpoints import Foreign, ForeignPublishers
+
+    graph: list[tuple[str, str]] = []  # (node name, type) of the publishers on /motor_currents
+    node = SimpleNamespace(get_publishers_info_by_topic=lambda topic: [
+        SimpleNamespace(node_name=name, node_namespace='/', topic_type=kind)
+        for name, kind in graph])  # fmt: skip
+    publishers = ForeignPublishers(node, {'/motor_currents': 'sensor_msgs/msg/JointState'})
+    clock = [100.0]
+    monkeypatch.setattr(endpoints.time, 'monotonic', lambda: clock[0])
+    unknown, string = endpoints.UNKNOWN_NODE, 'std_msgs/msg/String'
+
+    graph[:] = [(unknown, string)]
+    assert publishers.look() == []  # its name may come with the next look
+    assert publishers.types_seen('/motor_currents') == [string]  # known for the final report
+    clock[0] += endpoints.NAME_WAIT_S / 2
+    graph[:] = [('listener', string)]
+    assert publishers.look() == [Foreign('/motor_currents', '/listener', string)]
+    assert publishers.look() == []  # once
+    graph[:] = [('listener', string), (unknown, string)]
+    assert publishers.look() == []
+    clock[0] += endpoints.NAME_WAIT_S
+    assert publishers.look() == [Foreign('/motor_currents', f'/{unknown}', string)]  # unnamed
