@@ -71,6 +71,8 @@ def param(
     high_open: bool = False,
     topic: bool = False,
     non_empty: str = '',
+    unique: bool = False,
+    msg_type: bool = False,
 ) -> Any:
     """A dataclass field with the metadata of a ROS parameter and what it may hold.
 
@@ -83,6 +85,8 @@ def param(
             are always refused.
         topic: a ROS topic name (each item of a list; an empty string means off).
         non_empty: for a list that may not be empty, what to give instead ('' : it may be).
+        unique: a list whose items may not repeat.
+        msg_type: a ROS message type, pkg/msg/Type (each item of a list).
     """
     bounds = None if low is None and high is None else (low, high, low_open, high_open)
     if choices:
@@ -96,6 +100,8 @@ def param(
             'range': bounds,
             'topic': topic,
             'non_empty': non_empty,
+            'unique': unique,
+            'msg_type': msg_type,
         },
     )
 
@@ -124,8 +130,14 @@ def check_schema(config: DataclassInstance) -> None:
 
 def _schema_problem(item: dataclasses.Field[Any], value: Any, types: Mapping[str, Any]) -> str:
     """What is wrong with a field's value by its schema ('' if nothing), naming the field."""
+    items = value if isinstance(value, tuple | list) else (value,)
     if item.metadata.get('non_empty') and isinstance(value, tuple | list) and not value:
         return f'{item.name}: an empty list; {item.metadata["non_empty"]}'
+    if item.metadata.get('unique') and len(set(items)) != len(items):
+        return f'{item.name} lists an entry twice: {list(items)}'
+    for entry in items if item.metadata.get('msg_type') else ():
+        if not isinstance(entry, str) or entry.count('/') != 2:
+            return f'{item.name}: expected pkg/msg/Type, got {entry!r}'
     choices = item.metadata.get('choices')
     if choices and value not in choices:
         return f'{item.name} must be one of {list(choices)}, got {value!r}'

@@ -93,11 +93,13 @@ class RecorderConfig:
         'Topics to record (the bag contract).',
         topic=True,
         non_empty='give at least one topic to record',
+        unique=True,
     )
     msg_types: tuple[str, ...] = param(
         (JOINT_STATE, JOINT_STATE),
         'Message type of each topic, as pkg/msg/Type.',
         non_empty='give one pkg/msg/Type per topic',
+        msg_type=True,
     )
     reliability: str = param(
         'reliable',
@@ -150,17 +152,12 @@ class RecorderConfig:
 
     def __post_init__(self) -> None:
         """Check ranges, naming the key."""
-        check_schema(self)  # an empty topics or msg_types list among the rest
+        check_schema(self)  # empty, repeated or malformed topics and msg_types among the rest
         if len(self.topics) != len(self.msg_types):
             raise ConfigError(
-                f'topics and msg_types need one entry per topic, got {list(self.topics)} and '
-                f'{list(self.msg_types)}'
+                f'each recorded topic needs its type: topics {list(self.topics)} and msg_types '
+                f'{list(self.msg_types)} differ in length'
             )
-        if len(set(self.topics)) != len(self.topics):
-            raise ConfigError(f'topics lists a topic twice: {list(self.topics)}')
-        for msg_type in self.msg_types:
-            if msg_type.count('/') != 2:
-                raise ConfigError(f'msg_types: expected pkg/msg/Type, got {msg_type!r}')
         for name, low, unit in (('split_duration_s', MIN_SPLIT_S, 's'),
                                 ('split_size_mib', MIN_SPLIT_MIB, 'MiB')):  # fmt: skip
             if 0 < getattr(self, name) < low:
