@@ -49,7 +49,7 @@ from id_learning.training.run_folder import (
 )
 from id_learning.twin import load_twin_config
 from id_learning.twin.plant import TwinPlant
-from id_learning.twin.simulate import TWIN_CONFIG_COPY
+from id_learning.twin.simulate import TWIN_CONFIG_COPY, TwinConfig
 
 __all__ = ['CLOSED_LOOP_JSON', 'DEFAULT_DURATION_S', 'ClosedLoopResult', 'closed_loop_run']
 
@@ -97,6 +97,47 @@ class ClosedLoopResult:
             f'{reference["bag"]} (it holds {reference["available_s"]:.2f} s)'
         )
         return '\n'.join(lines)
+
+
+def _reference_bag(
+    run: dict[str, Any], run_dir: Path, robot: RobotConfig, bag: Path | None
+) -> tuple[Path, bool]:
+    """The bag to track, and whether the run was not trained on it (``closed_loop_run``'s bag).
+
+    Raises:
+        DatasetError: ``bag`` is no training bag but holds samples of one.
+    """
+    if bag is None:
+        return training_bag(run, run_dir), False
+    if is_training_bag(Path(bag), run):
+        return Path(bag), False
+    refuse_training_samples([Path(bag)], run, run_dir, robot)
+    return Path(bag), True
+
+
+def _plant_config(
+    bag: Path, twin_config: Path | None, robot: RobotConfig
+) -> tuple[Path, TwinConfig]:
+    """The plant's twin config (``_twin_config_path``) and the config read.
+
+    Raises:
+        ConfigError: no twin config, or one of another robot.
+    """
+    twin_path = _twin_config_path(bag, twin_config)
+    twin = load_twin_config(twin_path)
+    difference = how_robots_differ(robot, twin.robot)
+    if difference:
+        raise ConfigError(f"{twin_path}: the twin is not the run's robot: it has {difference}")
+    return twin_path, twin
+
+
+def _run_kinds(run: dict[str, Any], run_dir: Path, kinds: Sequence[str] | None) -> list[str]:
+    """The kinds asked for (None: all of the run's); one the run lacks is refused."""
+    chosen = list(run['kinds'] if kinds is None else kinds)
+    unknown = sorted(set(chosen) - set(run['kinds']))
+    if unknown:
+        raise ConfigError(f'{run_dir}: no model(s) {unknown} in the run; it has {run["kinds"]}')
+    return chosen
 
 
 def _twin_config_path(bag: Path, twin_config: Path | None) -> Path:
@@ -202,6 +243,7 @@ def closed_loop_run(
     Raises:
         CheckpointError: the run is incomplete, or it or a model does not fit the robot.
         ConfigError: no twin config, one of another robot, or a model the run lacks.
+        DatasetError: ``bag`` holds samples of a training bag.
         OutputError: ``out`` is refused, or a write failed.
     """
     run_dir, out = Path(run_dir), Path(out)
@@ -214,19 +256,9 @@ def closed_loop_run(
     check_output(out, force=force, inputs=inputs, kind='closed-loop')  # before the loop
     if run.get('robot', {}).get('joints') != list(robot.joints):
         raise CheckpointError(f'{run_dir}: the run is not for robot {robot.name}')
-    unseen = bag is not None and not is_training_bag(Path(bag), run)
-    if bag is not None and unseen:
-        refuse_training_samples([Path(bag)], run, run_dir, robot)
-    bag = Path(bag) if bag is not None else training_bag(run, run_dir)
-    twin_path = _twin_config_path(bag, twin_config)
-    twin = load_twin_config(twin_path)
-    difference = how_robots_differ(robot, twin.robot)
-    if difference:
-        raise ConfigError(f"{twin_path}: the twin is not the run's robot: it has {difference}")
-    kinds = list(run['kinds'] if kinds is None else kinds)
-    unknown = sorted(set(kinds) - set(run['kinds']))
-    if unknown:
-        raise ConfigError(f'{run_dir}: no model(s) {unknown} in the run; it has {run["kinds"]}')
+    bag, unseen = _reference_bag(run, run_dir, robot, bag)
+    twin_path, twin = _plant_config(bag, twin_config, robot)
+    kinds = _run_kinds(run, run_dir, kinds)
     config = preprocess_from_dict(run['preprocessing'])
     dataset = load_datasets([bag], robot, config, progress=False)[0]
     tracked = _tracked(dataset, config, bag, robot.ipo_period_s, duration_s, unseen=unseen)
