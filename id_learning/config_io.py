@@ -19,6 +19,7 @@ refused too (``regular=True``), never waited on; one the user names may be a pip
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -35,18 +36,21 @@ from id_learning.errors import ConfigError, IdLearningError
 
 __all__ = [
     'MAX_CONFIG_BYTES',
+    'DuplicateKeyError',
     'check_keys',
     'config_base',
     'describe_range',
     'finite_number',
     'float_vector',
     'load_yaml_mapping',
+    'loads_unique',
     'not_a_file',
     'number_hint',
     'parse_yaml',
     'range_problem',
     'read_capped',
     'readonly',
+    'short_json',
     'special_kind',
     'topic_name_problem',
 ]
@@ -494,3 +498,50 @@ def topic_name_problem(name: object) -> str | None:
     if len(expanded) > TOPIC_MAX_LENGTH:
         return f'a topic name is at most {TOPIC_MAX_LENGTH} characters long'
     return None
+
+
+class DuplicateKeyError(ValueError):
+    """A JSON object names one key twice (``loads_unique``); the message names the key.
+
+    Attributes:
+        key: the key given twice.
+        values: its two values, as short JSON texts.
+    """
+
+    def __init__(self, key: str, values: tuple[str, str]) -> None:
+        super().__init__(
+            f'key {key!r} appears twice in one object ({values[0]} and {values[1]}): which one '
+            'holds is ambiguous'
+        )
+        self.key = key
+        self.values = values
+
+
+def _unique_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's pairs as a dict; refuses a key given twice.
+
+    Raises:
+        DuplicateKeyError: names the key and its two values.
+    """
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise DuplicateKeyError(key, (short_json(out[key]), short_json(value)))
+        out[key] = value
+    return out
+
+
+def short_json(value: Any) -> str:
+    """``value`` as JSON, cut to 40 characters (for messages)."""
+    text = json.dumps(value)
+    return text if len(text) <= 40 else text[:37] + '...'
+
+
+def loads_unique(text: str) -> Any:
+    """``json.loads`` that refuses an object with a key given twice (the stdlib keeps the last).
+
+    Raises:
+        DuplicateKeyError: a key repeats within one object (the message names it).
+        json.JSONDecodeError: not valid JSON.
+    """
+    return json.loads(text, object_pairs_hook=_unique_object)

@@ -18,7 +18,6 @@ written makes sense, so each check holds for a model.json rehashed after an edit
 
 from __future__ import annotations
 
-import json
 import logging
 import re
 from collections.abc import Mapping
@@ -28,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from id_learning import __version__
+from id_learning.config_io import DuplicateKeyError, loads_unique, short_json
 from id_learning.errors import CheckpointError
 
 __all__ = [
@@ -42,43 +42,6 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
-
-
-class DuplicateKeyError(ValueError):
-    """A JSON object names one key twice (``loads_unique``); the message names the key."""
-
-
-def _unique_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """A JSON object's pairs as a dict; refuses a key given twice.
-
-    Raises:
-        DuplicateKeyError: names the key and its two values.
-    """
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            first, second = (_short(item) for item in (out[key], value))
-            raise DuplicateKeyError(
-                f'key {key!r} appears twice in one object ({first} and {second}): which one '
-                'holds is ambiguous'
-            )
-        out[key] = value
-    return out
-
-
-def _short(value: Any) -> str:
-    text = json.dumps(value)
-    return text if len(text) <= 40 else text[:37] + '...'
-
-
-def loads_unique(text: str) -> Any:
-    """``json.loads`` that refuses an object with a key given twice (the stdlib keeps the last).
-
-    Raises:
-        DuplicateKeyError: a key repeats within one object (the message names it).
-        json.JSONDecodeError: not valid JSON.
-    """
-    return json.loads(text, object_pairs_hook=_unique_object)
 
 
 # -- versions ------------------------------------------------------------------------------------
@@ -153,7 +116,7 @@ def _numbers(value: Any, field: str, path: Path) -> np.ndarray:
     if not isinstance(value, list) or not all(
         isinstance(x, (int, float)) and not isinstance(x, bool) for x in value
     ):
-        raise CheckpointError(f'{path}: {field} is not a list of numbers: {_short(value)}')
+        raise CheckpointError(f'{path}: {field} is not a list of numbers: {short_json(value)}')
     array = np.asarray(value, dtype=float)
     bad = np.flatnonzero(~np.isfinite(array))
     if bad.size:
@@ -175,7 +138,9 @@ def check_scalers(metadata: Mapping[str, Any], path: Path, joints: tuple[str, ..
         found.append(('target_scaler', metadata['target_scaler']))
     for field, scaler in found:
         if not isinstance(scaler, Mapping) or set(scaler) != {'low', 'high'}:
-            raise CheckpointError(f'{path}: {field} is not a scaler (low, high): {_short(scaler)}')
+            raise CheckpointError(
+                f'{path}: {field} is not a scaler (low, high): {short_json(scaler)}'
+            )
         low = _numbers(scaler['low'], f'{field}.low', path)
         high = _numbers(scaler['high'], f'{field}.high', path)
         quantities = _scaled_quantities(field)

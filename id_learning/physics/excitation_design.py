@@ -29,7 +29,7 @@ import numpy as np
 from scipy import linalg
 from tqdm import tqdm
 
-from id_learning.config_io import read_capped
+from id_learning.config_io import DuplicateKeyError, loads_unique, read_capped
 from id_learning.errors import ConfigError
 from id_learning.physics.base_parameters import BaseParameters, base_parameters
 from id_learning.physics.rigid_body import RigidBodyDynamics
@@ -389,23 +389,15 @@ def _read_document(path: Path, where: str) -> object:
         raise ConfigError(f'{where}: {path}: cannot read a designed excitation: {err}') from err
     at = f'{where}: {path}'
     try:
-        return json.loads(text, object_pairs_hook=lambda pairs: _unique_keys(pairs, at))
+        return loads_unique(text)
+    except DuplicateKeyError as err:
+        raise ConfigError(
+            f'{at}: the key {err.key!r} is given twice in one object ({err.values[0]} and '
+            f'{err.values[1]}): which one holds is ambiguous; keep one, or design the excitation '
+            'again'
+        ) from err
     except json.JSONDecodeError as err:
         raise ConfigError(f'{at}: cannot read a designed excitation: {err}') from err
-
-
-def _unique_keys(pairs: list[tuple[str, Any]], where: str) -> dict[str, Any]:
-    """One JSON object's pairs as a dict; refuses a key given twice (naming it)."""
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise ConfigError(
-                f'{where}: the key {key!r} is given twice in one object ({json.dumps(out[key])} '
-                f'and {json.dumps(value)}): which one holds is ambiguous; keep one, or design '
-                'the excitation again'
-            )
-        out[key] = value
-    return out
 
 
 def load_design(path: Path, robot: RobotConfig, where: str) -> ExcitationTrajectory:
