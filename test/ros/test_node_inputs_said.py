@@ -144,19 +144,29 @@ def test_a_second_recorder_on_the_same_output_is_refused_naming_the_parameter(
     assert sorted(os.listdir(tmp_path)) == ['bag', 'first.log', 'long.log', 'second.log']
 
 
-def test_several_publishers_are_said_once_per_episode_and_wait_for_their_names(monkeypatch):
+def _graph(monkeypatch, topic: str, expected: str):
+    """A graph of (node name, type) publishers on ``topic``, its watcher and its clock [s]."""
     from types import SimpleNamespace
 
     from id_learning.nodes import endpoints
-    from id_learning.nodes.endpoints import ForeignPublishers, shared_text
+    from id_learning.nodes.endpoints import ForeignPublishers
 
-    graph: list[tuple[str, str]] = []  # (node name, type) of the publishers on /reference
-    node = SimpleNamespace(get_publishers_info_by_topic=lambda topic: [
+    graph: list[tuple[str, str]] = []
+    node = SimpleNamespace(get_publishers_info_by_topic=lambda _: [
         SimpleNamespace(node_name=name, node_namespace='/', topic_type=kind)
         for name, kind in graph])  # fmt: skip
-    publishers = ForeignPublishers(node, {'/reference': 'trajectory_msgs/msg/JointTrajectory'})
     clock = [100.0]
     monkeypatch.setattr(endpoints.time, 'monotonic', lambda: clock[0])
+    return graph, ForeignPublishers(node, {topic: expected}), clock
+
+
+def test_several_publishers_are_said_once_per_episode_and_wait_for_their_names(monkeypatch):
+    from id_learning.nodes import endpoints
+    from id_learning.nodes.endpoints import shared_text
+
+    graph, publishers, clock = _graph(
+        monkeypatch, '/reference', 'trajectory_msgs/msg/JointTrajectory'
+    )
 
     def look(*nodes: str) -> bool:
         graph[:] = [(name, 'trajectory_msgs/msg/JointTrajectory') for name in nodes]
@@ -185,18 +195,10 @@ def test_several_publishers_are_said_once_per_episode_and_wait_for_their_names(m
 
 def test_a_publisher_of_another_type_is_said_once_by_its_name(monkeypatch):
     """Discovery may show it first without its node's name: it waits for the name (CI race)."""
-    from types import SimpleNamespace
-
     from id_learning.nodes import endpoints
-    from id_learning.nodes.endpoints import Foreign, ForeignPublishers
+    from id_learning.nodes.endpoints import Foreign
 
-    graph: list[tuple[str, str]] = []  # (node name, type) of the publishers on /motor_currents
-    node = SimpleNamespace(get_publishers_info_by_topic=lambda topic: [
-        SimpleNamespace(node_name=name, node_namespace='/', topic_type=kind)
-        for name, kind in graph])  # fmt: skip
-    publishers = ForeignPublishers(node, {'/motor_currents': 'sensor_msgs/msg/JointState'})
-    clock = [100.0]
-    monkeypatch.setattr(endpoints.time, 'monotonic', lambda: clock[0])
+    graph, publishers, clock = _graph(monkeypatch, '/motor_currents', 'sensor_msgs/msg/JointState')
     unknown, string = endpoints.UNKNOWN_NODE, 'std_msgs/msg/String'
 
     graph[:] = [(unknown, string)]
