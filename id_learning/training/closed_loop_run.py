@@ -273,9 +273,8 @@ def closed_loop_run(
         .predict(reference.q, reference.v, reference.a)
         for kind in kinds
     }
-    feed_forward[TRUE_DYNAMICS] = (
-        plant.motor_torque(reference.q + plant.encoder_offset, reference.v, reference.a)
-        / plant.kt_scale
+    feed_forward[TRUE_DYNAMICS] = plant.command(
+        reference.q + plant.encoder_offset, reference.v, reference.a
     )
     gains = reference_gains(plant, reference)
     runs = compare_feed_forward(

@@ -36,7 +36,7 @@ from id_learning.dataset.inputs import Motion
 from id_learning.dataset.preprocess import Dataset
 from id_learning.errors import ConfigError
 from id_learning.record.excitation import ExcitationTrajectory
-from id_learning.twin.effects import GravitySpring, SignalDelay, TorqueOffset
+from id_learning.twin.effects import GravitySpring, SignalDelay
 from id_learning.twin.ground_truth import read_ground_truth
 from id_learning.twin.plant import TwinPlant
 from id_learning.twin.simulate import (
@@ -203,11 +203,7 @@ def _noise_free_torque(
             j = plant.robot.joints.index(spring.joint)
             link[:, j] -= spring.torque_on_joint(q[:, j])
         return link
-    offset = plant.config.effects.get('torque_offset')
-    assert isinstance(offset, TorqueOffset)
-    # tau_u from currents uses the datasheet k_t; the real one is kt_scale times larger.
-    tau_u: np.ndarray = plant.motor_torque(q, v, a, t) / plant.kt_scale
-    return tau_u + offset.offset if offset.enabled else tau_u
+    return plant.command(q, v, a, t)
 
 
 def _label_mismatch(

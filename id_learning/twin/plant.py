@@ -5,12 +5,15 @@ other direction. ``TwinPlant`` holds the same hidden robot as ``simulate`` for a
 link parameters and payload, rotor inertia, balancer, friction, cogging, torque-constant scale,
 encoder offset) and integrates
 
-    (M(q) + J_rotor N^2) a = k_t,scale * tau_cmd - (C(q, v) v + g(q) - spring(q) + f(q, v)),
+    (M(q) + J_rotor N^2) a = k_t,scale * (tau_cmd - o) - (C(q, v) v + g(q) - spring(q) + f(q, v)),
 
-where tau_cmd is a torque in the drive's datasheet units (tau_u), as a controller commands it.
-Friction is stiff around zero velocity (a smoothed sign), so each step treats it implicitly in
-the velocity (linearised backward Euler): explicit Euler would need microsecond steps.
-The label-only effects (a current sensor's offset, the currents' delay) act on no motion. A
+where tau_cmd is a torque in the drive's datasheet units (tau_u), as a controller commands it,
+and o the current sensor's offset in the same units (``torque_offset``): the drive's current loop
+regulates the current its sensor measures, the one the labels are made of, so it delivers the
+command less the offset, and the command a motion needs (``command``) holds the offset as the
+labels do. Friction is stiff around zero velocity (a smoothed sign), so each step treats it
+implicitly in the velocity (linearised backward Euler): explicit Euler would need microsecond
+steps. The currents' delay is the labels' alone and acts on no motion. A
 friction that warms up over the shift (``warm_scale``, ``warm_up_s``) follows the plant's time
 from the config's ``shift_start_s``.
 """
@@ -22,7 +25,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from id_learning.robot.drives import rotor_inertia_joint_side
-from id_learning.twin.effects import GravitySpring, JointOffset, RotorInertia, TorqueConstantScale
+from id_learning.twin.effects import (
+    GravitySpring,
+    JointOffset,
+    RotorInertia,
+    TorqueConstantScale,
+    TorqueOffset,
+)
 from id_learning.twin.simulate import (
     TwinConfig,
     friction_and_cogging,
@@ -83,6 +92,12 @@ class TwinPlant:
         self.encoder_offset = (
             np.asarray(offset.offset, dtype=float) if offset.enabled else np.zeros(robot.n_joints)
         )
+        sensor = effects.get('torque_offset')
+        assert isinstance(sensor, TorqueOffset)
+        #: (n,) the current sensor's offset in tau_u units [N*m]: the loop delivers less by it.
+        self.sensor_offset = (
+            np.asarray(sensor.offset, dtype=float) if sensor.enabled else np.zeros(robot.n_joints)
+        )
 
     # -- torques --------------------------------------------------------------------------------
     def _spring_torque(self, q: np.ndarray) -> np.ndarray:
@@ -123,6 +138,18 @@ class TwinPlant:
         out: np.ndarray = link + self.rotor_inertia_joint_side * a + friction
         return out
 
+    def command(
+        self, q: np.ndarray, v: np.ndarray, a: np.ndarray, time_s: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(N, n) the command in tau_u units under which the drive delivers ``motor_torque``.
+
+        The true inverse dynamics as a feed-forward: the motor torque over the torque-constant
+        scale (tau_u uses the datasheet k_t) plus the current sensor's offset, which the current
+        loop regulates on; what ``simulate``'s noise-free label holds for the undelayed motion.
+        """
+        tau_u: np.ndarray = self.motor_torque(q, v, a, time_s) / self.kt_scale + self.sensor_offset
+        return tau_u
+
     # -- integration ----------------------------------------------------------------------------
     def start(self, q: np.ndarray, v: np.ndarray, a: np.ndarray | None = None) -> PlantState:
         """A state of positions and velocities (n,).
@@ -137,6 +164,8 @@ class TwinPlant:
     def step(self, state: PlantState, tau_command: np.ndarray, dt: float) -> PlantState:
         """Advance by ``dt`` [s] under a commanded torque (n,) in tau_u units (datasheet k_t).
 
+        The drive delivers k_t,scale times the command less the current sensor's offset.
+
         Linearised backward Euler in the velocity for friction, then the position with the new
         velocity (semi-implicit Euler).
         """
@@ -148,7 +177,8 @@ class TwinPlant:
         slope = (
             self._friction(q, v + _DERIVATIVE_STEP, state.link_torque, state.time_s) - friction
         ) / _DERIVATIVE_STEP
-        force = self.kt_scale * tau_command - (bias - spring + friction)
+        delivered = self.kt_scale * (tau_command - self.sensor_offset)
+        force = delivered - (bias - spring + friction)
         dv = np.linalg.solve(mass + dt * np.diag(np.maximum(slope, 0.0)), dt * force)
         v_next = v + dv
         link = mass @ (dv / dt) - np.diag(self.rotor_inertia_joint_side) @ (dv / dt)

@@ -54,6 +54,28 @@ def test_a_step_under_the_needed_torque_gives_the_motion_s_acceleration(twin) ->
     np.testing.assert_allclose(after.q, q + dt * after.v)
 
 
+def test_the_drive_delivers_the_command_less_the_current_sensor_s_offset() -> None:
+    """The current loop regulates on the offset sensor: the needed command holds the offset."""
+    effects = yaml.safe_load((REPO / 'config/twin_default.yaml').read_text())['effects']
+    effects['signal_delay']['enabled'] = False
+    offset = np.array([12.0, -18.0, 9.0, 2.0, -1.5, 0.6])
+    effects['torque_offset'] |= {'enabled': True, 'offset': offset.tolist()}
+    config = twin_config(4.0, effects, seed=7)
+    result = simulate(config)
+    plant = TwinPlant(config)
+    np.testing.assert_allclose(plant.sensor_offset, offset)
+    command = plant.command(result.q_true, result.v_true, result.a_true)
+    # What the labels hold, noise-free: the motion's tau_u plus the sensor's offset.
+    np.testing.assert_allclose(command, result.tau_u_clean, rtol=1e-9, atol=1e-6)
+    k = 200
+    q, v, a = result.q_true[k], result.v_true[k], result.a_true[k]
+    dt = 1e-5
+    after = plant.step(plant.start(q, v, a), command[k], dt)
+    np.testing.assert_allclose((after.v - v) / dt, a, rtol=1e-3, atol=1e-3)
+    without = plant.step(plant.start(q, v, a), command[k] - offset, dt)
+    assert np.all(np.abs((without.v - v) / dt - a) > 1e-3)  # the offset moves the arm
+
+
 def test_true_feed_forward_shrinks_the_tracking_error_and_a_biased_one_less(twin) -> None:
     config, result = twin
     plant = TwinPlant(config)
