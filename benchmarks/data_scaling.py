@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import tempfile
 import time
@@ -124,9 +125,10 @@ def main() -> None:
     period = robot.ipo_period_s
     test_n = round(60.0 * args.test_minutes / period)
     ratios = {kind: np.zeros((len(minutes), robot.n_joints)) for kind in kinds}
-    rmse: dict[str, list[list[float]]] = {kind: [] for kind in kinds}
-    seconds: dict[str, list[float]] = {kind: [] for kind in kinds}
+    rmse: dict[str, list[list[float | None]]] = {kind: [] for kind in kinds}
+    seconds: dict[str, list[float | None]] = {kind: [] for kind in kinds}
     floors = []
+    failures: dict[str, str] = {}
     with tempfile.TemporaryDirectory() as scratch:
         out = args.out or Path(scratch)
         for i, m in enumerate(minutes):
@@ -150,7 +152,13 @@ def main() -> None:
             )
             floors.append(run.metrics['label_noise_floor_nm'])
             for kind in kinds:
-                entry = run.metrics['models'][kind]
+                entry = run.metrics['models'].get(kind)
+                if entry is None:  # its fit failed: a gap in its curve, with why
+                    failures[f'{kind}, {m:g} min'] = run.failures.get(kind, 'not fitted')
+                    ratios[kind][i] = np.nan
+                    rmse[kind].append([None] * robot.n_joints)
+                    seconds[kind].append(None)
+                    continue
                 ratios[kind][i] = entry['rmse_through_filter_over_floor']
                 rmse[kind].append(entry['rmse_through_filter_nm'])
                 seconds[kind].append(entry['train_seconds'])
@@ -170,8 +178,12 @@ def main() -> None:
         'joints': joints,
         'label_noise_floor_nm': floors,
         'rmse_through_filter_nm': rmse,
-        'ratio_to_floor': {k: v.tolist() for k, v in ratios.items()},
+        'ratio_to_floor': {
+            k: [[None if math.isnan(x) else x for x in row] for row in v.tolist()]
+            for k, v in ratios.items()
+        },
         'train_seconds': seconds,
+        'failures': failures,
         'wall_s': time.monotonic() - began,
         'plot': str(args.plot),
     }
@@ -211,6 +223,9 @@ def report(document: dict[str, Any], settings: list[str]) -> list[str]:
             for kind, ratio in document['ratio_to_floor'].items()
         ]
         lines += ['', f'{joint}: test RMSE / floor', '', *markdown_table(['kind', *columns], rows)]
+    if document['failures']:
+        lines += ['', 'Not fitted (a gap in the table and the plot):', '']
+        lines += [f'- {where}: {why}' for where, why in document['failures'].items()]
     return lines
 
 
