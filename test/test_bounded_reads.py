@@ -252,6 +252,20 @@ CASES: dict[str, Callable[[Path, Path], tuple[list[str], str]]] = {
         ),
         r'model\.json: cannot read model metadata: a FIFO \(named pipe\), not a regular file',
     ),
+    'load_effects_file, effects.json a FIFO': lambda bag, tmp: (
+        _call(
+            'from id_learning.models.effects import load_effects_file; '
+            f'load_effects_file({str(_to_fifo(tmp / "effects.json"))!r})'
+        ),
+        r'effects\.json: cannot read effects\.json: a FIFO \(named pipe\), not a regular file',
+    ),
+    'load_effects_file, effects.json a link to /dev/zero': lambda bag, tmp: (
+        _call(
+            'from id_learning.models.effects import load_effects_file; '
+            f'load_effects_file({str(_to_device(tmp / "effects.json"))!r})'
+        ),
+        r'effects\.json: cannot read effects\.json: a character device',
+    ),
     'bag_custom_data, metadata.yaml a socket': lambda bag, tmp: (
         _call(
             'from id_learning.bag import bag_custom_data; '

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from id_learning.bag import JointStateSeries, TopicInfo
+from id_learning.bag.metadata_file import metadata_text
 from id_learning.config_io import parse_yaml
 from id_learning.dataset.accelerations import (
     AccelerationExcess,
@@ -23,7 +24,7 @@ from id_learning.dataset.accelerations import (
 )
 from id_learning.dataset.consistency import KinematicConsistency, gap_starts
 from id_learning.dataset.inspect_report import GAP_PERIODS
-from id_learning.errors import ConfigError
+from id_learning.errors import BagError, ConfigError
 from id_learning.robot.config import RobotConfig
 
 __all__ = [
@@ -168,9 +169,9 @@ def metadata_mismatches(
         if count != len(log_times[name, msgtype])
     ]
     try:
-        document = parse_yaml((path / 'metadata.yaml').read_text(encoding='utf-8'), str(path))
+        document = parse_yaml(metadata_text(path), str(path))
         meta = document['rosbag2_bagfile_information']
-    except (OSError, UnicodeDecodeError, ConfigError, KeyError, TypeError):
+    except (BagError, ConfigError, KeyError, TypeError):
         return tuple(lines)  # the reader opened the bag: what it read is checked above
     held = sum(len(times) for times in log_times.values())
     count = meta.get('message_count') if isinstance(meta, dict) else None

@@ -27,6 +27,7 @@ from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
 
+from id_learning.config_io import read_capped
 from id_learning.errors import CheckpointError, ConfigError, RobotModelError
 from id_learning.models.base import (
     InverseDynamicsModel,
@@ -51,6 +52,8 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
+#: The largest effects.json read (a diagnosis writes a few kB; a larger file is another one).
+MAX_EFFECTS_BYTES = 16 * 2**20
 
 #: Tensor-name prefix of the effect coefficients in an artifact.
 TERM_PREFIX = 'effects.term.'
@@ -67,9 +70,13 @@ def load_effects_file(path: str | Path) -> dict[str, Any]:
     if path.is_dir():
         path = path / EFFECTS_JSON
     try:
-        data = loads_unique(path.read_text(encoding='utf-8'))
-    except FileNotFoundError as err:
-        raise ConfigError(f'effects: {path} does not exist (run `id-learning diagnose`)') from err
+        if not path.exists():
+            raise ConfigError(f'effects: {path} does not exist (run `id-learning diagnose`)')
+        data = loads_unique(
+            read_capped(path, 'effects.json', MAX_EFFECTS_BYTES, regular=True).decode('utf-8')
+        )
+    except UnicodeDecodeError as err:
+        raise ConfigError(f'effects: {path} is not UTF-8 text: {err}') from err
     except DuplicateKeyError as err:
         raise ConfigError(f'effects: {path}: {err}; the file was edited or is corrupt') from err
     except json.JSONDecodeError as err:

@@ -23,6 +23,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from id_learning.config_io import read_capped
+from id_learning.errors import ConfigError
+
 __all__ = [
     'ADAPTATION_JSON',
     'COLUMNS',
@@ -39,6 +42,8 @@ __all__ = [
 COLUMNS = ('coulomb_level_nm', 'viscous_nms_per_rad', 'offset_nm')
 #: The adapters keep each estimated parameter within this many prior standard deviations.
 ESTIMATE_PRIOR_STDS = 100.0
+#: The largest adaptation state read (a few kB are written; a larger file is another one).
+MAX_STATE_BYTES = 2**20
 #: Rounding allowed on a stored value at its limit.
 _SLACK = 1e-9
 
@@ -211,12 +216,14 @@ def load_base(loop: AdaptationLoop, artifact: Path | str, joints: tuple[str, ...
     if not path.exists():
         return StoredBase(path, found=False)
     try:
-        state = json.loads(path.read_text(encoding='utf-8'))
+        state = json.loads(
+            read_capped(path, 'adaptation state', MAX_STATE_BYTES, regular=True).decode('utf-8')
+        )
         if not isinstance(state, dict):
             raise ValueError('not a JSON object')
         _restore(loop, state, joints)
         before = int(state.get('updates_total', state.get('updates')) or 0)
-    except (OSError, ValueError, TypeError) as err:  # JSONDecodeError is a ValueError
+    except (ConfigError, ValueError, TypeError) as err:  # JSONDecodeError is a ValueError
         return StoredBase(path, problem=str(err) or type(err).__name__)
     return StoredBase(path, updates_before=before)
 

@@ -34,7 +34,6 @@ one sample. 'torch' calls the model's own ``predict`` (``predict_window`` for th
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -223,14 +222,14 @@ class FeedForwardPredictor:
             CheckpointError: the artifact (or the fallback artifact) is invalid, belongs to
                 another robot, or the fallback is no physics model of the same target.
         """
-        from id_learning.models.artifact import METADATA_FILE, artifact_inputs, artifact_target
+        from id_learning.models import artifact
         from id_learning.models.registry import load_model
 
         config = config or GuardConfig(
             period_s=robot.ipo_period_s, consistency_scale=robot.consistency_scale
         )
         model = load_model(Path(folder), robot).for_the_drive()
-        metadata = json.loads((Path(folder) / METADATA_FILE).read_text(encoding='utf-8'))
+        metadata = artifact.read_metadata(Path(folder) / artifact.METADATA_FILE)
         predictor = cls(
             model,
             robot.limits.torque,
@@ -239,13 +238,13 @@ class FeedForwardPredictor:
             inference=inference,
             limits=robot.limits.take([robot.joints.index(name) for name in model.joint_names]),
             fallback=physics_fallback(
-                model, robot, artifact_target(metadata), fallback_artifact, beside=folder
+                model, robot, artifact.artifact_target(metadata), fallback_artifact, beside=folder
             )
             if is_network(model)
             else None,
         )
-        predictor.inputs, predictor.fitting_inputs = artifact_inputs(metadata)
-        predictor.target = artifact_target(metadata)
+        predictor.inputs, predictor.fitting_inputs = artifact.artifact_inputs(metadata)
+        predictor.target = artifact.artifact_target(metadata)
         return predictor
 
     @property

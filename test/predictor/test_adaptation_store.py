@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
-from id_learning.predictor.adaptation_store import adaptation_path
+from id_learning.predictor.adaptation_store import MAX_STATE_BYTES, adaptation_path
 from id_learning.robot.config import RobotConfig
 
 TOPIC = '/motor_currents'
@@ -289,3 +290,20 @@ def test_a_stored_base_parameter_change_beyond_its_limit_is_refused_by_name(
     loop = new_loop(mabi, inertia=True)
     problem = loop.load(artifact, mabi.joints).problem or ''
     assert re.search(r"'change' of base parameter .+ is 1e\+15, beyond the ", problem), problem
+
+
+@pytest.mark.parametrize('kind', ['fifo', 'large'])
+def test_a_state_file_that_is_no_file_or_too_large_is_named_not_waited_on(
+    mabi: RobotConfig, artifact: Path, kind: str
+) -> None:
+    """A FIFO nobody writes, or a file past the cap: a problem said at once, a start from zero."""
+    path = adaptation_path(artifact)
+    if kind == 'fifo':
+        os.mkfifo(path)
+    else:
+        with path.open('wb') as stream:
+            stream.truncate(MAX_STATE_BYTES + 1)
+    base = new_loop(mabi).load(artifact, mabi.joints)
+    expected = 'a FIFO (named pipe), not a regular file' if kind == 'fifo' else 'larger than 1 MiB'
+    assert expected in (base.problem or '')
+    assert str(path) in (base.problem or '')
