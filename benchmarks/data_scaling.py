@@ -50,20 +50,7 @@ def last_samples(result: TwinResult, n: int) -> TwinResult:
     """The last n samples of a twin run, ground truth included."""
     if n > len(result.recording.stamps_ns):
         raise ValueError(f'the run holds {len(result.recording.stamps_ns)} samples, not {n}')
-    tail = slice(len(result.recording.stamps_ns) - n, None)
-    recording = result.recording
-    fields = ('stamps_ns', 'position', 'velocity', 'current', 'joint_torque')
-    cut = {k: getattr(recording, k)[tail] for k in fields if getattr(recording, k) is not None}
-    return replace(
-        result,
-        recording=replace(recording, **cut),
-        components={name: x[tail] for name, x in result.components.items()},
-        tau_u_clean=result.tau_u_clean[tail],
-        tau_joint_clean=result.tau_joint_clean[tail],
-        q_true=result.q_true[tail],
-        v_true=result.v_true[tail],
-        a_true=result.a_true[tail],
-    )
+    return result.take(slice(len(result.recording.stamps_ns) - n, None))
 
 
 def plot(

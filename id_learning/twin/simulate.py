@@ -11,7 +11,7 @@ hidden parameters, so one robot can be recorded many times.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -295,6 +295,39 @@ class TwinResult:
     a_true: np.ndarray
     parameters: dict[str, Any]
 
+    def take(self, rows: slice) -> TwinResult:
+        """Some rows of the run, its ground truth's RMS figures those of the rows.
+
+        A bag of a part of a simulation (the last minutes of a long one) is written from this:
+        the RMS ``ground_truth.json`` states is checked against the arrays beside it.
+        """
+        recording = self.recording
+        fields = ('stamps_ns', 'position', 'velocity', 'current', 'joint_torque')
+        cut = {k: getattr(recording, k)[rows] for k in fields if getattr(recording, k) is not None}
+        components = {name: x[rows] for name, x in self.components.items()}
+        tau_u_clean = self.tau_u_clean[rows]
+        return replace(
+            self,
+            recording=replace(recording, **cut),
+            components=components,
+            tau_u_clean=tau_u_clean,
+            tau_joint_clean=self.tau_joint_clean[rows],
+            q_true=self.q_true[rows],
+            v_true=self.v_true[rows],
+            a_true=self.a_true[rows],
+            parameters=self.parameters | rms_figures(components, tau_u_clean),
+        )
+
+
+def rms_figures(components: dict[str, np.ndarray], tau_u_clean: np.ndarray) -> dict[str, Any]:
+    """``ground_truth.json``'s RMS of each noise-free component and of tau_u, per joint."""
+    return {
+        'component_rms_nm': {
+            name: np.sqrt(np.mean(value**2, axis=0)).tolist() for name, value in components.items()
+        },
+        'tau_u_clean_rms_nm': np.sqrt(np.mean(tau_u_clean**2, axis=0)).tolist(),
+    }
+
 
 def true_dynamics(config: TwinConfig, rng: np.random.Generator) -> RigidBodyDynamics:
     """The twin's rigid-body model: URDF with inertial parameter errors and the payload."""
@@ -463,10 +496,7 @@ def simulate(config: TwinConfig, *, progress: bool = False) -> TwinResult:
     )
     parameters = _ground_truth_parameters(config, dynamics, rotor_inertia, kt_scale, delay_s)
     parameters['excitation'] = trajectory.to_dict()
-    parameters['component_rms_nm'] = {
-        name: np.sqrt(np.mean(value**2, axis=0)).tolist() for name, value in components.items()
-    }
-    parameters['tau_u_clean_rms_nm'] = np.sqrt(np.mean(tau_u_clean**2, axis=0)).tolist()
+    parameters |= rms_figures(components, tau_u_clean)
     return TwinResult(recording, components, tau_u_clean, tau_joint, q, v, a, parameters)
 
 

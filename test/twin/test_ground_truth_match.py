@@ -51,6 +51,20 @@ def test_its_own_ground_truth_is_used(twins, tmp_path: Path) -> None:
     np.testing.assert_allclose(torque, own.tau_u_clean, rtol=1e-6, atol=1e-3)
 
 
+def test_the_last_part_of_a_run_keeps_its_ground_truth(twins, mabi, tmp_path: Path) -> None:
+    """A bag of a run's last samples states its own RMS, and so its ground truth is used."""
+    (own, _), _ = twins
+    part = own.take(slice(len(own.tau_u_clean) // 2, None))
+    rms = np.sqrt(np.mean(part.tau_u_clean**2, axis=0))
+    np.testing.assert_allclose(part.parameters['tau_u_clean_rms_nm'], rms)
+    assert part.parameters['excitation'] == own.parameters['excitation']
+    assert len(part.recording.stamps_ns) == len(part.q_true) == len(part.tau_u_clean)
+    folder = write_twin_output(part, twin_config(30.0, seed=21), tmp_path / 'part')
+    torque, why = read_noise_free_torque(folder, prepare_dataset(part.recording, mabi))
+    assert why == ''
+    assert torque is not None
+
+
 def test_an_old_ground_truth_without_json_is_still_judged(twins, tmp_path: Path) -> None:
     (own, other), dataset = twins
     folder = _write(tmp_path / 'own', own.recording.stamps_ns, own.tau_u_clean, None)
