@@ -56,7 +56,7 @@ from id_learning.online_check.plan import load_setup, plan_excerpt
 from id_learning.online_check.result import OnlineCheckError, OnlineCheckResult
 from id_learning.online_check.ros import replay_and_collect, start_predictor
 from id_learning.online_check.scoring import score
-from id_learning.training.run_folder import MODELS_DIR, refuse_incomplete_run
+from id_learning.training.run_folder import MODELS_DIR, check_run_model, refuse_incomplete_run
 
 __all__ = ['OnlineCheckError', 'OnlineCheckResult', 'has_ros', 'online_check']
 
@@ -108,6 +108,7 @@ def online_check(
     domain = _domain(domain_id)
     if Path(artifact).parent.name == MODELS_DIR:  # a model of a run: the run must be complete
         refuse_incomplete_run(Path(artifact).parent.parent)
+        check_run_model(Path(artifact))  # and the model the one it saved
     notes: list[str] = []
     setup = load_setup(Path(bag), Path(robot_config_path), Path(artifact), notes)
     namespace = f'/online_check_{os.getpid()}'

@@ -36,13 +36,12 @@ from id_learning.evaluation.closed_loop_report import (
     plot_feed_forward,
     plot_tracking,
 )
-from id_learning.models.registry import load_model
 from id_learning.outputs import check_output, result_folder
 from id_learning.robot.config import RobotConfig, how_robots_differ
 from id_learning.training.datasets import load_datasets, preprocess_from_dict, segment_rows
 from id_learning.training.run_folder import (
-    MODELS_DIR,
     is_training_bag,
+    load_run_model,
     read_run,
     refuse_training_samples,
     training_bag,
@@ -268,7 +267,7 @@ def closed_loop_run(
     offset_s = float(dataset.stamps_ns[start] - dataset.stamps_ns[0]) * 1e-9
     plant = TwinPlant(replace(twin, shift_start_s=twin.shift_start_s + offset_s))
     feed_forward = {
-        kind: load_model(run_dir / MODELS_DIR / kind, robot, kind, target=config.target)
+        kind: load_run_model(run_dir, run, kind, robot)
         .for_the_drive()
         .predict(reference.q, reference.v, reference.a)
         for kind in kinds

@@ -22,6 +22,7 @@ from id_learning.config_io import not_a_file, read_capped
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler
 from id_learning.errors import CheckpointError
 from id_learning.models.artifact import _git_commit, robot_fingerprint
+from id_learning.models.base import InverseDynamicsModel
 from id_learning.models.metadata_checks import DuplicateKeyError, loads_unique
 from id_learning.outputs import incomplete_reason, partial_path, write_text_atomic
 from id_learning.robot.config import RobotConfig
@@ -30,13 +31,16 @@ from id_learning.training.fitting import ModelResult
 from id_learning.training.measure import metric_notes
 
 __all__ = [
+    'ARTIFACTS_KEY',
     'METRICS_FILE',
     'METRICS_FORMAT',
     'MODELS_DIR',
     'REPORT_FILE',
     'RUN_FILE',
     'RUN_FORMAT',
+    'check_run_model',
     'is_training_bag',
+    'load_run_model',
     'machine_info',
     'metrics_document',
     'read_run',
@@ -174,6 +178,59 @@ def read_run(run_dir: Path) -> dict[str, Any]:
     return document
 
 
+#: run.json's key of each model's ``artifact_sha256`` as the run saved it.
+ARTIFACTS_KEY = 'artifacts'
+
+
+def load_run_model(
+    run_dir: Path, run: dict[str, Any], kind: str, robot: RobotConfig
+) -> InverseDynamicsModel:
+    """A run's model of ``kind``, verified to be the one the run trained and saved.
+
+    Raises:
+        CheckpointError: the artifact is invalid (``load_model``), of another target, or not
+            the model this run saved (``check_run_model``).
+    """
+    from id_learning.models.registry import load_model
+
+    folder = Path(run_dir) / MODELS_DIR / kind
+    target = (run.get('preprocessing') or {}).get('target')
+    model = load_model(folder, robot, kind, target=target)
+    check_run_model(folder, run)
+    return model
+
+
+def check_run_model(folder: Path, run: dict[str, Any] | None = None) -> None:
+    """Refuse a model in a run's ``models/`` that is not the one the run saved there.
+
+    A model folder is self-consistent wherever it came from; run.json records each model's
+    ``artifact_sha256``, so another run's model copied or linked into ``models/`` is refused
+    instead of being scored, tracked or served as this run's. A folder outside a run, or a run
+    from before the record, passes unchecked. ``run``: the run's run.json, when read already.
+
+    Raises:
+        CheckpointError: the run is incomplete or unreadable (``read_run``), or the model's
+            model.json is not the one run.json records (names both digests' starts).
+    """
+    from id_learning.models.artifact import ARTIFACT_HASH, METADATA_FILE, read_metadata
+
+    folder = Path(folder)
+    if folder.parent.name != MODELS_DIR:
+        return
+    run = run if run is not None else read_run(folder.parent.parent)
+    recorded = (run.get(ARTIFACTS_KEY) or {}).get(folder.name)
+    if recorded is None:
+        return
+    held = read_metadata(folder / METADATA_FILE).get(ARTIFACT_HASH)
+    if held != recorded:
+        raise CheckpointError(
+            f'{folder}: not the {folder.name} model this run trained: its model.json '
+            f'({ARTIFACT_HASH} {str(held)[:12]}...) differs from the one {RUN_FILE} records '
+            f'({str(recorded)[:12]}...), so it was copied or linked in from another run; copy '
+            'a run whole, or train again'
+        )
+
+
 def training_bag(run: dict[str, Any], run_dir: Path, index: int = 0) -> Path:
     """Where a run's ``index``-th training bag is now, wherever the command runs from.
 
@@ -244,10 +301,15 @@ def save_models(
     preprocessing: dict[str, Any],
     target_scaler: MinMaxScaler,
     training_data: dict[str, Any],
-) -> None:
-    """Save each fitted model into its folder, with the run's settings and its own metrics."""
+) -> dict[str, str]:
+    """Save each fitted model into its folder, with the run's settings and its own metrics.
+
+    Returns each model's ``artifact_sha256`` (what its model.json holds), for run.json.
+    """
+    from id_learning.models.artifact import ARTIFACT_HASH, METADATA_FILE, read_metadata
     from id_learning.models.registry import save_model
 
+    digests: dict[str, str] = {}
     for kind, result in results.items():
         save_model(
             result.model,
@@ -260,6 +322,8 @@ def save_models(
                 'train_history': table[kind].get('history'),
             },
         )
+        digests[kind] = str(read_metadata(result.folder / METADATA_FILE)[ARTIFACT_HASH])
+    return digests
 
 
 def metrics_document(

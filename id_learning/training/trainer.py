@@ -66,10 +66,12 @@ from id_learning.training.measure import (
     write_run_report,
 )
 from id_learning.training.run_folder import (
+    ARTIFACTS_KEY,
     METRICS_FILE,
     MODELS_DIR,
     REPORT_FILE,
     RUN_FILE,
+    load_run_model,
     machine_info,
     metrics_document,
     read_run,
@@ -255,7 +257,7 @@ def _write_run(
     )
     rows = segment_rows(dataset, 'test')
     table, predictions = evaluate_models(results, dataset, rows, scale, timing=True)
-    save_models(
+    run[ARTIFACTS_KEY] = save_models(
         results,
         table,
         preprocessing=preprocessing,
@@ -388,16 +390,12 @@ def _fit_and_save(
 
 def _load_models(run_dir: Path, run: dict[str, Any], robot: RobotConfig) -> dict[str, ModelResult]:
     """Load every model of a run; their metrics are filled in when they are evaluated."""
-    from id_learning.models.registry import load_model
-
     results: dict[str, ModelResult] = {}
     # An interrupted run lists its models in the order they were fitted: report them as asked.
     order = {kind: k for k, kind in enumerate(run.get('requested_kinds', run['kinds']))}
-    target = (run.get('preprocessing') or {}).get('target')
     for kind in sorted(run['kinds'], key=lambda kind: order.get(kind, len(order))):
-        folder = run_dir / MODELS_DIR / kind
-        model = load_model(folder, robot, kind, target=target)
-        results[kind] = ModelResult(kind, model, folder, {})
+        model = load_run_model(run_dir, run, kind, robot)
+        results[kind] = ModelResult(kind, model, run_dir / MODELS_DIR / kind, {})
     _say_what_does_not_belong(run_dir, run, results)
     return results
 

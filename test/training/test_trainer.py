@@ -152,6 +152,9 @@ def test_artifacts_carry_preprocessing_data_hashes_and_metrics(run, bags):
     assert document['train_history']['epochs'] == 2
     run_document = json.loads((run.out / 'run.json').read_text())
     assert run_document['robot_config'] == str((REPO / 'config/mabi_max100.yaml').resolve())
+    # run.json records each saved model's whole-artifact hash (the run's own models).
+    assert run_document['artifacts']['mlp'] == document['artifact_sha256']
+    assert set(run_document['artifacts']) == set(run_document['kinds'])
 
 
 def test_saved_models_load_back_and_predict_exactly_the_same(run, mabi):
