@@ -21,6 +21,7 @@ __all__ = [
     'Samples',
     'check_distinct',
     'refuse_shared_samples',
+    'repeated_samples',
     'shared_samples',
     'shared_stamps',
 ]
@@ -182,6 +183,33 @@ def shared_samples(first: Samples, second: Samples) -> tuple[np.ndarray, np.ndar
     same = b_at - a_at == shifts[np.argmax(counts)]
     order = np.argsort(a_at[same])
     return a_at[same][order], b_at[same][order]
+
+
+def repeated_samples(samples: Samples) -> tuple[np.ndarray, np.ndarray]:
+    """The stamps [ns] of moving samples a recording holds twice: (first copy, second copy).
+
+    ``shared_samples`` within one recording: a looped replay recorded into one bag, or a log
+    appended to itself, repeats every value of a stretch (positions and the sensors' noise) at
+    later stamps. The pairs at the most common stamp shift are returned, in time order.
+    """
+    _, ns, q = samples[:3]
+    empty = np.empty(0, dtype=np.int64)
+    if len(ns) < 3:
+        return empty, empty
+    noisy = samples[3] if len(samples) == 4 else None
+    rows = q if noisy is None else np.hstack([q, noisy])
+    moving = np.flatnonzero(np.any(q[1:] != q[:-1], axis=1)) + 1
+    keys = _row_keys(rows)[moving]
+    order = np.argsort(keys, kind='stable')  # equal rows stay in time order
+    same = keys[order][1:] == keys[order][:-1]
+    if not same.any():
+        return empty, empty
+    at = np.asarray(ns)[moving]
+    earlier, later = at[order[:-1][same]], at[order[1:][same]]
+    shifts, counts = np.unique(later - earlier, return_counts=True)
+    keep = later - earlier == shifts[np.argmax(counts)]
+    index = np.argsort(earlier[keep])
+    return earlier[keep][index], later[keep][index]
 
 
 def shared_stamps(first: Samples, second: Samples) -> np.ndarray:

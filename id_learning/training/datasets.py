@@ -25,6 +25,7 @@ from id_learning.bag.distinct import (
     MIN_SHARED_SAMPLES,
     Samples,
     refuse_shared_samples,
+    repeated_samples,
     shared_samples,
     shared_stamps,
 )
@@ -252,6 +253,7 @@ def _refuse_shared_segments(known: list[Samples], bag: Path, recording: Recordin
         for k, segment in enumerate(segments)
     ]
     for k, samples in enumerate(new):
+        _refuse_repeats(samples)
         for other in known:
             refuse_shared_samples([other, samples], f'{_SHARED_WHY}; give each recording once')
         for other in new[:k]:
@@ -261,6 +263,28 @@ def _refuse_shared_segments(known: list[Samples], bag: Path, recording: Recordin
                 're-import it from logs cut without the overlap',
             )
     known.extend(new)
+
+
+def _refuse_repeats(samples: Samples) -> None:
+    """Refuse a recording that holds a stretch of its own samples twice.
+
+    Split into a training and a test part, the copy would put training samples into the test
+    part and report training scores as test scores (a looped replay recorded into one bag).
+
+    Raises:
+        DatasetError: names the recording and both stretches' stamps.
+    """
+    first, second = repeated_samples(samples)
+    if first.size < MIN_SHARED_SAMPLES:
+        return
+    shift_s = (int(second[0]) - int(first[0])) * 1e-9
+    raise DatasetError(
+        f'{samples[0]} holds the same {first.size} samples twice: stamps {int(first[0])} to '
+        f'{int(first[-1])} ns again {shift_s:.1f} s later, from {int(second[0])} ns: '
+        f'{_SHARED_WHY}; the recording repeats itself (a looped replay recorded into one bag, '
+        'or a log appended to itself): record it once, or import only the part before the '
+        'repeat'
+    )
 
 
 #: ``Dataset.extra`` key of why a twin's ground truth was not used: the reasons, each once.

@@ -155,6 +155,39 @@ def test_a_segment_re_stamped_from_another_bag_is_refused(bags, mabi, tmp_path):
         load_datasets([bags[0], bag], mabi, PreprocessConfig(), progress=False)
 
 
+def test_a_bag_that_repeats_itself_is_refused_naming_both_stretches(bags, mabi, tmp_path):
+    """A looped replay recorded into one bag: its test part would be a copy of training."""
+    recording = load_recording(bags[0], mabi)
+    n = recording.n_samples
+    span = int(recording.stamps_ns[-1] - recording.stamps_ns[0]) + 8_000_000
+    twice = Recording(
+        joints=recording.joints,
+        stamps_ns=np.concatenate([recording.stamps_ns, recording.stamps_ns + span]),
+        position=np.concatenate([recording.position, recording.position]),
+        velocity=np.concatenate([recording.velocity, recording.velocity]),
+        current=np.concatenate([recording.current, recording.current]),
+    )
+    bag = write_recording(twice, tmp_path / 'twice', mabi.topics)
+    with pytest.raises(DatasetError) as err:
+        load_datasets([bag], mabi, PreprocessConfig(), progress=False)
+    found = re.fullmatch(
+        r'(\S+) holds the same (\d+) samples twice: stamps (\d+) to (\d+) ns again ([\d.]+) s '
+        r'later, from (\d+) ns: the same motion would be in the training and the test part; .*',
+        str(err.value),
+    )
+    assert found, err.value
+    assert found[1] == str(bag)
+    assert int(found[2]) > n // 2  # the moving samples of the whole first copy
+    assert float(found[5]) == pytest.approx(span * 1e-9, abs=0.05)
+    assert int(found[6]) - int(found[3]) == span
+    # The same commanded motion run twice, with the sensors' own noise each time: no copy.
+    again = load_recording(bags[0], mabi)
+    noise = np.random.default_rng(5).normal(0.0, 1e-3, size=again.current.shape)
+    rerun = replace(twice, current=np.concatenate([recording.current, again.current + noise]))
+    fresh = write_recording(rerun, tmp_path / 'rerun', mabi.topics)
+    assert load_datasets([fresh], mabi, PreprocessConfig(), progress=False)
+
+
 @pytest.fixture(scope='module')
 def cut_bag(bags, mabi, tmp_path_factory):
     """The last 30 s of the first training bag, as a bag of its own."""
