@@ -24,6 +24,7 @@ import threading
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+from id_learning.bag.writer import BagWriteError
 from id_learning.errors import IdLearningError
 from id_learning.outputs import LOCK_SUFFIX, OutputError, bag_output, os_reason, replace_folder
 
@@ -76,6 +77,11 @@ def staged_bag(
         try:
             try:
                 yield staged
+            except BagWriteError as err:  # the staged bag is removed below: nothing is kept
+                raise OutputError(
+                    f'{target}: writing failed: {err.reason}; {_as_it_was(target)} (free space '
+                    'and run it again)'
+                ) from err
             except IdLearningError as err:  # the hidden folder, removed below, is not named
                 said = str(err).replace(str(staged), str(target))
                 raise type(err)(f'{said}; {_as_it_was(target)}') from err

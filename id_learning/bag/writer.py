@@ -32,12 +32,24 @@ from id_learning.bag.messages import message_definition
 from id_learning.errors import BagError
 from id_learning.outputs import bag_output, os_reason
 
-__all__ = ['BagWriter', 'write_metadata']
+__all__ = ['BagWriteError', 'BagWriter', 'write_metadata']
 
 ROSBAG2_VERSION = 9
 DEFAULT_CHUNK_BYTES = 1 << 20
 
 _T = TypeVar('_T')
+
+
+class BagWriteError(BagError):
+    """The storage refused a write (a full disk, an I/O error): ``reason`` is the OS's words.
+
+    The message says what the file keeps (a recorder's bag is recoverable); a writer that
+    discards its bag (``staged_bag``) says so in its own words from ``reason``.
+    """
+
+    def __init__(self, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class _DirectFile:
@@ -336,11 +348,12 @@ class BagWriter:
         except (OSError, ValueError) as err:
             reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
             lost = sum(self._pending.values())
-            self.failure = BagError(
+            self.failure = BagWriteError(
+                reason,
                 f'{self.path}: writing failed: {reason}; nothing more is written: the '
                 f'{sum(self.on_disk.values())} message(s) already in the file are kept '
                 f'(id-learning bag recover), the {lost} of the chunk being written did not all '
-                'reach it'
+                'reach it',
             )
             if self._stream is not None:
                 self._stream.close()

@@ -70,6 +70,23 @@ LIMITED = (
 )
 
 
+def _refused_on_a_full_disk(limit: int, *args: object) -> str:
+    """An ``id-learning`` command run with files capped at ``limit`` bytes: its error output.
+
+    It must fail with exit 2 and no traceback.
+    """
+    done = subprocess.run(
+        [sys.executable, '-c', LIMITED, str(limit), '-m', 'id_learning.cli', *map(str, args),
+         '--quiet'],
+        capture_output=True, text=True, cwd=REPO, timeout=300,
+        env={**os.environ, 'PYTHONDONTWRITEBYTECODE': '1'}, check=False,
+    )  # fmt: skip
+    said = done.stderr.strip()
+    assert done.returncode == 2, said
+    assert 'Traceback' not in said
+    return said
+
+
 # -- the folder itself ----------------------------------------------------------------------------
 def test_a_result_is_written_beside_its_folder_and_renamed_there_when_complete(tmp_path):
     out = tmp_path / 'deep' / 'result'
@@ -293,16 +310,9 @@ def test_a_full_disk_while_writing_a_figure_is_one_line_and_leaves_nothing(
     small_run, bags, tmp_path
 ):
     out = tmp_path / 'eval'
-    done = subprocess.run(
-        [sys.executable, '-c', LIMITED, str(FIGURE_LIMIT_BYTES), '-m', 'id_learning.cli',
-         'evaluate', '--run', str(small_run.out), '--bag', str(bags[1]), '--out', str(out),
-         '--quiet'],
-        capture_output=True, text=True, cwd=REPO, timeout=300,
-        env={**os.environ, 'PYTHONDONTWRITEBYTECODE': '1'}, check=False,
-    )  # fmt: skip
-    said = done.stderr.strip()
-    assert done.returncode == 2, said
-    assert 'Traceback' not in said
+    said = _refused_on_a_full_disk(
+        FIGURE_LIMIT_BYTES, 'evaluate', '--run', small_run.out, '--bag', bags[1], '--out', out
+    )
     lines = [line for line in said.splitlines() if 'error' in line]
     assert len(lines) == 1, said
     assert 'File too large' in lines[0]
@@ -313,3 +323,16 @@ def test_a_full_disk_while_writing_a_figure_is_one_line_and_leaves_nothing(
 def test_every_entry_a_real_result_lists_is_one_a_partial_may_hold(small_run):
     listed = json.loads((small_run.out / MANIFEST_FILE).read_text())['entries']
     assert set(listed) <= WRITTEN_ENTRIES, set(listed) - WRITTEN_ENTRIES
+
+
+def test_a_full_disk_while_simulating_says_nothing_was_kept(tmp_path):
+    """The staged bag is removed: no 'kept' messages, no bag recover hint, nothing left."""
+    out = tmp_path / 'twin'
+    config = REPO / 'config' / 'twin_default.yaml'
+    said = _refused_on_a_full_disk(
+        2**20, 'simulate', '--config', config, '--out', out, '--duration', 300
+    )
+    assert f'{out}: writing failed: File too large; nothing was written to {out}' in said
+    assert 'kept' not in said
+    assert 'recover' not in said
+    assert list(tmp_path.iterdir()) == []
