@@ -240,7 +240,7 @@ def design_for_identification(
             harmonic at or above Nyquist, a limit violated on the check grid).
     """
     limits, period_s = robot.limits, robot.ipo_period_s
-    home = home_pose(config, limits)
+    home = home_pose(config, limits, robot.joints)
     check_bandwidth(config.base_frequency_hz, config.harmonics, period_s, 'excitation')
     draw = _Drawer(config, robot, home, rng)
     count = config.segment_count

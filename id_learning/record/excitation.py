@@ -15,6 +15,7 @@ short rests between them. Limits are enforced by scaling and then checked on a d
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -262,17 +263,36 @@ def random_segment(
     return FourierSegment(a, b, home + (b / (omega * orders)).sum(axis=1), omega)
 
 
-def home_pose(config: ExcitationConfig, limits: JointLimits) -> np.ndarray:
+def home_pose(
+    config: ExcitationConfig,
+    limits: JointLimits,
+    joints: Sequence[str] | None = None,
+    where: str = 'excitation',
+) -> np.ndarray:
     """The pose every segment starts and ends at: ``config.home``, or mid-range.
 
+    ``joints`` name the limits' joints and ``where`` the config in messages.
+
     Raises:
-        ConfigError: it is not strictly inside the position limits.
+        ConfigError: it is not strictly inside the position limits (names each joint outside,
+            its value and its limits).
     """
     lower, upper = limits.position_lower, limits.position_upper
     home = 0.5 * (lower + upper) if config.home is None else np.asarray(config.home, dtype=float)
-    if home.shape != lower.shape or np.any(home <= lower) or np.any(home >= upper):
+    if home.shape != lower.shape:
+        raise ConfigError(f'{where}.home: {len(home)} values for {len(lower)} joints')
+    outside = np.flatnonzero((home <= lower) | (home >= upper))
+    if outside.size:
+        names = (
+            list(joints) if joints is not None else [f'joint #{j + 1}' for j in range(len(home))]
+        )
+        said = '; '.join(
+            f'{names[j]} {home[j]:g} rad, its limits [{lower[j]:g}, {upper[j]:g}] rad'
+            for j in outside
+        )
         raise ConfigError(
-            f'excitation.home {home.tolist()} must lie strictly inside the position limits'
+            f'{where}.home must lie strictly inside the position limits of the robot config: '
+            f'{said}'
         )
     return home
 

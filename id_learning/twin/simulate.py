@@ -28,7 +28,12 @@ from id_learning.config_io import (
 from id_learning.dataset.recording import Recording
 from id_learning.errors import ConfigError
 from id_learning.physics.rigid_body import RigidBodyDynamics
-from id_learning.record.excitation import ExcitationConfig, ExcitationTrajectory, design_excitation
+from id_learning.record.excitation import (
+    ExcitationConfig,
+    ExcitationTrajectory,
+    design_excitation,
+    home_pose,
+)
 from id_learning.robot.config import RobotConfig, load_robot_config
 from id_learning.robot.drives import (
     current_from_motor_torque,
@@ -191,6 +196,8 @@ def twin_config_from_dict(data: dict[str, Any], base_dir: Path, where: str) -> T
         excitation = ExcitationConfig(**excitation_data)
     except TypeError as err:
         raise ConfigError(f'{where}: excitation: {err}') from err
+    if excitation.home is not None:  # named with the file here, not when simulated
+        home_pose(excitation, robot.limits, robot.joints, f'{where}: excitation')
     m = data.get('measurement') or {}
     check_keys(m, _MEASUREMENT, f'{where}: measurement')
     counts = m.get('encoder_counts_per_motor_turn', 0)

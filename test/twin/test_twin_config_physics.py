@@ -39,8 +39,8 @@ def _config_file(tmp_path: Path, change: dict[str, Any]) -> Path:
     data['robot'] = str(REPO / 'config/mabi_max100.yaml')
     for section, values in change.items():
         for key, value in values.items():
-            if section == 'measurement':
-                data['measurement'][key] = value
+            if section in ('measurement', 'excitation'):
+                data[section][key] = value
             else:
                 data['effects'][section][key] = value
     path = tmp_path / 'twin.yaml'
@@ -65,6 +65,9 @@ def _config_file(tmp_path: Path, change: dict[str, Any]) -> Path:
          r'measurement\.current_noise_std_a: 5 A for joint_1 is more than 10%'),
         ({'inertial_parameter_error': {'mass_rel_std': 5.0}},
          r'effects\.inertial_parameter_error\.mass_rel_std: must be <= 0\.25, got 5: .*42 %'),
+        ({'excitation': {'home': [10.0, 0, 0, 0, -9.0, 0]}},
+         r'excitation\.home must lie strictly inside the position limits of the robot config: '
+         r'joint_1 10 rad, its limits \[-3, 3\] rad; joint_5 -9 rad, its limits'),
     ],
 )  # fmt: skip
 def test_a_value_no_robot_or_sensor_has_is_refused_naming_file_key_and_value(
