@@ -7,19 +7,23 @@ Comparison Towards Efficient Inverse Dynamics Identification", 14th IFAC Symposi
 Its Table 1 (per-axis test RMSE of the seven models on the normalised scale) is not part of
 this package: the table belongs to the paper. ``load_study_table`` reads it from a JSON file the
 user points at (``train --study-table PATH``); the report then places it beside our numbers, and
-says that it is absent otherwise. The file holds ``rmse_normalised`` (model kind -> six values,
-axes 1..6), ``joints``, and optionally ``source``, ``metric``, ``split_note`` and ``findings``.
+says that it is absent otherwise. The file is a JSON object holding ``joints`` (a list of
+distinct axis names, as many as the robot has joints), ``rmse_normalised`` (an object of model
+kind -> a list of one RMSE per axis, in the order of ``joints``, each a finite number >= 0), and
+optionally ``source``, ``metric`` and ``split_note`` (strings) and ``findings`` (a list of
+strings). Other keys are notes and are not read. A value of another type (a string or a
+boolean where a number belongs, a number where a list belongs) is refused, naming the file, the
+key path (``rmse_normalised.mlp[5]``) and the value.
 """
 
 from __future__ import annotations
 
-import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from id_learning.config_io import read_capped
+from id_learning.config_io import loads_unique, number_hint, range_problem, read_capped, short_json
 from id_learning.errors import ConfigError
-from id_learning.models.metadata_checks import loads_unique
 
 __all__ = [
     'MAX_STUDY_TABLE_BYTES',
@@ -68,11 +72,17 @@ class StudyTable:
 def load_study_table(path: Path | str, n_joints: int | None = None) -> StudyTable:
     """Read the study's Table 1 from JSON (module docstring).
 
+    Every value is checked where it enters: ``joints`` a list of distinct non-empty names,
+    ``rmse_normalised`` an object of model kind -> list of one RMSE per axis, each a finite
+    number >= 0 (not a boolean, not a string), ``source``, ``metric`` and ``split_note`` strings,
+    ``findings`` a list of strings. Other keys (the robot, the labels) are notes and kept out.
+
     Raises:
         ConfigError: the file is missing or unreadable, a device, past
             ``MAX_STUDY_TABLE_BYTES`` (``config_io.read_capped``) or not JSON, a key is
-            given twice or missing, a model row has the wrong number of values or a non-finite
-            one, or the axes do not match ``n_joints``.
+            given twice or missing, a value has the wrong type, a model row has the wrong number
+            of values or one that is no finite non-negative number, or the axes do not match
+            ``n_joints``; the message names the file, the key and the value.
     """
     path = Path(path)
     text = read_capped(path, 'study table', MAX_STUDY_TABLE_BYTES)
@@ -80,36 +90,134 @@ def load_study_table(path: Path | str, n_joints: int | None = None) -> StudyTabl
         data = loads_unique(text.decode('utf-8'))
     except ValueError as err:  # not UTF-8, not JSON, a key given twice
         raise ConfigError(f'{path}: cannot read study table: {err}') from err
+    except RecursionError:
+        raise ConfigError(f'{path}: cannot read study table: JSON nested too deeply') from None
     if not isinstance(data, dict):
-        raise ConfigError(f'{path}: the study table must be a JSON object')
+        raise ConfigError(
+            f'{path}: the study table must be a JSON object, got {_type_name(data)} {_shown(data)}'
+        )
     for key in ('rmse_normalised', 'joints'):
         if key not in data:
             raise ConfigError(f'{path}: the study table lacks {key!r}')
-    joints = tuple(str(j) for j in data['joints'])
+    joints = _joints(path, data['joints'])
     if n_joints is not None and len(joints) != n_joints:
         raise ConfigError(
-            f'{path}: the study table has {len(joints)} axes, the robot {n_joints} joints'
+            f'{path}: joints: the study table has {len(joints)} axes, the robot {n_joints} joints'
         )
-    rows: dict[str, tuple[float, ...]] = {}
-    for kind, values in dict(data['rmse_normalised']).items():
-        try:
-            row = tuple(float(x) for x in values)
-        except (TypeError, ValueError) as err:
-            raise ConfigError(f'{path}: rmse_normalised.{kind}: {err}') from err
-        if len(row) != len(joints) or not all(math.isfinite(x) for x in row):
-            raise ConfigError(
-                f'{path}: rmse_normalised.{kind} needs {len(joints)} finite values, got {values}'
-            )
-        rows[str(kind)] = row
     return StudyTable(
         path=path,
-        rmse_normalised=rows,
+        rmse_normalised=_rows(path, data['rmse_normalised'], len(joints)),
         joints=joints,
-        source=str(data.get('source', '')),
-        metric=str(data.get('metric', '')),
-        split_note=str(data.get('split_note', '')),
-        findings=tuple(str(f) for f in data.get('findings', ())),
+        source=_text(path, data, 'source'),
+        metric=_text(path, data, 'metric'),
+        split_note=_text(path, data, 'split_note'),
+        findings=_findings(path, data.get('findings', [])),
     )
+
+
+def _type_name(value: object) -> str:
+    """A JSON value's kind in JSON's words (an object, a list, ...), for messages."""
+    if value is None:
+        return 'null'
+    if isinstance(value, bool):
+        return 'a boolean'
+    if isinstance(value, (int, float)):
+        return 'a number'
+    if isinstance(value, str):
+        return 'a string'
+    if isinstance(value, list):
+        return 'a list'
+    return 'an object'
+
+
+def _shown(value: object) -> str:
+    """``value`` as short JSON for a message (never the whole of a large value)."""
+    try:
+        return short_json(value)
+    except (ValueError, RecursionError):  # cannot happen for what json.loads returned
+        return _type_name(value)
+
+
+#: A key written as is in a key path (``rmse_normalised.rnea_mlp``); any other is quoted.
+_PLAIN_KEY = re.compile(r'[A-Za-z0-9_+\-]+')
+
+
+def _key(name: str) -> str:
+    """A key for a dotted key path: as is when a plain word, else quoted."""
+    return name if _PLAIN_KEY.fullmatch(name) else repr(name)
+
+
+def _joints(path: Path, value: object) -> tuple[str, ...]:
+    """``joints``: a list of distinct non-empty names, at least one."""
+    if not isinstance(value, list) or not value:
+        raise ConfigError(
+            f'{path}: joints: must be a non-empty list of axis names, got {_type_name(value)} '
+            f'{_shown(value)}'
+        )
+    for k, name in enumerate(value):
+        if not isinstance(name, str) or not name.strip():
+            raise ConfigError(
+                f'{path}: joints[{k}]: must be a non-empty name (a string), got '
+                f'{_type_name(name)} {_shown(name)}'
+            )
+    twice = sorted({name for name in value if value.count(name) > 1})
+    if twice:
+        raise ConfigError(f'{path}: joints: {twice} given more than once; name each axis once')
+    return tuple(value)
+
+
+def _rows(path: Path, value: object, n_axes: int) -> dict[str, tuple[float, ...]]:
+    """``rmse_normalised``: model kind -> one finite RMSE >= 0 per axis."""
+    if not isinstance(value, dict) or not value:
+        raise ConfigError(
+            f'{path}: rmse_normalised: must be a non-empty object of model kind -> list of '
+            f'{n_axes} RMSE values (one per axis), got {_type_name(value)} {_shown(value)}'
+        )
+    rows: dict[str, tuple[float, ...]] = {}
+    for kind, values in value.items():
+        where = f'{path}: rmse_normalised.{_key(kind)}'
+        if not kind.strip():
+            raise ConfigError(
+                f'{path}: rmse_normalised: a model kind must be a name, got {kind!r}'
+            )
+        if not isinstance(values, list) or len(values) != n_axes:
+            raise ConfigError(
+                f'{where}: needs {n_axes} finite values >= 0 in a list (one RMSE per axis), got '
+                f'{_type_name(values)} {_shown(values)}'
+            )
+        row = []
+        for k, x in enumerate(values):
+            problem = range_problem(x, low=0.0)
+            if problem:
+                raise ConfigError(f'{where}[{k}]: {problem}, got {_shown(x)}{number_hint(x)}')
+            row.append(float(x))
+        rows[kind] = tuple(row)
+    return rows
+
+
+def _text(path: Path, data: dict[str, object], key: str) -> str:
+    """An optional note (``source``, ``metric``, ``split_note``): a string, '' when absent."""
+    value = data.get(key, '')
+    if not isinstance(value, str):
+        raise ConfigError(
+            f'{path}: {key}: must be a string, got {_type_name(value)} {_shown(value)}'
+        )
+    return value
+
+
+def _findings(path: Path, value: object) -> tuple[str, ...]:
+    """``findings``: a list of sentences (strings)."""
+    if not isinstance(value, list):
+        raise ConfigError(
+            f'{path}: findings: must be a list of sentences (strings), got {_type_name(value)} '
+            f'{_shown(value)}'
+        )
+    for k, item in enumerate(value):
+        if not isinstance(item, str):
+            raise ConfigError(
+                f'{path}: findings[{k}]: must be a string, got {_type_name(item)} {_shown(item)}'
+            )
+    return tuple(value)
 
 
 #: The model names as the study writes them.

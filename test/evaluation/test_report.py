@@ -279,6 +279,9 @@ def test_the_overlay_window_is_where_all_joints_move_most():
     assert stretches_of(rows) == [(0, 1000), (1000, 2500)]
 
 
+AXES = [f'axis_{k}' for k in range(1, 7)]
+
+
 def write_table(path, rows, joints=None, **extra):
     joints = joints or [f'axis_{k}' for k in range(1, 7)]
     path.write_text(json.dumps({'joints': joints, 'rmse_normalised': rows, **extra}))
@@ -343,14 +346,14 @@ def test_the_studys_findings_are_also_decided_on_the_studys_own_numbers(report_i
 @pytest.mark.parametrize(
     ('content', 'message'),
     [
-        ({'joints': ['a'] * 6}, "lacks 'rmse_normalised'"),
-        ({'joints': ['a'] * 6, 'rmse_normalised': {'mlp': [0.1] * 5}}, 'needs 6 finite values'),
+        ({'joints': AXES}, "lacks 'rmse_normalised'"),
+        ({'joints': AXES, 'rmse_normalised': {'mlp': [0.1] * 5}}, 'needs 6 finite values'),
         (
-            {'joints': ['a'] * 6, 'rmse_normalised': {'mlp': [0.1] * 5 + ['x']}},
+            {'joints': AXES, 'rmse_normalised': {'mlp': [0.1] * 5 + ['x']}},
             'rmse_normalised.mlp',
         ),
-        ({'joints': ['a'] * 6, 'rmse_normalised': {'mlp': [0.1] * 5 + [float('nan')]}}, 'finite'),
-        ({'joints': ['a'] * 7, 'rmse_normalised': {}}, '7 axes, the robot 6 joints'),
+        ({'joints': AXES, 'rmse_normalised': {'mlp': [0.1] * 5 + [float('nan')]}}, 'finite'),
+        ({'joints': [*AXES, 'axis_7'], 'rmse_normalised': {}}, '7 axes, the robot 6 joints'),
         ([1, 2], 'must be a JSON object'),
     ],
 )
