@@ -5,13 +5,23 @@ delimiter and the header row are detected unless the mapping names them. A gzip-
 (``.csv.gz``) is read as its decompressed text. The file's first bytes are checked against the
 format it is read as, so that an NPZ read as CSV (or the other way round) is named as such
 rather than failing to decode.
+
+Nothing is allocated on a file's word alone: each NPZ array's header (its shape and dtype) is
+read from the archive before the array, and an array is refused, naming the file, the array and
+its claimed shape, when its header cannot be parsed, when it claims more bytes than the archive
+stores of it (a corrupt or crafted header), or when the arrays together would take more than
+``MEMORY_SHARE`` of the memory available (a compressed archive can expand to far more than its
+size). A gzip-compressed CSV is decompressed up to that share of the memory too, and refused
+beyond it.
 """
 
 from __future__ import annotations
 
 import csv
 import gzip
+import io
 import logging
+import math
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -23,8 +33,9 @@ import numpy as np
 
 from id_learning.dataset.import_mapping import ImportMapping
 from id_learning.errors import ConfigError, DatasetError
+from id_learning.memory import available_memory_bytes
 
-__all__ = ['LogTable', 'is_float', 'log_suffix', 'read_table']
+__all__ = ['MEMORY_SHARE', 'LogTable', 'is_float', 'log_suffix', 'read_table']
 
 _LOG = logging.getLogger(__name__)
 
@@ -35,6 +46,13 @@ _CSV_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat', '.log')
 _ZIP_MAGIC = b'PK\x03\x04'
 _GZIP_MAGIC = b'\x1f\x8b'
 _NPY_MAGIC = b'\x93NUM'
+
+#: The share of the memory available that one log file's data may take once read: the arrays of
+#: an NPZ archive (as their headers claim them), the decompressed text of a gzipped CSV. The
+#: import then converts and checks the values, which takes as much again.
+MEMORY_SHARE = 0.5
+#: The decompressed bytes read at a time from a gzipped CSV.
+_GUNZIP_CHUNK = 2**20
 
 
 @dataclass(frozen=True)
@@ -125,13 +143,119 @@ def _read_npz(source: Path, said: str, where: str) -> LogTable:
         )
     try:
         loaded = np.load(source, allow_pickle=False)
-        if not isinstance(loaded, np.lib.npyio.NpzFile):
+        if not isinstance(loaded, np.lib.npyio.NpzFile) or loaded.zip is None:
             raise DatasetError(f'{source}: not an NPZ archive of named arrays')
         with loaded:
-            columns: dict[str | int, np.ndarray] = {key: loaded[key] for key in loaded.files}
-    except (OSError, ValueError, zipfile.BadZipFile) as err:
+            _check_npz_headers(source, loaded.zip, _memory_budget())
+            columns: dict[str | int, np.ndarray] = {
+                key: loaded[key] for key in loaded.files if not key.endswith('/')
+            }
+    except (OSError, ValueError, TypeError, EOFError, zipfile.BadZipFile, zlib.error) as err:
         raise DatasetError(f'{source}: cannot read NPZ file: {err}') from err
+    except MemoryError:  # the headers were checked; the memory went to another process since
+        raise DatasetError(
+            f'{source}: cannot read NPZ file: its arrays do not fit in the memory available'
+        ) from None
     return LogTable(source, columns, None)
+
+
+def _check_npz_headers(source: Path, archive: zipfile.ZipFile, budget: int | None) -> None:
+    """Refuse an NPZ archive whose arrays cannot be read as their headers claim them.
+
+    Only each array's header is read (a few hundred bytes), never its data: the claimed size is
+    checked against what the archive stores of the array and, for all arrays together, against
+    ``budget`` [bytes] (None: not known).
+
+    Raises:
+        DatasetError: a member is no NPY array, or its header is unreadable, claims an object
+            array or more data than stored, or the arrays exceed ``budget``; names the file, the
+            array and, when read, its claimed shape and dtype.
+    """
+    total = 0
+    for info in archive.infolist():
+        if info.is_dir():
+            continue
+        name = info.filename.removesuffix('.npy')
+        shape, dtype, claimed, header_bytes = _npy_header(source, archive, info, name)
+        what = f'{source}: array {name!r} claims shape {shape} of {dtype} ({_size(claimed)})'
+        if dtype.hasobject:
+            raise DatasetError(
+                f'{source}: array {name!r} holds Python objects (dtype {dtype}), which are not '
+                'read (they would be unpickled); save the columns as numbers'
+            )
+        stored = info.file_size - header_bytes
+        if claimed > stored:
+            raise DatasetError(
+                f'{what}, but the archive stores {_size(max(stored, 0))} of its data: the header '
+                'does not fit the data (a corrupt or truncated file); export the log again'
+            )
+        total += claimed
+        if budget is not None and total > budget:
+            raise DatasetError(
+                f'{what}; with the arrays before it, {_size(total)}: more than '
+                f'{MEMORY_SHARE:.0%} of the {_size(int(budget / MEMORY_SHARE))} of memory '
+                'available; split the log into shorter files (a folder of logs is imported in '
+                'name order)'
+            )
+
+
+def _npy_header(
+    source: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, name: str
+) -> tuple[tuple[int, ...], np.dtype, int, int]:
+    """One NPY member's shape, dtype, claimed data size [bytes] and header size [bytes].
+
+    Raises:
+        DatasetError: no NPY magic, an unknown NPY version, or a header numpy cannot parse, or a
+            negative dimension; names the file and the array.
+    """
+    unreadable = f'{source}: array {name!r}: cannot read its NPY header'
+    try:
+        with archive.open(info) as member:
+            magic = member.read(len(np.lib.format.MAGIC_PREFIX))
+            if magic != np.lib.format.MAGIC_PREFIX:
+                raise DatasetError(
+                    f'{source}: {info.filename!r} in the archive is no NPY array (it starts '
+                    f'with {magic[:8]!r}); an NPZ holds arrays saved with numpy.savez'
+                )
+            member.seek(0)
+            version = np.lib.format.read_magic(member)
+            # Version 3.0 differs from 2.0 only in the header's text encoding (UTF-8 for the
+            # field names of a structured dtype); its shape reads the same.
+            read_header = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+                if version in ((2, 0), (3, 0))
+                else None
+            )
+            if read_header is None:
+                raise DatasetError(f'{unreadable}: unknown NPY format version {version}')
+            shape, _, dtype = read_header(member)
+            header_bytes = member.tell()
+    except DatasetError:
+        raise
+    except (ValueError, TypeError, SyntaxError, EOFError, OSError, RecursionError) as err:
+        raise DatasetError(f'{unreadable}: {err}') from err
+    except (zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError) as err:
+        raise DatasetError(f'{unreadable}: {err}') from err
+    shape = tuple(shape)
+    if any(isinstance(n, bool) or n < 0 for n in shape):  # numpy checks for int only
+        raise DatasetError(f'{unreadable}: shape {shape} needs whole numbers >= 0')
+    return shape, dtype, math.prod(shape) * dtype.itemsize, header_bytes
+
+
+def _size(n_bytes: int) -> str:
+    """A byte count for messages: '745 GiB', '16 kB'... ."""
+    for unit, scale in (('GiB', 2**30), ('MiB', 2**20), ('KiB', 2**10)):
+        if n_bytes >= scale:
+            return f'{n_bytes / scale:.3g} {unit}'
+    return f'{n_bytes} bytes'
+
+
+def _memory_budget() -> int | None:
+    """``MEMORY_SHARE`` of the memory available [bytes], or None where it is not known."""
+    available = available_memory_bytes()
+    return None if available is None else int(MEMORY_SHARE * available)
 
 
 def _csv_text(source: Path, said: str, where: str) -> str:
@@ -141,15 +265,20 @@ def _csv_text(source: Path, said: str, where: str) -> str:
         ConfigError: the file is an NPZ (zip) archive (names the format to set).
         DatasetError: unreadable, a broken gzip stream, or no UTF-8 text.
     """
+    budget = _memory_budget()
     try:
-        data = source.read_bytes()
+        size = source.stat().st_size
+        if budget is not None and size > budget:
+            raise DatasetError(
+                f'{source}: cannot read CSV file: {_size(size)}, more than {MEMORY_SHARE:.0%} of '
+                f'the {_size(int(budget / MEMORY_SHARE))} of memory available; split the log '
+                'into shorter files (a folder of logs is imported in name order)'
+            )
+        data: bytes | bytearray = source.read_bytes()
     except OSError as err:
         raise DatasetError(f'{source}: cannot read CSV file: {err}') from err
     if data.startswith(_GZIP_MAGIC):
-        try:
-            data = gzip.decompress(data)
-        except (OSError, EOFError, zlib.error) as err:
-            raise DatasetError(f'{source}: cannot decompress this gzip file: {err}') from err
+        data = _gunzip(source, data, budget)
     if data.startswith(_ZIP_MAGIC):
         raise ConfigError(
             f'{source}: {said} does not fit this file, which looks like an NPZ (zip) archive (it '
@@ -159,6 +288,29 @@ def _csv_text(source: Path, said: str, where: str) -> str:
         return data.decode('utf-8-sig')
     except UnicodeDecodeError as err:
         raise DatasetError(f'{source}: cannot read CSV file: not UTF-8 text ({err})') from err
+
+
+def _gunzip(source: Path, data: bytes | bytearray, budget: int | None) -> bytearray:
+    """A gzip file's content, read in chunks and refused past ``budget`` [bytes] (a gzip bomb).
+
+    Raises:
+        DatasetError: a broken gzip stream, or more than ``budget`` bytes once decompressed.
+    """
+    out = bytearray()
+    try:
+        with gzip.GzipFile(fileobj=io.BytesIO(data)) as stream:
+            while chunk := stream.read(_GUNZIP_CHUNK):
+                out += chunk
+                if budget is not None and len(out) > budget:
+                    raise DatasetError(
+                        f'{source}: this gzip file decompresses to more than {_size(budget)} '
+                        f'({MEMORY_SHARE:.0%} of the {_size(int(budget / MEMORY_SHARE))} of '
+                        'memory available); split the log into shorter files (a folder of logs '
+                        'is imported in name order)'
+                    )
+    except (OSError, EOFError, zlib.error) as err:
+        raise DatasetError(f'{source}: cannot decompress this gzip file: {err}') from err
+    return out
 
 
 def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:

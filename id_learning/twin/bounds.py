@@ -14,14 +14,13 @@ robot's drawn link masses must stay positive (``check_drawn_masses``).
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from id_learning.config_io import finite_number
 from id_learning.errors import ConfigError
+from id_learning.memory import available_memory_bytes
 from id_learning.record.excitation import ExcitationConfig, check_bandwidth
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import amperes_per_newton_metre
@@ -55,20 +54,6 @@ MAX_RESOLUTION_SHARE = 0.01
 #: the twin exists to simulate are a few % of the torque limit, and a noise above 10 % of it
 #: hides them in every sample (real drives: well under 1 %).
 MAX_NOISE_SHARE = 0.1
-
-
-def available_memory_bytes() -> int | None:
-    """The memory available to a new allocation [bytes] (Linux MemAvailable), or None."""
-    try:
-        for line in Path('/proc/meminfo').read_text(encoding='ascii').splitlines():
-            if line.startswith('MemAvailable:'):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf('SC_AVPHYS_PAGES') * os.sysconf('SC_PAGE_SIZE')
-    except (AttributeError, OSError, ValueError):
-        return None
 
 
 def check_duration(
