@@ -9,10 +9,12 @@ whole: its compressed bytes are decompressed as a stream as far as they go (zstd
 and every record complete within them is kept (the chunk's CRC cannot be checked; each record's
 length is). The stop reason names the chunk (its offset and compression).
 
-Nothing readable is ever lost: a result with no message while the files hold bytes past their
-header is refused (nothing is written, in place or to ``out``); and when the scan stopped at data
-it could not decode (a damaged chunk, a compression it cannot stream), in place the originals are
-kept as ``<file>.damaged`` whatever ``keep_damaged`` says, since a better reader may get more.
+Nothing readable is ever lost, and nothing is called recovered that holds no message: a result
+with no message is refused (nothing is written, in place or to ``out``), naming each file, its
+size and why no message could be read from it (an empty file, a cut inside the header); and when
+the scan stopped at data it could not decode (a damaged chunk, a compression it cannot stream),
+in place the originals are kept as ``<file>.damaged`` whatever ``keep_damaged`` says, since a
+better reader may get more.
 
 Safety: the rebuilt bag is written to a hidden sibling folder and read back (per-topic counts must
 match the scan) before anything of the original is touched. In place, the damaged files are then
@@ -370,18 +372,18 @@ def recover_bag(
 
 
 def _refuse_empty(path: Path, target: Path | None, scans: list[FileScan]) -> None:
-    """Refuse a result with no message: into ``target`` always, in place when bytes are lost.
+    """Refuse a result with no message, in place and into ``target`` alike.
 
-    An empty bag into a new folder says nothing the scan did not; in place it would replace
-    files whose bytes past the header might hold messages a better reader gets back.
+    An empty bag recovers nothing: into a new folder it says nothing the scan did not, in place
+    it would replace files whose bytes past the header might hold messages a better reader gets
+    back, and from files that hold nothing (a 0-byte ``.mcap``) it would be reported as a
+    recovered recording that every later command then finds without its topics.
 
     Raises:
         BagError: no message recovered (each file's size and why its scan stopped).
     """
     if any(scan.messages for scan in scans):
         return
-    if target is None and not any(scan.bytes_discarded for scan in scans):
-        return  # nothing there to lose (empty files): an empty valid bag is what they hold
     where = f'nothing written to {target}' if target is not None else 'nothing replaced'
     files = '; '.join(
         f'{scan.name} ({scan.size_bytes} bytes): {scan.stop_reason or "no message"}'

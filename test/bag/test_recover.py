@@ -148,19 +148,38 @@ def test_a_chunk_torn_by_the_cut_keeps_its_complete_messages(tmp_path: Path) -> 
     assert 'messages kept from its complete part' in (scan.stop_reason or '')
 
 
-def test_zero_byte_file_recovers_to_an_empty_valid_bag(
+def test_a_zero_byte_file_is_refused_and_nothing_is_written(
+    intact_bag: tuple[Path, Messages], tmp_path: Path
+) -> None:
+    """Probe RC6: a recording with no message is no recovered bag, in place or into --out."""
+    bag = tmp_path / 'bag'
+    assert torn_copy(intact_bag[0], bag, 0.0) == 0
+    before = sorted(p.name for p in bag.iterdir())
+
+    with pytest.raises(BagError) as err:
+        recover_bag(bag)
+    assert str(err.value) == (
+        f'{bag}: no complete message could be read (bag_0.mcap (0 bytes): empty file); nothing '
+        'replaced, the original is left as it is'
+    )
+    assert sorted(p.name for p in bag.iterdir()) == before
+    assert not (bag / 'metadata.yaml').exists()
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith('.')) == []
+
+
+def test_an_empty_file_beside_its_metadata_is_refused_and_left_as_it_is(
     intact_bag: tuple[Path, Messages], tmp_path: Path
 ) -> None:
     bag = tmp_path / 'bag'
-    assert torn_copy(intact_bag[0], bag, 0.0) == 0
+    shutil.copytree(intact_bag[0], bag)
+    mcap_file(bag).write_bytes(b'')
+    before = {p.name: p.read_bytes() for p in bag.iterdir()}
 
-    report = recover_bag(bag)
-
-    assert report.messages == 0
-    assert report.bytes_discarded == 0
-    assert report.files[0].stop_reason == 'empty file'
-    assert (bag / 'metadata.yaml').is_file()
-    assert list(iter_raw(bag, [])) == []
+    for out in (None, tmp_path / 'out'):
+        with pytest.raises(BagError, match=r'bag_0\.mcap \(0 bytes\): empty file\); nothing'):
+            recover_bag(bag, out)
+    assert {p.name: p.read_bytes() for p in bag.iterdir()} == before
+    assert not (tmp_path / 'out').exists()
 
 
 def test_complete_file_without_metadata_recovers_every_message(
