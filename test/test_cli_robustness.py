@@ -186,3 +186,20 @@ def test_an_empty_path_is_refused_naming_it_before_any_work(
     assert exited.value.code == 2
     assert f'error: {named}: an empty path; name the file or folder' in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    'argv',
+    [
+        ['train', '--bag', 'b', '--out', 'o', '--max-seconds-per-model', '1e-9'],
+        ['demo', '--bag', 'b', '--out', 'o', '--train-seconds', '1e-9'],
+        ['sweep', '--bag', 'b', '--out', 'o', '--kind', 'mlp', '--max-seconds-per-trial', '1e-9'],
+    ],
+)
+def test_a_fit_budget_below_what_a_fit_takes_names_the_option_given(argv, capsys):
+    """The option's own range is the fit's: not refused later as a hyper-parameter."""
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    said = capsys.readouterr().err
+    assert f'argument {argv[-2]}: must be a finite number in [0.001, 10000000], got 1e-9' in said

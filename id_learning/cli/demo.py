@@ -287,7 +287,7 @@ def add_demo_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     )
     p.add_argument(
         '--train-seconds',
-        type=options.positive_float,
+        type=options.fit_seconds,
         help=f'wall-clock budget per model fit [s] (default {DEMO_SECONDS_PER_MODEL:g}); the '
         f'identification and the diagnosis get at least {DEMO_PHYSICS_SECONDS:g} s',
     )

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from id_learning.cli.paths import default_robot_config
 from id_learning.errors import ConfigError
+from id_learning.models.hyper_schema import HYPER_RANGES
 
 if TYPE_CHECKING:
     from id_learning.evaluation.study import StudyTable
@@ -30,6 +31,7 @@ __all__ = [
     'effect_names',
     'empty_paths',
     'finite',
+    'fit_seconds',
     'hyper_parameters',
     'integer',
     'load_robot',
@@ -189,6 +191,8 @@ def integer(low: int | None = None, high: int | None = None) -> Callable[[str], 
 
 #: An argparse type: a finite float > 0 (a budget, a duration).
 positive_float = finite(0.0, low_open=True)
+#: An argparse type: a fit's wall-clock budget [s], in the range its ``max_seconds`` takes.
+fit_seconds = finite(*HYPER_RANGES['max_seconds'])
 #: An argparse type: a seed of numpy's and Optuna's generators.
 seed = integer(0, SEED_MAX)
 

@@ -91,7 +91,7 @@ def add_sweep_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument('--out', required=True, help='folder for best.yaml, plots and the SQLite db')
     p.add_argument(
         '--max-seconds-per-trial',
-        type=options.positive_float,
+        type=options.fit_seconds,
         help='wall-clock budget of each network fit [s]',
     )
     p.add_argument('--seed', type=options.seed, help="the sampler's seed (default: random)")

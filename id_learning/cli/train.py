@@ -224,7 +224,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         '--max-seconds-per-model',
-        type=options.positive_float,
+        type=options.fit_seconds,
         help='wall-clock budget per model fit [s], the identification and the diagnosis of '
         'the training part included; a fit cut short says so in the report (default: none, '
         'early stopping decides)',
