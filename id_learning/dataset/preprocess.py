@@ -204,11 +204,20 @@ def regularise(
     and listed in the report.
 
     Raises:
-        DatasetError: a stamp is further from the grid than the tolerance, or two share a slot.
+        DatasetError: the log is sampled at another period than ``period_s`` (the robot
+            config's; ``content.sampling_problem`` names both), a stamp is further from the grid
+            than the tolerance, or two share a slot.
     """
     period_ns = period_s * 1e9
     slots, jitter = grid_slots(recording.stamps_ns, period_ns, recording.stamps_ns[0])
     if (jitter > jitter_tolerance * period_ns).any():
+        from id_learning.dataset.content import sampling_problem  # content imports this module
+
+        steps = np.diff(recording.stamps_ns)
+        own = float(np.median(steps[steps > 0])) if (steps > 0).any() else period_ns
+        line = sampling_problem(recording.stamps_ns, period_s, str(recording.source))
+        if line is not None and abs(own / period_ns - 1.0) > jitter_tolerance:
+            raise DatasetError(line)  # the whole log is at another period, not one sample off
         sample = int(np.argmax(jitter > jitter_tolerance * period_ns))
         raise DatasetError(
             f'{recording.source}: sample {sample} '

@@ -86,3 +86,16 @@ def test_inspect_reports_a_4_ms_bag_against_the_8_ms_robot(mabi, tmp_path: Path)
     assert not any('sampled every' in p for p in inspect_bag(bag).problems)  # no robot, no IPO
     clean = write_recording(sine_recording(1500), tmp_path / 'ipo8')
     assert not any('sampled every' in p for p in inspect_bag(clean, robot=mabi).problems)
+
+
+def test_a_robot_config_at_twice_the_log_s_period_is_named_not_the_log() -> None:
+    """An 8 ms log with a 16 ms robot config: both periods and the config named as the remedy."""
+    stamps = uniform(8.0)
+    recording = replace(sine_recording(len(stamps)), stamps_ns=stamps, source='base')
+    with pytest.raises(DatasetError) as err:
+        regularise(recording, 0.016)
+    said = str(err.value)
+    assert said.startswith("base: sampled every 8 ms (median stamp step), the robot's IPO period")
+    assert 'is 16 ms' in said
+    assert 'give the robot config whose ipo_period_s it has' in said
+    assert 'resample the log first' not in said
