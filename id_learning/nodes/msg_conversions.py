@@ -104,11 +104,16 @@ def joint_state_to_sample(msg: JointState) -> ReferenceSample:
 def trajectory_to_sample(msg: JointTrajectory) -> ReferenceSample:
     """The first point of a JointTrajectory; empty accelerations mean 'estimate them'.
 
-    A message without points gives empty arrays, which the core rejects as a shape error.
+    A message without points gives empty arrays and says so (``lacks``): the core rejects it as a
+    shape error naming that.
     """
     if not msg.points:
         return ReferenceSample(
-            time_to_ns(msg.header.stamp), tuple(msg.joint_names), _EMPTY, _EMPTY
+            time_to_ns(msg.header.stamp),
+            tuple(msg.joint_names),
+            _EMPTY,
+            _EMPTY,
+            lacks='the JointTrajectory has no points',
         )
     point = msg.points[0]
     a = _floats(point.accelerations)

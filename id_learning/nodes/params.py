@@ -337,7 +337,8 @@ class PredictorNodeConfig:
     )
     zero_command_on_stale: bool = param(
         True,
-        'Publish one zero command when the reference goes stale: a forward command controller '
+        'Ramp the command to zero when the reference goes stale (one IPO period of the slew '
+        'limit per cycle) and back at that rate when it resumes: a forward command controller '
         'holds its last command, which would otherwise keep a stale torque.',
     )
     stale_after_cycles: int = param(
@@ -349,8 +350,9 @@ class PredictorNodeConfig:
     )
     max_age_s: float = param(
         0.1,
-        'Reject a sample that arrives later than this, or whose stamp leaps further ahead, '
-        "against the stream's own time base [s] (no shared clock needed); 0 = off.",
+        "Reject a sample that arrives later than this against the stream's own time base "
+        '[s] (no shared clock needed), and one whose stamp leads it by more than one IPO period '
+        '(or this, where shorter); 0 = off.',
         read_only=False,
         low=0.0,
         high=3600.0,

@@ -17,10 +17,13 @@ outputs are clamped to the robot's torque limits (times ``torque_limit_scale``) 
 samples with wrong joints, NaN or Inf, or stamps that do not advance are rejected with an error
 and the node keeps running, and so is a header stamp that is no time (``nanosec`` >= 1e9 or a
 negative ``sec``: ``invalid_stamp``, refused here before the core); inputs outside the training
-range are counted and warned about. When no valid sample has arrived for ``stale_after_cycles``
-IPO cycles the reference is stale: a watchdog says so (throttled), nothing is published, and with
-``command_topic`` one zero command is sent (a forward command controller holds its last command).
-The history is reset when the reference resumes. Said once: a trajectory point whose
+range are counted and warned about; so is a stamp more than one IPO period ahead of the stream's
+time base (``future_stamp``). When no valid sample has arrived for ``stale_after_cycles`` IPO
+cycles the reference is stale: a watchdog says so (throttled), nothing is published on
+``output_topic``, and the command on ``command_topic`` ramps to zero, one IPO period's worth of
+the slew limit per cycle (a forward command controller holds its last command), and back towards
+tau_u at that rate when the reference resumes (``predictor_command``). The history is reset when
+the reference resumes. Said once: a trajectory point whose
 time_from_start is not 0 (taken as the current cycle's; ``points_ahead`` on /diagnostics), several
 publishers on the input (``input_publishers``), torch_threads beyond the CPU cores it may use.
 
@@ -67,7 +70,6 @@ from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from id_learning.errors import ConfigError
@@ -85,7 +87,6 @@ from id_learning.nodes.msg_conversions import (
     serialize_exact,
     time_from_start_ns,
     time_to_ns,
-    torque_command,
     trajectory_message,
     trajectory_to_sample,
 )
@@ -97,6 +98,7 @@ from id_learning.nodes.params import (
     resolve_robot_config,
     validate_change,
 )
+from id_learning.nodes.predictor_command import CommandOutput
 from id_learning.nodes.predictor_report import (
     INPUT_TYPES,
     SHARED_INPUT,
@@ -173,11 +175,11 @@ class Predictor(ShellNode):
             self._tau_u: Publisher = self.create_publisher(
                 JointState, config.output_topic, output_qos
             )
-        self._command: Publisher | None = None
+        self._command: CommandOutput | None = None
         if config.command_topic:
             with endpoint(self, 'command_topic', config.command_topic):
-                self._command = self.create_publisher(
-                    Float64MultiArray, config.command_topic, output_qos
+                self._command = CommandOutput(
+                    self, config.command_topic, output_qos, core, config.zero_command_on_stale
                 )
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         n = len(self.names)
@@ -185,9 +187,6 @@ class Predictor(ShellNode):
             lambda stamp_ns, tau: joint_state_message(stamp_ns, self.names, effort=tau),
             JointState,
             n,
-        )
-        self._command_bytes = SerializedOutput(
-            lambda _, tau: torque_command(tau), Float64MultiArray, n, has_stamp=False
         )
         kind: type = JointTrajectory if config.input_type == 'trajectory' else JointState
         self._convert: Callable[[Any], ReferenceSample] = (
@@ -233,7 +232,7 @@ class Predictor(ShellNode):
             f'{self.core.model.kind} model from {Path(config.artifact).resolve()}: '
             f'{config.input_type} on {self._subscription.topic_name} -> tau_u on '
             f'{self._tau_u.topic_name}'
-            + (f' and {self._command.topic_name}' if self._command else '')
+            + (f' and {self._command.publisher.topic_name}' if self._command else '')
             + f'; input range check: {source}, out of range: {self.core.out_of_range_action}'
             + (
                 f' to the {self.core.fallback.source}'
@@ -257,7 +256,8 @@ class Predictor(ShellNode):
         for _ in range(25):
             self._convert(message)
             self._tau_u_bytes.serialize(0, zeros)
-            self._command_bytes.serialize(0, zeros)
+            if self._command is not None:
+                self._command.warm_up(zeros)
 
     def _on_reference_info(self, msg: Any, info: Any) -> None:
         self._on_reference(msg, info.get('received_timestamp', 0) if isinstance(info, dict) else 0)
@@ -286,7 +286,7 @@ class Predictor(ShellNode):
             tau = result.tau
             self._tau_u.publish(self._tau_u_bytes.serialize(result.stamp_ns, tau))
             if self._command is not None:
-                self._command.publish(self._command_bytes.serialize(0, tau))
+                self._command.send(tau)
             if received_wall_ns:
                 latency_s = (time.time_ns() - received_wall_ns) * 1e-9
             else:  # no middleware timestamp: from the callback's start
@@ -403,8 +403,8 @@ class Predictor(ShellNode):
         became_stale = self.core.check_stale(now)
         if not self.core.is_stale:
             return
-        if became_stale and self._command is not None and self.config.zero_command_on_stale:
-            self._command.publish(self._command_bytes.serialize(0, np.zeros(len(self.names))))
+        if became_stale and self._command is not None:
+            self._command.went_stale()  # the command ramps to zero
         # Once when it goes stale, then at a slow pace: the end of a motion is stale too, and a
         # predictor left running must not fill the log. /diagnostics carries the state.
         period_ns = self.config.stale_log_period_s * 1e9

@@ -24,9 +24,10 @@ class GuardConfig:
             this many periods (receive time), or when consecutive stamps are further apart. A
             stale reference ends the feed-forward (nothing is published); a jump in the stamps
             resets the history (acceleration estimate, LSTM window) for when it resumes.
-        max_age_s: reject a sample that arrives later than this, or whose stamp leaps further
-            ahead, against the stream's time base [s] (``predictor.stamps``: no shared clock
-            needed); 0 turns both checks off (the stamps' order is still checked).
+        max_age_s: reject a sample that arrives later than this against the stream's time base
+            [s], and one whose stamp leads it by more than one IPO period (or this, where
+            shorter) (``predictor.stamps``: no shared clock needed); 0 turns both checks off
+            (the stamps' order is still checked).
         resync_after: rejections for time in a row (order, age, future) after which the next
             sample starts a new time base, with one warning: a sender's clock step never locks
             the stream out.

@@ -3,9 +3,9 @@
 Guards, in the order they run (the first that fails decides):
 
 1. joints, shapes, finite values (``predictor.guards``);
-2. time (``predictor.stamps``): the stamp after the last accepted one, neither later nor further
-   ahead than ``max_age_s`` against the stream's time base; ``resync_after`` such rejections in a
-   row start a new time base (with one warning), so no stamp locks the stream out;
+2. time (``predictor.stamps``): the stamp after the last accepted one, at most ``max_age_s`` late
+   and one IPO period ahead against the stream's time base; ``resync_after`` such rejections in a
+   row start a new time base (one warning; the only place published stamps may step back);
 3. plausible: a state an arm of these limits can be in (``dataset.plausibility.SampleGate``);
 4. consistent: the sample follows from the ones before it, and the last 2 s of velocities
    integrate to the positions' change (``dataset.consistency``); one that does not yields no
@@ -57,7 +57,7 @@ from id_learning.predictor.fallback import (
     is_network,
     physics_fallback,
 )
-from id_learning.predictor.guards import SampleCheck
+from id_learning.predictor.guards import Checked, SampleCheck
 from id_learning.predictor.outcome import PredictorCounters, Reject, StepResult
 from id_learning.predictor.output import OutputStage
 from id_learning.predictor.ranges import TrainingRange, training_range
@@ -126,7 +126,7 @@ class FeedForwardPredictor:
         #: The torque the model predicts ('motor' tau_u or 'joint'), where the artifact says.
         self.target: str | None = None
         self.inference = inference
-        self.config = config or GuardConfig()
+        self.config = config = config or GuardConfig()
         self.joint_names: tuple[str, ...] = tuple(model.joint_names)
         n = len(self.joint_names)
         limit = np.asarray(torque_limit, dtype=float)
@@ -144,7 +144,7 @@ class FeedForwardPredictor:
         self._limits = limits
         self._consistency = self._consistency_stream(self.config)
         self._check = SampleCheck(self.joint_names)
-        self._clock = StampClock(self.config.max_age_s, self.config.resync_after)
+        self._clock = StampClock(config.max_age_s, config.resync_after, config.period_s)
         self.output = self._output_stage(self.config)
         #: Consistent samples since the last inconsistent one, up to rearm_samples (armed at
         #: start and after a hole: there is nothing to doubt the stream yet).
@@ -292,8 +292,7 @@ class FeedForwardPredictor:
             else self._training_range.widened(config.range_margin)
         )
         self._estimator.cutoff_hz = config.acceleration_cutoff_hz
-        self._clock.max_age_ns = round(config.max_age_s * 1e9)
-        self._clock.resync_after = config.resync_after
+        self._clock.configure(config.max_age_s, config.resync_after, config.period_s)
         last = self.output.last
         self.output = self._output_stage(config)
         self.output.last = last
@@ -384,19 +383,26 @@ class FeedForwardPredictor:
         now_ns = receive_ns if clock_ns is None else clock_ns
         clock = self._clock
         refused = clock.judge(sample.stamp_ns, now_ns)
-        resynced = refused is not None and clock.should_resync()
-        if refused is not None and not resynced:
+        if refused is not None and not clock.should_resync():
             return self._reject(sample, *refused)
         if self._gate is not None:
             violation = self._gate.violation(q, v, given_a)
             if violation is not None:
                 return self._reject(sample, Reject.IMPOSSIBLE, violation)
-        if resynced:
-            assert refused is not None
-            self.reset()
-            clock.resync(sample.stamp_ns, now_ns)
-            counters.resyncs += 1
-            self._armed = 0  # nothing to compare the first sample of a new time base with
+        if refused is None:
+            return self._taken(sample, receive_ns, (q, v, given_a), now_ns)
+        self.reset()  # resynchronised: a new time base, and what the old one refused is said
+        clock.resync(sample.stamp_ns, now_ns)
+        counters.resyncs += 1
+        self._armed = 0  # nothing to compare the first sample of a new time base with
+        result = self._taken(sample, receive_ns, (q, v, given_a), now_ns)
+        return replace(result, resynced=True, detail=f'{refused[1]}; {result.detail or "served"}')
+
+    def _taken(
+        self, sample: ReferenceSample, receive_ns: int, checked: Checked, now_ns: int
+    ) -> StepResult:
+        """The rest of the step for a sample the time base takes: consistency, model, output."""
+        q, v, given_a = checked
         resumed = self._follow(sample.stamp_ns, receive_ns, now_ns)
         stream = self._consistency
         if stream is not None:
@@ -415,10 +421,7 @@ class FeedForwardPredictor:
             return self._held(sample, receive_ns, Reject.REARMING,
                               f'consistent sample {self._armed} of {self.config.rearm_samples} '
                               'before the model serves again')  # fmt: skip
-        result = self._serve(sample, receive_ns, (q, v, a), resumed=resumed, resynced=resynced)
-        if resynced and refused is not None:  # say what the old time base refused
-            return replace(result, detail=f'{refused[1]}; {result.detail or "served"}')
-        return result
+        return self._serve(sample, receive_ns, (q, v, a), resumed=resumed)
 
     def _follow(self, stamp_ns: int, receive_ns: int, now_ns: int) -> bool:
         """Take an accepted sample into the time base; whether it ends a stale episode.
@@ -477,7 +480,6 @@ class FeedForwardPredictor:
         state: tuple[np.ndarray, np.ndarray, np.ndarray],
         *,
         resumed: bool,
-        resynced: bool,
     ) -> StepResult:
         """The model's torque for a sample that passed every gate, clamped and slew-limited."""
         counters = self.counters
@@ -518,7 +520,6 @@ class FeedForwardPredictor:
             detail=detail,
             is_clamped=is_clamped,
             is_slew_limited=is_slewed,
-            resynced=resynced,
             is_out_of_range=out_of_range,
             resumed_after_stale=resumed,
             physics_share=share,

@@ -48,6 +48,8 @@ class SampleCheck:
 
     def __call__(self, sample: ReferenceSample) -> Checked | tuple[Reject, str]:
         """(q, v, a) in the model's order, or (why, what) the sample is refused."""
+        if sample.lacks is not None:
+            return Reject.SHAPE, f'{sample.lacks}: no joint values to predict from'
         names = tuple(sample.names)
         if len(names) != self._n:
             return Reject.JOINT_COUNT, (

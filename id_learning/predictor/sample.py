@@ -19,6 +19,9 @@ class ReferenceSample:
         q: (m,) positions [rad].
         v: (m,) velocities [rad/s].
         a: (m,) accelerations [rad/s^2], or None to estimate them causally.
+        lacks: what the message lacked that the sample would be made of, in words (e.g. 'the
+            JointTrajectory has no points'), or None; the core refuses such a sample as a shape
+            error naming it.
     """
 
     stamp_ns: int
@@ -26,3 +29,4 @@ class ReferenceSample:
     q: np.ndarray
     v: np.ndarray
     a: np.ndarray | None = None
+    lacks: str | None = None

@@ -10,11 +10,23 @@ so a sample's lateness ``receive - stamp - offset`` is how much longer than the 
 it took, whatever the clocks' difference (no shared time base needed). ``DRIFT`` lets the offset
 grow by up to the stamps' own advance: a sender whose stamps run at half this clock's rate or
 faster (a replay at ``rate`` 0.5) is followed, while a delivery that stalls by more than
-``max_age_s`` beyond that is caught. With ``max_age_s`` > 0, such a sample is too old and one whose
-stamp leaps more than ``max_age_s`` ahead of the time base is a future stamp (a slower sender
-needs ``max_age_s`` 0); any sample not after the last accepted is out of order. A time base that no
-longer holds (the sender's clock stepped, a replay restarted) never locks the stream out: after
-``resync_after`` such rejections in a row the next sample starts a new time base.
+``max_age_s`` beyond that is caught. With ``max_age_s`` > 0, such a sample is too old, and one
+whose stamp leads the time base by more than the future tolerance, one IPO period (or
+``max_age_s`` where that is shorter), is a future stamp (a slower sender needs ``max_age_s`` 0,
+which turns both checks off); any sample not after the last accepted is out of order.
+
+Why one period: a stream whose stamps advance by one period per sample leads the sample before
+it by the period less the time between their arrivals, so under one period whatever the
+delivery (floods included, each arrival after the one before), and the time base is the
+quickest delivery seen, which a sample can lead only by less. A sample accepted with a lead
+under one period is stamped before the next valid one: no valid sample is refused as out of
+order after it, and the published stamps keep increasing. A longer lead (the sample stamped
+50 ms ahead) would be taken as the newest stamp, so that the valid samples after it were refused
+as out of order until a resync, the outputs' stamps stepping back there.
+
+A time base that no longer holds (the sender's clock stepped, a replay restarted) never locks the
+stream out: after ``resync_after`` such rejections in a row the next sample starts a new time
+base. Only there may the stamps of what is published step back (the warning says so).
 
 Gaps: the IPO cycles between consecutive stamps seen (refused samples are seen) are counted,
 whatever happens between them (rejections, resyncs, history resets, stale periods), so that every
@@ -30,7 +42,7 @@ from __future__ import annotations
 
 from id_learning.predictor.outcome import Reject
 
-__all__ = ['DRIFT', 'MAX_LEAP_S', 'StampClock']
+__all__ = ['DRIFT', 'MAX_LEAP_S', 'StampClock', 'future_tolerance_ns']
 
 #: How fast the offset may grow between a sender's clock and ours (share of the stamps' advance).
 DRIFT = 1.0
@@ -39,18 +51,29 @@ DRIFT = 1.0
 MAX_LEAP_S = 1.0
 
 
+def future_tolerance_ns(max_age_s: float, period_s: float) -> int:
+    """The furthest a stamp may lead its time base [ns]; 0: no check (``max_age_s`` 0).
+
+    One IPO period, or ``max_age_s`` where that is shorter.
+    """
+    return round(min(max_age_s, period_s) * 1e9) if max_age_s > 0 else 0
+
+
 class StampClock:
     """The time base of one reference stream.
 
     Args:
-        max_age_s: the largest lateness, and the largest leap ahead, accepted [s]; 0: neither
-            is checked (the order still is).
+        max_age_s: the largest lateness accepted [s]; 0: neither lateness nor leads are checked
+            (the order still is).
         resync_after: rejections for time in a row after which a sample starts a new time base.
+        period_s: the IPO period [s]: the largest lead accepted (``future_tolerance_ns``).
     """
 
-    def __init__(self, max_age_s: float, resync_after: int) -> None:
-        self.max_age_ns = round(max_age_s * 1e9)
+    def __init__(self, max_age_s: float, resync_after: int, period_s: float) -> None:
+        self.max_age_ns = 0
+        self.future_ns = 0
         self.resync_after = resync_after
+        self.configure(max_age_s, resync_after, period_s)
         self.offset_ns: int | None = None
         self.last_stamp_ns: int | None = None
         #: Rejections for time since the last accepted sample.
@@ -62,6 +85,12 @@ class StampClock:
         #: The hole the last stamp passed to ``skipped`` ends: (stamp, its cycles, the newest
         #: stamp before it); ``judge`` counts it or, for a leap of the clock, not.
         self._hole: tuple[int, int, int] | None = None
+
+    def configure(self, max_age_s: float, resync_after: int, period_s: float) -> None:
+        """New limits for the samples to come (the time base is kept)."""
+        self.max_age_ns = round(max_age_s * 1e9)
+        self.future_ns = future_tolerance_ns(max_age_s, period_s)
+        self.resync_after = resync_after
 
     def skipped(self, stamp_ns: int, stale_after_ns: int, period_s: float) -> int:
         """IPO cycles skipped since the newest stamp seen (refused samples are seen).
@@ -104,10 +133,12 @@ class StampClock:
                     f'stamp arrived {late_ns * 1e-6:.1f} ms later than its time base says '
                     f'(max_age_s {self.max_age_ns * 1e-9:g} s)'
                 )
-            if late_ns < -self.max_age_ns:
+            if late_ns < -self.future_ns:
+                allowed = 'max_age_s' if self.future_ns == self.max_age_ns else 'one IPO period'
                 return Reject.FUTURE_STAMP, (
-                    f'stamp is {-late_ns * 1e-6:.1f} ms ahead of its time base '
-                    f'(max_age_s {self.max_age_ns * 1e-9:g} s)'
+                    f'stamp is {-late_ns * 1e-6:.1f} ms ahead of its time base (the quickest '
+                    f'delivery so far), more than the {self.future_ns * 1e-6:g} ms allowed '
+                    f'({allowed})'
                 )
         last = self.last_stamp_ns
         if last is not None and stamp_ns <= last:

@@ -372,11 +372,12 @@ def test_late_samples_with_contiguous_stamps_keep_the_lstm_window(tiny_artifacts
 def test_a_gap_in_the_stamps_resets_the_lstm_window_as_a_new_run(tiny_artifacts, mabi):
     stamps, q, v, a = reference_run(50)
     predictor = FeedForwardPredictor.from_artifact(tiny_artifacts['lstm'], mabi)
-    gap_ns = 10 * PERIOD_NS
+    gap_ns = 10 * PERIOD_NS  # the sender paused: its stamps and their arrival leap together
     outputs = []
     for k in range(50):
-        stamp = int(stamps[k]) + (gap_ns if k >= 25 else 0)
-        result = predictor.step(ReferenceSample(stamp, JOINTS, q[k], v[k], a[k]), receive(k))
+        gap = gap_ns if k >= 25 else 0
+        sample_k = ReferenceSample(int(stamps[k]) + gap, JOINTS, q[k], v[k], a[k])
+        result = predictor.step(sample_k, receive(k) + gap)
         outputs.append(result.tau)
     assert predictor.counters.history_resets == 1
     assert predictor.counters.stale_episodes == 1
@@ -498,6 +499,15 @@ def test_guard_config_rejects_bad_values_naming_the_key(overrides, key):
         ({'q': np.zeros((6, 1))}, 'q has shape (6, 1), expected (6,)'),
         ({'v': np.zeros(6, dtype=complex)}, 'v holds complex128 values, expected real numbers'),
         ({'a': np.array(['0'] * 6)}, 'a holds <U1 values'),
+        (  # a JointTrajectory without points (msg_conversions says so)
+            {
+                'q': np.empty(0),
+                'v': np.empty(0),
+                'a': None,
+                'lacks': 'the JointTrajectory has no points',
+            },
+            'the JointTrajectory has no points: no joint values to predict from',
+        ),
     ],
 )
 def test_a_sample_of_the_wrong_shape_or_type_is_refused_saying_which(linear, change, said):

@@ -106,7 +106,7 @@ def test_one_stamp_far_ahead_neither_counts_nor_blinds_the_count(mabi):
 
 
 def test_the_stamp_clock_settles_a_hole_when_it_judges_the_stamp():
-    clock = StampClock(max_age_s=0.1, resync_after=5)
+    clock = StampClock(max_age_s=0.1, resync_after=5, period_s=PERIOD_NS * 1e-9)
     clock.accept(START_NS, 0)
     clock.newest_ns = START_NS
     stamp = START_NS + 30 * PERIOD_NS

@@ -2,14 +2,22 @@
 
 Streams are a smooth, valid motion broken by generated faults: position jumps, alternating
 poses, a still position with a velocity, velocities flipping sign, NaN, stamps far ahead, back,
-repeated, floods (no time between arrivals) and silences. Invariants, each against an
-independent reference:
+repeated, 50 ms ahead (``lead``, inside ``max_age_s``) or 0.6 period ahead (``nudge``, inside the
+tolerance), floods (no time between arrivals) and silences. Between arrivals the node's watchdog
+and command ramp run once per IPO period. Invariants, each against an independent reference:
 
 - never a non-finite torque, never one beyond the (scaled) torque limits;
 - never a change between published torques faster than the slew limit (``predictor.output``);
 - never a model torque from a sample whose pair with the sample before it fails the consistency
   gate (``dataset.consistency``, evaluated here on the pair alone);
-- no lock-out: a valid stream after any of the above is served again within the stated bound.
+- never a model torque from a sample leading its time base by more than one IPO period (the
+  quickest delivery, computed here in closed form: ``predictor.stamps``), nor from a ``lead``;
+- the stamps of what is published increase, except across a resync (a new time base);
+- the command stream (``predictor.command``) moves by at most one period's worth of the slew
+  limit per message, around stale episodes too, ends each ramp exactly at zero, and is tau_u
+  whenever tau_u is within that step of it;
+- no lock-out: a valid stream after any of the above is served again within the stated bound,
+  and the command stream rejoins tau_u within the steps its distance needs.
 """
 
 from __future__ import annotations
@@ -32,10 +40,12 @@ from id_learning.dataset.consistency import (
 )
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.predictor import FeedForwardPredictor, GuardConfig, ReferenceSample, Reject
+from id_learning.predictor.command import CommandStream
+from id_learning.predictor.stamps import DRIFT
 
 PERIOD_NS = 8_000_000
 FAULTS = ('valid', 'jump', 'alternate', 'still', 'flip', 'nan', 'ahead', 'back', 'repeat',
-          'flood', 'silence')  # fmt: skip
+          'lead', 'nudge', 'flood', 'silence')  # fmt: skip
 
 
 class SteepModel(InverseDynamicsModel):
@@ -94,6 +104,10 @@ def fed(faults: list[str], phase: float, start_k: int = 0):
             stamp -= 3600 * 10**9
         elif fault == 'repeat':
             stamp = 10**9 + max(k - 1, 0) * PERIOD_NS
+        elif fault == 'lead':  # the probe's P12: inside max_age_s, six periods ahead
+            stamp += 50_000_000
+        elif fault == 'nudge':  # inside the tolerance: taken, and the next valid one after it
+            stamp += 6 * PERIOD_NS // 10
         elif fault == 'flood':
             receive -= PERIOD_NS - 1000
         elif fault == 'silence':
@@ -154,6 +168,95 @@ def test_whatever_the_stream_the_output_is_finite_bounded_slew_limited_and_gated
         last_tau, last_stamp = tau, sample.stamp_ns
 
 
+def drive(predictor: FeedForwardPredictor, stream, commands: CommandStream):
+    """Step each sample as the node does, its tau_u sent as a command too; between arrivals the
+    node's watchdog and command ramp run once per IPO period.
+
+    Returns:
+        the results, and the commands in order as (command, 'follow' tau or 'ramp' None,
+        a ramp under way after it).
+    """
+    results, sent = [], []
+    last = None
+    for sample, receive in stream:
+        tick = receive if last is None else last + PERIOD_NS
+        while tick < receive:
+            if predictor.check_stale(tick):
+                commands.went_stale()
+            command = commands.ramp()
+            if command is not None:
+                sent.append((command.copy(), None, commands.is_ramping))
+            tick += PERIOD_NS
+        last = receive
+        result = predictor.step(sample, receive)
+        results.append(result)
+        if result.tau is not None:
+            sent.append((commands.follow(result.tau).copy(), result.tau, False))
+    return results, sent
+
+
+def lead_ns(base: list[tuple[int, int]], stamp: int, receive: int) -> int:
+    """How far ``stamp`` leads the time base of the accepted (receive, stamp) pairs ``base``:
+    the quickest delivery, each pair's offset allowed to grow by DRIFT times the stamps since."""
+    last_stamp = base[-1][1]
+    offset = min(r - s + round(DRIFT * (last_stamp - s)) for r, s in base)
+    return stamp - receive + offset
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(faults=faults_strategy, phase=st.floats(0.0, 6.28))
+def test_whatever_the_stream_stamps_rise_future_stamps_get_no_torque_and_the_command_ramps(
+    mabi, faults, phase
+):
+    predictor = predictor_for(mabi)
+    config = predictor.config
+    commands = CommandStream(predictor)
+    step = mabi.limits.torque / config.torque_rise_s * config.period_s
+    assert np.allclose(commands.step, step)
+    stream = fed(faults, phase)
+    results, sent = drive(predictor, stream, commands)
+    # Stamps: a model torque only within one period ahead of the time base; rising outputs.
+    base: list[tuple[int, int]] = []
+    last_out, resynced_since = None, False
+    for i, ((sample, receive), result) in enumerate(zip(stream, results, strict=True)):
+        stamp = sample.stamp_ns
+        if result.reject is None and base and not result.resynced:
+            lead = lead_ns(base, stamp, receive)
+            assert lead <= PERIOD_NS, f'a model torque for a stamp {lead} ns ahead'
+        if faults[i] == 'lead' and base and 'lead' not in faults[:i]:  # ahead of a time base
+            assert result.reject is not None, 'a model torque for a stamp 50 ms ahead'
+        resynced_since |= result.resynced
+        if result.tau is not None:
+            if last_out is not None and stamp <= last_out:
+                assert resynced_since, f'output stamp {stamp} after {last_out}, no resync'
+            last_out, resynced_since = stamp, False
+        if result.reject in (None, Reject.INCONSISTENT, Reject.REARMING):  # taken
+            restart = result.resynced or (base and stamp - base[-1][1] > config.stale_after_ns)
+            base = [(receive, stamp)] if restart else [*base, (receive, stamp)]
+    # Commands: at most one step per message; ramps end at zero; tau_u when within a step.
+    previous = None
+    ramp_from, ramp_length = None, 0
+    for command, tau, still_ramping in sent:
+        assert np.isfinite(command).all()
+        if previous is not None:
+            assert (np.abs(command - previous) <= step * (1 + 1e-12) + 1e-9).all()
+        if tau is None:  # a ramp command
+            if ramp_length == 0:
+                ramp_from = previous
+            ramp_length += 1
+            if not still_ramping:
+                assert not command.any(), 'a ramp that ended off zero'
+        else:
+            if ramp_length and ramp_from is not None and previous.any():  # cut short: resumed
+                assert ramp_length < np.ceil(np.max(np.abs(ramp_from) / step)) + 1
+            ramp_length = 0
+            if previous is None or (np.abs(tau - previous) <= step).all():
+                np.testing.assert_array_equal(command, tau)
+        previous = command
+
+
 @settings(
     max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
@@ -163,16 +266,24 @@ def test_after_any_fault_a_valid_stream_is_served_again_within_the_stated_bound(
     mabi, faults, phase, new_phase, shift
 ):
     predictor = predictor_for(mabi)
-    for sample, receive in fed(faults, phase):
-        predictor.step(sample, receive)
+    commands = CommandStream(predictor)
+    drive(predictor, fed(faults, phase), commands)
     # A valid motion from another pose, its stamps anywhere (an hour back or ahead included).
     bound = predictor.recovery_samples
-    tail = fed(['valid'] * (bound + 10), new_phase, start_k=len(faults) + 30 + shift)
+    # The command's way back: from anywhere within the limits, at one step per message less
+    # what tau_u moves meanwhile (a few % of the limit per cycle on this motion).
+    rejoin = math.ceil(2.0 / (0.8 * predictor.config.period_s / predictor.config.torque_rise_s))
+    tail = fed(['valid'] * (bound + rejoin + 10), new_phase, start_k=len(faults) + 30 + shift)
     offset = len(faults) * PERIOD_NS + 10**9  # receive times go on after the faults'
-    results = [predictor.step(sample, receive + offset) for sample, receive in tail]
+    tail = [(sample, receive + offset) for sample, receive in tail]
+    results, sent = drive(predictor, tail, commands)
     assert all(r.reject is None and r.tau is not None for r in results[bound:]), [
         r.reject for r in results
     ]
+    served = [(command, tau) for command, tau, _ in sent[-(len(results) - bound) :]]
+    assert all(tau is not None for _, tau in served)
+    for command, tau in served[rejoin:]:
+        np.testing.assert_array_equal(command, tau)
 
 
 def test_the_stated_bound_is_what_the_docs_say(mabi):

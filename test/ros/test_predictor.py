@@ -239,6 +239,12 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
         ]
     assert stale_reports
     assert set(stale_reports) == {DiagnosticStatus.WARN}
+    # The command ramps to zero while stale (at most 7 cycles from the limit): then resume.
+    listener.wait_for(
+        lambda: any(not any(m.data) for m in listener.messages['/ff/commands']),
+        10,
+        'the command ramp to reach zero',
+    )
     for k in range(10, 20):
         send(k)
 
@@ -284,15 +290,24 @@ def test_predictor_survives_bad_input_publishes_nothing_invalid_and_counts_it(
         assert np.all(np.abs(effort) <= limit)
     clamped = np.array([m.effort for m in published[10:14]])
     assert np.any(np.isclose(np.abs(clamped), limit), axis=1).all()
-    # The forward-command copy: the same torques, plus one zero command when it went stale.
+    # The forward-command copy: tau_u, at most one period's worth of the slew limit per message
+    # (torque_rise_s 0.05 s), ramped to exactly zero when stale and back towards tau_u after,
+    # which it has rejoined by the last sample.
     listener.wait_for(
-        lambda: len(listener.messages['/ff/commands']) >= 25, 10, 'the command copies'
+        lambda: (
+            len(listener.messages['/ff/commands']) > len(published)
+            and list(listener.messages['/ff/commands'][-1].data) == list(published[-1].effort)
+        ),
+        10,
+        'the command copies',
     )
     with listener.condition:
-        commands = [list(m.data) for m in listener.messages['/ff/commands']]
-    zeros = [c for c in commands if not any(c)]
-    assert 1 <= len(zeros) <= int(values['stale_episodes'])
-    assert [c for c in commands if any(c)] == [list(m.effort) for m in published]
+        commands = np.array([list(m.data) for m in listener.messages['/ff/commands']])
+    step = mabi.limits.torque / 0.05 * mabi.ipo_period_s
+    assert (np.abs(np.diff(commands, axis=0)) <= step * (1 + 1e-12)).all()
+    assert len(commands) > len(published)  # the ramp's commands besides one per tau_u
+    assert any(not c.any() for c in commands)
+    np.testing.assert_array_equal(commands[-1], published[-1].effort)
     assert predictor.stop() == 0
     log = predictor.log()
     assert 'no model torque (non_finite)' in log

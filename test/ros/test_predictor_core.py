@@ -107,3 +107,88 @@ def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given
         for each in made:
             each.destroy_node()
         context.try_shutdown()
+
+
+def test_a_trajectory_without_points_is_refused_saying_so(mabi):
+    from trajectory_msgs.msg import JointTrajectory
+
+    from id_learning.nodes.msg_conversions import trajectory_to_sample
+    from id_learning.predictor import Reject
+
+    core = FeedForwardPredictor(Linear(mabi), mabi.limits.torque)
+    msg = JointTrajectory(joint_names=list(mabi.joints))  # the probe's TJ1
+    result = core.step(trajectory_to_sample(msg), 10**9)
+    assert result.reject is Reject.SHAPE
+    assert result.detail.startswith('the JointTrajectory has no points')
+
+
+def test_the_command_ramps_to_zero_when_stale_and_back_over_dds(mabi, domain_id):
+    # The probe's P25: the command dropped to zero and jumped back; now a ramp each way, on
+    # the node's timer, at most one period's worth of the slew limit per message.
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray
+    from trajectory_msgs.msg import JointTrajectory
+
+    from id_learning.nodes.msg_conversions import trajectory_message
+
+    config = PredictorNodeConfig(
+        artifact='in-memory', command_topic='ff_cmd', torque_rise_s=1.0, stale_after_cycles=5
+    )
+    core = FeedForwardPredictor(Linear(mabi), mabi.limits.torque, guard_config(config, mabi))
+    core.warm_up()
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    executor = SingleThreadedExecutor(context=context)
+    made: list = []
+    try:
+        node = Predictor(core, mabi, config, context=context)
+        sender = rclpy.create_node('sender', context=context)
+        made += [node, sender]
+        for each in made:
+            executor.add_node(each)
+        commands: list[np.ndarray] = []
+        publisher = sender.create_publisher(JointTrajectory, 'reference', reference_qos(10))
+        sender.create_subscription(
+            Float64MultiArray, 'ff_cmd', lambda m: commands.append(np.array(m.data)), 1000
+        )
+
+        def spin_until(condition, what: str) -> None:
+            deadline = time.monotonic() + WAIT_S
+            while not condition():
+                assert time.monotonic() < deadline, f'timed out waiting for {what}'
+                executor.spin_once(timeout_sec=0.05)
+
+        spin_until(
+            lambda: publisher.get_subscription_count() >= 1 and node.count_subscribers('ff_cmd'),
+            'the node and the sender to match',
+        )
+        zeros, period_ns = np.zeros(6), round(mabi.ipo_period_s * 1e9)
+        a = 0.3 * mabi.limits.torque  # tau = a: 38 steps of 0.8 % of the limit from zero
+
+        def send(n: int) -> None:
+            start_ns = time.time_ns()
+            for k in range(n):
+                msg = trajectory_message(start_ns + k * period_ns, mabi.joints, zeros, zeros, a)
+                publisher.publish(msg)
+
+        send(3)
+        spin_until(lambda: len(commands) >= 3, 'the first commands')
+        np.testing.assert_array_equal(commands[0], a)  # the first command is the first tau_u
+        spin_until(lambda: not commands[-1].any(), 'the ramp to reach zero')
+        ramp = len(commands) - 3
+        assert ramp == 38
+        send(3)  # resumed: tau_u continues at a, the command ramps back from zero
+        spin_until(lambda: len(commands) >= 3 + ramp + 3, 'the commands after resuming')
+        step = mabi.limits.torque / config.torque_rise_s * mabi.ipo_period_s
+        np.testing.assert_allclose(commands[-3:], [k * step for k in (1, 2, 3)])
+        assert (np.abs(np.diff(commands, axis=0)) <= step * (1 + 1e-12)).all()
+        assert core.counters.predicted == 6
+        assert core.counters.rejected == 0
+        node.close()
+    finally:
+        executor.shutdown()
+        for each in made:
+            each.destroy_node()
+        context.try_shutdown()
