@@ -11,7 +11,7 @@ hidden parameters, so one robot can be recorded many times.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +63,7 @@ from id_learning.twin.effects import (
     ViscousFriction,
     effects_from_dict,
 )
+from id_learning.twin.result import TwinResult, rms_figures
 
 __all__ = [
     'GROUND_TRUTH_ARRAYS',
@@ -277,63 +278,6 @@ def load_twin_config(path: Path | str, overrides: dict[str, Any] | None = None) 
     data = load_yaml_mapping(path)
     data.update(overrides or {})
     return twin_config_from_dict(data, config_base(path, data.get('robot')), str(path))
-
-
-@dataclass(frozen=True, eq=False)
-class TwinResult:
-    """A simulated recording with its ground truth.
-
-    Attributes:
-        recording: what the sensors recorded, in the bag contract's quantities.
-        components: noise-free tau_u contributions [N*m] per name, each (N, n); they sum to
-            ``tau_u_clean`` (each already divided by the torque-constant scale).
-        tau_u_clean: (N, n) tau_u a perfect current sensor would give [N*m].
-        tau_joint_clean: (N, n) torque through the gear output (what a joint torque sensor sees).
-        q_true, v_true, a_true: (N, n) the true motion at the sample times.
-        parameters: true parameters and noise levels (JSON-ready).
-    """
-
-    recording: Recording
-    components: dict[str, np.ndarray]
-    tau_u_clean: np.ndarray
-    tau_joint_clean: np.ndarray
-    q_true: np.ndarray
-    v_true: np.ndarray
-    a_true: np.ndarray
-    parameters: dict[str, Any]
-
-    def take(self, rows: slice) -> TwinResult:
-        """Some rows of the run, its ground truth's RMS figures those of the rows.
-
-        A bag of a part of a simulation (the last minutes of a long one) is written from this:
-        the RMS ``ground_truth.json`` states is checked against the arrays beside it.
-        """
-        recording = self.recording
-        fields = ('stamps_ns', 'position', 'velocity', 'current', 'joint_torque')
-        cut = {k: getattr(recording, k)[rows] for k in fields if getattr(recording, k) is not None}
-        components = {name: x[rows] for name, x in self.components.items()}
-        tau_u_clean = self.tau_u_clean[rows]
-        return replace(
-            self,
-            recording=replace(recording, **cut),
-            components=components,
-            tau_u_clean=tau_u_clean,
-            tau_joint_clean=self.tau_joint_clean[rows],
-            q_true=self.q_true[rows],
-            v_true=self.v_true[rows],
-            a_true=self.a_true[rows],
-            parameters=self.parameters | rms_figures(components, tau_u_clean),
-        )
-
-
-def rms_figures(components: dict[str, np.ndarray], tau_u_clean: np.ndarray) -> dict[str, Any]:
-    """``ground_truth.json``'s RMS of each noise-free component and of tau_u, per joint."""
-    return {
-        'component_rms_nm': {
-            name: np.sqrt(np.mean(value**2, axis=0)).tolist() for name, value in components.items()
-        },
-        'tau_u_clean_rms_nm': np.sqrt(np.mean(tau_u_clean**2, axis=0)).tolist(),
-    }
 
 
 def true_dynamics(config: TwinConfig, rng: np.random.Generator) -> RigidBodyDynamics:
