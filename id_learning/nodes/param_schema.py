@@ -356,3 +356,18 @@ def validate_change(current: _T, changes: Mapping[str, Any]) -> tuple[_T | None,
         return dataclasses.replace(current, **updates), ''
     except ConfigError as err:
         return None, str(err)
+
+
+def log_change(logger: Any, before: object, after: object) -> None:
+    """Warn of every parameter a runtime set changed, before and after, in one line.
+
+    A gate loosened at runtime (``consistency_scale``, ``rearm_samples``, ``max_age_s``) changes
+    what the node lets through: the log says who changed what, not only /parameter_events.
+    """
+    changed = [
+        f'{item.name} {getattr(before, item.name)!r} -> {getattr(after, item.name)!r}'
+        for item in dataclasses.fields(before)  # type: ignore[arg-type]
+        if getattr(before, item.name) != getattr(after, item.name)
+    ]
+    if changed:
+        logger.warning(f'parameters set at runtime: {", ".join(changed)}')

@@ -95,6 +95,7 @@ from id_learning.nodes.params import (
     PredictorNodeConfig,
     declare_parameters,
     guard_config,
+    log_change,
     resolve_robot_config,
     validate_change,
 )
@@ -405,8 +406,7 @@ class Predictor(ShellNode):
             return
         if became_stale and self._command is not None:
             self._command.went_stale()  # the command ramps to zero
-        # Once when it goes stale, then at a slow pace: the end of a motion is stale too, and a
-        # predictor left running must not fill the log. /diagnostics carries the state.
+        # Once when stale, then slowly: a predictor left running must not fill the log.
         period_ns = self.config.stale_log_period_s * 1e9
         if not became_stale and (period_ns <= 0 or now - self._stale_logged_ns < period_ns):
             return
@@ -433,6 +433,7 @@ class Predictor(ShellNode):
             return SetParametersResult(successful=False, reason=str(err))
         if changed.diagnostics_period_s != self.config.diagnostics_period_s:
             self._diagnostics_timer.timer_period_ns = round(changed.diagnostics_period_s * 1e9)
+        log_change(self.get_logger(), self.config, changed)
         self.config = changed
         return SetParametersResult(successful=True)
 

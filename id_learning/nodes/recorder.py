@@ -69,6 +69,7 @@ from id_learning.nodes.msg_conversions import diagnostic_array, message_class, s
 from id_learning.nodes.params import (
     RecorderConfig,
     declare_parameters,
+    log_change,
     read_snapshot,
     validate_change,
 )
@@ -346,6 +347,7 @@ class Recorder(ShellNode):
             return SetParametersResult(successful=False, reason=reason)
         if changed.diagnostics_period_s != self.config.diagnostics_period_s:
             self._diagnostics_timer.timer_period_ns = round(changed.diagnostics_period_s * 1e9)
+        log_change(self.get_logger(), self.config, changed)
         self.config = changed
         return SetParametersResult(successful=True)
 

@@ -66,6 +66,7 @@ from id_learning.nodes.msg_conversions import (
 from id_learning.nodes.params import (
     ReplayConfig,
     declare_parameters,
+    log_change,
     read_snapshot,
     resolve_robot_config,
     validate_change,
@@ -289,6 +290,7 @@ class Replay(ShellNode):
             return SetParametersResult(successful=False, reason=reason)
         if changed.diagnostics_period_s != self.config.diagnostics_period_s:
             self._diagnostics_timer.timer_period_ns = round(changed.diagnostics_period_s * 1e9)
+        log_change(self.get_logger(), self.config, changed)
         self.config = changed
         return SetParametersResult(successful=True)
 

@@ -17,6 +17,7 @@ from id_learning.nodes.params import (
     RecorderConfig,
     ReplayConfig,
     config_from_mapping,
+    log_change,
     validate_change,
 )
 
@@ -171,3 +172,23 @@ def test_setting_an_undeclared_parameter_at_runtime_names_it_and_the_closest():
             node.destroy_node()
     finally:
         context.try_shutdown()
+
+
+def test_a_runtime_change_is_logged_with_each_value_before_and_after() -> None:
+    """Loosening a gate at runtime is said in the node's log, not only on /parameter_events."""
+    config = config_from_mapping(PredictorNodeConfig, REQUIRED[PredictorNodeConfig], 'test')
+    changed, _ = validate_change(config, {'consistency_scale': 1000.0, 'rearm_samples': 0})
+    assert changed is not None
+    said: list[str] = []
+
+    class Logger:
+        def warning(self, text: str) -> None:
+            said.append(text)
+
+    log_change(Logger(), config, changed)
+    assert said == [
+        f'parameters set at runtime: rearm_samples {config.rearm_samples!r} -> 0, '
+        f'consistency_scale {config.consistency_scale!r} -> 1000.0'  # in the schema's order
+    ]
+    log_change(Logger(), changed, changed)  # nothing changed: nothing said
+    assert len(said) == 1
