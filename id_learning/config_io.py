@@ -6,24 +6,14 @@ twice in one mapping (YAML's last-one-wins would drop the first silently). Numbe
 go through ``finite_number`` or ``float_vector``: NaN and inf are refused with the key, the value
 and the allowed range, since NaN slips through comparisons such as ``x < 0``.
 
-Every file the package reads whole, config or not, is read through ``read_capped``: a device
-(``/dev/zero`` never ends) is refused, and a file over the limit of its kind too, before it is
-read into memory. The limits live beside their readers: ``MAX_CONFIG_BYTES`` (16 MiB: configs,
-URDFs, parameter files), ``bag.metadata_file.MAX_BAG_METADATA_BYTES`` (4 MiB: a bag's
-metadata.yaml), ``training.run_folder.MAX_RUN_DOCUMENT_BYTES`` (16 MiB: run.json),
-``twin.ground_truth.MAX_GROUND_TRUTH_JSON_BYTES`` (16 MiB), ``models.artifact.MAX_METADATA_BYTES``
-(64 MiB: model.json), ``evaluation.study.MAX_STUDY_TABLE_BYTES`` (1 MiB). A file of the
-package's own folders (a bag's, a run's, an artifact's) must be a regular file: a FIFO there is
-refused too (``regular=True``), never waited on; one the user names may be a pipe (``<(...)``).
+Files are read whole through ``bounded_read.read_capped`` (re-exported here).
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
 import re
-import stat
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -32,10 +22,21 @@ from typing import Any
 import numpy as np
 import yaml
 
-from id_learning.errors import ConfigError, IdLearningError
+from id_learning.bounded_read import (
+    MAX_CONFIG_BYTES,
+    PIPE_IDLE_S,
+    PIPE_WRITER_S,
+    not_a_file,
+    pipe_waits_stop_when,
+    read_capped,
+    special_kind,
+)
+from id_learning.errors import ConfigError
 
 __all__ = [
     'MAX_CONFIG_BYTES',
+    'PIPE_IDLE_S',
+    'PIPE_WRITER_S',
     'DuplicateKeyError',
     'check_keys',
     'config_base',
@@ -47,6 +48,7 @@ __all__ = [
     'not_a_file',
     'number_hint',
     'parse_yaml',
+    'pipe_waits_stop_when',
     'range_problem',
     'read_capped',
     'readonly',
@@ -130,114 +132,6 @@ def parse_yaml(text: str, where: str) -> Any:
         raise ConfigError(f'{where}: not valid YAML: {err}') from err
     except RecursionError:
         raise ConfigError(f'{where}: YAML nested too deeply to read') from None
-
-
-#: The largest config file read [bytes]. A robot, twin, mapping or parameter YAML is a few KiB
-#: and a URDF a few hundred KiB (the largest of example-robot-data, TIAGo dual, 0.2 MiB): a file
-#: a hundred times larger is a wrong path (a log, a bag), read whole it could fill the memory.
-MAX_CONFIG_BYTES = 16 * 2**20
-
-#: What ``stat`` calls a file that is no regular file and no folder, for messages.
-_FILE_KINDS = (
-    (stat.S_ISCHR, 'a character device'),
-    (stat.S_ISBLK, 'a block device'),
-    (stat.S_ISSOCK, 'a socket'),
-    (stat.S_ISFIFO, 'a FIFO (named pipe)'),
-)
-#: The kinds no file is read from: a device may never end (``/dev/zero``), a socket is no file.
-_DEVICE_KINDS = frozenset(name for _, name in _FILE_KINDS[:3])
-#: The kinds that are no regular file and no folder (a folder fails at read, naming itself).
-_SPECIAL_KINDS = frozenset(name for _, name in _FILE_KINDS)
-
-
-def _mode_kind(mode: int) -> str | None:
-    """What a ``st_mode`` is when it is no regular file ('a folder', 'a character device', ...)."""
-    kinds = ((stat.S_ISDIR, 'a folder'), *_FILE_KINDS)
-    return next((kind for is_kind, kind in kinds if is_kind(mode)), None)
-
-
-def _size_text(size: int) -> str:
-    """A size in bytes for messages: '16 MiB', '64 KiB', '1000 bytes'."""
-    for unit, scale in (('MiB', 2**20), ('KiB', 2**10)):
-        if size >= scale:
-            return f'{size / scale:g} {unit}'
-    return f'{size} bytes'
-
-
-def not_a_file(path: Path | str) -> str | None:
-    """What ``path`` is when it is no regular file ('no such file', 'a folder', 'a FIFO', ...)."""
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        return 'no such file'
-    except OSError as err:
-        return f'cannot be read ({err.strerror or err})'
-    return _mode_kind(mode)
-
-
-def special_kind(path: Path | str) -> str | None:
-    """What ``path`` is when it exists but is no regular file (a folder, a FIFO, a device, ...).
-
-    None for a regular file (or a link to one), a missing file, or one that cannot be looked
-    at (reading it names why).
-    """
-    kind = not_a_file(path)
-    return kind if kind in _SPECIAL_KINDS or kind == 'a folder' else None
-
-
-def read_capped(
-    path: Path | str,
-    what: str = 'config file',
-    limit: int = MAX_CONFIG_BYTES,
-    *,
-    regular: bool = False,
-    error: type[IdLearningError] = ConfigError,
-) -> bytes:
-    """The bytes of a file of at most ``limit`` bytes; a device or a larger file is refused.
-
-    Every file the package reads whole comes through here, with a limit suited to what it is
-    (a config, a bag's metadata.yaml, a run's run.json, ...). A device such as ``/dev/zero`` is
-    refused before it is opened (it never ends, or is no file at all); a regular file larger
-    than ``limit`` before a byte is read. A pipe (``--robot <(...)``, a FIFO) is read as it
-    comes, up to the limit, unless ``regular``: the files inside the package's own folders
-    (a bag's metadata.yaml, a run's run.json) are written as regular files, and a FIFO there
-    (which nobody may ever write) is refused without waiting for a writer.
-
-    Args:
-        path: the file.
-        what: what the file is, for messages ('config file', 'URDF', 'bag metadata').
-        limit: the most bytes read.
-        regular: refuse anything but a regular file (a FIFO too), never blocking.
-        error: the error raised: the boundary's own (``BagError`` for a bag's files).
-
-    Raises:
-        ConfigError: (or ``error``) the file is missing or unreadable, a device or socket (with
-            ``regular``: a FIFO), or over ``limit`` bytes; the message names the file and what
-            it is.
-    """
-    kind = not_a_file(path)  # a FIFO is read as it comes; a missing file fails at open
-    if kind in (_SPECIAL_KINDS if regular else _DEVICE_KINDS):
-        raise error(f'{path}: cannot read {what}: {kind}, not a regular file')
-    # O_NONBLOCK: a FIFO put in place of the file after the check above opens at once (and is
-    # refused below) instead of waiting for a writer; a regular file reads as without it.
-    flags = os.O_RDONLY | os.O_CLOEXEC | (os.O_NONBLOCK if regular else 0)
-    try:
-        with os.fdopen(os.open(path, flags), 'rb') as stream:
-            info = os.fstat(stream.fileno())
-            kind = _mode_kind(info.st_mode)
-            if regular and kind in _SPECIAL_KINDS:
-                raise error(f'{path}: cannot read {what}: {kind}, not a regular file')
-            # A regular file's size is known: one past the limit is refused unread.
-            is_over = stat.S_ISREG(info.st_mode) and info.st_size > limit
-            data = b'' if is_over else stream.read(limit + 1)
-    except OSError as err:
-        raise error(f'{path}: cannot read {what}: {err.strerror or err}') from err
-    if is_over or len(data) > limit:
-        raise error(
-            f'{path}: cannot read {what}: larger than {_size_text(limit)}, which no {what} is: '
-            'is this the right file?'
-        )
-    return data
 
 
 def load_yaml_mapping(path: Path) -> dict[str, Any]:

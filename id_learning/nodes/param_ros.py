@@ -3,9 +3,10 @@
 ``declare_parameters`` declares every field of a node config (``nodes.param_schema``) with its
 description and constraints; before that it refuses what ROS would take without a word:
 
-- a ``--params-file`` that repeats a key in one mapping (rcl keeps the later value without a
-  word; the package's other YAML readers refuse it) or that is no valid YAML, and one with no
-  section for the node (``refuse_foreign_params_files``);
+- a ``--params-file`` that is no regular file (a FIFO, ``<(...)``, a device: ``params_file_kind``,
+  checked before ROS starts), one that repeats a key in one mapping (rcl keeps the later value
+  without a word; the package's other YAML readers refuse it) or that is no valid YAML, and one
+  with no section for the node (``refuse_foreign_params_files``);
 - a value given on the command line that the node could not use, even one a later ``-p`` or file
   replaces (``check_given_values``); and rcl keeps the first of two values of one parameter when
   the later one has another type (``-p rate:=10.0 -p rate:=fast`` played at 10): the node holds
@@ -26,7 +27,7 @@ import difflib
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from id_learning.config_io import parse_yaml, read_capped
+from id_learning.config_io import parse_yaml, read_capped, special_kind
 from id_learning.errors import ConfigError
 from id_learning.nodes.param_schema import (
     STRING_LIST,
@@ -48,6 +49,7 @@ __all__ = [
     'COMMAND_LINE',
     'check_given_values',
     'declare_parameters',
+    'params_file_kind',
     'read_node_config',
     'read_snapshot',
     'refuse_foreign_params_files',
@@ -59,6 +61,33 @@ _T = TypeVar('_T', bound='DataclassInstance')
 #: The arguments ``runtime.run_node`` gave rclpy.init (None: ``sys.argv``): where the node's
 #: ``-p`` values and params files come from.
 COMMAND_LINE: list[str] | None = None
+
+
+def params_file_kind(args: Sequence[str] | None) -> str | None:
+    """The first ``--params-file`` of a command line (None: ``sys.argv``) that is no regular file.
+
+    Checked before ROS starts: a params file must be a regular file. rcl reads each one while
+    ``rclpy.init`` parses the command line, then the node reads it again: for its own checks
+    (``refuse_foreign_params_files``) and in rcl again through the probe nodes that tell what
+    each source gives (``check_given_values``). A pipe (``--params-file <(...)``) gives its
+    text once, so the later reads would find it empty; and rcl's ``fopen`` of a FIFO no process
+    writes to waits for a writer without a word. A missing file is left to rcl, which names it
+    ("Couldn't parse params file").
+
+    Returns:
+        That file, what it is and what to do, for an error line; None when there is none.
+    """
+    for path in params_files(args):
+        kind = special_kind(path)
+        if kind is not None:
+            hint = (
+                '; ROS reads a parameter file more than once as a node starts (rcl, then the '
+                "node's own checks) and a pipe gives its text only once: write it to a file"
+                if kind.startswith('a FIFO')
+                else ''
+            )
+            return f'--params-file {path}: {kind}, not a regular file{hint}'
+    return None
 
 
 def refuse_foreign_params_files(node: Node, args: Sequence[str] | None = None) -> None:
@@ -80,7 +109,8 @@ def refuse_foreign_params_files(node: Node, args: Sequence[str] | None = None) -
     """
     for path in params_files(COMMAND_LINE if args is None else args):
         try:
-            text = read_capped(path, 'parameter file').decode('utf-8')
+            # A regular file, never waited on: rcl read it before (``params_file_kind``).
+            text = read_capped(path, 'parameter file', regular=True).decode('utf-8')
         except (ConfigError, UnicodeDecodeError):
             continue  # rcl read it before the node started; nothing to add here
         try:

@@ -5,7 +5,11 @@ On Jazzy ``rclpy.init()`` is no context manager: init, spin inside try, catch
 SIGINT and SIGTERM end the spin through our own handler (see _StopOnSignal). A node's ``close()``
 runs before the node is destroyed, so that the recorder finishes its bag and every node logs its
 final report, and the process exits 0. A signal before that, while Python imports the node
-(``id_learning.entry``) or ROS starts, ends it with one line and 130 (143 for SIGTERM).
+(``id_learning.entry``) or ROS starts, ends it with one line and 130 (143 for SIGTERM). A
+signal while the node is made and waits on a pipe (``robot_config:=<(...)``) ends that wait at
+once (``config_io.pipe_waits_stop_when``): the node is refused, naming the file, and exits 2.
+A ``--params-file`` that is no regular file is refused before ROS reads it
+(``param_ros.params_file_kind``).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rclpy.utilities import ok, try_shutdown
 
+from id_learning.config_io import pipe_waits_stop_when
 from id_learning.entry import stopped_while_starting
 from id_learning.errors import IdLearningError
 from id_learning.nodes import param_ros
@@ -207,7 +212,8 @@ def run_node(
 
     Returns:
         The process exit status: 0, or 2 when the node could not start (bad parameters,
-        missing files), with the reason logged; 130 after one line when Ctrl-C came while ROS
+        missing files, a params file that is no regular file, a signal while it waited on a
+        pipe), with the reason logged; 130 after one line when Ctrl-C came while ROS
         started, before the node was being made (during the imports, ``id_learning.entry``
         says so alike).
     """
@@ -221,6 +227,10 @@ def run_node(
             os.close(devnull)
             return 128 + signal.SIGPIPE
         return 0
+    problem = param_ros.params_file_kind(args)  # before rcl reads it (a FIFO: without end)
+    if problem:
+        print(f'error: {name or "node"}: {problem}', file=sys.stderr)
+        return 2
     try:
         rclpy.init(
             args=None if args is None else list(args),
@@ -239,7 +249,9 @@ def run_node(
     status = 0
     param_ros.COMMAND_LINE = None if args is None else list(args)  # its -p and params files
     try:
-        node = make_node()
+        # A signal is noted, not raised: a wait on a pipe (robot_config:=<(...)) checks for it.
+        with pipe_waits_stop_when(stop.event.is_set):
+            node = make_node()
         spinner = make_executor(node.executor_kind)
         spinner.add_node(node)
         # One watch per node: a node that looks itself at its own moments shares it.
