@@ -61,11 +61,15 @@ Inertial = tuple[float, np.ndarray]
 def read_urdf(urdf: Path | str) -> bytes:
     """The URDF's bytes, read through the capped reader (``config_io.read_capped``).
 
+    A regular file only: the URDF is read more than once (its checks, its hash, pinocchio), and
+    a pipe gives its text once.
+
     Raises:
-        RobotModelError: the file is missing, a device, over ``MAX_CONFIG_BYTES``, or not UTF-8.
+        RobotModelError: the file is missing, no regular file (a FIFO, a device), over
+            ``MAX_CONFIG_BYTES``, or not UTF-8.
     """
     try:
-        data = read_capped(urdf, 'URDF')
+        data = read_capped(urdf, 'URDF', regular=True)
     except ConfigError as err:
         raise RobotModelError(str(err)) from None
     # urdfdom (pinocchio's parser) reads UTF-8 only; XML in UTF-16 parses here but not there.
