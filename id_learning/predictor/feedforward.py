@@ -299,7 +299,6 @@ class FeedForwardPredictor:
         if self._consistency is not None:
             self._consistency = self._consistency_stream(config)
 
-    # -- state ------------------------------------------------------------------------------------
     @property
     def recovery_samples(self) -> int:
         """After any bad sample, a valid stream is served again from at most its this-many-th."""
@@ -376,18 +375,19 @@ class FeedForwardPredictor:
         if isinstance(checked[0], Reject):
             return self._reject(sample, checked[0], str(checked[1]))
         q, v, given_a = checked
-        config = self.config
-        counters.skipped_cycles += self._clock.skipped(
+        config, clock = self.config, self._clock
+        counters.skipped_cycles += clock.skipped(
             sample.stamp_ns, config.stale_after_ns, config.period_s
         )
         now_ns = receive_ns if clock_ns is None else clock_ns
-        clock = self._clock
         refused = clock.judge(sample.stamp_ns, now_ns)
         if refused is not None and not clock.should_resync():
             return self._reject(sample, *refused)
         if self._gate is not None:
             violation = self._gate.violation(q, v, given_a)
             if violation is not None:
+                if refused is None:  # a stamp of the stream: the time base follows it (a backlog)
+                    clock.accept(sample.stamp_ns, now_ns)
                 return self._reject(sample, Reject.IMPOSSIBLE, violation)
         if refused is None:
             return self._taken(sample, receive_ns, (q, v, given_a), now_ns)

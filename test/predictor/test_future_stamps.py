@@ -117,3 +117,21 @@ def test_consecutive_floods_lead_by_less_than_a_period_each_and_are_served(mabi)
     results = stepped(predictor, stream)
     assert all(r.reject is None for r in results), {r.detail for r in results if r.reject}
     assert np.isfinite([r.tau for r in results]).all()
+
+
+def test_a_refused_sample_in_a_draining_backlog_moves_the_time_base_along(mabi):
+    """After a 40 ms stall the queue drains at once; a sample the plausibility gate refuses in
+    it is still the stream's stamp: the valid ones after it lead by less than a period."""
+    predictor = predictor_for(mabi)
+    stream = fed(['valid'] * 40, 0.4)
+    drained = stream[29][1] - 1_000_000  # samples 20-29 arrive at once, 0.1 ms apart
+    for k in range(20, 30):
+        sample, _ = stream[k]
+        if k == 26:  # a velocity no arm has: the gate refuses it (no model torque)
+            sample = replace(sample, v=np.full(6, 50.0))
+        stream[k] = (sample, drained + (k - 20) * 100_000)
+    results = stepped(predictor, stream)
+    assert results[26].reject is Reject.IMPOSSIBLE
+    others = [r for k, r in enumerate(results) if k != 26]
+    assert all(r.reject is None for r in others), [(r.reject, r.detail) for r in others]
+    assert predictor.counters.resyncs == 0
