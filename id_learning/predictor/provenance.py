@@ -15,14 +15,18 @@ __all__ = ['incomplete_run']
 
 
 def incomplete_run(artifact: Path | str) -> str | None:
-    """Why the run holding ``artifact`` is incomplete; None for a whole run or a lone artifact."""
-    from id_learning.training.run_folder import MODELS_DIR, refuse_incomplete_run
+    """Why the run holding ``artifact`` is incomplete, or holds another run's model there.
+
+    None for a whole run's own model or a lone artifact.
+    """
+    from id_learning.training.run_folder import MODELS_DIR, check_run_model, refuse_incomplete_run
 
     artifact = Path(artifact)
     if artifact.parent.name != MODELS_DIR:
         return None
     try:
         refuse_incomplete_run(artifact.parent.parent)
+        check_run_model(artifact)  # and the model the one the run saved, not another run's
     except CheckpointError as err:
         return str(err)
     return None

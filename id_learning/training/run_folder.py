@@ -205,8 +205,9 @@ def check_run_model(folder: Path, run: dict[str, Any] | None = None) -> None:
 
     A model folder is self-consistent wherever it came from; run.json records each model's
     ``artifact_sha256``, so another run's model copied or linked into ``models/`` is refused
-    instead of being scored, tracked or served as this run's. A folder outside a run, or a run
-    from before the record, passes unchecked. ``run``: the run's run.json, when read already.
+    instead of being scored or tracked as this run's (the predictor node warns of it). A folder
+    outside a run, or a run from before the record, passes unchecked. ``run``: the run's
+    run.json, when read already.
 
     Raises:
         CheckpointError: the run is incomplete or unreadable (``read_run``), or the model's
@@ -215,8 +216,8 @@ def check_run_model(folder: Path, run: dict[str, Any] | None = None) -> None:
     from id_learning.models.artifact import ARTIFACT_HASH, METADATA_FILE, read_metadata
 
     folder = Path(folder)
-    if folder.parent.name != MODELS_DIR:
-        return
+    if folder.parent.name != MODELS_DIR or not (folder.parent.parent / RUN_FILE).exists():
+        return  # a model outside a run (a folder that happens to be called models)
     run = run if run is not None else read_run(folder.parent.parent)
     recorded = (run.get(ARTIFACTS_KEY) or {}).get(folder.name)
     if recorded is None:

@@ -81,3 +81,14 @@ def test_a_model_another_run_saved_is_refused_as_this_run_s(tmp_path, mabi, how)
     del run[ARTIFACTS_KEY]
     (tmp_path / 'run' / RUN_FILE).write_text(json.dumps(run))
     check_run_model(own['mlp'])
+
+
+def test_a_model_in_a_folder_called_models_outside_a_run_is_not_judged_as_a_run_s(tmp_path, mabi):
+    from predictor.tiny_artifacts import build_tiny_artifacts
+
+    from id_learning.predictor.provenance import incomplete_run
+    from id_learning.training.run_folder import check_run_model
+
+    lone = build_tiny_artifacts(tmp_path / 'deploy' / 'models', mabi, kinds=['rnea_lq'])
+    check_run_model(lone['rnea_lq'])  # no run.json beside models/: nothing to compare with
+    assert incomplete_run(lone['rnea_lq']) is None
