@@ -91,7 +91,7 @@ def special_kind(path: Path | str) -> str | None:
 
 #: How long a pipe may give no byte while a process holds it open for writing [s], before it is
 #: refused. The writer of ``--robot <(...)`` is a program that may first have to start and work
-#: (``xacro`` expanding a URDF, a script that imports numpy: seconds on a loaded machine), so
+#: (a script that writes a robot config, importing numpy: seconds on a loaded machine), so
 #: the wait is generous; but it ends: a writer that is stuck, or a shell holding the FIFO open
 #: and writing nothing, is named instead of being waited on for ever without a word.
 PIPE_IDLE_S = 30.0

@@ -15,8 +15,8 @@ tau_u the same bound per period of its stamps). It
   sample (after skipped cycles or a silence its bound spans more than one period), in which case
   the command catches up over the next messages;
 - ramps to zero once the reference is stale (``zero_command_on_stale``): one command per IPO
-  period, each one step closer to zero, the last exactly zero; with the defaults (50 ms) a
-  command at the torque limit reaches zero within 7 messages;
+  period, each one step closer to zero, the last exactly zero; a command at the torque limit
+  reaches zero within ceil(torque_rise_s / T) messages (7 at the defaults, 50 ms and 8 ms);
 - ramps back from wherever the ramp has brought it when the reference resumes, towards tau_u at
   the same rate, until it has caught up (tau_u itself continues from its last published value).
 

@@ -280,7 +280,7 @@ def home_pose(
     lower, upper = limits.position_lower, limits.position_upper
     home = 0.5 * (lower + upper) if config.home is None else np.asarray(config.home, dtype=float)
     if home.shape != lower.shape:
-        raise ConfigError(f'{where}.home: {len(home)} values for {len(lower)} joints')
+        raise ConfigError(f'{where}.home: {home.size} value(s) for {len(lower)} joints')
     outside = np.flatnonzero((home <= lower) | (home >= upper))
     if outside.size:
         names = (

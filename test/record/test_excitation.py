@@ -229,7 +229,8 @@ def test_tripled_segment_fails_the_real_limits(
                      id='on-the-upper-limit'),
         pytest.param((0.0, 0.0, -2.6, 0.0, 0.0, 0.0), r' .*strictly inside .*: joint #3 -2\.6 rad',
                      id='below-the-lower-limit'),
-        pytest.param((0.0, 0.0, 0.0, 0.0, 0.0), r': 5 values for 6 joints', id='too-few-joints'),
+        pytest.param((0.0, 0.0, 0.0, 0.0, 0.0), r': 5 value\(s\) for 6 joints',
+                     id='too-few-joints'),
     ],
 )  # fmt: skip
 def test_home_outside_the_position_limits_is_refused(home: tuple[float, ...], match: str) -> None:
