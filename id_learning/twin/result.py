@@ -39,7 +39,9 @@ class TwinResult:
         """Some rows of the run, its ground truth's RMS figures those of the rows.
 
         A bag of a part of a simulation (the last minutes of a long one) is written from this:
-        the RMS ``ground_truth.json`` states is checked against the arrays beside it.
+        the RMS ``ground_truth.json`` states is checked against the arrays beside it, so its
+        noise-free torque and floor are used. Its needed torque is not: ``twin.needed_torque``
+        rebuilds the whole simulation's stamps, which a part does not hold (said in a note).
         """
         recording = self.recording
         fields = ('stamps_ns', 'position', 'velocity', 'current', 'joint_torque')
