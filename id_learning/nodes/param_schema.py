@@ -358,7 +358,7 @@ def validate_change(current: _T, changes: Mapping[str, Any]) -> tuple[_T | None,
         return None, str(err)
 
 
-def log_change(logger: Any, before: object, after: object) -> None:
+def log_change(logger: Any, before: DataclassInstance, after: DataclassInstance) -> None:
     """Warn of every parameter a runtime set changed, before and after, in one line.
 
     A gate loosened at runtime (``consistency_scale``, ``rearm_samples``, ``max_age_s``) changes
@@ -366,7 +366,7 @@ def log_change(logger: Any, before: object, after: object) -> None:
     """
     changed = [
         f'{item.name} {getattr(before, item.name)!r} -> {getattr(after, item.name)!r}'
-        for item in dataclasses.fields(before)  # type: ignore[arg-type]
+        for item in dataclasses.fields(before)
         if getattr(before, item.name) != getattr(after, item.name)
     ]
     if changed:
