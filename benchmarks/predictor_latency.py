@@ -103,7 +103,7 @@ class Bench:
         from sensor_msgs.msg import JointState
         from trajectory_msgs.msg import JointTrajectory
 
-        from id_learning.nodes.qos import DIAGNOSTICS_QOS, TORQUE_QOS, reference_qos
+        from id_learning.nodes.qos import DIAGNOSTICS_QOS, reference_qos, torque_qos
 
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
@@ -115,7 +115,7 @@ class Bench:
         self.diagnostics: dict[str, str] = {}
         # Raw bytes and the C++ events executor: this process must not be the bottleneck at
         # 1 kHz. The stamp is read straight from the CDR (after the 4-byte encapsulation).
-        self.node.create_subscription(JointState, '/tau_u', self._on_tau, TORQUE_QOS, raw=True)
+        self.node.create_subscription(JointState, '/tau_u', self._on_tau, torque_qos(), raw=True)
         self.node.create_subscription(
             DiagnosticArray, '/diagnostics', self._on_diagnostics, DIAGNOSTICS_QOS
         )

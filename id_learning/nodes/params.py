@@ -331,6 +331,13 @@ class PredictorNodeConfig:
         'joint side], stamp = the input stamp.',
         topic=True,
     )
+    output_depth: int = param(
+        10,
+        'tau_u and command queue depth [messages] (KEEP_LAST); 10 matches ros2_control. A '
+        'reliable consumer that stalls longer than this many cycles loses the oldest.',
+        low=1,
+        high=MAX_QUEUE_DEPTH,
+    )
     command_topic: str = param(
         '',
         'Also publish tau_u [N*m] as std_msgs/Float64MultiArray here (ros2_control forward '

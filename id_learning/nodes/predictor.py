@@ -66,7 +66,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
-from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
@@ -113,7 +112,7 @@ from id_learning.nodes.predictor_report import (
     setup_warnings,
     troubles,
 )
-from id_learning.nodes.qos import DIAGNOSTICS_QOS, TORQUE_QOS, reference_qos
+from id_learning.nodes.qos import DIAGNOSTICS_QOS, reference_qos, torque_qos
 from id_learning.nodes.runtime import ShellNode, run_node
 from id_learning.predictor import (
     FeedForwardPredictor,
@@ -144,7 +143,7 @@ class Predictor(ShellNode):
         robot: the robot config the core was built for (the guards of a runtime change).
         config: the parameters, declared as the node's with these values.
         input_qos: QoS of the reference subscription; None: ``reference_qos(input_depth)``.
-        output_qos: QoS of the tau_u and command publishers (match the consumer).
+        output_qos: QoS of the tau_u and command publishers; None: ``torque_qos(output_depth)``.
         **kwargs: passed to rclpy's Node (context, namespace, ...).
     """
 
@@ -154,7 +153,7 @@ class Predictor(ShellNode):
         robot: RobotConfig,
         config: PredictorNodeConfig,
         input_qos: QoSProfile | None = None,
-        output_qos: QoSProfile = TORQUE_QOS,
+        output_qos: QoSProfile | None = None,
         **kwargs: Any,
     ) -> None:
         """Declare the parameters, advertise, warm the messages up, then subscribe."""
@@ -172,10 +171,9 @@ class Predictor(ShellNode):
         self._window_start = (time.monotonic(), 0)
         self._stale_logged_ns = 0
         self._is_closed = False
+        output_qos = output_qos or torque_qos(config.output_depth)
         with endpoint(self, 'output_topic', config.output_topic):
-            self._tau_u: Publisher = self.create_publisher(
-                JointState, config.output_topic, output_qos
-            )
+            self._tau_u = self.create_publisher(JointState, config.output_topic, output_qos)
         self._command: CommandOutput | None = None
         if config.command_topic:
             with endpoint(self, 'command_topic', config.command_topic):
@@ -563,7 +561,7 @@ def build_core(config: PredictorNodeConfig) -> tuple[FeedForwardPredictor, Robot
 
 
 def make_predictor(
-    input_qos: QoSProfile | None = None, output_qos: QoSProfile = TORQUE_QOS, **kwargs: Any
+    input_qos: QoSProfile | None = None, output_qos: QoSProfile | None = None, **kwargs: Any
 ) -> Predictor:
     """Read the parameters, build the core, freeze the garbage collector, make the node.
 

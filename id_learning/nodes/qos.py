@@ -8,7 +8,8 @@
 - The predictor's reference input: RELIABLE, KEEP_LAST with a small depth: a sample that waited
   for more than a few cycles is of no use as feed-forward, and the guards drop it anyway.
 - The torque output matches ros2_control's forward command controller, which subscribes with the
-  system default QoS (RELIABLE, KEEP_LAST 10, VOLATILE).
+  system default QoS (RELIABLE, KEEP_LAST 10, VOLATILE); a reliable writer drops what a reader
+  has not acknowledged once its history is full, so a consumer that stalls needs a deeper one.
 - /clock: BEST_EFFORT, KEEP_LAST 1, as rclpy's and rclcpp's time sources subscribe to it.
 - /diagnostics: RELIABLE, KEEP_LAST 10, as diagnostic_aggregator subscribes.
 """
@@ -21,9 +22,9 @@ __all__ = [
     'CLOCK_QOS',
     'DIAGNOSTICS_QOS',
     'RELIABILITIES',
-    'TORQUE_QOS',
     'reference_qos',
     'sensor_qos',
+    'torque_qos',
 ]
 
 RELIABILITIES = {
@@ -52,12 +53,15 @@ def reference_qos(depth: int = 10) -> QoSProfile:
     )
 
 
-TORQUE_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+def torque_qos(depth: int = 10) -> QoSProfile:
+    """The predictor's tau_u and command outputs: the system default at ``depth`` 10."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.VOLATILE,
+    )
+
 
 CLOCK_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,

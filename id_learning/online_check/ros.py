@@ -16,6 +16,7 @@ from contextlib import suppress
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from id_learning.nodes.params import MAX_QUEUE_DEPTH
 from id_learning.nodes.process import NodeProcess, StartNode
 from id_learning.online_check.plan import CheckSetup, Excerpt
 from id_learning.online_check.result import NS_PER_S, OnlineCheckError
@@ -77,6 +78,7 @@ def start_predictor(
     input_depth: int | None,
 ) -> NodeProcess:
     """Start the predictor node on the artifact, in ``namespace``, listening to its reference."""
+    samples = round(seconds * NS_PER_S / setup.period_ns) + 64  # the excerpt's and a margin
     return start(
         'predictor',
         {
@@ -88,7 +90,9 @@ def start_predictor(
             # served by the physics prior (test/ros/test_predictor.py checks the fallback).
             'out_of_range': 'warn',
             'diagnostics_period_s': 0.25,
-            'latency_window': max(4096, round(seconds * NS_PER_S / setup.period_ns) + 64),
+            'latency_window': max(4096, samples),
+            # The check's own listener, stalled with the machine, must not lose a tau_u.
+            'output_depth': min(samples, MAX_QUEUE_DEPTH),
             **({} if input_depth is None else {'input_depth': input_depth}),
         },
         {'__ns': namespace, '/diagnostics': f'{namespace}/diagnostics'},

@@ -58,9 +58,11 @@ def score(
         predictor_diag = collected.predictor
         notes.append(
             f'{n_missing} samples got no tau_u: the predictor received '
-            f'{predictor_diag.get("received", "?")} of {collected.n_inputs} references and '
-            f'rejected {predictor_diag.get("rejected", "?")}; its input queue keeps the newest '
-            'input_depth samples, so a stall of the machine drops older ones'
+            f'{predictor_diag.get("received", "?")} of {collected.n_inputs} references, '
+            f'rejected {predictor_diag.get("rejected", "?")} and published '
+            f'{predictor_diag.get("published", "?")} (this check received '
+            f'{len(collected.outputs)}); its input queue keeps the newest input_depth samples, '
+            'so a stall of the machine drops older ones'
         )
     node_model = _node_model(setup, ref_by_row, matched)
     stamps, robot = dataset.stamps_ns, setup.robot

@@ -63,7 +63,7 @@ def test_online_check_gives_the_offline_prediction_for_every_replayed_sample(
     assert result.n_samples == expected
     # Every input got an output, stamped so that it matches its sample.
     assert result.n_inputs == expected
-    assert result.n_outputs == expected
+    assert result.n_outputs == expected, (result.notes, result.predictor)
     assert result.n_missing == 0
     assert result.predictor['published'] == str(expected)
     assert result.predictor['rejected'] == '0'

@@ -57,7 +57,7 @@ def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given
 
     from id_learning.nodes.msg_conversions import trajectory_message
 
-    config = PredictorNodeConfig(artifact='in-memory', torque_limit_scale=0.5)
+    config = PredictorNodeConfig(artifact='in-memory', torque_limit_scale=0.5, output_depth=37)
     core = FeedForwardPredictor(Linear(mabi), mabi.limits.torque, guard_config(config, mabi))
     core.warm_up()
     context = Context()
@@ -84,6 +84,9 @@ def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given
 
         assert node.get_parameter('torque_limit_scale').value == 0.5
         assert node.get_parameter('artifact').value == 'in-memory'
+        # A consumer that stalls for output_depth cycles loses nothing from the writer's history.
+        (tau_u,) = [p for p in node.publishers if p.topic_name == '/tau_u']
+        assert tau_u.qos_profile.depth == 37
         spin_until(
             lambda: (
                 publisher.get_subscription_count() >= 1 and node.count_subscribers('tau_u') >= 1
