@@ -7,10 +7,12 @@ from dataclasses import replace
 from itertools import pairwise
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from predictor.test_stream_properties import PERIOD_NS, fed, motion, predictor_for
 
 from id_learning.predictor import ReferenceSample, Reject
-from id_learning.predictor.stamps import future_tolerance_ns
+from id_learning.predictor.stamps import StampClock, future_tolerance_ns
 
 JOINTS = tuple(f'joint_{j}' for j in range(1, 7))
 
@@ -135,3 +137,26 @@ def test_a_refused_sample_in_a_draining_backlog_moves_the_time_base_along(mabi):
     others = [r for k, r in enumerate(results) if k != 26]
     assert all(r.reject is None for r in others), [(r.reject, r.detail) for r in others]
     assert predictor.counters.resyncs == 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    delays=st.lists(st.floats(0.0, 0.099), min_size=2, max_size=300),
+    transport=st.integers(0, 10**12),
+    spacing=st.integers(0, 2_000_000),
+)
+def test_a_periodic_stream_delivered_in_order_within_max_age_is_never_refused_for_time(
+    delays, transport, spacing
+):
+    # The invariant a loaded machine relies on (a stalled sender or receiver, then a burst):
+    # whatever each sample's extra delay up to max_age_s (0.1 s), in arrival order, at least
+    # ``spacing`` apart, no sample is too old, ahead of its time base or out of order.
+    clock = StampClock(0.1, 5, PERIOD_NS * 1e-9)
+    arrival = 0
+    for k, delay in enumerate(delays):
+        stamp = k * PERIOD_NS
+        arrival = max(arrival + spacing, stamp + transport + round(delay * 1e9))
+        if arrival - stamp - transport > round(0.1 * 1e9):
+            break  # the spacing itself made it late: beyond the invariant's premise
+        assert clock.judge(stamp, arrival) is None, (k, clock.offset_ns, arrival - stamp)
+        clock.accept(stamp, arrival)
