@@ -55,12 +55,7 @@ def reference_qos(depth: int = 10) -> QoSProfile:
 
 def torque_qos(depth: int = 10) -> QoSProfile:
     """The predictor's tau_u and command outputs: the system default at ``depth`` 10."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.VOLATILE,
-    )
+    return reference_qos(depth)  # the same policies: RELIABLE, KEEP_LAST, VOLATILE
 
 
 CLOCK_QOS = QoSProfile(
