@@ -116,6 +116,7 @@ def main() -> None:
     seconds: dict[str, list[float | None]] = {kind: [] for kind in kinds}
     floors = []
     failures: dict[str, str] = {}
+    cut_short: dict[str, list[str]] = {}
     with tempfile.TemporaryDirectory() as scratch:
         out = args.out or Path(scratch)
         for i, m in enumerate(minutes):
@@ -147,6 +148,8 @@ def main() -> None:
                     seconds[kind].append(None)
                     continue
                 ratios[kind][i] = entry['rmse_through_filter_over_floor']
+                if kind in run.metrics.get('cut_short', {}):  # its figure is the budget's too
+                    cut_short[f'{kind}, {m:g} min'] = run.metrics['cut_short'][kind]
                 rmse[kind].append(entry['rmse_through_filter_nm'])
                 seconds[kind].append(entry['train_seconds'])
     joints = list(robot.joints)
@@ -171,6 +174,7 @@ def main() -> None:
         },
         'train_seconds': seconds,
         'failures': failures,
+        'cut_short': cut_short,
         'wall_s': time.monotonic() - began,
         'plot': str(args.plot),
     }
@@ -213,6 +217,13 @@ def report(document: dict[str, Any], settings: list[str]) -> list[str]:
     if document['failures']:
         lines += ['', 'Not fitted (a gap in the table and the plot):', '']
         lines += [f'- {where}: {why}' for where, why in document['failures'].items()]
+    if document['cut_short']:
+        lines += [
+            '',
+            "Cut short by the time budget (the figure is the budget's as much as the data's):",
+            '',
+        ]
+        lines += [f'- {where}: {"; ".join(why)}' for where, why in document['cut_short'].items()]
     return lines
 
 
