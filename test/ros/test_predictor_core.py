@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from typing import ClassVar
 
 import numpy as np
@@ -47,10 +48,40 @@ class Linear(InverseDynamicsModel):
         pass
 
 
-def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given(mabi, domain_id):
+@contextmanager
+def served(core, mabi, config, domain_id, **kwargs):
+    """The node on ``core`` and a sender, in a context of their own; and spin_until."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    executor = SingleThreadedExecutor(context=context)
+    made: list = []
+    try:
+        node = Predictor(core, mabi, config, context=context, **kwargs)
+        made.append(node)
+        made.append(rclpy.create_node('sender', context=context))
+        for each in made:
+            executor.add_node(each)
+
+        def spin_until(condition, what: str) -> None:
+            deadline = time.monotonic() + WAIT_S
+            while not condition():
+                assert time.monotonic() < deadline, f'timed out waiting for {what}'
+                executor.spin_once(timeout_sec=0.05)
+
+        yield node, made[1], spin_until
+        node.close()
+    finally:
+        executor.shutdown()
+        for each in made:
+            each.destroy_node()
+        context.try_shutdown()
+
+
+def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given(mabi, domain_id):
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory
@@ -60,28 +91,16 @@ def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given
     config = PredictorNodeConfig(artifact='in-memory', torque_limit_scale=0.5, output_depth=37)
     core = FeedForwardPredictor(Linear(mabi), mabi.limits.torque, guard_config(config, mabi))
     core.warm_up()
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    executor = SingleThreadedExecutor(context=context)
-    made: list = []
-    try:
-        # An override the config does not hold: the node declares its config, not overrides.
-        overrides = [Parameter('torque_limit_scale', value=0.9)]
-        node = Predictor(core, mabi, config, context=context, parameter_overrides=overrides)
-        sender = rclpy.create_node('sender', context=context)
-        made += [node, sender]
-        for each in made:
-            executor.add_node(each)
+    # An override the config does not hold: the node declares its config, not overrides.
+    overrides = [Parameter('torque_limit_scale', value=0.9)]
+    with served(core, mabi, config, domain_id, parameter_overrides=overrides) as (
+        node,
+        sender,
+        spin_until,
+    ):
         received: list[JointState] = []
         publisher = sender.create_publisher(JointTrajectory, 'reference', reference_qos(10))
         sender.create_subscription(JointState, 'tau_u', received.append, 100)
-
-        def spin_until(condition, what: str) -> None:
-            deadline = time.monotonic() + WAIT_S
-            while not condition():
-                assert time.monotonic() < deadline, f'timed out waiting for {what}'
-                executor.spin_once(timeout_sec=0.05)
-
         assert node.get_parameter('torque_limit_scale').value == 0.5
         assert node.get_parameter('artifact').value == 'in-memory'
         # A consumer that stalls for output_depth cycles loses nothing from the writer's history.
@@ -104,12 +123,6 @@ def test_the_node_serves_a_core_built_in_memory_with_the_parameters_it_was_given
             assert tuple(msg.name) == tuple(mabi.joints)
             np.testing.assert_allclose(msg.effort, 10.0 * q, rtol=0, atol=1e-12)
         assert core.counters.published == len(stamps)
-        node.close()
-    finally:
-        executor.shutdown()
-        for each in made:
-            each.destroy_node()
-        context.try_shutdown()
 
 
 def test_a_trajectory_without_points_is_refused_saying_so(mabi):
@@ -128,9 +141,6 @@ def test_a_trajectory_without_points_is_refused_saying_so(mabi):
 def test_the_command_ramps_to_zero_when_stale_and_back_over_dds(mabi, domain_id):
     # The probe's P25: the command dropped to zero and jumped back; now a ramp each way, on
     # the node's timer, at most one period's worth of the slew limit per message.
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray
     from trajectory_msgs.msg import JointTrajectory
 
@@ -141,28 +151,12 @@ def test_the_command_ramps_to_zero_when_stale_and_back_over_dds(mabi, domain_id)
     )
     core = FeedForwardPredictor(Linear(mabi), mabi.limits.torque, guard_config(config, mabi))
     core.warm_up()
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    executor = SingleThreadedExecutor(context=context)
-    made: list = []
-    try:
-        node = Predictor(core, mabi, config, context=context)
-        sender = rclpy.create_node('sender', context=context)
-        made += [node, sender]
-        for each in made:
-            executor.add_node(each)
+    with served(core, mabi, config, domain_id) as (node, sender, spin_until):
         commands: list[np.ndarray] = []
         publisher = sender.create_publisher(JointTrajectory, 'reference', reference_qos(10))
         sender.create_subscription(
             Float64MultiArray, 'ff_cmd', lambda m: commands.append(np.array(m.data)), 1000
         )
-
-        def spin_until(condition, what: str) -> None:
-            deadline = time.monotonic() + WAIT_S
-            while not condition():
-                assert time.monotonic() < deadline, f'timed out waiting for {what}'
-                executor.spin_once(timeout_sec=0.05)
-
         spin_until(
             lambda: publisher.get_subscription_count() >= 1 and node.count_subscribers('ff_cmd'),
             'the node and the sender to match',
@@ -189,9 +183,3 @@ def test_the_command_ramps_to_zero_when_stale_and_back_over_dds(mabi, domain_id)
         assert (np.abs(np.diff(commands, axis=0)) <= step * (1 + 1e-12)).all()
         assert core.counters.predicted == 6
         assert core.counters.rejected == 0
-        node.close()
-    finally:
-        executor.shutdown()
-        for each in made:
-            each.destroy_node()
-        context.try_shutdown()
