@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import sys
 from collections.abc import Mapping, Sequence
@@ -38,6 +39,7 @@ __all__ = [
     'PIPE_IDLE_S',
     'PIPE_WRITER_S',
     'DuplicateKeyError',
+    'broken_link',
     'check_keys',
     'config_base',
     'describe_range',
@@ -314,10 +316,12 @@ def float_vector(
     *,
     minimum: float | None = None,
     exclusive_minimum: bool = False,
+    each: str = 'one per joint',
 ) -> np.ndarray:
     """Convert a scalar or list into a read-only float vector of the given length.
 
-    A scalar is broadcast to every joint.
+    A scalar is broadcast to every entry. ``each``: what the values are, for the message of a
+    wrong length ('one per joint'; 'x, y, z of the centre of mass [m]' for a 3-vector).
 
     Raises:
         ConfigError: wrong length, non-numeric entries (a quoted number such as '420' or a
@@ -334,7 +338,7 @@ def float_vector(
     if array.ndim == 0:
         array = np.full(length, float(array))
     if array.shape != (length,):
-        raise ConfigError(f'{where}: expected {length} values (one per joint), got {value!r}')
+        raise ConfigError(f'{where}: expected {length} values ({each}), got {value!r}')
     if not np.all(np.isfinite(array)):
         raise ConfigError(f'{where}: values must be finite, got {value!r}')
     if minimum is not None:
@@ -423,6 +427,25 @@ def _unique_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
             raise DuplicateKeyError(key, (short_json(out[key]), short_json(value)))
         out[key] = value
     return out
+
+
+def broken_link(path: Path | str) -> str | None:
+    """What ``path`` is when it is a symbolic link that leads to nothing, for messages.
+
+    'a link to <target>, which does not exist' (or, for a chain of links, that the chain ends
+    nowhere); None for anything else: a file, a folder, a link to one, or no entry at all. A
+    reader that says 'no such file' of a dangling link sends the user looking for the wrong
+    thing: the link is there, its target is not.
+    """
+    try:
+        target = os.readlink(path)
+    except OSError:  # no link, or no entry at all
+        return None
+    if os.path.exists(path):
+        return None
+    if os.path.lexists(os.path.join(os.path.dirname(path), target)):
+        return f'a link to {target}, a chain of links that leads to nothing'
+    return f'a link to {target}, which does not exist'
 
 
 def short_json(value: Any) -> str:

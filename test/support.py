@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -147,3 +150,19 @@ def inspect_topic_rows(stdout: str) -> dict[str, list[str]]:
         for cells in (line.split() for line in stdout.splitlines())
         if cells and cells[0] in ('/joint_states', '/motor_currents')
     }
+
+
+@contextmanager
+def no_hang(seconds: float = 20.0) -> Iterator[None]:
+    """Fail, not hang, when code in this process blocks (opens a FIFO nobody writes): SIGALRM."""
+
+    def expire(number: int, frame: object) -> None:
+        raise TimeoutError(f'no answer within {seconds:g} s: it blocks (a FIFO opened?)')
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)

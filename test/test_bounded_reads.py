@@ -15,7 +15,6 @@ from __future__ import annotations
 import os
 import re
 import resource
-import signal
 import socket
 import subprocess
 import sys
@@ -26,7 +25,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from support import REPO, sine_recording
+from support import REPO, no_hang, sine_recording
 
 from id_learning import bounded_read
 from id_learning.bag.metadata_file import MAX_BAG_METADATA_BYTES
@@ -462,18 +461,9 @@ IN_PROCESS_S = 20.0
 
 @pytest.fixture
 def deadline() -> Iterator[None]:
-    """Fail, not hang, when a read in this process blocks: the alarm's handler raises."""
-
-    def expire(number: int, frame: object) -> None:
-        pytest.fail(f'no answer within {IN_PROCESS_S:g} s (it blocks)')
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, IN_PROCESS_S)
-    try:
+    """Fail, not hang, when a read in this process blocks."""
+    with no_hang(IN_PROCESS_S):
         yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def _held_fifo(tmp: Path) -> tuple[Path, int]:

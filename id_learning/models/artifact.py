@@ -30,7 +30,7 @@ from safetensors import SafetensorError
 from safetensors.numpy import load_file, save_file
 
 from id_learning import __version__
-from id_learning.config_io import not_a_file, read_capped
+from id_learning.config_io import broken_link, not_a_file, read_capped
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.errors import CheckpointError
 from id_learning.models.metadata_checks import DuplicateKeyError, check_metadata, loads_unique
@@ -313,6 +313,9 @@ def read_metadata(meta_path: Path) -> dict[str, Any]:
             not a JSON object; names it (and the key).
     """
     meta_path = Path(meta_path)
+    link = broken_link(meta_path)
+    if link is not None:
+        raise CheckpointError(f'{meta_path}: {link}; restore it, or copy the artifact whole')
     data = read_capped(
         meta_path, 'model metadata', MAX_METADATA_BYTES, regular=True, error=CheckpointError
     )
@@ -345,16 +348,22 @@ def read_artifact(
     """Read and verify an artifact; returns (model.json, tensors).
 
     Raises:
-        CheckpointError: missing files, wrong format or kind, a key given twice, a tensor list or
-            hash that does not match the metadata, wrong units, a robot/joint/drive mismatch, a
-            non-finite number, a scaler of the wrong length or of zero width, targets that
-            disagree, a physical parameter of the wrong sign (``metadata_checks``), or a
-            model.json changed after it was written. A newer package version is warned of.
+        CheckpointError: a path that is no folder (a file, a FIFO, a device, a link to
+            nothing: named, never opened), missing files, wrong format or kind, a key given
+            twice, a tensor list or hash that does not match the metadata, wrong units, a
+            robot/joint/drive mismatch, a non-finite number, a scaler of the wrong length or of
+            zero width, targets that disagree, a physical parameter of the wrong sign
+            (``metadata_checks``), or a model.json changed after it was written. A newer
+            package version is warned of.
     """
     folder = Path(folder)
+    _refuse_no_folder(folder)
     meta_path, weights_path = folder / METADATA_FILE, folder / WEIGHTS_FILE
     for path in (meta_path, weights_path):
         what = not_a_file(path)
+        link = broken_link(path)
+        if link is not None:
+            raise CheckpointError(f'{path}: {link}; restore it, or copy the artifact whole')
         if what == 'no such file':
             raise CheckpointError(
                 f'{folder}: not a model artifact (needs {METADATA_FILE} and {WEIGHTS_FILE})'
@@ -402,6 +411,27 @@ def read_artifact(
     # Its header is verified above (format, kind, units, tensors, hashes, robot, the fitted
     # values' numbers); the model's own loader checks its settings and fitted values.
     return cast(ModelDocument, metadata), tensors
+
+
+def _refuse_no_folder(folder: Path) -> None:
+    """Refuse an artifact path that is no folder, naming what it is, without opening it.
+
+    A FIFO given as the artifact is never opened (that would wait for a writer), a regular file
+    (a model.json given instead of its folder) is named as a file. A path that does not exist
+    is left to the caller's 'not a model artifact'.
+
+    Raises:
+        CheckpointError: the path is a file, a FIFO, a device or socket, or a link to nothing.
+    """
+    expected = f'expected a folder with {METADATA_FILE} and {WEIGHTS_FILE}'
+    link = broken_link(folder)
+    if link is not None:
+        raise CheckpointError(f'{folder}: {link}; a model artifact is a folder ({expected})')
+    kind = not_a_file(folder)
+    if kind is None:
+        raise CheckpointError(f'{folder}: a regular file, not a model folder ({expected})')
+    if kind not in ('a folder', 'no such file') and not kind.startswith('cannot be read'):
+        raise CheckpointError(f'{folder}: {kind}, not a model folder ({expected})')
 
 
 #: Summaries in the fitted metadata that describe the fit and never enter a prediction (a loss

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import platform
 import time
@@ -18,10 +19,16 @@ from typing import Any
 import numpy as np
 import torch
 
-from id_learning.config_io import not_a_file, read_capped
+from id_learning.config_io import broken_link, not_a_file, read_capped, short_json
 from id_learning.dataset.preprocess import Dataset, MinMaxScaler
 from id_learning.errors import CheckpointError
-from id_learning.models.artifact import _git_commit, robot_fingerprint
+from id_learning.models.artifact import (
+    ARTIFACT_HASH,
+    METADATA_FILE,
+    _git_commit,
+    read_metadata,
+    robot_fingerprint,
+)
 from id_learning.models.base import InverseDynamicsModel
 from id_learning.models.metadata_checks import DuplicateKeyError, loads_unique
 from id_learning.outputs import incomplete_reason, partial_path, write_text_atomic
@@ -163,8 +170,14 @@ def read_run(run_dir: Path) -> dict[str, Any]:
     kind = not_a_file(run_dir)
     if kind not in (None, 'a folder', 'no such file'):
         raise CheckpointError(f'{run_dir}: {kind}, not a training run folder (train writes one)')
-    refuse_incomplete_run(run_dir)
     path = Path(run_dir) / RUN_FILE
+    link = broken_link(path)
+    if link is not None:
+        raise CheckpointError(
+            f'{path}: {link}: the run document is not where the link points; restore it, or '
+            'copy the run folder whole instead of linking its files'
+        )
+    refuse_incomplete_run(run_dir)
     if not path.exists():
         raise CheckpointError(f'{run_dir}: not a training run folder (no {RUN_FILE})')
     try:
@@ -206,30 +219,105 @@ def check_run_model(folder: Path, run: dict[str, Any] | None = None) -> None:
     A model folder is self-consistent wherever it came from; run.json records each model's
     ``artifact_sha256``, so another run's model copied or linked into ``models/`` is refused
     instead of being scored or tracked as this run's (the predictor node warns of it). A folder
-    outside a run, or a run from before the record, passes unchecked. ``run``: the run's
-    run.json, when read already.
+    outside a run passes unchecked, and a run from before the record is checked only as below.
+    ``run``: the run's run.json, when read already.
+
+    run.json itself holds no hash (it is rewritten as the run goes on, and a hash written
+    again after an edit proves nothing): what it shares with each model's model.json
+    (``SHARED_SECTIONS``) must say the same, since model.json is hash-checked and is the one
+    run.json records. A hand edit of run.json (a gear ratio, the scaler, the target) would
+    otherwise change what ``evaluate`` reads without a word.
 
     Raises:
-        CheckpointError: the run is incomplete or unreadable (``read_run``), or the model's
-            model.json is not the one run.json records (names both digests' starts).
+        CheckpointError: the run is incomplete or unreadable (``read_run``), the model's
+            model.json is not the one run.json records (names both digests' starts), or
+            run.json differs from it in a shared section (names run.json, the key and both
+            values).
     """
-    from id_learning.models.artifact import ARTIFACT_HASH, METADATA_FILE, read_metadata
-
     folder = Path(folder)
-    if folder.parent.name != MODELS_DIR or not (folder.parent.parent / RUN_FILE).exists():
+    run_dir = folder.parent.parent
+    if folder.parent.name != MODELS_DIR or not os.path.lexists(run_dir / RUN_FILE):
         return  # a model outside a run (a folder that happens to be called models)
-    run = run if run is not None else read_run(folder.parent.parent)
+    run = run if run is not None else read_run(run_dir)
     recorded = (run.get(ARTIFACTS_KEY) or {}).get(folder.name)
-    if recorded is None:
-        return
-    held = read_metadata(folder / METADATA_FILE).get(ARTIFACT_HASH)
-    if held != recorded:
+    meta_path = folder / METADATA_FILE
+    if recorded is None and not meta_path.is_file():
+        return  # nothing recorded, nothing to compare with: loading the model names the fault
+    metadata = read_metadata(meta_path)
+    held = metadata.get(ARTIFACT_HASH)
+    if recorded is not None and held != recorded:
         raise CheckpointError(
             f'{folder}: not the {folder.name} model this run trained: its model.json '
             f'({ARTIFACT_HASH} {str(held)[:12]}...) differs from the one {RUN_FILE} records '
             f'({str(recorded)[:12]}...), so it was copied or linked in from another run; copy '
             'a run whole, or train again'
         )
+    _refuse_edited_run(run_dir / RUN_FILE, run, meta_path, metadata, saved=recorded is not None)
+
+
+#: The sections run.json shares with each of its models' model.json (``save_models`` writes
+#: them into both): the robot the run was for, and what ``evaluate`` reads back.
+SHARED_SECTIONS = ('robot', 'preprocessing', 'target_scaler', 'training_data')
+_ABSENT = object()
+
+
+def _refuse_edited_run(
+    run_file: Path, run: dict[str, Any], meta_path: Path, metadata: dict[str, Any], *, saved: bool
+) -> None:
+    """Refuse a run.json whose shared sections differ from a model's model.json.
+
+    A section that one of the two lacks (written before it existed) is not compared. ``saved``:
+    the model is the one run.json records, so the edit was made in run.json.
+
+    Raises:
+        CheckpointError: names run.json, the first key that differs, both values and model.json.
+    """
+    for section in SHARED_SECTIONS:
+        if section not in run or section not in metadata:
+            continue
+        found = _first_difference(run[section], metadata[section], section)
+        if found is None:
+            continue
+        key, ours, theirs = found
+        why = (
+            f'the model the run saved (its {ARTIFACT_HASH} is the one {RUN_FILE} records), '
+            f'so {RUN_FILE} was edited after the run; restore it, or train again'
+            if saved
+            else f'the model in this run: {RUN_FILE} or the model was edited, or the model comes '
+            'from another run; train again'
+        )
+        raise CheckpointError(
+            f'{run_file}: {key} is {_shown(ours)} there but {_shown(theirs)} in {meta_path}, {why}'
+        )
+
+
+def _shown(value: Any) -> str:
+    return 'absent' if value is _ABSENT else short_json(value)
+
+
+def _first_difference(ours: Any, theirs: Any, where: str) -> tuple[str, Any, Any] | None:
+    """The first key path at which two JSON values differ, with both values; None if alike.
+
+    Numbers compare by value (205 and 205.0 are one number; NaN is NaN), a boolean is no number.
+    """
+    if isinstance(ours, dict) and isinstance(theirs, dict):
+        for key in [*ours, *(key for key in theirs if key not in ours)]:
+            found = _first_difference(
+                ours.get(key, _ABSENT), theirs.get(key, _ABSENT), f'{where}.{key}'
+            )
+            if found is not None:
+                return found
+        return None
+    if isinstance(ours, list) and isinstance(theirs, list) and len(ours) == len(theirs):
+        for k, (a, b) in enumerate(zip(ours, theirs, strict=True)):
+            found = _first_difference(a, b, f'{where}[{k}]')
+            if found is not None:
+                return found
+        return None
+    if ours is _ABSENT or theirs is _ABSENT or isinstance(ours, bool) != isinstance(theirs, bool):
+        return where, ours, theirs
+    both_nan = all(isinstance(x, float) and math.isnan(x) for x in (ours, theirs))
+    return None if ours == theirs or both_nan else (where, ours, theirs)
 
 
 def training_bag(run: dict[str, Any], run_dir: Path, index: int = 0) -> Path:
@@ -307,7 +395,6 @@ def save_models(
 
     Returns each model's ``artifact_sha256`` (what its model.json holds), for run.json.
     """
-    from id_learning.models.artifact import ARTIFACT_HASH, METADATA_FILE, read_metadata
     from id_learning.models.registry import save_model
 
     digests: dict[str, str] = {}

@@ -308,6 +308,14 @@ class EffectSet:
         return {name: self.effects[name].to_dict() for name in EFFECT_NAMES}
 
 
+#: The 3-vectors of an effect (not one value per joint), and what their values are.
+_POINT_VALUES = {
+    'com_m': "the x, y, z of the centre of mass in the robot's payload frame [m]",
+    'inertia_kgm2': 'the principal moments of inertia Ixx, Iyy, Izz about the centre of mass '
+    '[kg*m^2]',
+}
+
+
 def _parse_effect(cls: type[Effect], data: dict[str, Any], n: int, where: str) -> Effect:
     names = [item.name for item in fields(cls)]
     check_keys(data, names, where)
@@ -329,8 +337,9 @@ def _parse_effect(cls: type[Effect], data: dict[str, Any], n: int, where: str) -
             if not isinstance(value, bool):
                 raise ConfigError(f'{where}.enabled: expected true or false, got {value!r}')
             kwargs[item.name] = value
-        elif item.name in {'com_m', 'inertia_kgm2'}:
-            kwargs[item.name] = tuple(float_vector(value, f'{where}.{item.name}', 3).tolist())
+        elif item.name in _POINT_VALUES:
+            vector = float_vector(value, f'{where}.{item.name}', 3, each=_POINT_VALUES[item.name])
+            kwargs[item.name] = tuple(vector.tolist())
             problem = (
                 principal_moments_problem(np.array(kwargs[item.name]))
                 if item.name == 'inertia_kgm2'

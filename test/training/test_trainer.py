@@ -490,7 +490,7 @@ def test_a_run_where_every_model_fails_is_an_error_naming_each(short_bag, mabi, 
 
 
 def test_a_shuffled_run_scores_its_drawn_test_samples_and_evaluate_gives_them_back(
-    bags, mabi, tmp_path
+    bags, mabi, tmp_path, monkeypatch
 ):
     from id_learning.evaluation.scoring import test_index
 
@@ -517,12 +517,23 @@ def test_a_shuffled_run_scores_its_drawn_test_samples_and_evaluate_gives_them_ba
             run.metrics['models'][kind]['rmse_through_filter_nm'],
             rtol=1e-9,
         )
-    # A split that cannot be rebuilt exactly is refused, not scored on mixed samples.
+    # A split that cannot be rebuilt exactly (another random stream: the masks drawn now hash
+    # otherwise) is refused, not scored on mixed samples.
+    from id_learning.training import trainer
+
+    with monkeypatch.context() as patch:
+        patch.setattr(trainer, 'mask_sha256', lambda mask: '0' * 64)
+        with pytest.raises(CheckpointError, match='shuffled split could not be rebuilt'):
+            evaluate_run(out, bags, mabi, tmp_path / 'eval2', progress=False)
+    # A mask hash edited into run.json is refused before: run.json no longer says what the
+    # models' model.json (hash-checked) say of the data.
     document = json.loads((out / 'run.json').read_text())
     document['training_data']['bags'][0]['train_mask_sha256'] = '0' * 64
     (out / 'run.json').write_text(json.dumps(document))
-    with pytest.raises(CheckpointError, match='shuffled split could not be rebuilt'):
-        evaluate_run(out, bags, mabi, tmp_path / 'eval2', progress=False)
+    with pytest.raises(
+        CheckpointError, match=r'run\.json: training_data\.bags\[0\]\.train_mask_sha256 is "0000'
+    ):
+        evaluate_run(out, bags, mabi, tmp_path / 'eval3', progress=False)
 
 
 def test_kinds_are_fitted_cheapest_first_and_reported_in_the_order_given():

@@ -16,6 +16,7 @@ import yaml
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from id_learning.config_io import float_vector
 from id_learning.errors import ConfigError
 from id_learning.robot import load_robot_config
 from id_learning.robot.drives import amperes_per_newton_metre
@@ -169,3 +170,36 @@ def test_a_draw_leaves_massless_bodies_alone() -> None:
     urdf = np.array([0.0, 5.0])
     check_drawn_masses(urdf, np.array([0.0, 4.0]), ['a', 'b'], mass_rel_std=0.1, robot_seed=0,
                        where='twin.yaml')  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ('key', 'what'),
+    [
+        ('inertia_kgm2',
+         'the principal moments of inertia Ixx, Iyy, Izz about the centre of mass [kg*m^2]'),
+        ('com_m', "the x, y, z of the centre of mass in the robot's payload frame [m]"),
+    ],
+)  # fmt: skip
+def test_a_payload_vector_of_the_wrong_length_says_what_its_three_values_are(tmp_path, key, what):
+    # Probe T20: 2 inertia values were refused as 'expected 3 values (one per joint)'.
+    path = _config_file(tmp_path, {'payload_mass': {key: [0.1, 0.2]}})
+    with pytest.raises(ConfigError) as err:
+        load_twin_config(path)
+    message = str(err.value)
+    assert message.startswith(f'{path}: effects.payload_mass.{key}: expected 3 values ({what})')
+    assert 'per joint' not in message
+    assert 'got [0.1, 0.2]' in message
+
+
+def test_a_per_joint_vector_of_the_wrong_length_still_says_one_per_joint(tmp_path):
+    path = _config_file(tmp_path, {'joint_offset': {'offset': [0.0] * 5}})
+    with pytest.raises(
+        ConfigError, match=r'effects\.joint_offset\.offset: expected 6 values \(one per joint\)'
+    ):
+        load_twin_config(path)
+
+
+def test_float_vector_names_what_its_values_are():
+    with pytest.raises(ConfigError, match=r'^k: expected 3 values \(x, y, z\), got \[1, 2\]$'):
+        float_vector([1, 2], 'k', 3, each='x, y, z')
+    assert float_vector([1, 2, 3], 'k', 3, each='x, y, z').tolist() == [1.0, 2.0, 3.0]
