@@ -9,15 +9,17 @@ this package: the table belongs to the paper. ``load_study_table`` reads it from
 user points at (``train --study-table PATH``); the report then places it beside our numbers, and
 says that it is absent otherwise. The file is a JSON object holding ``joints`` (a list of
 distinct axis names, as many as the robot has joints), ``rmse_normalised`` (an object of model
-kind -> a list of one RMSE per axis, in the order of ``joints``, each a finite number >= 0), and
-optionally ``source``, ``metric`` and ``split_note`` (strings) and ``findings`` (a list of
-strings). Other keys are notes and are not read. A value of another type (a string or a
-boolean where a number belongs, a number where a list belongs) is refused, naming the file, the
-key path (``rmse_normalised.mlp[5]``) and the value.
+kind, one of ``models.registry.MODEL_KINDS``, -> a list of one RMSE per axis, in the order of
+``joints``, each a finite number >= 0), and optionally ``source``, ``metric`` and
+``split_note`` (strings) and ``findings`` (a list of strings). Other keys are notes and are not
+read. A value of another type (a string or a boolean where a number belongs, a number where a
+list belongs), or a row keyed by no model kind (which the report would leave out), is refused,
+naming the file, the key path (``rmse_normalised.mlp[5]``) and the value.
 """
 
 from __future__ import annotations
 
+import difflib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -80,7 +82,8 @@ def load_study_table(path: Path | str, n_joints: int | None = None) -> StudyTabl
     Raises:
         ConfigError: the file is missing or unreadable, a device, past
             ``MAX_STUDY_TABLE_BYTES`` (``config_io.read_capped``) or not JSON, a key is
-            given twice or missing, a value has the wrong type, a model row has the wrong number
+            given twice or missing, a value has the wrong type, a model row is keyed by no
+            model kind (the closest kind is suggested), a model row has the wrong number
             of values or one that is no finite non-negative number, or the axes do not match
             ``n_joints``; the message names the file, the key and the value.
     """
@@ -180,6 +183,9 @@ def _rows(path: Path, value: object, n_axes: int) -> dict[str, tuple[float, ...]
             raise ConfigError(
                 f'{path}: rmse_normalised: a model kind must be a name, got {kind!r}'
             )
+        problem = _kind_problem(kind)
+        if problem is not None:
+            raise ConfigError(f'{where}: {problem}')
         if not isinstance(values, list) or len(values) != n_axes:
             raise ConfigError(
                 f'{where}: needs {n_axes} finite values >= 0 in a list (one RMSE per axis), got '
@@ -193,6 +199,27 @@ def _rows(path: Path, value: object, n_axes: int) -> dict[str, tuple[float, ...]
             row.append(float(x))
         rows[kind] = tuple(row)
     return rows
+
+
+def _kind_problem(kind: str) -> str | None:
+    """Why a row's key is no model kind (with the closest kind and the known ones), or None.
+
+    The report places a row beside the model of its kind: a row keyed otherwise (a typo, the
+    study's label such as 'RNEA+MLP') would be left out of the comparison without a word.
+    """
+    from id_learning.models.registry import MODEL_KINDS
+
+    if kind in MODEL_KINDS:
+        return None
+    by_label = {label.lower(): name for name, label in MODEL_LABELS.items()}
+    written = re.sub(r'[^a-z0-9]+', '_', kind.lower()).strip('_')
+    close = [by_label[kind.lower()]] if kind.lower() in by_label else []
+    close = close or difflib.get_close_matches(written, list(MODEL_KINDS), n=1)
+    guess = f' (did you mean {close[0]!r}?)' if close else ''
+    return (
+        f'{kind!r} is no model kind{guess}; the kinds are {", ".join(MODEL_KINDS)} (a row is '
+        'keyed by the kind it is compared with)'
+    )
 
 
 def _text(path: Path, data: dict[str, object], key: str) -> str:

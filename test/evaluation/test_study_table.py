@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 
 from id_learning.errors import ConfigError
 from id_learning.evaluation.study import load_study_table
+from id_learning.models.registry import MODEL_KINDS
 
 AXES = [f'axis_{k}' for k in range(1, 7)]
 ROW = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
@@ -123,7 +124,7 @@ def test_non_finite_numbers_written_as_json_extensions_are_refused(tmp_path: Pat
 
 def test_a_kind_that_is_no_plain_word_is_quoted_in_the_key_path(tmp_path: Path) -> None:
     file = write(tmp_path / 'bad.json', _with(('rmse_normalised', 'a b\n'), 'x'))
-    assert "rmse_normalised.'a b\\n': needs 6" in refusal(file)
+    assert "rmse_normalised.'a b\\n': 'a b\\n' is no model kind" in refusal(file)
 
 
 def test_json_nested_too_deeply_is_refused(tmp_path: Path) -> None:
@@ -192,10 +193,10 @@ def _acceptable(path: tuple[Any, ...], value: Any) -> bool:
             return (
                 isinstance(value, dict)
                 and bool(value)
-                and all(k.strip() and row(v) for k, v in value.items())
+                and all(k in MODEL_KINDS and row(v) for k, v in value.items())
             )
-        case ('rmse_normalised', _):
-            return row(value)
+        case ('rmse_normalised', kind):
+            return kind in MODEL_KINDS and row(value)
         case ('rmse_normalised', _, _):
             return rmse(value)
         case ('findings',):
