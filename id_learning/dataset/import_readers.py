@@ -1,10 +1,11 @@
 """Read a log file (CSV or NPZ) into named raw columns, before any conversion.
 
 CSV files are split line by line so that every data row keeps its line number for messages; the
-delimiter and the header row are detected unless the mapping names them. A gzip-compressed CSV
-(``.csv.gz``) is read as its decompressed text. The file's first bytes are checked against the
-format it is read as, so that an NPZ read as CSV (or the other way round) is named as such
-rather than failing to decode.
+delimiter and the header row are detected unless the mapping names them. Fields quoted by the
+csv module's rules (``"time_ms"``, ``"1.5"``) read as their text, whitespace-separated ones too.
+A gzip-compressed CSV (``.csv.gz``) is read as its decompressed text. The file's first bytes are
+checked against the format it is read as, so that an NPZ read as CSV (or the other way round) is
+named as such rather than failing to decode.
 
 Nothing is allocated on a file's word alone: each NPZ array's header (its shape and dtype) is
 read from the archive before the array, and an array is refused, naming the file, the array and
@@ -22,6 +23,7 @@ import gzip
 import io
 import logging
 import math
+import re
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -346,13 +348,31 @@ def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:
 
 
 def _split(lines: Sequence[str], delimiter: str) -> list[list[str]]:
-    """Split lines into stripped fields; one CSV reader per line keeps line numbers exact."""
+    """Split lines into stripped fields; one CSV reader per line keeps line numbers exact.
+
+    Fields quoted as the csv module quotes them (``"time_ms"``, ``"1.5"``, a ``""`` inside for
+    a quote) read as their text, whatever the delimiter: whitespace too.
+    """
     if delimiter == 'whitespace':
-        return [line.split() for line in lines]
+        return [_split_whitespace(line) for line in lines]
     char = '\t' if delimiter == 'tab' else delimiter
     return [
         [cell.strip() for cell in next(csv.reader([line], delimiter=char, skipinitialspace=True))]
         for line in lines
+    ]
+
+
+#: A field of a whitespace-separated line: quoted (a ``""`` inside for a quote), or bare.
+_WHITESPACE_FIELD = re.compile(r'"((?:[^"]|"")*)"(?=\s|$)|(\S+)')
+
+
+def _split_whitespace(line: str) -> list[str]:
+    """A whitespace-separated line's fields; a quoted one may hold spaces (``"q1 deg"``)."""
+    if '"' not in line:
+        return line.split()
+    fields = (match.group(1, 2) for match in _WHITESPACE_FIELD.finditer(line))
+    return [
+        bare if quoted is None else quoted.replace('""', '"').strip() for quoted, bare in fields
     ]
 
 

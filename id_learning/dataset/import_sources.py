@@ -10,7 +10,9 @@ a table whose rows split alike into cells that are mostly numbers. Notes beside 
 README.txt, a notes.log, a program's text log) are no table: they are named in one warning and
 skipped, and a folder where nothing reads as a log is refused, naming its files and why. A file
 given as a source is read whatever it holds (the reader names what is wrong with it). Files with
-other suffixes (a mapping, a README.md, a plot) are no logs and are passed over.
+other suffixes (a mapping, a README.md, a plot) are no logs and are passed over. An entry named
+like a log that is no regular file (a FIFO, a device, a socket, a link to nothing) is refused,
+naming it and what it is, never opened: passed over, a log meant to be there would be lost.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from id_learning.bag.distinct import check_distinct
-from id_learning.config_io import special_kind
+from id_learning.config_io import broken_link, special_kind
 from id_learning.dataset.import_readers import is_float, log_suffix
 from id_learning.errors import DatasetError
 
@@ -49,13 +51,20 @@ def _is_number(cell: str, separator: str | None) -> bool:
     return is_float(cell) or (separator != ',' and is_float(cell.replace(',', '.')))
 
 
+def _unquoted(cell: str) -> str:
+    """A cell's text without the quotes CSV may put around it (``"1.5"``, ``"time_ms"``)."""
+    cell = cell.strip()
+    return cell[1:-1].strip() if len(cell) > 1 and cell[0] == cell[-1] == '"' else cell
+
+
 def log_problem(path: Path) -> str | None:
     """Why a text file is no log, in words; None when its head reads as one (or it is an NPZ).
 
     A log is a table: in its first ``_HEAD_BYTES``, at least two rows split alike (by tab, ';',
-    ',' or whitespace) into cells of which two or more, and at least half, are numbers. Header,
-    comment and blank lines are passed over. Prose has no such rows, nor has a binary file. A
-    zip archive (an NPZ, whatever its name) is left to the reader, as the mapping's format says.
+    ',' or whitespace) into cells of which two or more, and at least half, are numbers (quotes
+    around a cell, as CSV writes them, are no part of it). Header, comment and blank lines are
+    passed over. Prose has no such rows, nor has a binary file. A zip archive (an NPZ, whatever
+    its name) is left to the reader, as the mapping's format says.
     """
     if log_suffix(path) == '.npz':
         return None
@@ -81,7 +90,8 @@ def log_problem(path: Path) -> str | None:
         widths = Counter(
             len(cells)
             for cells in (
-                [cell.strip() for cell in line.split(separator) if cell.strip()] for line in lines
+                [cell for cell in (_unquoted(c) for c in line.split(separator)) if cell]
+                for line in lines
             )
             if 2 * sum(_is_number(cell, separator) for cell in cells) >= max(len(cells), 4)
         )
@@ -153,6 +163,37 @@ def _warn_subfolders(folder: Path, given: Sequence[Path]) -> None:
     )
 
 
+def _refuse_no_files(named: Sequence[Path]) -> None:
+    """Refuse a folder's entry named like a log that is no regular file (a folder passes).
+
+    A FIFO, a device, a socket or a link to nothing named ``b.csv`` may stand for a log that
+    was to be recorded there: passed over, that log would be left out of the bag without a
+    word. Each is looked at with ``stat`` only, never opened (a FIFO would wait for a writer).
+
+    Raises:
+        DatasetError: names the entry and what it is.
+    """
+    for path in named:
+        link = broken_link(path)
+        if link is not None:
+            raise DatasetError(
+                f'{path}: {link}; it is named like a log of this folder: restore its target, or '
+                'remove the link'
+            )
+        kind = special_kind(path)
+        if kind is None or kind == 'a folder':  # a subfolder is named by _warn_subfolders
+            continue
+        hint = (
+            'an import reads a log more than once: write it to a file in its place'
+            if kind.startswith('a FIFO')
+            else 'move it out of the folder, or give the log files themselves as sources'
+        )
+        raise DatasetError(
+            f"{path}: {kind}, not a log file, yet named like one of this folder's logs (a log "
+            f'there would be left out of the bag); {hint}'
+        )
+
+
 def log_files(sources: Sequence[Path | str]) -> list[Path]:
     """The log files named: files as given, folders as their log files in name order.
 
@@ -162,17 +203,18 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
 
     Raises:
         DatasetError: a source does not exist or is no file or folder (a device, a FIFO: named),
-            or a folder holds no log file (it names the subfolders that do, or its files that
-            read as no log).
+            a folder holds an entry named like a log that is no file (a FIFO, a device, a
+            socket, a link to nothing: named, never opened), or a folder holds no log file (it
+            names the subfolders that do, or its files that read as no log).
         ConfigError: one log given twice (same file, or identical bytes), naming it.
     """
     files: list[Path] = []
     given = [Path(source).resolve() for source in sources]
     for source in map(Path, sources):
         if source.is_dir():
-            found = sorted(
-                p for p in source.iterdir() if p.is_file() and log_suffix(p) in LOG_SUFFIXES
-            )
+            named = sorted(p for p in source.iterdir() if log_suffix(p) in LOG_SUFFIXES)
+            _refuse_no_files(named)
+            found = [p for p in named if p.is_file()]
             if not found:
                 below = _logs_below(source)
                 raise DatasetError(
