@@ -415,6 +415,8 @@ def test_adaptation_learns_a_friction_offset_from_the_currents_and_saves_it_besi
             'input_topic': '/reference',
             'input_depth': 500,
             'stale_after_cycles': 5000,
+            # One sample per tau_u: a loaded machine sends slower than the stamps advance.
+            'max_age_s': 0.0,
             'diagnostics_period_s': 0.1,
             'adaptation': 'rls',
             'adaptation_time_constant_s': 5.0,

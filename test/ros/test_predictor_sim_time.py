@@ -136,6 +136,8 @@ def test_unusable_currents_are_said_once_and_leave_the_stored_adaptation_as_it_w
             'input_topic': '/reference',
             'input_depth': 100,
             'stale_after_cycles': 5000,
+            # One sample per tau_u: a loaded machine sends slower than the stamps advance.
+            'max_age_s': 0.0,
             'diagnostics_period_s': 0.1,
             'adaptation': 'rls',
         },
