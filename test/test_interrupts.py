@@ -3,6 +3,7 @@ traceback, and the shell's status (128 + the signal's number); a run keeps its p
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import subprocess
 import sys
@@ -91,6 +92,35 @@ def test_an_interrupted_train_says_in_one_line_that_its_partial_run_is_left(
     assert (partial_path(out) / INCOMPLETE_FILE).is_file()  # kept: it holds a fitted model
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ['run.partial']  # no lock left
+
+
+def test_ctrl_c_pressed_again_and_again_during_the_cleanup_changes_nothing(
+    bag: Path, tmp_path: Path
+) -> None:
+    # The probe's I08: a second SIGINT while the first one's cleanup ran ended train by signal.
+    out = tmp_path / 'run'
+    process = _cli('train', '--bag', str(bag), '--out', str(out), '--quiet', '--device', 'cpu',
+                   '--models', 'rnea_lq,mlp', '--hyper', 'mlp.max_epochs=100000',
+                   '--hyper', 'mlp.patience=100000')  # fmt: skip
+    try:
+        _wait_for(process, 'rnea_lq: fitted')
+        deadline = time.monotonic() + EXIT_S
+        while process.poll() is None:  # a signal every 10 ms until it has exited
+            assert time.monotonic() < deadline, 'train did not exit'
+            process.send_signal(signal.SIGINT)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                process.wait(0.01)
+    except BaseException:
+        process.kill()
+        process.communicate()
+        raise
+    _, err = process.communicate(timeout=EXIT_S)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert process.returncode == 130, lines
+    assert not any('Traceback' in line for line in lines), lines
+    assert len(lines) == 1, lines
+    assert lines[0].startswith('id-learning train: interrupted; '), lines
+    assert (partial_path(out) / INCOMPLETE_FILE).is_file()
 
 
 def test_a_simulate_terminated_before_writing_says_nothing_was_written(tmp_path: Path) -> None:

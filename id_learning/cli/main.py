@@ -55,8 +55,12 @@ class _Stopping(logging.Filter):
 def _signals_raise() -> Iterator[None]:
     """SIGINT raises KeyboardInterrupt, SIGTERM ``Terminated``, while the command runs.
 
-    A signal ignored when the tool started (a background job) stays ignored; the handlers
-    before are restored after (``main`` may run in a process that goes on).
+    Only the first: a signal repeated while its cleanup runs (Ctrl-C pressed again) is ignored,
+    so that the cleanup finishes, and the tool still ends with its one line and status. A
+    signal ignored when the tool started (a background job) stays ignored; the handlers before
+    are restored after (``main`` may run in a process that goes on), except after a signal
+    stopped the command: the process is ending, and a further signal must not turn its exit
+    into a traceback or a death by signal.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -66,6 +70,8 @@ def _signals_raise() -> Iterator[None]:
     defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
 
     def handle(number: int, frame: FrameType | None) -> None:
+        if stopping.stopped:
+            return  # the first one's cleanup is running: let it finish
         stopping.stopped = True
         raise raised[signal.Signals(number)]
 
@@ -81,7 +87,9 @@ def _signals_raise() -> Iterator[None]:
         optuna.removeFilter(stopping)
         for number, handler in previous.items():
             if handler is defaults[number]:
-                signal.signal(number, handler)
+                # Ignored, not handled, once stopped: Python puts its own handlers back to the
+                # default (death by signal) while the interpreter shuts down, not SIG_IGN.
+                signal.signal(number, signal.SIG_IGN if stopping.stopped else handler)
 
 
 def _stat(path: Path | None) -> tuple[int, int] | None:

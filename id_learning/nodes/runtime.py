@@ -147,8 +147,15 @@ class _StopOnSignal:
         self.event.set()
 
     def restore(self) -> None:
+        """Put the handlers before back, unless a signal stopped the node.
+
+        The process is then ending: a repeated Ctrl-C must not end it by signal after its bag
+        and its report are done.
+        """
         for number, handler in self._previous.items():
-            signal.signal(number, handler)
+            # Ignored, not handled: Python puts its handlers back to the default (death by
+            # signal) while the interpreter shuts down, but leaves SIG_IGN as it is.
+            signal.signal(number, signal.SIG_IGN if self.event.is_set() else handler)
 
 
 def close_spun_node(
