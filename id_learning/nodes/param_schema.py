@@ -19,10 +19,10 @@ import dataclasses
 import difflib
 import re
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar, get_type_hints
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, get_type_hints
 
 from id_learning.config_io import (
     describe_range,
@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
 __all__ = [
+    'MAX_SECONDS',
     'STRING_LIST',
     'check_schema',
     'command_line_sources',
@@ -47,6 +48,7 @@ __all__ = [
     'param',
     'params_file_problem',
     'params_files',
+    'refuse_shared_topics',
     'section_matches',
     'shared_topic_problem',
     'validate_change',
@@ -55,6 +57,11 @@ __all__ = [
 
 #: The type of a list parameter (topics, msg_types).
 STRING_LIST = tuple[str, ...]
+#: The longest time a parameter may give [s], about 32 years: every time parameter has a ``high``
+#: at most this, so that its nanoseconds fit an int64 where the node or rclpy converts them.
+MAX_SECONDS = 1e9
+#: Groups of (topic by parameter, what the node uses its own fixed topics for), see topic_checks.
+TopicChecks = list[tuple[dict[str, str], dict[str, str]]]
 
 _T = TypeVar('_T', bound='DataclassInstance')
 
@@ -204,6 +211,37 @@ def shared_topic_problem(named: Mapping[str, str], own: Mapping[str, str]) -> st
             )
         seen[topic] = parameter
     return None
+
+
+class _HasTopics(Protocol):
+    """A node config that says which of its topics may not meet (``topic_checks``)."""
+
+    def topic_checks(self) -> TopicChecks: ...
+
+
+def refuse_shared_topics(
+    config: _HasTopics, resolve: Callable[[str], str] | None = None, where: str = ''
+) -> None:
+    """Refuse two topic parameters of a node on one topic, or one on a topic the node keeps.
+
+    Args:
+        config: the node's parameters (``topic_checks`` says which topics may not meet).
+        resolve: the node's name resolution (namespace, remaps); None: as written, where only
+            equal strings are surely one topic ('tau_u' and '/tau_u' are one in the root
+            namespace only: the node checks again with the resolved names).
+        where: put before the reason (the node).
+
+    Raises:
+        ConfigError: names both parameters (or the parameter and the node's use) and the topic.
+    """
+    name = resolve or (lambda topic: topic)
+    for named, own in config.topic_checks():
+        problem = shared_topic_problem(
+            {parameter: name(topic) for parameter, topic in named.items()},
+            {name(topic): what for topic, what in own.items()},
+        )
+        if problem:
+            raise ConfigError(f'{where}{problem}')
 
 
 _FIELD_TYPES: dict[type, dict[str, Any]] = {}

@@ -18,7 +18,6 @@ gains a line only for a rule between fields.
 from __future__ import annotations
 
 import datetime
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -27,12 +26,14 @@ from id_learning.config_io import not_a_file
 from id_learning.errors import ConfigError
 from id_learning.nodes.param_ros import declare_parameters, read_snapshot
 from id_learning.nodes.param_schema import (
+    MAX_SECONDS,
+    TopicChecks,
     check_schema,
     config_from_mapping,
     load_node_config,
     log_change,
     param,
-    shared_topic_problem,
+    refuse_shared_topics,
     validate_change,
 )
 from id_learning.predictor.config import GuardConfig, OutOfRangeAction
@@ -61,8 +62,6 @@ JOINT_STATE = 'sensor_msgs/msg/JointState'
 #: The deepest queue a node keeps [messages], and the most threads it starts.
 MAX_QUEUE_DEPTH = 1_000_000
 MAX_THREADS = 256
-#: Groups of (topic by parameter, what the node uses its own fixed topics for), see topic_checks.
-TopicChecks = list[tuple[dict[str, str], dict[str, str]]]
 #: The shortest and longest period of a node's timers [s]: a shorter one spins a CPU core on
 #: reports nobody reads; a longer one overflows the timer's int64 nanoseconds.
 MIN_PERIOD_S = 0.05
@@ -70,6 +69,8 @@ MAX_PERIOD_S = 3600.0
 #: The smallest recorder split [s], [MiB] (besides 0 = off): a new file per message otherwise.
 MIN_SPLIT_S = 0.1
 MIN_SPLIT_MIB = 0.1
+#: The largest split [MiB] (about a PiB: its bytes fit an int64), the slowest replay rate [-].
+MAX_SPLIT_MIB, MIN_RATE = 1e9, 1e-3
 #: The smallest torque_limit_scale: the share the predictor core accepts (``GuardConfig``).
 MIN_TORQUE_LIMIT_SCALE = 1e-6
 #: The shortest repeat of the predictor's 'still stale' line [s] (besides 0 = once).
@@ -134,11 +135,13 @@ class RecorderConfig:
         'Start a new .mcap file after this much log time [s], at least 0.1 s; 0 = no split by '
         'duration.',
         low=0.0,
+        high=MAX_SECONDS,
     )
     split_size_mib: float = param(
         0.0,
         'Start a new .mcap file at this file size [MiB], at least 0.1 MiB; 0 = no split by size.',
         low=0.0,
+        high=MAX_SPLIT_MIB,
     )
     diagnostics_period_s: float = param(
         1.0,
@@ -168,6 +171,16 @@ class RecorderConfig:
                     f'otherwise), got {getattr(self, name)!r}'
                 )
         refuse_shared_topics(self)
+
+    @property
+    def split_duration_ns(self) -> int | None:
+        """``split_duration_s`` [ns] for the writer; None: no split by duration."""
+        return round(self.split_duration_s * 1e9) or None
+
+    @property
+    def split_bytes(self) -> int | None:
+        """``split_size_mib`` [bytes] for the writer; None: no split by size."""
+        return round(self.split_size_mib * (1 << 20)) or None
 
     def topic_checks(self) -> TopicChecks:
         """Groups of (topic by parameter, the node's own topics) no two of which may meet.
@@ -205,16 +218,25 @@ class ReplayConfig:
     )
     rate: float = param(
         1.0,
-        'Playback speed factor [-]: 2.0 plays twice as fast.',
-        low=0.0,
+        'Playback speed factor [-]: 2.0 plays twice as fast, 0.001 (the slowest) plays a second '
+        'of the bag in about 17 minutes. A play longer than an hour of wall time is said as it '
+        'starts.',
+        low=MIN_RATE,
         high=100.0,
-        low_open=True,
     )
     loop: bool = param(False, 'Start again from the start offset at the end.')
     start_offset_s: float = param(
-        0.0, 'Skip this much of the bag from its first sample [s].', low=0.0
+        0.0,
+        'Skip this much of the bag from its first sample [s]; beyond its end nothing is played.',
+        low=0.0,
+        high=MAX_SECONDS,
     )
-    duration_s: float = param(0.0, 'Play this much of the bag [s]; 0 = to the end.', low=0.0)
+    duration_s: float = param(
+        0.0,
+        'Play this much of the bag [s]; 0, or more than it holds = to the end.',
+        low=0.0,
+        high=MAX_SECONDS,
+    )
     publish_clock: bool = param(
         True, 'Publish /clock with each cycle stamp (for use_sim_time nodes).'
     )
@@ -264,6 +286,7 @@ class ReplayConfig:
         30.0,
         'Give up waiting for subscribers after this long and play anyway [s].',
         low=0.0,
+        high=MAX_SECONDS,
         low_open=True,
     )
     exit_when_done: bool = param(True, 'Shut the node down after the last cycle (unless loop).')
@@ -447,6 +470,7 @@ class PredictorNodeConfig:
         'Memory of the adaptation (its forgetting factor) [s]; at least 0.1 s (ten IPO periods '
         'and more).',
         low=0.1,
+        high=MAX_SECONDS,
     )
     measured_topic: str = param(
         '/motor_currents',
@@ -472,6 +496,7 @@ class PredictorNodeConfig:
         'Minimum interval between repeated warnings and errors [s].',
         read_only=False,
         low=0.0,
+        high=MAX_SECONDS,
         low_open=True,
     )
     stale_log_period_s: float = param(
@@ -480,6 +505,7 @@ class PredictorNodeConfig:
         'while it lasts (it is on /diagnostics throughout), at least 1 s; 0 = once [s].',
         read_only=False,
         low=0.0,
+        high=MAX_SECONDS,
     )
     latency_window: int = param(
         4096,
@@ -522,34 +548,6 @@ class PredictorNodeConfig:
         if self.adaptation != 'off':
             named['measured_topic'] = self.measured_topic
         return [(named, DIAGNOSTICS)]
-
-
-# -- rules between fields -------------------------------------------------------------------------
-def refuse_shared_topics(
-    config: RecorderConfig | ReplayConfig | PredictorNodeConfig,
-    resolve: Callable[[str], str] | None = None,
-    where: str = '',
-) -> None:
-    """Refuse two topic parameters of a node on one topic, or one on a topic the node keeps.
-
-    Args:
-        config: the node's parameters (``topic_checks`` says which topics may not meet).
-        resolve: the node's name resolution (namespace, remaps); None: as written, where only
-            equal strings are surely one topic ('tau_u' and '/tau_u' are one in the root
-            namespace only: the node checks again with the resolved names).
-        where: put before the reason (the node).
-
-    Raises:
-        ConfigError: names both parameters (or the parameter and the node's use) and the topic.
-    """
-    name = resolve or (lambda topic: topic)
-    for named, own in config.topic_checks():
-        problem = shared_topic_problem(
-            {parameter: name(topic) for parameter, topic in named.items()},
-            {name(topic): what for topic, what in own.items()},
-        )
-        if problem:
-            raise ConfigError(f'{where}{problem}')
 
 
 # -- files ----------------------------------------------------------------------------------------

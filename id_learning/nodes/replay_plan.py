@@ -46,7 +46,7 @@ from id_learning.predictor.guards import stamp_problem
 from id_learning.predictor.reference import reference_from_states
 from id_learning.robot.config import RobotConfig
 
-__all__ = ['REFERENCE_PAD_S', 'Cycle', 'ReplayPlan', 'build_plan', 'check_smoothing']
+__all__ = ['REFERENCE_PAD_S', 'Cycle', 'ReplayPlan', 'build_plan', 'check_smoothing', 'span_keys']
 
 NS_PER_S = 1_000_000_000
 #: Joint states read beyond each end of the span for the reference's zero-phase filter [s].
@@ -326,6 +326,34 @@ class _Span:
     warnings: tuple[str, ...]
 
 
+def span_keys(
+    offset_s: float, duration_s: float, origin: int, last: int
+) -> tuple[int, int | None]:
+    """The first and last key of the played span [ns] (None: to the end) of a bag's keys.
+
+    Whatever the seconds (the parameters are bounded, but this does not rely on it): a start
+    beyond the bag's last key is just past it (nothing to play), a stop at or beyond it is the
+    end; no product overflows.
+
+    Args:
+        offset_s: ``start_offset_s`` [s], from ``origin``.
+        duration_s: ``duration_s`` [s]; 0: to the end.
+        origin: the bag's first key [ns]; last: its last [ns].
+    """
+    length = last - origin
+    offset = _ns_at_most(offset_s, length + 1)
+    if duration_s <= 0:
+        return origin + offset, None
+    stop = origin + offset + _ns_at_most(duration_s, length - offset)
+    return origin + offset, None if stop >= last else stop
+
+
+def _ns_at_most(seconds: float, most: int) -> int:
+    """``seconds`` [ns], at most ``most`` (inf and NaN too)."""
+    ns = seconds * NS_PER_S
+    return round(ns) if ns < most else most
+
+
 def _read_span(
     config: ReplayConfig, path: Path, needed: Sequence[str], types: Mapping[str, str]
 ) -> _Span:
@@ -352,8 +380,8 @@ def _read_span(
     if not heads:
         raise ConfigError(f'{path}: no messages on {list(needed)}')
     origin = min(heads)
-    start = origin + round(config.start_offset_s * NS_PER_S)
-    stop = start + round(config.duration_s * NS_PER_S) if config.duration_s > 0 else None
+    last = max(int(order.keys.max()) for order in orders.values() if order.keys.size)
+    start, stop = span_keys(config.start_offset_s, config.duration_s, origin, last)
     pad = round(REFERENCE_PAD_S * NS_PER_S) if has_reference else 0
 
     def within(keys: np.ndarray, margin: int) -> np.ndarray:
