@@ -22,7 +22,9 @@ gets suffixes) or a path longer than ``PATH_MAX`` is one line naming the path, a
 error of the operating system while the path is looked at. Messages name the option or
 parameter that gave the path (``option``: ``--out``, ``--plot``, the recorder's ``output``).
 A bag is locked the same way while it is written (``bag_output``, ``BagWriter``): a second
-writer is refused naming the first.
+writer is refused naming the first. A replay holds the lock shared while it plays a bag
+(``read_lock``): a writer that would replace the bag is refused naming the replay
+(``id_learning.output_lock``).
 
 A failure while writing (disk full, a file size limit, no permission) raises ``OutputError``
 naming the path and the operating system's reason; nothing is left under ``<out>``, and the
@@ -33,14 +35,12 @@ has fitted). Consumers ask ``incomplete_reason`` whether a folder they read is c
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import logging
 import os
 import platform
 import shutil
 import tempfile
-import threading
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -69,6 +69,7 @@ from id_learning.output_kinds import (
     refuse_unwritten,
     write_manifest,
 )
+from id_learning.output_lock import locked, named_path, output_lock, read_lock
 
 __all__ = [
     'COMMAND_KINDS',
@@ -94,6 +95,7 @@ __all__ = [
     'os_reason',
     'output_lock',
     'partial_path',
+    'read_lock',
     'refuse_long_names',
     'replace_folder',
     'result_folder',
@@ -105,16 +107,6 @@ _LOG = logging.getLogger(__name__)
 #: Where a replaced result waits, for a moment, to be removed.
 REPLACED_SUFFIX = '.replaced'
 INCOMPLETE_FORMAT = 'id_learning.incomplete/1'
-#: The output locks this process holds: lock path -> the thread holding it (``output_lock``).
-_HELD: dict[Path, int] = {}
-
-
-def named_path(out: Path) -> Path:
-    """``out``, resolved where its last part is no name (``.``, ``x/..``): siblings use it."""
-    named = Path(out).resolve() if Path(out).name in ('', '.', '..') else Path(out)
-    if not named.name:
-        raise OutputError(f'{out}: the root folder is never an output; name a folder under it')
-    return named
 
 
 def partial_path(out: Path) -> Path:
@@ -435,79 +427,6 @@ class ResultFolder:
     keep: bool = False
 
 
-@contextlib.contextmanager
-def _locked(out: Path, option: str = '--out') -> Iterator[None]:
-    """Hold ``<out>.lock`` (flock, not waiting); removed on release (``option``: for messages).
-
-    Raises:
-        OutputError: another process holds it (named by its pid), or it cannot be created.
-    """
-    path = named_path(out).with_name(named_path(out).name + LOCK_SUFFIX)
-    for _ in range(5):  # a holder may remove the file between our open and our flock
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as err:
-            raise OutputError(f'{path}: {os_reason(err)} (locking {out})') from err
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.read(fd, 64).decode(errors='replace').strip() or 'unknown'
-            os.close(fd)
-            raise OutputError(
-                f'{out}: another process (pid {holder}) is writing it ({path} is locked); '
-                f'wait for it to finish, or choose another {option}'
-            ) from None
-        try:
-            same = os.fstat(fd).st_ino == os.stat(path).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            break
-        os.close(fd)
-    else:
-        raise OutputError(f'{path}: could not be locked (it kept being replaced)')
-    try:
-        try:  # a disk already full takes the file but not the pid
-            os.ftruncate(fd, 0)
-            os.write(fd, f'{os.getpid()}\n'.encode())
-        except OSError as err:
-            raise OutputError(f'{path}: {os_reason(err)} (locking {out})') from err
-        yield
-    finally:
-        path.unlink(missing_ok=True)
-        os.close(fd)
-
-
-def _held_key(out: Path) -> Path:
-    """The lock of ``out`` as one key however ``out`` is spelled (relative, through links)."""
-    return Path(os.path.realpath(named_path(out).parent)) / (named_path(out).name + LOCK_SUFFIX)
-
-
-@contextlib.contextmanager
-def output_lock(out: Path, *, option: str = '--out') -> Iterator[None]:
-    """Hold ``<out>.lock`` (flock, not waiting) while writing ``out``; its parent must exist.
-
-    ``option``: the option or parameter that gave ``out``, as the refusal names it.
-
-    Taken again by the thread holding it, it goes on (a command holds it, the writer it calls
-    takes it too); another thread or process is refused, naming the holder's pid.
-
-    Raises:
-        OutputError: another writer holds it, or it cannot be created or written.
-    """
-    out = Path(out)
-    key, me = _held_key(out), threading.get_ident()
-    if _HELD.get(key) == me:
-        yield
-        return
-    with _locked(out, option):
-        _HELD[key] = me
-        try:
-            yield
-        finally:
-            del _HELD[key]
-
-
 def _start(out: Path, command: str, option: str) -> Path:
     """A fresh ``<out>.partial`` with its marker (an interrupted one is removed first)."""
     work = partial_path(out)
@@ -566,7 +485,7 @@ def result_folder(
     kind = COMMAND_KINDS.get(command)
     out = check_output(out, force=force, inputs=inputs, kind=kind, option=option)
     make_parent(out)
-    with _locked(out, option):  # not output_lock: a result has one writer, even in one thread
+    with locked(out, option):  # not output_lock: a result has one writer, even in one thread
         out = check_output(  # ours
             out, force=force, inputs=inputs, is_locked=True, kind=kind, option=option
         )

@@ -33,16 +33,24 @@ period is refused; with ``timing: log_time``, log times that do not advance refu
 Jitter: each cycle's lateness (publish time minus its deadline) is recorded; the median, 99th
 percentile and maximum [ms] and the cycles later than one IPO period are logged at the end and
 published on /diagnostics. With ``loop`` the bag starts again one period after its last cycle
-(/clock then jumps back).
+(/clock then jumps back). A play longer than an hour of wall time (its duration / rate) is said
+as it starts.
+
+From before the bag is read until it closes, the replay holds the bag shared
+(``outputs.read_lock``, ``<bag>.lock`` beside it): a writer that would replace it meanwhile (a
+recorder with ``overwrite``) is refused, naming the replay. Where that file cannot be made (a
+folder nobody may write into, where nobody can replace the bag either), it plays without it.
 
 Usage: ``ros2 run id_learning replay --ros-args -p bag:=bags/default -p rate:=1.0``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -74,15 +82,20 @@ from id_learning.nodes.params import (
 from id_learning.nodes.qos import CLOCK_QOS, DIAGNOSTICS_QOS, reference_qos, sensor_qos
 from id_learning.nodes.replay_plan import Cycle, ReplayPlan, build_plan
 from id_learning.nodes.runtime import NameClash, ShellNode, run_node
+from id_learning.outputs import read_lock
 from id_learning.predictor.timing import RollingStats
 from id_learning.robot.config import load_robot_config
 
-__all__ = ['Cycle', 'Replay', 'ReplayPlan', 'build_plan', 'main']
+__all__ = ['Cycle', 'Replay', 'ReplayPlan', 'build_plan', 'long_play_warning', 'main']
 
 NODE_NAME = 'replay'
 NS_PER_S = 1_000_000_000
 #: Lead time between the end of the set-up and the first deadline [ns].
 START_LEAD_NS = 20_000_000
+#: A play longer than this in wall time is said as the replay starts [s].
+LONG_PLAY_S = 3600.0
+#: The longest single wait on a deadline [s] (threading's waits refuse more than ~292 years).
+MAX_WAIT_S = 3600.0
 _NO_VALUES = np.empty(0)
 
 
@@ -101,7 +114,15 @@ class Replay(ShellNode):
         config = self.config
         refuse_clashing_topics(self, config)  # before the bag is read
         self.robot = load_robot_config(resolve_robot_config(config.robot_config))
-        self.plan = build_plan(config, self.robot)
+        # The bag is held shared from before it is read until close(): a writer that would
+        # replace it meanwhile (a recorder with overwrite) is refused, naming this replay.
+        self._bag_lock = contextlib.ExitStack()
+        try:
+            self._bag_lock.enter_context(read_lock(Path(config.bag)))
+            self.plan = build_plan(config, self.robot)
+        except BaseException:
+            self._bag_lock.close()
+            raise
         self.done: Future = Future()
         qos = sensor_qos(config.qos_depth)
         self._topic_publishers: list[Publisher] = []
@@ -147,6 +168,9 @@ class Replay(ShellNode):
             f'{self.plan.duration_ns / NS_PER_S:.2f} s) of {config.bag}; reference '
             f'{config.reference_mode}, rate {config.rate:g}'
         )
+        said = long_play_warning(self.plan.duration_ns, config.rate, loop=config.loop)
+        if said:
+            self.get_logger().warning(said)
         self._thread = threading.Thread(target=self._play, name='replay', daemon=True)
         self._thread.start()
 
@@ -205,8 +229,10 @@ class Replay(ShellNode):
         for cycle in self.plan.cycles:
             deadline = start_ns + round(cycle.offset_ns / rate)
             remaining = deadline - time.monotonic_ns()
-            if remaining > 0 and self._stop.wait(remaining / NS_PER_S):
-                return deadline
+            while remaining > 0:
+                if self._stop.wait(min(remaining / NS_PER_S, MAX_WAIT_S)):
+                    return deadline
+                remaining = deadline - time.monotonic_ns()
             lateness = time.monotonic_ns() - deadline
             if clock is not None:
                 clock.publish(clock_bytes.serialize(cycle.stamp_ns, _NO_VALUES))
@@ -301,8 +327,25 @@ class Replay(ShellNode):
         self._is_closed = True
         self._stop.set()
         self._thread.join(timeout=3.0)
+        self._bag_lock.close()
         if not self.done.done():
             self.get_logger().info(f'stopped: {self.report()}')
+
+
+def long_play_warning(duration_ns: int, rate: float, *, loop: bool) -> str | None:
+    """What to say of a play longer than ``LONG_PLAY_S`` in wall time, or None.
+
+    A slow rate stretches the bag: 4 s at rate 0.001 take over an hour, with nothing published
+    between the cycles but /diagnostics.
+    """
+    wall_s = duration_ns / NS_PER_S / rate
+    if wall_s <= LONG_PLAY_S:
+        return None
+    return (
+        f'{duration_ns / NS_PER_S:.3g} s of the bag at rate {rate:g} take {wall_s / 3600:.2g} h '
+        f'of wall time{" each loop" if loop else ""} (duration / rate); raise rate to play '
+        'faster'
+    )
 
 
 def main(args: Sequence[str] | None = None) -> int:
