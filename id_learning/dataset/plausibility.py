@@ -242,6 +242,21 @@ def first_unpaired(a_ns: np.ndarray, b_ns: np.ndarray, period_s: float) -> int |
     return int(beyond[0]) if beyond.size else None
 
 
+def _two_streams(stamps_ns: np.ndarray) -> bool:
+    """Stamps that go back more than once and are two increasing streams, taken in turn."""
+    if np.count_nonzero(np.diff(stamps_ns) < 0) < 2:
+        return False  # one step back: a clock step, or one sample out of place
+    high = low = None  # the last stamps of the two streams, high >= low
+    for stamp in np.asarray(stamps_ns).tolist():  # each on the stream it extends most closely
+        if high is None or stamp > high:
+            high = stamp
+        elif low is None or stamp > low:
+            low = stamp
+        else:
+            return False
+    return True
+
+
 def check_stamps(
     stamps_ns: np.ndarray, period_s: float, max_gap_periods: float, where: str
 ) -> None:
@@ -254,9 +269,11 @@ def check_stamps(
     if (steps <= 0).any():
         sample = int(np.argmax(steps <= 0)) + 1
         kind = 'repeats' if steps[sample - 1] == 0 else 'goes backwards'
+        two = kind != 'repeats' and _two_streams(stamps_ns)
         raise DatasetError(
             f'{where}: time stamp {kind} at sample {sample}: {int(stamps_ns[sample - 1])} ns -> '
             f'{int(stamps_ns[sample])} ns'
+            + ('; the stamps are two interleaved streams (two publishers?)' if two else '')
         )
     limit_ns = max_gap_periods * period_s * 1e9
     if (steps > limit_ns).any():

@@ -32,7 +32,11 @@ in the file and comes back with ``id-learning bag recover``.
 A publisher of another message type on a recorded topic cannot be matched (nothing of it reaches
 the bag): the recorder looks at the topics' publishers on every diagnostics period, warns once per
 publisher and type found, naming both types and the publisher's node, and lists it on
-/diagnostics (level warn). Header stamps are recorded as sent, never read: a stamp that is no
+/diagnostics (level warn). Several publishers of the recorded type on one topic interleave two
+streams in the bag (train refuses their stamps going back and forth): that look names them once
+per episode (``endpoints.ForeignPublishers.newly_shared``), and /diagnostics lists them (level
+warn); topics many nodes share by design (``MERGED_TYPES``: /diagnostics, /rosout, /tf) are not
+warned of. Header stamps are recorded as sent, never read: a stamp that is no
 time (``nanosec`` >= 1e9) is the replay's and the predictor's to refuse.
 
 Topics are checked before anything is recorded: one recorded twice (also under two names that
@@ -64,7 +68,12 @@ from rclpy.task import Future
 
 from id_learning.bag import BagWriter
 from id_learning.errors import BagError
-from id_learning.nodes.endpoints import ForeignPublishers, endpoint, refuse_clashing_topics
+from id_learning.nodes.endpoints import (
+    ForeignPublishers,
+    endpoint,
+    refuse_clashing_topics,
+    shared_text,
+)
 from id_learning.nodes.msg_conversions import diagnostic_array, message_class, serialize_exact
 from id_learning.nodes.params import (
     RecorderConfig,
@@ -82,7 +91,16 @@ __all__ = ['Recorder', 'TopicCounts', 'main']
 NODE_NAME = 'recorder'
 #: How messages name the parameters that give the bag and let it be replaced.
 OUTPUT_OPTION, OVERWRITE_FLAG = 'output:=PATH', 'overwrite:=true'
-MIB = 1 << 20
+#: Types many nodes publish on one topic by design (reports, logs, transforms): several
+#: publishers of them are never warned of.
+MERGED_TYPES = frozenset(
+    {'diagnostic_msgs/msg/DiagnosticArray', 'rcl_interfaces/msg/Log', 'tf2_msgs/msg/TFMessage'}
+)
+#: What several publishers on a recorded topic do to the bag (``endpoints.shared_text``).
+SHARED_TOPIC = (
+    'their messages interleave in the bag, two streams whose stamps go back and forth, which '
+    'train refuses; leave one publisher on it'
+)
 #: Messages taken from a subscription's queue per callback, beyond the one the executor hands.
 DRAIN_LIMIT = 256
 #: Seconds after the first message of any topic before a topic still without one is warned of.
@@ -185,8 +203,8 @@ class Recorder(ShellNode):
                 overwrite=config.overwrite,
                 flag=OVERWRITE_FLAG,
                 chunk_bytes=config.chunk_kib * 1024,
-                split_duration_ns=round(config.split_duration_s * 1e9) or None,
-                split_bytes=round(config.split_size_mib * MIB) or None,
+                split_duration_ns=config.split_duration_ns,
+                split_bytes=config.split_bytes,
             ).open()
         except BaseException:
             self._output.close()
@@ -362,13 +380,30 @@ class Recorder(ShellNode):
         )
 
     def check_publisher_types(self) -> None:
-        """Warn once per publisher and type of a type its topic is not recorded as."""
+        """Warn of publishers that spoil a recorded topic.
+
+        Once per publisher and type of a type its topic is not recorded as; once per episode of
+        several publishers of the recorded type on one topic (``ForeignPublishers``).
+        """
         for item in self.foreign.look():
             self.get_logger().warning(
                 f'{item.topic}: a publisher sends {item.msg_type}, but the topic is recorded as '
                 f'{self.foreign.expected[item.topic]} (msg_types): none of its messages reach '
                 f'the bag (publisher: node {item.node})'
             )
+        for topic, msg_type in self.foreign.expected.items():
+            if msg_type not in MERGED_TYPES and self.foreign.newly_shared(topic):
+                nodes = self.foreign.shared(topic)
+                self.get_logger().warning(shared_text(topic, nodes, SHARED_TOPIC))
+
+    def shared_topics(self) -> list[str]:
+        """The recorded topics with several publishers at the last look (merged types aside)."""
+        return [
+            topic
+            for topic in self.counts
+            if self.foreign.expected[self._resolved[topic]] not in MERGED_TYPES
+            and self.foreign.shared(self._resolved[topic])
+        ]
 
     def wrong_types(self, topic: str) -> list[str]:
         """The other types publishers were found to send on a recorded topic."""
@@ -395,6 +430,8 @@ class Recorder(ShellNode):
             values[f'{topic} lost'] = counts.lost
             if self.wrong_types(topic):
                 values[f'{topic} wrong type'] = ', '.join(self.wrong_types(topic))
+        for topic in self.shared_topics():
+            values[f'{topic} publishers'] = ', '.join(self.foreign.shared(self._resolved[topic]))
         return values
 
     def log_time_base(self) -> str:
@@ -410,8 +447,10 @@ class Recorder(ShellNode):
         self.check_publisher_types()
         total = self.totals()
         wrong = [topic for topic in self.counts if self.wrong_types(topic)]
+        shared = self.shared_topics()
         fallback = self.system_clock_since is not None
-        level = 'error' if self.failure else 'warn' if total.dropped or wrong or fallback else 'ok'
+        troubled = total.dropped or wrong or shared or fallback
+        level = 'error' if self.failure else 'warn' if troubled else 'ok'
         message = (
             f'{total.written} written, {total.dropped} dropped'
             if total.received
@@ -422,6 +461,8 @@ class Recorder(ShellNode):
 
         if wrong:
             message += f'; a publisher of another type on {", ".join(wrong)}'
+        if shared:
+            message += f'; several publishers on {", ".join(shared)}'
         if fallback:
             message += '; logged on the system clock: use_sim_time without /clock'
         self._diagnostics.publish(
