@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from id_learning.errors import ConfigError
+from id_learning.models.artifact import ARTIFACT_HASH
 from id_learning.physics.friction import coulomb
 from id_learning.predictor.adaptation_inertia import InertiaAdapter, stabilised
 from id_learning.predictor.adaptation_pairing import (
@@ -56,7 +57,9 @@ from id_learning.predictor.adaptation_store import (
     StoredBase,
     adaptation_path,
     load_base,
+    model_identity,
     save_state,
+    unloaded_base,
 )
 from id_learning.robot.config import RobotConfig
 from id_learning.robot.drives import torque_per_ampere
@@ -261,7 +264,7 @@ class FrictionAdapter:
         """
         path = adaptation_path(artifact)
         tmp = path.with_suffix('.tmp')
-        state = self.state(joints) | (extra or {})
+        state = self.state(joints) | {ARTIFACT_HASH: model_identity(artifact)} | (extra or {})
         tmp.write_text(json.dumps(state, indent=2), encoding='utf-8')
         tmp.replace(path)
         return path
@@ -460,20 +463,20 @@ class AdaptationLoop:
         return lines
 
     def finish(self, artifact: Path, joints: Sequence[str]) -> tuple[bool, str]:
-        """``save`` at the end of a session: (is a warning, a line saying what was stored)."""
+        """``save`` at the end of a session: (is a warning, a line saying what went where)."""
         self.learn_ready()
+        base = self.base or unloaded_base(artifact)
         try:
-            saved = self.save(artifact, tuple(joints))
+            saved = save_state(self, tuple(joints), base)
         except OSError as err:
             return True, f'adapted parameters not saved: {err}'
         if saved is not None:
-            return False, f'adapted parameters saved to {saved[0]}: {saved[1]}'
-        path = self.base.path if self.base else adaptation_path(artifact)
+            return saved[0], f'adapted parameters saved to {saved[1]}: {saved[2]}'
         why = self.frozen_reason or 'no paired currents'
         return False, (
             f'adaptation accepted no update this session ({self.adapter.counters.frozen} '
-            f'frozen samples, the latest: {why}; {self.unpaired} currents unpaired); {path} is '
-            'left as it was'
+            f'frozen samples, the latest: {why}; {self.unpaired} currents unpaired); '
+            f'{base.untouched()}'
         )
 
     def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
@@ -485,18 +488,23 @@ class AdaptationLoop:
         extra = {} if self.inertia is None else self.inertia.state()
         return self.adapter.state(joints) | extra
 
-    def load(self, artifact: Path, joints: Sequence[str]) -> StoredBase:
-        """Continue from ``<artifact>.adaptation.json`` when it fits (``adaptation_store``)."""
-        self.base = load_base(self, artifact, tuple(joints))
+    def load(
+        self, artifact: Path, joints: Sequence[str], model_sha256: str | None = None
+    ) -> StoredBase:
+        """Continue from ``<artifact>.adaptation.json`` when it fits (``adaptation_store``).
+
+        ``model_sha256``: the loaded model's ``artifact_sha256`` (None: read from its model.json).
+        """
+        self.base = load_base(self, artifact, tuple(joints), model_sha256)
         return self.base
 
     def save(self, artifact: Path, joints: tuple[str, ...]) -> tuple[Path, str] | None:
-        """Write the state beside the artifact if this session learnt: (path, what), or None.
+        """Write the state where its model is if this session learnt: (path, what), or None.
 
         A file not looked at by ``load`` is not continued from: it is kept aside, not lost.
         """
-        base = self.base or StoredBase(adaptation_path(artifact), problem='not loaded at start')
-        return save_state(self, joints, base)
+        saved = save_state(self, joints, self.base or unloaded_base(artifact))
+        return None if saved is None else (saved[1], saved[2])
 
     @classmethod
     def for_robot(

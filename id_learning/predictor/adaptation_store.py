@@ -1,30 +1,48 @@
 """The adaptation's learnt values across predictor sessions: ``<artifact>.adaptation.json``.
 
-A session starts from what the file holds (when it was written for the same joints and mode)
-and writes back only when it learnt something: a session that accepted no update (NaN currents,
-a reference always stale) leaves the file as it was, so that it never erases what an earlier one
-learnt. Writing is atomic (a temporary file, flushed to disk, then renamed over the old one). A
-file that cannot be continued from is never overwritten: it is kept as ``<file>.previous`` (or
-``.previous.N``) before a new one is written. It cannot be continued from when it is unreadable,
-for other joints, mode or base parameters, or holds a value the adaptation never reaches online:
-not finite, beyond the limits it keeps its estimate and error scale within (``ESTIMATE_PRIOR_STDS``
-prior standard deviations, the torque limit), an applied correction beyond its bound, or an error
-scale of 0 (which would gate every sample); the reason names the key, the joint and the value.
+A session starts from what the file holds (when it was learnt on the same model, for the same
+joints and mode) and writes back only when it learnt something: a session that accepted no update
+(NaN currents, a reference always stale) leaves the file as it was, so that it never erases what
+an earlier one learnt. Writing is atomic (a temporary file, flushed to disk, then renamed over the
+old one). A file that cannot be continued from is never overwritten: it is kept as
+``<file>.previous`` (or ``.previous.N``) before a new one is written. It cannot be continued from
+when it is unreadable, for other joints, mode or base parameters, or holds a value the adaptation
+never reaches online: not finite, beyond the limits it keeps its estimate and error scale within
+(``ESTIMATE_PRIOR_STDS`` prior standard deviations, the torque limit), an applied correction
+beyond its bound, or an error scale of 0 (which would gate every sample); the reason names the
+key, the joint and the value.
+
+The file belongs to one model: it records the ``artifact_sha256`` of the model.json it was learnt
+on. One learnt on another model (a run retrained in place under the predictor), or written
+before files recorded it, is not continued from: it is kept as ``<file>.model-<its sha's
+start>``. At the end of a session the state goes where the model it was learnt on is:
+
+- beside the artifact, when its model.json still holds the sha the session started with;
+- beside the same model in the completed run, when the artifact lay in ``<run>.partial`` and
+  train has since renamed the folder to ``<run>``;
+- otherwise (the model replaced under the predictor, its folder gone, or the file not writable)
+  never over another model's state: to ``<artifact>.adaptation.json.model-<sha's start>`` in the
+  nearest folder that still exists, else in ``$XDG_STATE_HOME/id_learning`` (``~/.local/state``),
+  with a warning naming the file. Each attempt that failed is named when none succeeds.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from id_learning.config_io import read_capped
-from id_learning.errors import ConfigError
+from id_learning.errors import CheckpointError, ConfigError
+from id_learning.models.artifact import ARTIFACT_HASH, METADATA_FILE, read_metadata
+from id_learning.outputs import PARTIAL_SUFFIX, partial_path
 
 __all__ = [
     'ADAPTATION_JSON',
@@ -34,7 +52,9 @@ __all__ = [
     'StoredBase',
     'adaptation_path',
     'load_base',
+    'model_identity',
     'save_state',
+    'unloaded_base',
 ]
 
 
@@ -111,20 +131,34 @@ class StoredBase:
         updates_before: accepted updates of the earlier sessions (0 when not continued from).
         problem: why the file could not be continued from, or None (continued from).
         found: the file was there at start.
+        model_sha256: the ``artifact_sha256`` of the model the session runs (None: its
+            model.json records none), what the state is stored for.
+        artifact: the artifact folder (None: the one ``path`` is named for).
+        aside_tag: the suffix of the name a file not continued from is kept under.
     """
 
     path: Path
     updates_before: int = 0
     problem: str | None = None
     found: bool = True
+    model_sha256: str | None = None
+    artifact: Path | None = None
+    aside_tag: str = 'previous'
+
+    @property
+    def folder(self) -> Path:
+        """The artifact folder the state is for."""
+        if self.artifact is not None:
+            return self.artifact
+        return self.path.with_name(self.path.name.removesuffix(f'.{ADAPTATION_JSON}'))
 
     def line(self) -> tuple[bool, str] | None:
         """(is a warning, what the session starts from) for the log; None: there was no file."""
         if self.problem is not None:
             return True, (
                 f'adaptation starts from zero: {self.path} cannot be continued from '
-                f'({self.problem}); it is kept as {self.path.name}.previous if this session '
-                'learns'
+                f'({self.problem}); it is kept as {self.path.name}.{self.aside_tag} if this '
+                'session learns'
             )
         if not self.found:
             return None
@@ -132,6 +166,12 @@ class StoredBase:
             f'adaptation continues from {self.path} ({self.updates_before} updates in earlier '
             'sessions)'
         )
+
+    def untouched(self) -> str:
+        """What became of the file when a session learnt nothing (nothing is written)."""
+        if self.path.exists():
+            return f'{self.path} is left as it was'
+        return f'none written, and there is none at {self.path}'
 
 
 def adaptation_path(artifact: Path | str) -> Path:
@@ -210,69 +250,246 @@ def _restore(loop: AdaptationLoop, state: dict[str, Any], joints: tuple[str, ...
     body.restore(np.concatenate([friction.reshape(-1), change]), scale)
 
 
-def load_base(loop: AdaptationLoop, artifact: Path | str, joints: tuple[str, ...]) -> StoredBase:
-    """Continue the loop from the stored file when it fits; what was found (no file: zero)."""
-    path = adaptation_path(artifact)
+def model_identity(artifact: Path | str) -> str | None:
+    """The ``artifact_sha256`` the artifact's model.json holds now.
+
+    None: it records none (an artifact from before the hash) or there is no model.json; the
+    state of such a model cannot be told from another's of the same kind.
+
+    Raises:
+        CheckpointError: model.json is there but unreadable.
+    """
+    meta = Path(artifact) / METADATA_FILE
+    if not os.path.lexists(meta):
+        return None
+    digest = read_metadata(meta).get(ARTIFACT_HASH)
+    return digest if isinstance(digest, str) else None
+
+
+def _short(digest: object) -> str:
+    """The start of a sha for a message ('none recorded' for None)."""
+    return f'{digest[:12]}...' if isinstance(digest, str) else 'none recorded'
+
+
+def _model_tag(digest: object) -> str:
+    """``model-<its start>`` for the names of files of the model with ``digest``."""
+    hex_start = digest[:12] if isinstance(digest, str) else ''
+    return f'model-{hex_start}' if re.fullmatch('[0-9a-f]{12}', hex_start) else 'model-unknown'
+
+
+#: A key the stored state lacks, or a model.json that cannot be read.
+_ABSENT = object()
+
+
+class _OtherModelError(ValueError):
+    """The stored state was learnt on another model than the session's (or says not on which)."""
+
+    def __init__(self, stored: object, model: str | None) -> None:
+        if stored is _ABSENT:
+            why = (
+                f'it records no model ({ARTIFACT_HASH}): written before adaptation states '
+                "recorded the model they were learnt on, it may be another model's; this "
+                f"model's is {_short(model)} (to continue from it all the same, add "
+                f'"{ARTIFACT_HASH}": "{model}" to it)'
+            )
+        else:
+            why = (
+                f'learnt on another model: its {ARTIFACT_HASH} is {_short(stored)}, this '
+                f"model's is {_short(model)}"
+            )
+        super().__init__(why)
+        self.tag = _model_tag(None if stored is _ABSENT else stored)
+
+
+def _base(artifact: Path | str, model_sha256: str | None = None) -> StoredBase:
+    """A fresh base for ``artifact`` (resolved), of the given model (None: as model.json says)."""
+    artifact = Path(artifact).resolve()
+    if model_sha256 is None:
+        try:
+            model_sha256 = model_identity(artifact)
+        except CheckpointError:  # the predictor loaded it: only a folder changed under it
+            model_sha256 = None
+    return StoredBase(adaptation_path(artifact), model_sha256=model_sha256, artifact=artifact)
+
+
+def unloaded_base(artifact: Path | str) -> StoredBase:
+    """The base of a session that did not ``load``: its file is not continued from."""
+    return replace(_base(artifact), problem='not loaded at start')
+
+
+def load_base(
+    loop: AdaptationLoop,
+    artifact: Path | str,
+    joints: tuple[str, ...],
+    model_sha256: str | None = None,
+) -> StoredBase:
+    """Continue the loop from the stored file when it fits; what was found (no file: zero).
+
+    ``model_sha256``: the ``artifact_sha256`` of the model the session runs, as it was loaded
+    (None: read from the artifact's model.json now).
+    """
+    base = _base(artifact, model_sha256)
+    path = base.path
     if not path.exists():
-        return StoredBase(path, found=False)
+        return replace(base, found=False)
     try:
         state = json.loads(
             read_capped(path, 'adaptation state', MAX_STATE_BYTES, regular=True).decode('utf-8')
         )
         if not isinstance(state, dict):
             raise ValueError('not a JSON object')
+        stored = state.get(ARTIFACT_HASH, _ABSENT)
+        if stored != base.model_sha256:
+            raise _OtherModelError(stored, base.model_sha256)
         _restore(loop, state, joints)
         before = int(state.get('updates_total', state.get('updates')) or 0)
+    except _OtherModelError as err:
+        return replace(base, problem=str(err), aside_tag=err.tag)
     except (ConfigError, ValueError, TypeError) as err:  # JSONDecodeError is a ValueError
-        return StoredBase(path, problem=str(err) or type(err).__name__)
-    return StoredBase(path, updates_before=before)
+        return replace(base, problem=str(err) or type(err).__name__)
+    return replace(base, updates_before=before)
 
 
-def _aside(path: Path) -> Path:
-    """A free name beside ``path`` for a file that must not be overwritten."""
-    candidate = path.with_name(f'{path.name}.previous')
-    k = 1
-    while candidate.exists():
-        candidate = path.with_name(f'{path.name}.previous.{k}')
+def _free(path: Path) -> Path:
+    """``path``, or ``path.N`` with the first N free: a name that overwrites nothing."""
+    candidate, k = path, 1
+    while os.path.lexists(candidate):
+        candidate = path.with_name(f'{path.name}.{k}')
         k += 1
     return candidate
 
 
+def _write(path: Path, state: dict[str, Any]) -> None:
+    """Write ``state`` to a temporary file, flush it to disk, rename it to ``path``."""
+    tmp = path.with_name(f'.{path.name}.tmp')
+    try:
+        with tmp.open('w', encoding='utf-8') as stream:
+            stream.write(json.dumps(state, indent=2))
+            stream.flush()
+            os.fsync(stream.fileno())
+        tmp.replace(path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise
+
+
+@dataclass(frozen=True)
+class _Place:
+    """Where a session's state goes: the model's own file, or ``None`` (elsewhere), and why."""
+
+    own: Path | None
+    why: str = ''
+    warn: bool = False
+
+
+def _final_artifact(artifact: Path) -> Path | None:
+    """Where ``artifact`` is once the run folder it lies in (``<run>.partial``) is complete."""
+    for folder in artifact.parents:
+        name = folder.name.removesuffix(PARTIAL_SUFFIX)
+        if name and name != folder.name and partial_path(folder.with_name(name)) == folder:
+            return folder.with_name(name) / artifact.relative_to(folder)
+    return None
+
+
+def _held(artifact: Path) -> str | object | None:
+    """``model_identity``, or ``_ABSENT`` when model.json is unreadable (no model known)."""
+    try:
+        return model_identity(artifact)
+    except CheckpointError:
+        return _ABSENT
+
+
+def _placement(base: StoredBase) -> _Place:
+    """Where the state of the model ``base`` was loaded for goes now (``save_state``)."""
+    artifact, start = base.folder, base.model_sha256
+    if artifact.is_dir():
+        held = _held(artifact)
+        if held == start:
+            return _Place(base.path)
+        now = 'unreadable' if held is _ABSENT else _short(held)
+        return _Place(None, (
+            f'the model at {artifact} was replaced while this session ran (its {ARTIFACT_HASH} '
+            f"was {_short(start)}, now {now}): {base.path} is the new model's, left alone"
+        ), warn=True)  # fmt: skip
+    final = _final_artifact(artifact)
+    if final is not None and final.is_dir() and _held(final) == start:
+        return _Place(
+            adaptation_path(final), f'{artifact} moved to {final}: train completed its run'
+        )
+    elsewhere = '' if final is None else (
+        f', and {final} holds another model' if final.is_dir() else f', nor is it at {final}'
+    )  # fmt: skip
+    return _Place(None, f'the artifact folder {artifact} is gone{elsewhere}', warn=True)
+
+
+def _state_folder() -> Path:
+    """``$XDG_STATE_HOME/id_learning`` (``~/.local/state/id_learning``): the last fallback."""
+    root = os.environ.get('XDG_STATE_HOME') or str(Path.home() / '.local' / 'state')
+    return Path(root) / 'id_learning'
+
+
+def _elsewhere(base: StoredBase) -> list[Path]:
+    """Files for a state that cannot go beside its model, nearest first (none overwritten)."""
+    name = f'{base.folder.name}.{ADAPTATION_JSON}.{_model_tag(base.model_sha256)}'
+    nearest = next((p for p in base.folder.parents if p.is_dir()), None)
+    folders = [f for f in (nearest, _state_folder()) if f is not None]
+    return [folder / name for folder in folders]
+
+
 def save_state(
     loop: AdaptationLoop, joints: tuple[str, ...], base: StoredBase
-) -> tuple[Path, str] | None:
-    """Write the loop's state over ``base.path`` if this session learnt; (path, what) or None.
+) -> tuple[bool, Path, str] | None:
+    """Write the loop's state if this session learnt: (is a warning, path, what), or None.
 
-    None: no accepted update this session, so the stored state is left as it was. Otherwise a
-    file that could not be continued from is moved aside first, and the new state is written
-    to a temporary file, flushed to disk and renamed over the old one.
+    None: no accepted update this session, so the stored state is left as it was. Otherwise the
+    state goes where its model is (the module's docstring); in the model's own file a file
+    that could not be continued from is moved aside first, and the new state is written to a
+    temporary file, flushed to disk and renamed over the old one. A warning: the state could
+    not go beside its model and went elsewhere, said why.
 
     Raises:
-        OSError: the file could not be written (the old one is then as it was).
+        OSError: the state could be written nowhere (names each place tried and why).
     """
     updates = loop.session_updates
     if updates == 0:
         return None
     state = loop.state(joints) | {
+        ARTIFACT_HASH: base.model_sha256,
+        'artifact': str(base.folder),
         'mode': _mode(loop),
         'updates': updates,
         'updates_total': base.updates_before + updates,
         'continued_from_earlier_sessions': base.problem is None and base.updates_before > 0,
     }
-    path = base.path
-    moved = ''
-    if base.problem is not None and path.exists():
-        aside = _aside(path)
-        path.replace(aside)
-        moved = f'; the file it could not continue from is kept as {aside.name}'
-    tmp = path.with_name(f'.{path.name}.tmp')
-    with tmp.open('w', encoding='utf-8') as stream:
-        stream.write(json.dumps(state, indent=2))
-        stream.flush()
-        os.fsync(stream.fileno())
-    tmp.replace(path)
     what = (
         f'{updates} updates of this session on top of {base.updates_before} earlier '
-        f'({state["updates_total"]} in all){moved}'
+        f'({state["updates_total"]} in all)'
     )
-    return path, what
+    place, tried = _placement(base), []
+    if place.own is not None:
+        path = place.own
+        try:
+            moved = ''
+            if base.problem is not None and path.exists():
+                aside = _free(path.with_name(f'{path.name}.{base.aside_tag}'))
+                path.replace(aside)
+                moved = f'; the file it could not continue from is kept as {aside.name}'
+            _write(path, state)
+        except OSError as err:
+            tried.append(f'{path} ({err.strerror or err})')
+            place = _Place(None, f'{path} could not be written ({err.strerror or err})', True)
+        else:
+            return place.warn, path, what + moved + (f'; {place.why}' if place.why else '')
+    learnt_on = f'learnt on the model with {ARTIFACT_HASH} {_short(base.model_sha256)}'
+    for wanted in _elsewhere(base):
+        path = wanted
+        try:
+            wanted.parent.mkdir(parents=True, exist_ok=True)
+            path = _free(wanted)
+            _write(path, state)
+        except OSError as err:
+            tried.append(f'{path} ({err.strerror or err})')
+            continue
+        return True, path, f'{what}, {learnt_on}, not beside it: {place.why}'
+    raise OSError(f'{place.why}; {learnt_on}; could not be written to {", ".join(tried)}')

@@ -122,7 +122,8 @@ def test_a_file_it_cannot_continue_from_is_kept_aside_not_overwritten(
     mabi: RobotConfig, artifact: Path
 ) -> None:
     path = adaptation_path(artifact)
-    path.write_text('{"joints": ["a", "b"], "theta": []}', encoding='utf-8')
+    # For this model (a folder without model.json: no artifact_sha256), of other joints.
+    path.write_text('{"artifact_sha256": null, "joints": ["a", "b"]}', encoding='utf-8')
     loop = new_loop(mabi)
     base = loop.load(artifact, mabi.joints)
     assert base.problem is not None
@@ -135,7 +136,7 @@ def test_a_file_it_cannot_continue_from_is_kept_aside_not_overwritten(
     loop.save(artifact, mabi.joints)
 
     assert (path.parent / f'{path.name}.previous').read_text() == (
-        '{"joints": ["a", "b"], "theta": []}'
+        '{"artifact_sha256": null, "joints": ["a", "b"]}'
     )
     assert json.loads(path.read_text())['updates'] == 10
 
@@ -148,6 +149,7 @@ def test_the_stored_state_changes_exactly_when_the_session_accepted_an_update(
     mabi: RobotConfig, tmp_path: Path, kinds: list[str], stored: bool
 ) -> None:
     artifact = tmp_path / 'rnea_lq'
+    artifact.mkdir(exist_ok=True)  # the model's folder: the state is written beside it
     path = adaptation_path(artifact)
     path.unlink(missing_ok=True)
     if stored:
@@ -224,6 +226,7 @@ def test_what_a_session_stores_the_next_continues_from_whatever_it_was_fed(
     them in at once (the error scale and the estimate reach their limits).
     """
     artifact = tmp_path / 'rnea_lq'
+    artifact.mkdir(exist_ok=True)  # the model's folder: the state is written beside it
     path = adaptation_path(artifact)
     path.unlink(missing_ok=True)
     config = AdaptationConfig(time_constant_s=memory)

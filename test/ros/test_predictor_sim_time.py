@@ -122,6 +122,8 @@ def test_unusable_currents_are_said_once_and_leave_the_stored_adaptation_as_it_w
         'error_scale_nm': [5.0] * n_joints,
         'updates': 300,
         'updates_total': 300,
+        # Learnt on this model: a state of another model is not continued.
+        'artifact_sha256': json.loads((artifact / 'model.json').read_text())['artifact_sha256'],
     }
     stored.write_text(json.dumps(earlier), encoding='utf-8')
     before = stored.read_bytes()
