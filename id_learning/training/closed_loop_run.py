@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from id_learning.dataset.inputs import Motion
 from id_learning.dataset.preprocess import Dataset, PreprocessConfig
 from id_learning.errors import CheckpointError, ConfigError
 from id_learning.evaluation.closed_loop import (
@@ -46,6 +47,7 @@ from id_learning.training.run_folder import (
     refuse_training_samples,
     training_bag,
 )
+from id_learning.training.run_identity import RUN_IDENTITY_KEY, check_run_unchanged, run_identity
 from id_learning.twin import load_twin_config
 from id_learning.twin.plant import TwinPlant
 from id_learning.twin.simulate import TWIN_CONFIG_COPY, TwinConfig
@@ -238,9 +240,11 @@ def closed_loop_run(
     ``bag``: a recording of the twin to track instead of the run's test part: from its start
     when the run was not trained on it (one that holds training samples is refused), its test
     part when it is one of the run's training bags; its twin config is the plant's.
+    closed_loop.json records the run's identity beside its path (``run_identity``).
 
     Raises:
-        CheckpointError: the run is incomplete, or it or a model does not fit the robot.
+        CheckpointError: the run is incomplete, or it or a model does not fit the robot, or the
+            run was replaced while the loop ran (nothing written).
         ConfigError: no twin config, one of another robot, or a model the run lacks.
         DatasetError: ``bag`` holds samples of a training bag.
         OutputError: ``out`` is refused, or a write failed.
@@ -266,12 +270,7 @@ def closed_loop_run(
     # The plant's friction warms up from where the reference starts in the recording.
     offset_s = float(dataset.stamps_ns[start] - dataset.stamps_ns[0]) * 1e-9
     plant = TwinPlant(replace(twin, shift_start_s=twin.shift_start_s + offset_s))
-    feed_forward = {
-        kind: load_run_model(run_dir, run, kind, robot)
-        .for_the_drive()
-        .predict(reference.q, reference.v, reference.a)
-        for kind in kinds
-    }
+    identity, feed_forward = _feed_forwards(run_dir, run, kinds, robot, reference)
     feed_forward[TRUE_DYNAMICS] = plant.command(
         reference.q + plant.encoder_offset, reference.v, reference.a
     )
@@ -282,6 +281,7 @@ def closed_loop_run(
     best, ratio = improvement(runs, kinds)
     document = {
         'run': str(run_name or run_dir),
+        RUN_IDENTITY_KEY: identity,  # the path may hold another run later
         'twin_config': str(twin_path),
         'reference': tracked,
         'joints': list(robot.joints),
@@ -314,6 +314,7 @@ def closed_loop_run(
             limits=plant.robot.limits.torque,
             robot=robot,
         )
+        check_run_unchanged(run_dir, identity, 'closed-loop')  # not in place before it passes
     out = folder.out
     if report is not None:
         add_section(report, _section(document), out)
@@ -327,6 +328,20 @@ def closed_loop_run(
         out / FEED_FORWARD_PNG,
         out / CLOSED_LOOP_MD,
     )
+
+
+def _feed_forwards(
+    run_dir: Path, run: dict[str, Any], kinds: list[str], robot: RobotConfig, reference: Motion
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The run's identity (``run_identity``, taken first); each model's tau_u on ``reference``."""
+    identity = run_identity(run_dir, run, kinds)
+    feed_forward = {
+        kind: load_run_model(run_dir, run, kind, robot)
+        .for_the_drive()
+        .predict(reference.q, reference.v, reference.a)
+        for kind in kinds
+    }
+    return identity, feed_forward
 
 
 def _section(document: dict[str, Any]) -> list[str]:

@@ -80,6 +80,7 @@ from id_learning.training.run_folder import (
     save_models,
     write_json,
 )
+from id_learning.training.run_identity import RUN_IDENTITY_KEY, check_run_unchanged, run_identity
 
 __all__ = [
     'METRICS_FILE',
@@ -485,12 +486,13 @@ def evaluate_run(
     part, because its training part is not new data.
 
     ``out`` is written whole or not at all (``id_learning.outputs``); ``force`` replaces an
-    earlier result there, but never the evaluated run or a bag.
+    earlier result there, but never the evaluated run or a bag. metrics.json records the run's
+    identity beside its path (``run_identity``).
 
     Raises:
         CheckpointError: the run is incomplete, or it or a model does not match ``robot``
             (load_model verifies robot name, joints and order, URDF hash, drives, units and
-            weight hashes).
+            weight hashes), or the run was replaced while it was evaluated (nothing written).
         OutputError: ``out`` is refused, or a write failed.
         DatasetError, BagError: a bag is unusable.
     """
@@ -503,9 +505,12 @@ def evaluate_run(
             f'{run_dir}: run joints {run.get("robot", {}).get("joints")} do not match robot '
             f'{robot.name} joints {fingerprint["joints"]}'
         )
+    identity = run_identity(run_dir, run, run['kinds'])  # before the models are loaded
     with result_folder(out, command='evaluate', force=force, inputs=[run_dir, *bags]) as folder:
-        metrics, results, dataset = _evaluate_into(folder.work, run_dir, run, bags, robot,
-                                                   progress=progress)  # fmt: skip
+        metrics, results, dataset = _evaluate_into(
+            folder.work, run_dir, run, bags, robot, progress=progress, identity=identity
+        )
+        check_run_unchanged(run_dir, identity, 'evaluate')  # not in place before it passes
     return EvaluationResult(folder.out, dataset, results, metrics, folder.out / REPORT_FILE)
 
 
@@ -517,8 +522,12 @@ def _evaluate_into(
     robot: RobotConfig,
     *,
     progress: bool,
+    identity: dict[str, Any],
 ) -> tuple[dict[str, Any], dict[str, ModelResult], Dataset]:
-    """``evaluate_run``'s work, written into ``out``; (metrics, models, evaluated data)."""
+    """``evaluate_run``'s work, written into ``out``; (metrics, models, evaluated data).
+
+    ``identity``: the run's (``run_identity``), recorded in metrics.json.
+    """
     config = preprocess_from_dict(run['preprocessing'])
     configure_torch(TRAIN_THREADS)
     results = _load_models(run_dir, run, robot)
@@ -558,5 +567,6 @@ def _evaluate_into(
         machine=machine_info(),
         git_commit=_git_commit(),
     )
+    metrics[RUN_IDENTITY_KEY] = identity  # the path may hold another run later
     write_json(out / METRICS_FILE, metrics)
     return metrics, results, dataset
