@@ -12,13 +12,18 @@ causally: the backward difference of the velocity over the stamps, optionally lo
 (``acceleration_cutoff_hz``; see ``predictor.acceleration``). The LSTM keeps its own window of the
 last 20 samples.
 
-Safety (all decided in the core, logged here throttled): nothing non-finite is published;
-outputs are clamped to the robot's torque limits (times ``torque_limit_scale``) and counted;
+Safety (all decided in the core; logged here throttled by hand, each kind of line at most once
+per ``log_throttle_s``, which may change at runtime as rclpy's throttle may not, ``log_throttle``):
+nothing non-finite is published; outputs are clamped to the robot's torque limits (times
+``torque_limit_scale``) and counted;
 samples with wrong joints, NaN or Inf, or stamps that do not advance are rejected with an error
 and the node keeps running, and so is a header stamp that is no time (``nanosec`` >= 1e9 or a
 negative ``sec``: ``invalid_stamp``, refused here before the core); inputs outside the training
 range are counted and warned about; so is a stamp more than one IPO period ahead of the stream's
-time base (``future_stamp``). When no valid sample has arrived for ``stale_after_cycles`` IPO
+time base (``future_stamp``). A sender whose stamps advance at another rate than the receive
+clock (a replay at a rate other than 1; ``predictor.stamp_rate``, over 2 s, beyond 5 %) is served,
+and said: a warning when it starts, a line when it ends, ``stamp_rate_ratio`` on /diagnostics
+and the level warn while it lasts. When no valid sample has arrived for ``stale_after_cycles`` IPO
 cycles the reference is stale: a watchdog says so (throttled), nothing is published on
 ``output_topic``, and the command on ``command_topic`` ramps to zero, one IPO period's worth of
 the slew limit per cycle (a forward command controller holds its last command), and back towards
@@ -78,6 +83,7 @@ from id_learning.nodes.endpoints import (
     refuse_clashing_topics,
     shared_text,
 )
+from id_learning.nodes.log_throttle import ThrottledLog
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     diagnostic_array,
@@ -95,16 +101,15 @@ from id_learning.nodes.params import (
     declare_parameters,
     guard_config,
     log_change,
-    resolve_robot_config,
     validate_change,
 )
 from id_learning.nodes.predictor_command import CommandOutput
+from id_learning.nodes.predictor_core import adaptation_loop, build_core
 from id_learning.nodes.predictor_report import (
     INPUT_TYPES,
     SHARED_INPUT,
     TROUBLES,
     NodeCounts,
-    adaptation_loop,
     ahead_text,
     count_values,
     final_report,
@@ -120,10 +125,10 @@ from id_learning.predictor import (
     Reject,
     RollingStats,
     StepResult,
-    configure_inference_threads,
 )
 from id_learning.predictor.guards import stamp_problem
-from id_learning.robot.config import RobotConfig, load_robot_config
+from id_learning.predictor.stamp_rate import StampRate
+from id_learning.robot.config import RobotConfig
 
 __all__ = ['Predictor', 'adaptation_loop', 'build_core', 'main', 'make_predictor']
 
@@ -170,6 +175,9 @@ class Predictor(ShellNode):
         self._troubles = (0,) * len(TROUBLES)
         self._window_start = (time.monotonic(), 0)
         self._stale_logged_ns = 0
+        # Not rclpy's throttle_duration_sec: it may not change between calls, log_throttle_s may.
+        self._log = ThrottledLog(self.get_logger(), lambda: self.config.log_throttle_s)
+        self.stamp_rate = StampRate()  # the stamps' rate against the receive clock
         self._is_closed = False
         output_qos = output_qos or torque_qos(config.output_depth)
         with endpoint(self, 'output_topic', config.output_topic):
@@ -273,6 +281,11 @@ class Predictor(ShellNode):
             if self._convert is trajectory_to_sample:
                 self._check_ahead(msg)
             result = self.core.step(sample, receive_ns)
+            # O(1); a refused lead would pass for a quick delivery, so it is left out.
+            if result.reject is not Reject.FUTURE_STAMP and self.stamp_rate.add(
+                sample.stamp_ns, receive_ns
+            ):
+                self._say([self.stamp_rate.line()])  # when it starts and when it ends
             if result.reject is not None:
                 self._log_reject(result)
             if result.resynced:
@@ -304,10 +317,7 @@ class Predictor(ShellNode):
             self.core.prepare_next()  # off the path from sample to torque
         except Exception as err:  # the edge of the callback: report and keep running
             self.counts.callback_errors += 1
-            self.get_logger().error(
-                f'reference callback failed: {type(err).__name__}: {err}',
-                throttle_duration_sec=self.config.log_throttle_s,
-            )
+            self._log.failure('reference_callback', 'reference callback', err)  # never raises
 
     def _start_adaptation(self) -> Any:
         """With the core's adaptation loop: continue from the stored file; the currents' topic."""
@@ -334,10 +344,7 @@ class Predictor(ShellNode):
             self._say(loop.take_reasons())  # each kind of reason once
         except Exception as err:  # the edge of the callback: report and keep running
             self.counts.callback_errors += 1
-            self.get_logger().error(
-                f'measured-current callback failed: {type(err).__name__}: {err}',
-                throttle_duration_sec=self.config.log_throttle_s,
-            )
+            self._log.failure('measured_callback', 'measured-current callback', err)
 
     def _say(self, lines: Sequence[tuple[bool, str] | None]) -> None:
         """Log each (is a warning, line) at the warning level, or else at info."""
@@ -350,10 +357,10 @@ class Predictor(ShellNode):
     def _refuse_stamp(self, problem: str) -> None:
         """Refuse a sample whose header stamp is no time (counted as rejected invalid_stamp)."""
         self.counts.invalid_stamps += 1
-        self.get_logger().error(
+        self._log.error(
+            'invalid_stamp',
             f'sample refused: no model torque (invalid_stamp): header stamp {problem} '
             f'({self.counts.invalid_stamps} so far)',
-            throttle_duration_sec=self.config.log_throttle_s,
         )
 
     def _check_ahead(self, msg: JointTrajectory) -> None:
@@ -365,36 +372,32 @@ class Predictor(ShellNode):
                 self.get_logger().warning(ahead_text(self._input_topic, ahead_ns))
 
     def _log_reject(self, result: StepResult) -> None:
-        throttle = self.config.log_throttle_s
         held = ', hold output published' if result.is_held else ''
         text = (
             f'sample at {result.stamp_ns} ns: no model torque ({result.reject.value}{held}): '
             f'{result.detail}'
         )
+        key = f'reject_{result.reject.value}'  # each reason throttled on its own
         if result.reject in (Reject.OUT_OF_RANGE, Reject.REARMING):
-            self.get_logger().warning(text, throttle_duration_sec=throttle)
+            self._log.warning(key, text)
         else:
-            self.get_logger().error(text, throttle_duration_sec=throttle)
+            self._log.error(key, text)
 
     def _log_result(self, result: StepResult) -> None:
-        throttle = self.config.log_throttle_s
         if result.resumed_after_stale:  # resuming is normal: not worth a line at the INFO level
             self.get_logger().debug('reference resumed: publishing again (history reset)')
         if result.is_out_of_range or result.physics_share > 0:
-            self.get_logger().warning(
-                f'input outside the training range: {result.detail}',
-                throttle_duration_sec=throttle,
-            )
+            self._log.warning('out_of_range', f'input outside the training range: {result.detail}')
         if result.is_clamped:
-            self.get_logger().warning(
+            self._log.warning(
+                'clamped',
                 f'tau_u clamped to the torque limits ({self.core.counters.clamped_samples} '
                 'samples so far)',
-                throttle_duration_sec=throttle,
             )
         if result.is_slew_limited:
-            self.get_logger().warning(
+            self._log.warning(
+                'slew_limited',
                 f'tau_u slew-limited ({self.core.counters.slew_limited_samples} samples so far)',
-                throttle_duration_sec=throttle,
             )
 
     def _check_stale(self) -> None:
@@ -442,13 +445,14 @@ class Predictor(ShellNode):
         now = time.monotonic()
         start, received_then = self._window_start
         self._window_start = (now, received)
-        latency = self.latency_s.summary()
+        latency, rate = self.latency_s.summary(), self.stamp_rate.ratio
         compute = self.core.compute_s.summary()
         values: dict[str, object] = {
             'model': self.core.model.kind,
             'artifact': self.config.artifact,
             'adaptation': self.config.adaptation,
             'input_rate_hz': (received - received_then) / max(now - start, 1e-9),
+            'stamp_rate_ratio': float('nan') if rate is None else rate,  # nan: before a window
             **count_values(self.core, self.counts),
             # Matched on the writer side: a consumer listed here receives every tau_u.
             'tau_u_subscriptions': self._tau_u.get_subscription_count(),
@@ -512,6 +516,8 @@ class Predictor(ShellNode):
             message = f'since the last report: {", ".join(grew)}'
         else:
             level, message = 'ok', f'{counters.published} published'
+        if self.stamp_rate.is_off:
+            level, message = 'warn', f'{message}; {self.stamp_rate.line()[1]}'
         if foreign:
             level, message = 'warn', f'{message}; {foreign}'
         self._diagnostics.publish(
@@ -536,28 +542,6 @@ class Predictor(ShellNode):
         if self.core.adaptation is not None:  # saved only if it learnt, atomically
             self._say([self.core.adaptation.finish(Path(self.config.artifact), self.names)])
         self.get_logger().info(final_report(self.core, self.counts, self.latency_s.summary()))
-
-
-def build_core(config: PredictorNodeConfig) -> tuple[FeedForwardPredictor, RobotConfig]:
-    """The node's core from its parameters: robot, threads, artifact, adaptation, warmed up.
-
-    Raises:
-        ConfigError, CheckpointError, RobotModelError: the robot config or the artifact is
-            unusable, or adaptation is asked of a model that does not predict tau_u.
-    """
-    robot = load_robot_config(resolve_robot_config(config.robot_config))
-    configure_inference_threads(config.torch_threads)
-    core = FeedForwardPredictor.from_artifact(
-        config.artifact,
-        robot,
-        guard_config(config, robot),
-        inference=config.inference,
-        fallback_artifact=config.fallback_artifact or None,
-    )
-    if config.adaptation != 'off':
-        core.adaptation = adaptation_loop(config, robot, core)
-    core.warm_up()
-    return core, robot
 
 
 def make_predictor(

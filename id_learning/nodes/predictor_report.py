@@ -9,22 +9,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from id_learning.errors import ConfigError
 from id_learning.nodes.endpoints import Foreign, ForeignPublishers
 from id_learning.nodes.params import PredictorNodeConfig
 from id_learning.predictor import FeedForwardPredictor, Reject
-from id_learning.predictor.adaptation import AdaptationConfig, AdaptationLoop
 from id_learning.predictor.provenance import incomplete_run
 from id_learning.predictor.threads import oversubscription
 from id_learning.predictor.timing import StatsSummary
-from id_learning.robot.config import RobotConfig
 
 __all__ = [
     'INPUT_TYPES',
     'SHARED_INPUT',
     'TROUBLES',
     'NodeCounts',
-    'adaptation_loop',
     'ahead_text',
     'count_values',
     'final_report',
@@ -192,28 +188,6 @@ def setup_warnings(core: FeedForwardPredictor, config: PredictorNodeConfig) -> l
             'preprocessing)'
         )
     return warnings
-
-
-def adaptation_loop(
-    config: PredictorNodeConfig, robot: RobotConfig, core: FeedForwardPredictor
-) -> AdaptationLoop:
-    """The RLS adaptation of a motor-target model.
-
-    Raises:
-        ConfigError: the model predicts a measured joint torque, which currents do not give.
-    """
-    target = core.target
-    if target != 'motor':
-        raise ConfigError(
-            f'adaptation rls learns tau_u from motor currents; the {core.model.kind} model '
-            f'predicts the {target} target: set adaptation off'
-        )
-    settings = AdaptationConfig(time_constant_s=config.adaptation_time_constant_s)
-    loop = AdaptationLoop.for_robot(
-        robot, core.joint_names, settings, inertia=config.adaptation == 'rls_inertia'
-    )
-    loop.reference_source = config.input_topic
-    return loop
 
 
 def ahead_text(topic: str, ahead_ns: int) -> str:
