@@ -9,11 +9,12 @@ transport delay plus the difference of the clocks. The time base keeps its small
 so a sample's lateness ``receive - stamp - offset`` is how much longer than the quickest delivery
 it took, whatever the clocks' difference (no shared time base needed). ``DRIFT`` lets the offset
 grow by up to the stamps' own advance: a sender whose stamps run at half this clock's rate or
-faster (a replay at ``rate`` 0.5) is followed, while a delivery that stalls by more than
-``max_age_s`` beyond that is caught. With ``max_age_s`` > 0, such a sample is too old, and one
-whose stamp leads the time base by more than the future tolerance, one IPO period (or
-``max_age_s`` where that is shorter), is a future stamp (a slower sender needs ``max_age_s`` 0,
-which turns both checks off); any sample not after the last accepted is out of order.
+faster (a replay at ``rate`` 0.5; a faster one while its stamps gain less than one period per
+sample, see below; ``stamp_rate`` notices both) is followed, while a delivery that stalls by
+more than ``max_age_s`` beyond that is caught. With ``max_age_s`` > 0, such a sample is too
+old, and one whose stamp leads the time base by more than the future tolerance, one IPO period
+(or ``max_age_s`` where that is shorter), is a future stamp (a slower sender needs ``max_age_s``
+0, which turns both checks off); any sample not after the last accepted is out of order.
 
 Why one period: a stream whose stamps advance by one period per sample leads the sample before
 it by the period less the time between their arrivals, so under one period whatever the
