@@ -68,11 +68,8 @@ def _stop(process: subprocess.Popen[str], number: int) -> tuple[int, list[str]]:
     return process.returncode, [line for line in err.splitlines() if line.strip()]
 
 
-def test_an_interrupted_train_says_in_one_line_that_its_partial_run_is_left(
-    bag: Path, tmp_path: Path
-) -> None:
-    out = tmp_path / 'run'
-    # RNEA+LQ is fitted first and saved at once; the MLP would take minutes.
+def _train_with_a_fitted_model(bag: Path, out: Path) -> subprocess.Popen[str]:
+    """A train into ``out`` once it has fitted and saved RNEA+LQ; its MLP would take minutes."""
     process = _cli('train', '--bag', str(bag), '--out', str(out), '--quiet', '--device', 'cpu',
                    '--models', 'rnea_lq,mlp', '--hyper', 'mlp.max_epochs=100000',
                    '--hyper', 'mlp.patience=100000')  # fmt: skip
@@ -82,6 +79,14 @@ def test_an_interrupted_train_says_in_one_line_that_its_partial_run_is_left(
         process.kill()
         process.communicate()
         raise
+    return process
+
+
+def test_an_interrupted_train_says_in_one_line_that_its_partial_run_is_left(
+    bag: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / 'run'
+    process = _train_with_a_fitted_model(bag, out)
     status, lines = _stop(process, signal.SIGINT)
     assert status == 130, lines
     assert not any('Traceback' in line for line in lines), lines
@@ -99,11 +104,8 @@ def test_ctrl_c_pressed_again_and_again_during_the_cleanup_changes_nothing(
 ) -> None:
     # The probe's I08: a second SIGINT while the first one's cleanup ran ended train by signal.
     out = tmp_path / 'run'
-    process = _cli('train', '--bag', str(bag), '--out', str(out), '--quiet', '--device', 'cpu',
-                   '--models', 'rnea_lq,mlp', '--hyper', 'mlp.max_epochs=100000',
-                   '--hyper', 'mlp.patience=100000')  # fmt: skip
+    process = _train_with_a_fitted_model(bag, out)
     try:
-        _wait_for(process, 'rnea_lq: fitted')
         deadline = time.monotonic() + EXIT_S
         while process.poll() is None:  # a signal every 10 ms until it has exited
             assert time.monotonic() < deadline, 'train did not exit'
