@@ -80,6 +80,7 @@ def param(
     non_empty: str = '',
     unique: bool = False,
     msg_type: bool = False,
+    zero_or_at_least: tuple[float, str, str] | None = None,
 ) -> Any:
     """A dataclass field with the metadata of a ROS parameter and what it may hold.
 
@@ -94,6 +95,7 @@ def param(
         non_empty: for a list that may not be empty, what to give instead ('' : it may be).
         unique: a list whose items may not repeat.
         msg_type: a ROS message type, pkg/msg/Type (each item of a list).
+        zero_or_at_least: (least, what 0 means, unit): a number that is 0 or at least ``least``.
     """
     bounds = None if low is None and high is None else (low, high, low_open, high_open)
     if choices:
@@ -109,6 +111,7 @@ def param(
             'non_empty': non_empty,
             'unique': unique,
             'msg_type': msg_type,
+            'zero_or_at_least': zero_or_at_least,
         },
     )
 
@@ -119,7 +122,9 @@ def constraints(item: dataclasses.Field[Any]) -> str:
         return f'one of {list(item.metadata["choices"])}'
     if item.metadata.get('range'):
         low, high, low_open, high_open = item.metadata['range']
-        return describe_range(low, high, low_open=low_open, high_open=high_open)
+        text = describe_range(low, high, low_open=low_open, high_open=high_open)
+        least = item.metadata.get('zero_or_at_least')
+        return text if least is None else f'{text}, 0 ({least[1]}) or at least {least[0]:g}'
     return 'a ROS topic name' if item.metadata.get('topic') else ''
 
 
@@ -161,6 +166,10 @@ def _schema_problem(item: dataclasses.Field[Any], value: Any, types: Mapping[str
         )
         if problem:
             return f'{item.name}: {problem}, got {value!r}'
+    least = item.metadata.get('zero_or_at_least')
+    if least is not None and 0 < value < least[0]:
+        minimum, zero, unit = least
+        return f'{item.name}: must be 0 ({zero}) or at least {minimum:g} {unit}, got {value!r}'
     if item.metadata.get('topic'):
         for name in value if isinstance(value, tuple | list) else (value,) if value else ():
             problem = topic_name_problem(name)

@@ -506,6 +506,7 @@ class PredictorNodeConfig:
         read_only=False,
         low=0.0,
         high=MAX_SECONDS,
+        zero_or_at_least=(MIN_LOG_PERIOD_S, 'once', 's'),  # a line per watchdog tick otherwise
     )
     latency_window: int = param(
         4096,
@@ -533,11 +534,6 @@ class PredictorNodeConfig:
         if not self.artifact:
             raise ConfigError('artifact is required: the model artifact folder')
         check_schema(self)
-        if 0 < self.stale_log_period_s < MIN_LOG_PERIOD_S:  # a line per watchdog tick otherwise
-            raise ConfigError(
-                f'stale_log_period_s: must be 0 (once) or at least {MIN_LOG_PERIOD_S:g} s, got '
-                f'{self.stale_log_period_s!r}'
-            )
         refuse_shared_topics(self)
 
     def topic_checks(self) -> TopicChecks:
