@@ -136,12 +136,14 @@ class RecorderConfig:
         'duration.',
         low=0.0,
         high=MAX_SECONDS,
+        zero_or_at_least=(MIN_SPLIT_S, 'off', 's'),  # a file per message otherwise
     )
     split_size_mib: float = param(
         0.0,
         'Start a new .mcap file at this file size [MiB], at least 0.1 MiB; 0 = no split by size.',
         low=0.0,
         high=MAX_SPLIT_MIB,
+        zero_or_at_least=(MIN_SPLIT_MIB, 'off', 'MiB'),
     )
     diagnostics_period_s: float = param(
         1.0,
@@ -163,13 +165,6 @@ class RecorderConfig:
                 f'each recorded topic needs its type: topics {list(self.topics)} and msg_types '
                 f'{list(self.msg_types)} differ in length'
             )
-        for name, low, unit in (('split_duration_s', MIN_SPLIT_S, 's'),
-                                ('split_size_mib', MIN_SPLIT_MIB, 'MiB')):  # fmt: skip
-            if 0 < getattr(self, name) < low:
-                raise ConfigError(
-                    f'{name}: must be 0 (off) or at least {low:g} {unit} (a file per message '
-                    f'otherwise), got {getattr(self, name)!r}'
-                )
         refuse_shared_topics(self)
 
     @property
