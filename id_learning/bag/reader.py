@@ -106,7 +106,14 @@ def _open(path: Path) -> tuple[Reader, str | None]:
     if not path.exists():
         raise BagError(f'{path}: no such bag')
     if path.is_file():
-        raise BagError(f'{path}: expected a rosbag2 folder (with metadata.yaml), got a file')
+        within = (
+            f'; it is a file of the bag {path.parent}: give that folder'
+            if (path.parent / METADATA_FILE).is_file()
+            else ''
+        )
+        raise BagError(
+            f'{path}: expected a rosbag2 folder (with metadata.yaml), got a file{within}'
+        )
     if not (path / METADATA_FILE).exists():
         if (why := folder_is_no_bag(path)) is not None:
             raise BagError(f'{path}: {why}')

@@ -229,3 +229,18 @@ def test_a_bag_still_being_written_is_named_so_not_torn(tmp_path: Path) -> None:
         with pytest.raises(BagError, match=rf'being written by process {os.getpid()} .*lock'):
             bag_info(path)
     assert bag_info(path).topic('/joint_states').count == 1
+
+
+def test_a_file_of_a_bag_given_for_the_bag_names_its_folder(bag: Path, tmp_path: Path) -> None:
+    # The probe's Q03/Q04: `inspect bag/x.mcap` (as `ros2 bag info` takes it) said only 'a file'.
+    for inside in [*bag.glob('*.mcap'), bag / 'metadata.yaml']:
+        with pytest.raises(BagError) as err:
+            bag_info(inside)
+        assert str(err.value) == (
+            f'{inside}: expected a rosbag2 folder (with metadata.yaml), got a file; it is a file '
+            f'of the bag {bag}: give that folder'
+        )
+    lone = tmp_path / 'lone.mcap'
+    lone.write_bytes(next(bag.glob('*.mcap')).read_bytes())
+    with pytest.raises(BagError, match=r'got a file$'):  # no folder to name
+        bag_info(lone)
