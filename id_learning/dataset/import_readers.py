@@ -13,7 +13,13 @@ its claimed shape, when its header cannot be parsed, when it claims more bytes t
 stores of it (a corrupt or crafted header), or when the arrays together would take more than
 ``MEMORY_SHARE`` of the memory available (a compressed archive can expand to far more than its
 size). A gzip-compressed CSV is decompressed up to that share of the memory too, and refused
-beyond it.
+beyond it. A CSV line may hold up to ``MAX_LINE_CHARS`` characters (a field as many, far beyond
+the csv module's default of 128 KiB); a longer line is refused, naming it.
+
+A CSV row with fewer cells than the header (a torn row) is refused as such, whatever the
+``nan_policy``; so is one with more non-empty cells. Either message hints at another delimiter
+that would split the row into the header's cells, or at a decimal comma; a decimal comma in a
+mapped column of a log split by another delimiter is named as one.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import math
 import re
 import zipfile
 import zlib
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +44,7 @@ from id_learning.dataset.import_mapping import ImportMapping
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.memory import available_memory_bytes
 
-__all__ = ['MEMORY_SHARE', 'LogTable', 'is_float', 'log_suffix', 'read_table']
+__all__ = ['MAX_LINE_CHARS', 'MEMORY_SHARE', 'LogTable', 'is_float', 'log_suffix', 'read_table']
 
 _LOG = logging.getLogger(__name__)
 
@@ -55,6 +62,9 @@ _NPY_MAGIC = b'\x93NUM'
 MEMORY_SHARE = 0.5
 #: The decompressed bytes read at a time from a gzipped CSV.
 _GUNZIP_CHUNK = 2**20
+#: The characters a CSV line may hold (16 Mi): a long unmapped field (a note, a dump) is read; a
+#: longer line, most likely no line of a log (a file without line breaks), is refused.
+MAX_LINE_CHARS = 2**24
 
 
 @dataclass(frozen=True)
@@ -111,6 +121,8 @@ def _format_from_suffix(source: Path, mapping: ImportMapping) -> Literal['csv', 
     suffix = log_suffix(source)
     if suffix == '.npz':
         return 'npz'
+    if suffix in ('.yaml', '.yml', '.json'):
+        raise DatasetError(f'{source}: a YAML/JSON file (a mapping?), not a log (CSV or NPZ)')
     if suffix in _CSV_SUFFIXES:
         return 'csv'
     raise ConfigError(
@@ -324,9 +336,19 @@ def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:
     ]
     if not numbered:
         raise DatasetError(f'{source}: no data rows')
+    too_long = [(number, len(line)) for number, line in numbered if len(line) > MAX_LINE_CHARS]
+    if too_long:
+        raise DatasetError(
+            f'{source}: line {too_long[0][0]} has {too_long[0][1]:,} characters, more than the '
+            f'{MAX_LINE_CHARS:,} a log line may have ({len(too_long)} such line(s)); is this a '
+            'log of one row per line? Split the long lines, or drop the long column'
+        )
     lines = [line for _, line in numbered]
-    delimiter = mapping.delimiter or _sniff_delimiter(lines[:_SNIFF_LINES])
-    rows = _split(lines, delimiter)
+    numbers = [number for number, _ in numbered]
+    delimiter = mapping.delimiter or _sniff_delimiter(
+        lines[:_SNIFF_LINES], source, numbers[:_SNIFF_LINES]
+    )
+    rows = _split(lines, delimiter, source, numbers)
     has_header = _looks_like_header(rows[0]) if mapping.header == 'auto' else mapping.header
     if has_header is True and mapping.header is True:
         _check_header_row(rows[0], numbered[0][0], mapping, source)
@@ -337,29 +359,56 @@ def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:
     header = names[0] if names else []
     repeated = _repeated_names(header, mapping, source)
     line_numbers = np.array([number for number, _ in numbered[first_data:]])
-    _check_no_extra_cells(header or data_rows[0], data_rows, line_numbers, source)
+    shape = _RowShape(source, delimiter, header or data_rows[0], lines[0] if header else '')
+    _check_cell_counts(shape, data_rows, lines[first_data:], line_numbers)
     width = max(len(header), *(len(row) for row in data_rows))
     cells = np.array([row + [''] * (width - len(row)) for row in data_rows], dtype=object)
     keys: Sequence[str | int] = header or range(width)
     columns: dict[str | int, np.ndarray] = {
         key: cells[:, j] for j, key in enumerate(keys) if key != '' and key not in repeated
     }
+    if delimiter != ',':
+        _check_decimal_comma(columns, mapping, line_numbers, source)
     return LogTable(source, columns, line_numbers)
 
 
-def _split(lines: Sequence[str], delimiter: str) -> list[list[str]]:
+def _split(
+    lines: Sequence[str], delimiter: str, source: Path, numbers: Sequence[int]
+) -> list[list[str]]:
     """Split lines into stripped fields; one CSV reader per line keeps line numbers exact.
 
     Fields quoted as the csv module quotes them (``"time_ms"``, ``"1.5"``, a ``""`` inside for
-    a quote) read as their text, whatever the delimiter: whitespace too.
+    a quote) read as their text, whatever the delimiter: whitespace too. A line without quotes
+    splits as the csv module would split it. A field may hold up to ``MAX_LINE_CHARS``.
+
+    Raises:
+        DatasetError: the csv module refuses a line (names the file, the line and why).
     """
     if delimiter == 'whitespace':
         return [_split_whitespace(line) for line in lines]
     char = '\t' if delimiter == 'tab' else delimiter
     return [
-        [cell.strip() for cell in next(csv.reader([line], delimiter=char, skipinitialspace=True))]
-        for line in lines
+        [cell.strip() for cell in line.split(char)]
+        if '"' not in line
+        else _split_quoted(line, char, source, number)
+        for line, number in zip(lines, numbers, strict=True)
     ]
+
+
+def _split_quoted(line: str, char: str, source: Path, number: int) -> list[str]:
+    """One line's stripped fields as the csv module reads them, fields up to MAX_LINE_CHARS."""
+    limit = csv.field_size_limit()
+    try:
+        if limit < MAX_LINE_CHARS:
+            csv.field_size_limit(MAX_LINE_CHARS)
+        return [
+            cell.strip()
+            for cell in next(csv.reader([line], delimiter=char, skipinitialspace=True))
+        ]
+    except csv.Error as err:
+        raise DatasetError(f'{source}: line {number}: cannot split it into fields: {err}') from err
+    finally:
+        csv.field_size_limit(limit)
 
 
 #: A field of a whitespace-separated line: quoted (a ``""`` inside for a quote), or bare.
@@ -376,10 +425,10 @@ def _split_whitespace(line: str) -> list[str]:
     ]
 
 
-def _sniff_delimiter(lines: Sequence[str]) -> str:
+def _sniff_delimiter(lines: Sequence[str], source: Path, numbers: Sequence[int]) -> str:
     """The first candidate that splits the first line in several fields, as most lines split."""
     for candidate in _SNIFF_DELIMITERS:
-        counts = [len(row) for row in _split(lines, candidate)]
+        counts = [len(row) for row in _split(lines, candidate, source, numbers)]
         if counts and counts[0] > 1 and 2 * counts.count(counts[0]) > len(counts):
             return candidate
     return ','
@@ -398,28 +447,96 @@ def _looks_like_header(row: Sequence[str]) -> bool:
     return any(cell and not is_float(cell) for cell in row)
 
 
-def _check_no_extra_cells(
-    reference: Sequence[str], rows: Sequence[Sequence[str]], lines: np.ndarray, source: Path
-) -> None:
-    """Refuse rows with more non-empty cells than the header (or the first data row) has.
+@dataclass(frozen=True)
+class _RowShape:
+    """What a CSV row's cells are counted against: the header, or the first data row."""
 
-    A short row is named through its empty cells; a long one would otherwise pass unseen, yet an
-    extra cell means a merged or shifted row whose values may sit under the wrong columns.
-    Trailing empty cells (a delimiter at the end of each line) are no data and pass.
+    source: Path
+    delimiter: str
+    reference: list[str]
+    header_line: str  # '' without a header: the first data row is the reference
+
+
+def _check_cell_counts(
+    shape: _RowShape, rows: Sequence[list[str]], lines: Sequence[str], numbers: np.ndarray
+) -> None:
+    """Refuse rows with fewer cells, or more non-empty ones, than the header (or first row).
+
+    A short row is torn (cut off, or split by another delimiter); read as empty cells, its
+    values would be refused as missing, or dropped unseen by ``nan_policy: drop``. An extra
+    cell means a merged or shifted row whose values may sit under the wrong columns. Empty
+    cells at the end (a delimiter at the end of some lines) are no data and pass.
 
     Raises:
-        DatasetError: names the file, the first such line, its cell count and how many rows.
+        DatasetError: names the file, the first such line, its cell count, how many rows, and a
+            delimiter that would split it into the header's cells, or a decimal comma.
     """
-    width = len(reference)
-    long = [k for k, row in enumerate(rows) if len(row) > width and any(row[width:])]
-    if long:
-        first = rows[long[0]]
-        raise DatasetError(
-            f'{source}: line {int(lines[long[0]])} has {len(first)} cells, '
-            f'{len(first) - width} more than the {width} of the '
-            f'{"header" if reference is not rows[0] else "first data row"}; {len(long)} row(s) '
-            'are affected. Fix the log (a merged or shifted row?)'
-        )
+    width = len(shape.reference)
+    needed = width
+    while needed and not shape.reference[needed - 1]:
+        needed -= 1
+    bad = [
+        k
+        for k, row in enumerate(rows)
+        if len(row) < needed or (len(row) > width and any(row[width:]))
+    ]
+    if not bad:
+        return
+    row, line, number = rows[bad[0]], lines[bad[0]], int(numbers[bad[0]])
+    more = len(row) > width
+    what = 'header' if shape.header_line else 'first data row'
+    raise DatasetError(
+        f'{shape.source}: line {number} has {len(row)} cells, {abs(len(row) - width)} '
+        f'{"more" if more else "fewer"} than the {width} of the {what}; {len(bad)} row(s) are '
+        f'affected. Fix the log ({"a merged or shifted row" if more else "a torn row"}?)'
+        + _delimiter_hint(shape, line, number)
+    )
+
+
+def _delimiter_hint(shape: _RowShape, line: str, number: int) -> str:
+    """A hint at another delimiter that splits the line as it should be split, or ''."""
+    width = len(shape.reference)
+    used = {'tab': 'tab', 'whitespace': 'whitespace'}.get(shape.delimiter, repr(shape.delimiter))
+    decimal = ' (a decimal comma?)' if shape.delimiter == ',' and re.search(r'\d,\d', line) else ''
+    for other in (d for d in _SNIFF_DELIMITERS if d != shape.delimiter):
+        named = other if other in ('tab', 'whitespace') else repr(other)
+        cells = len(_split([line], other, shape.source, [number])[0])
+        header = len(_split([shape.header_line], other, shape.source, [number])[0])
+        if shape.header_line and header == cells > 1:
+            return (
+                f'; the header and line {number} split by {named} into {cells} cells: set '
+                f'delimiter: {named}{decimal}'
+            )
+        if cells == width > 1:
+            what = (
+                f'the header is split by {used}'
+                if shape.header_line
+                else f'the first data row by {used}'
+            )
+            return f'; {what} but line {number} by {named}?{decimal}'
+    return f'; {decimal[2:-1]}' if decimal else ''
+
+
+#: A number written with a decimal comma: ``0,5``, ``-37,25``.
+_DECIMAL_COMMA = re.compile(r'[+-]?\d+,\d+(?:[eE][+-]?\d+)?')
+
+
+def _check_decimal_comma(
+    columns: dict[str | int, np.ndarray], mapping: ImportMapping, numbers: np.ndarray, source: Path
+) -> None:
+    """Refuse a mapped column written with decimal commas (``37,5``), which reads as no number.
+
+    Raises:
+        DatasetError: names the file, the first such line, the column and the cell.
+    """
+    for key in sorted(_mapped_keys(mapping) & columns.keys(), key=str):
+        for k, cell in enumerate(columns[key].tolist()):
+            if _DECIMAL_COMMA.fullmatch(str(cell)):
+                raise DatasetError(
+                    f'{source}: line {int(numbers[k])}, column {key!r}: {cell!r} is not a '
+                    'number: a decimal comma? Write the log with decimal points '
+                    f'({str(cell).replace(",", ".")!r})'
+                )
 
 
 def _check_header_row(row: list[str], line: int, mapping: ImportMapping, source: Path) -> None:
@@ -443,14 +560,19 @@ def _check_header_row(row: list[str], line: int, mapping: ImportMapping, source:
     )
 
 
-def _mapped_names(mapping: ImportMapping) -> set[str]:
-    """The column names the mapping reads (time and every joint's quantities)."""
+def _mapped_keys(mapping: ImportMapping) -> set[str | int]:
+    """The columns the mapping reads (time and every joint's quantities), by name or index."""
     specs = [mapping.time] + [
         getattr(joint, quantity)
         for joint in mapping.joints
         for quantity in ('position', 'velocity', 'current', 'torque')
     ]
-    return {spec.column for spec in specs if spec is not None and isinstance(spec.column, str)}
+    return {spec.column for spec in specs if spec is not None}
+
+
+def _mapped_names(mapping: ImportMapping) -> set[str]:
+    """The column names the mapping reads (time and every joint's quantities)."""
+    return {key for key in _mapped_keys(mapping) if isinstance(key, str)}
 
 
 def _repeated_names(names: list[str], mapping: ImportMapping, source: Path) -> set[str]:
@@ -462,7 +584,8 @@ def _repeated_names(names: list[str], mapping: ImportMapping, source: Path) -> s
     Raises:
         DatasetError: a mapped column name is given more than once (names it and the columns).
     """
-    repeated = {name for name in names if name and names.count(name) > 1}
+    counts = Counter(names)
+    repeated = {name for name in names if name and counts[name] > 1}
     mapped = sorted(repeated & _mapped_names(mapping))
     if mapped:
         where = {name: [k for k, given in enumerate(names) if given == name] for name in mapped}

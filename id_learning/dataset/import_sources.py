@@ -13,12 +13,14 @@ given as a source is read whatever it holds (the reader names what is wrong with
 other suffixes (a mapping, a README.md, a plot) are no logs and are passed over. An entry named
 like a log that is no regular file (a FIFO, a device, a socket, a link to nothing) is refused,
 naming it and what it is, never opened: passed over, a log meant to be there would be lost.
+A mapping (or other YAML/JSON file) given as a source is refused as such, not read as a table.
 """
 
 from __future__ import annotations
 
 import gzip
 import logging
+import re
 import zlib
 from collections import Counter
 from collections.abc import Sequence
@@ -29,7 +31,7 @@ from id_learning.config_io import broken_link, special_kind
 from id_learning.dataset.import_readers import is_float, log_suffix
 from id_learning.errors import DatasetError
 
-__all__ = ['LOG_SUFFIXES', 'log_files', 'log_problem']
+__all__ = ['LOG_SUFFIXES', 'log_files', 'log_problem', 'mapping_problem']
 
 logger = logging.getLogger(__name__)
 
@@ -38,6 +40,11 @@ LOG_SUFFIXES = ('.csv', '.tsv', '.txt', '.dat', '.log', '.npz')
 _NAMED = 5  # subfolders (or files) named in a warning, then a count
 #: How much of a text file ``log_problem`` reads and judges [bytes]: hundreds of lines.
 _HEAD_BYTES = 1 << 16
+#: Suffixes of a mapping or settings file, no log.
+_MAPPING_SUFFIXES = ('.yaml', '.yml', '.json')
+#: A YAML mapping's key (``time:``); a line of YAML: a key, a list item, a comment.
+_YAML_KEY = re.compile(r'[A-Za-z_][\w .-]*:(?:\s|$)')
+_YAML_LINE = re.compile(r'\s*(?:-\s|-$|#|[A-Za-z_][\w .-]*:(?:\s|$))')
 #: Field separators a log's rows split by (None: whitespace), as the reader sniffs them.
 _SEPARATORS = ('\t', ';', ',', None)
 
@@ -99,6 +106,29 @@ def log_problem(path: Path) -> str | None:
             return None
     where = f'first {len(lines)} lines' if len(lines) > 1 else 'one line'
     return f'no table of numbers in its {where}'
+
+
+def mapping_problem(path: Path) -> str | None:
+    """Why a file given as a log looks like a mapping or other YAML/JSON file; None if not.
+
+    Its suffix is ``.yaml``, ``.yml`` or ``.json``; or its first line opens a JSON object; or its
+    first line is a YAML ``key: value`` and most of its first 20 lines are YAML.
+    """
+    suffix = log_suffix(path)
+    if suffix in _MAPPING_SUFFIXES:
+        return f'its suffix is {suffix!r}'
+    try:
+        with path.open('rb') as stream:
+            head = stream.read(4096).decode('utf-8-sig', errors='replace')
+    except OSError:
+        return None  # the reader names why it cannot be read
+    lines = [line for line in head.splitlines()[:20] if line.strip()]
+    first = lines[0].strip() if lines else ''
+    if first.startswith('{'):
+        return 'its first line opens a JSON object'
+    if _YAML_KEY.match(first) and 2 * sum(bool(_YAML_LINE.match(s)) for s in lines) > len(lines):
+        return f'its first line reads {first[:40]!r}, a YAML key: value'
+    return None
 
 
 def _skip_notes(folder: Path, files: Sequence[Path]) -> list[Path]:
@@ -226,6 +256,12 @@ def log_files(sources: Sequence[Path | str]) -> list[Path]:
             _warn_subfolders(source, given)
             files.extend(found)
         elif source.is_file():
+            if (why := mapping_problem(source)) is not None:
+                raise DatasetError(
+                    f'{source}: this looks like a mapping or other YAML/JSON file ({why}), not '
+                    'a log; give the mapping with --mapping and the log files (CSV or NPZ) as '
+                    'sources'
+                )
             files.append(source)
         elif (kind := special_kind(source)) is not None:
             # A device may never end; a pipe cannot be read twice (its head judged, then read).
