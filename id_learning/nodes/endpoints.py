@@ -2,6 +2,8 @@
 
 - ``refuse_clashing_topics``: the node's topic parameters checked once more with the names it
   resolves (namespace, remaps): 'reference' and '/reference' are one topic in the root namespace.
+- ``refuse_contract_topics``: the predictor publishes nothing on the robot's bag contract topics
+  (joint_states, motor_currents): the recorder records them, the replay publishes them.
 - ``endpoint``: a publisher or subscription that rcl refuses ends the start with one line naming
   the parameter and the topic, not a traceback.
 - ``ForeignPublishers``: a publisher of another message type on a topic the node takes in is
@@ -32,7 +34,16 @@ from id_learning.nodes.params import (
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ['Foreign', 'ForeignPublishers', 'endpoint', 'refuse_clashing_topics', 'shared_text']
+    from id_learning.robot.config import RobotConfig
+
+__all__ = [
+    'Foreign',
+    'ForeignPublishers',
+    'endpoint',
+    'refuse_clashing_topics',
+    'refuse_contract_topics',
+    'shared_text',
+]
 
 #: Part of the name the graph gives a publisher before discovery has brought its node's.
 UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
@@ -51,6 +62,35 @@ def refuse_clashing_topics(
         ConfigError: names the node, both parameters and the resolved topic.
     """
     refuse_shared_topics(config, node.resolve_topic_name, f'node {node.get_name()}: ')
+
+
+def refuse_contract_topics(node: Node, config: PredictorNodeConfig, robot: RobotConfig) -> None:
+    """Refuse an output or command topic that resolves to one of the robot's contract topics.
+
+    tau_u there would be recorded into the bag as the robot's joint states or motor currents
+    (and replayed, and learnt from as labels). The input topic may be one of them.
+
+    Raises:
+        ConfigError: names the node, the parameter, the topic and the robot's topic key.
+    """
+    contract = {
+        robot.topics.joint_states: 'joint_states',
+        robot.topics.motor_currents: 'motor_currents',
+    }
+    for parameter, topic in (
+        ('output_topic', config.output_topic),
+        ('command_topic', config.command_topic),
+    ):
+        if not topic:
+            continue
+        resolved = node.resolve_topic_name(topic)
+        key = contract.get(resolved)
+        if key is not None:
+            raise ConfigError(
+                f'node {node.get_name()}: {parameter} {topic!r} resolves to {resolved}, the '
+                f"robot's {key} topic (robot config topics.{key}, recorded into bags): the "
+                'predictor publishes nothing there'
+            )
 
 
 @contextlib.contextmanager

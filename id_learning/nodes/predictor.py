@@ -81,6 +81,7 @@ from id_learning.nodes.endpoints import (
     ForeignPublishers,
     endpoint,
     refuse_clashing_topics,
+    refuse_contract_topics,
     shared_text,
 )
 from id_learning.nodes.log_throttle import ThrottledLog
@@ -179,6 +180,7 @@ class Predictor(ShellNode):
         self._log = ThrottledLog(self.get_logger(), lambda: self.config.log_throttle_s)
         self.stamp_rate = StampRate()  # the stamps' rate against the receive clock
         self._is_closed = False
+        refuse_contract_topics(self, config, robot)
         output_qos = output_qos or torque_qos(config.output_depth)
         with endpoint(self, 'output_topic', config.output_topic):
             self._tau_u = self.create_publisher(JointState, config.output_topic, output_qos)
