@@ -17,8 +17,8 @@ finished with ``metadata.yaml`` and the counts are logged.
 
 Counts, per topic and in total: received (callbacks run), written (in the bag file: in a chunk
 handed to the OS, see ``bag.writer``; it trails received by up to one flush period), dropped (lost
-on the way -- gaps in the publisher's sequence numbers while a topic has one publisher, which
-include messages a full subscription queue overwrote; with the events executor, the middleware's
+on the way -- gaps in each publisher's sequence numbers (``sequence_gaps``), which include
+messages a full subscription queue overwrote; with the events executor, the middleware's
 message-lost events) and lost (received, but never in the file because a write failed). They are
 published on /diagnostics every ``diagnostics_period_s``. A topic that has received nothing
 ``SILENT_AFTER_S`` after another's first message is warned of once; the final summary is a
@@ -84,6 +84,7 @@ from id_learning.nodes.params import (
 )
 from id_learning.nodes.qos import DIAGNOSTICS_QOS, sensor_qos
 from id_learning.nodes.runtime import ShellNode, run_node
+from id_learning.nodes.sequence_gaps import SequenceGaps
 from id_learning.outputs import bag_output
 
 __all__ = ['Recorder', 'TopicCounts', 'main']
@@ -154,8 +155,10 @@ class Recorder(ShellNode):
         # one the middleware dropped from a full subscription queue without telling. The events
         # executor cannot; there only the middleware's message-lost events count.
         self._has_sequence = config.executor != 'events'
-        self._last_sequence: dict[str, int] = {}
-        self._is_single_publisher = dict.fromkeys(config.topics, False)
+        self._gaps = {
+            topic: SequenceGaps(functools.partial(self.count_publishers, topic))
+            for topic in config.topics
+        }
         receive = self._on_message_info if self._has_sequence else self._on_message
         self._uses_system_time = not _ros_time_is_active(self)
         #: Under use_sim_time: the topic whose first message came before any /clock (the whole
@@ -265,16 +268,12 @@ class Recorder(ShellNode):
     def _receive(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
         sequence = info.get('publication_sequence_number')
         if sequence is not None:
-            last = self._last_sequence.get(topic)
-            self._last_sequence[topic] = sequence
-            if last is None:  # first message: the flush timer refreshes this afterwards
-                self._is_single_publisher[topic] = self.count_publishers(topic) == 1
-            # Sequence numbers are per publisher: gaps only mean loss with a single one, and a
-            # smaller number means a new publisher.
-            if last is not None and sequence > last + 1 and self._is_single_publisher[topic]:
-                self.counts[topic].dropped += sequence - last - 1
+            # Sequence numbers are per publisher: a gap is counted in one publisher's numbers.
+            missing, last = self._gaps[topic].take(sequence)
+            if missing > 0:
+                self.counts[topic].dropped += missing
                 self.get_logger().warning(
-                    f'{topic}: {sequence - last - 1} message(s) lost before reception '
+                    f'{topic}: {missing} message(s) lost before reception '
                     f'(publisher sequence {last} -> {sequence}): raise qos_depth?',
                     throttle_duration_sec=1.0,
                 )
@@ -326,8 +325,9 @@ class Recorder(ShellNode):
                 '/clock started after the recording had begun on the system clock: it stays '
                 'on the system clock to the end (one time base per bag)'
             )
-        for topic in self._is_single_publisher:
-            self._is_single_publisher[topic] = self.count_publishers(topic) == 1
+        for topic, gaps in self._gaps.items():
+            if len(gaps) > 1:
+                gaps.forget_idle(self.count_publishers(topic))
         self._warn_silent()
         if self.failure is not None:
             return
