@@ -8,8 +8,13 @@ must not lose what it reads while it reads (a replay playing a bag) holds it sha
 it is; a reader is refused while a writer writes. Where the lock file cannot be made (a folder
 nobody may write into), a reader reads without it: nobody can replace the folder there either.
 
-The file holds a holder's pid (a reader's followed by what it is, e.g. ``1234 replay``). Its last
-holder removes it; one that locked a file removed meanwhile locks the new one (inodes compared).
+The lock of a path is the lock of what it resolves to (``os.path.realpath`` of the output where it
+exists, else of its parent): a link, a relative path or ``..`` meets the same lock as the target.
+
+The file holds a writer's pid, or one line per reader: its pid, what it is and a token (``1234
+replay @5``), appended when it takes the lock and blanked when it leaves. A refusal names the
+readers still alive ('pid unknown' where none is). Its last holder removes it; one that locked a
+file removed meanwhile locks the new one (inodes compared).
 """
 
 from __future__ import annotations
@@ -45,7 +50,15 @@ def named_path(out: Path) -> Path:
 
 
 def _lock_path(out: Path) -> Path:
-    return named_path(out).with_name(named_path(out).name + LOCK_SUFFIX)
+    """``<out>.lock`` beside what ``out`` resolves to (itself where it exists, else its parent)."""
+    named = named_path(out)
+    if os.path.lexists(named):
+        real = Path(os.path.realpath(named))
+    else:
+        real = Path(os.path.realpath(named.parent)) / named.name
+    if not real.name:
+        raise OutputError(f'{out}: it is the root folder, never an output; name a folder under it')
+    return real.with_name(real.name + LOCK_SUFFIX)
 
 
 class _BusyError(Exception):
@@ -56,10 +69,42 @@ class _BusyError(Exception):
         self.pid, self.reader = pid, reader
 
 
+#: The most of a lock file read for the names of its holders.
+_HOLDERS_BYTES = 1 << 16
+
+
+def _alive(pid: str) -> bool:
+    """Whether a process ``pid`` runs (one of another user's counts)."""
+    try:
+        os.kill(int(pid), 0)
+    except (ValueError, OverflowError, ProcessLookupError):
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return False
+    return True
+
+
 def _holder(fd: int) -> tuple[str, str]:
-    """(pid, what reads) from a lock file; ('unknown', '') where it holds nothing yet."""
-    words = os.pread(fd, 64, 0).decode(errors='replace').split()
-    return (words[0] if words else 'unknown'), ' '.join(words[1:])
+    """(pid, what reads) from a lock file; ('unknown', '') where it holds nothing yet.
+
+    Of readers' lines (``pid what @token``) only the live ones count; several are joined.
+    """
+    text = os.pread(fd, _HOLDERS_BYTES, 0).decode(errors='replace')
+    holders: list[tuple[str, str]] = []
+    for line in text.splitlines():
+        words = [word for word in line.split() if not word.startswith('@')]
+        if words and (pid := words[0]) not in {h[0] for h in holders}:
+            holders.append((pid, ' '.join(words[1:])))
+    readers = [h for h in holders if h[1]]
+    if not readers:  # a writer's pid (it holds the lock: it runs)
+        return holders[0] if holders else ('unknown', '')
+    holders = [h for h in readers if _alive(h[0])]
+    if not holders:
+        return 'unknown', ''
+    others = ''.join(f'; pid {pid}, a {what}' for pid, what in holders[1:])
+    return holders[0][0], holders[0][1] + others
 
 
 def _take(path: Path, out: Path, mode: int) -> int:
@@ -141,7 +186,7 @@ def locked(out: Path, option: str = '--out') -> Iterator[None]:
 
 def _held_key(out: Path) -> Path:
     """The lock of ``out`` as one key however ``out`` is spelled (relative, through links)."""
-    return Path(os.path.realpath(named_path(out).parent)) / (named_path(out).name + LOCK_SUFFIX)
+    return _lock_path(out)
 
 
 @contextlib.contextmanager
@@ -196,17 +241,39 @@ def read_lock(out: Path, *, reader: str = 'replay') -> Iterator[bool]:
     if fd is None:
         yield False
         return
+    line = f'{os.getpid()} {" ".join(reader.split()) or "reader"} @{fd}\n'.encode()
     try:
         with contextlib.suppress(OSError):  # the pid is for messages only
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f'{os.getpid()} {reader}\n'.encode(), 0)
+            _append(path, line)
         yield True
     finally:
-        _release_shared(path, fd)
+        _release_shared(path, fd, line)
 
 
-def _release_shared(path: Path, fd: int) -> None:
+def _append(path: Path, line: bytes) -> None:
+    """Add a reader's line to the lock file (appends of a line are atomic)."""
+    appender = os.open(path, os.O_WRONLY | os.O_APPEND)
+    try:
+        os.write(appender, line)
+    finally:
+        os.close(appender)
+
+
+def _blank(fd: int, line: bytes) -> None:
+    """Blank a reader's own line in place (others' lines and appends are left as they are)."""
+    text = os.pread(fd, _HOLDERS_BYTES, 0)
+    at = text.find(line)
+    while at > 0 and text[at - 1 : at] != b'\n':  # another line ending as this one does
+        at = text.find(line, at + 1)
+    if at >= 0:
+        os.pwrite(fd, b' ' * (len(line) - 1), at)
+
+
+def _release_shared(path: Path, fd: int, line: bytes = b'') -> None:
     """Let go of a shared lock; the last holder (none left to share it) removes the file."""
+    if line:
+        with contextlib.suppress(OSError):
+            _blank(fd, line)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # only once no other holder is left
         if os.fstat(fd).st_ino == os.stat(path).st_ino:
