@@ -24,15 +24,25 @@ start>``. At the end of a session the state goes where the model it was learnt o
   never over another model's state: to ``<artifact>.adaptation.json.model-<sha's start>`` in the
   nearest folder that still exists, else in ``$XDG_STATE_HOME/id_learning`` (``~/.local/state``),
   with a warning naming the file. Each attempt that failed is named when none succeeds.
+
+Two sessions on one artifact (two predictors) never overwrite each other's learning: a session
+records the file's content (sha256) when it loads, and at save, when the file changed meanwhile
+(another session saved there, or created it), leaves it as it is and writes its own state beside
+it, to ``<file>.session-<pid>``, with a warning naming both and that the two sessions' learning is
+not merged. The check and the write hold an flock on the folder, so two saves do not interleave.
+Nothing blocks the feed-forward: both sessions adapt and serve as before.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import hashlib
 import json
 import os
 import re
-from collections.abc import Sequence
+import stat
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -117,6 +127,8 @@ class AdaptationLoop(Protocol):
     def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
         """The JSON-ready state to store."""
 
+    base: StoredBase | None
+
 
 #: Where adapted parameters are saved beside (never over) an artifact.
 ADAPTATION_JSON = 'adaptation.json'
@@ -135,6 +147,9 @@ class StoredBase:
             model.json records none), what the state is stored for.
         artifact: the artifact folder (None: the one ``path`` is named for).
         aside_tag: the suffix of the name a file not continued from is kept under.
+        read: ``load_base`` looked at the file: ``content`` is what it held.
+        content: the sha256 of the file when read or last written by this session (None: none).
+        side: where this session's state went beside a file another session changed.
     """
 
     path: Path
@@ -144,6 +159,9 @@ class StoredBase:
     model_sha256: str | None = None
     artifact: Path | None = None
     aside_tag: str = 'previous'
+    read: bool = False
+    content: str | None = None
+    side: Path | None = None
 
     @property
     def folder(self) -> Path:
@@ -330,6 +348,7 @@ def load_base(
     """
     base = _base(artifact, model_sha256)
     path = base.path
+    base = replace(base, read=True, content=_digest(path))
     if not path.exists():
         return replace(base, found=False)
     try:
@@ -372,6 +391,61 @@ def _write(path: Path, state: dict[str, Any]) -> None:
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
         raise
+
+
+def _digest(path: Path) -> str | None:
+    """The sha256 of the file at ``path`` (None: there is none; unreadable: says so)."""
+    try:
+        info = os.stat(path)
+        if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_STATE_BYTES:  # never waited on
+            return f'mode {info.st_mode:o}, {info.st_size} bytes, at {info.st_mtime_ns} ns'
+        with path.open('rb') as stream:
+            return hashlib.file_digest(stream, 'sha256').hexdigest()
+    except FileNotFoundError:
+        return None
+    except OSError as err:
+        return f'unreadable ({err.strerror or err})'
+
+
+@contextlib.contextmanager
+def _folder_locked(folder: Path) -> Iterator[None]:
+    """Hold an flock on ``folder`` while a save checks and writes (none where it cannot)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        yield
+        return
+    try:
+        with contextlib.suppress(OSError):
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _changed(base: StoredBase, path: Path) -> bool:
+    """Whether another session wrote ``path`` since this one read (or last wrote) it."""
+    return base.read and _digest(path) != base.content
+
+
+def _beside(path: Path, base: StoredBase, state: dict[str, Any]) -> tuple[Path, str]:
+    """Write the state beside ``path`` (another session's now): (where, what became of both)."""
+    side = base.side or _free(path.with_name(f'{path.name}.session-{os.getpid()}'))
+    _write(side, state)
+    return side, (
+        f'; {path} was changed by another session since this one read it (two sessions adapted '
+        f"on one artifact): it is left as it is, and this session's state is written to {side} "
+        f"instead: the two sessions' learning is not merged (to continue from this one, rename "
+        f'it to {path.name})'
+    )
+
+
+def _saved(loop: AdaptationLoop, base: StoredBase, path: Path, side: bool) -> None:
+    """Record where this session's state went: its next save checks against what it wrote."""
+    if side:
+        loop.base = replace(base, side=path)
+    else:
+        loop.base = replace(base, problem=None, found=True, read=True, content=_digest(path))
 
 
 @dataclass(frozen=True)
@@ -470,12 +544,18 @@ def save_state(
     if place.own is not None:
         path = place.own
         try:
-            moved = ''
-            if base.problem is not None and path.exists():
-                aside = _free(path.with_name(f'{path.name}.{base.aside_tag}'))
-                path.replace(aside)
-                moved = f'; the file it could not continue from is kept as {aside.name}'
-            _write(path, state)
+            with _folder_locked(path.parent):
+                if _changed(base, path):
+                    side, note = _beside(path, base, state)
+                    _saved(loop, base, side, side=True)
+                    return True, side, what + note
+                moved = ''
+                if base.problem is not None and path.exists():
+                    aside = _free(path.with_name(f'{path.name}.{base.aside_tag}'))
+                    path.replace(aside)
+                    moved = f'; the file it could not continue from is kept as {aside.name}'
+                _write(path, state)
+                _saved(loop, base, path, side=False)
         except OSError as err:
             tried.append(f'{path} ({err.strerror or err})')
             place = _Place(None, f'{path} could not be written ({err.strerror or err})', True)
