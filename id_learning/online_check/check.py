@@ -70,6 +70,7 @@ def online_check(
     out: Path | None = None,
     domain_id: int | None = None,
     input_depth: int | None = None,
+    max_age_s: float | None = None,
     progress: bool = True,
 ) -> OnlineCheckResult:
     """Replay ``seconds`` of the bag's test part through the predictor node and compare offline.
@@ -84,6 +85,8 @@ def online_check(
         input_depth: the predictor's reference queue depth; None: the node's default, with
             which a machine stall longer than that many cycles drops samples (reported as
             missing), as it would in production. A depth of the excerpt's length loses none.
+        max_age_s: the predictor's ``max_age_s``; None: the node's default, with which a stall of
+            the machine longer than that refuses samples as too old (reported); 0: no time checks.
         progress: print what is happening.
 
     Returns:
@@ -124,7 +127,7 @@ def online_check(
     ):
         say(f'starting the predictor ({setup.kind}, domain {domain}, namespace {namespace})')
         predictor = start_predictor(
-            start, setup, namespace, seconds=seconds, input_depth=input_depth
+            start, setup, namespace, seconds=seconds, input_depth=input_depth, max_age_s=max_age_s
         )
         # While the node imports torch: the trainer's preprocessing and split of this bag.
         say(f'preprocessing {setup.bag} as the trainer does ({setup.preprocess.target} labels)')

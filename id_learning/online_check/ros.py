@@ -76,6 +76,7 @@ def start_predictor(
     *,
     seconds: float,
     input_depth: int | None,
+    max_age_s: float | None = None,
 ) -> NodeProcess:
     """Start the predictor node on the artifact, in ``namespace``, listening to its reference."""
     samples = round(seconds * NS_PER_S / setup.period_ns) + 64  # the excerpt's and a margin
@@ -94,6 +95,7 @@ def start_predictor(
             # The check's own listener, stalled with the machine, must not lose a tau_u.
             'output_depth': min(samples, MAX_QUEUE_DEPTH),
             **({} if input_depth is None else {'input_depth': input_depth}),
+            **({} if max_age_s is None else {'max_age_s': max_age_s}),
         },
         {'__ns': namespace, '/diagnostics': f'{namespace}/diagnostics'},
     )
