@@ -166,3 +166,20 @@ def no_hang(seconds: float = 20.0) -> Iterator[None]:
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
+
+
+@contextmanager
+def immutable(folder: Path) -> Iterator[Path]:
+    """``folder`` made one nobody may write into, root included (``chattr +i``)."""
+    import shutil
+
+    import pytest
+
+    if not shutil.which('chattr'):
+        pytest.skip('chattr is not installed')
+    if subprocess.run(['chattr', '+i', str(folder)], capture_output=True, check=False).returncode:
+        pytest.skip('this file system has no immutable attribute')
+    try:
+        yield folder
+    finally:
+        subprocess.run(['chattr', '-i', str(folder)], check=True)

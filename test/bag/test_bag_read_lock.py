@@ -5,14 +5,12 @@ folder where the lock cannot be made is read without it."""
 
 from __future__ import annotations
 
-import contextlib
-import shutil
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from support import immutable
 
 from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state
 from id_learning.bag.recover import recover_bag
@@ -105,21 +103,8 @@ def test_a_reader_in_another_process_keeps_the_bag(tmp_path: Path) -> None:
     BagWriter(bag, overwrite=True).open().close()
 
 
-@contextlib.contextmanager
-def _immutable(folder: Path) -> Iterator[Path]:
-    """``folder`` made one nobody may write into, root included (``chattr +i``)."""
-    if not shutil.which('chattr'):
-        pytest.skip('chattr is not installed')
-    if subprocess.run(['chattr', '+i', str(folder)], capture_output=True, check=False).returncode:
-        pytest.skip('this file system has no immutable attribute')
-    try:
-        yield folder
-    finally:
-        subprocess.run(['chattr', '-i', str(folder)], check=True)
-
-
 def test_a_bag_in_a_folder_that_cannot_be_written_is_read_without_a_lock(tmp_path: Path) -> None:
     bag = _bag(tmp_path / 'shelf' / 'bag')
-    with _immutable(bag.parent), read_lock(bag) as held:
+    with immutable(bag.parent), read_lock(bag) as held:
         assert not held
         assert not _lock_file(bag).exists()

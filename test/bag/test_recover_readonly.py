@@ -3,14 +3,13 @@ line suggesting --out; a rename that fails while installing is undone, and said 
 
 from __future__ import annotations
 
-import contextlib
 import shutil
-import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support import immutable as immutable_folder
 
 from id_learning.bag import JOINT_STATE, BagWriter, encode_joint_state
 from id_learning.bag.recover import recover_bag
@@ -45,23 +44,10 @@ def _files(folder: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
 
 
-@contextlib.contextmanager
-def _immutable(folder: Path) -> Iterator[Path]:
-    """``folder`` made one nobody may write into, root included (``chattr +i``)."""
-    if not shutil.which('chattr'):
-        pytest.skip('chattr is not installed')
-    if subprocess.run(['chattr', '+i', str(folder)], capture_output=True, check=False).returncode:
-        pytest.skip('this file system has no immutable attribute')
-    try:
-        yield folder
-    finally:
-        subprocess.run(['chattr', '-i', str(folder)], check=True)
-
-
 @pytest.fixture
 def immutable(tmp_path: Path) -> Iterator[Path]:
     """A torn bag in a folder that cannot be written."""
-    with _immutable(_torn_bag(tmp_path / 'ro', 'ro_0.mcap')) as bag:
+    with immutable_folder(_torn_bag(tmp_path / 'ro', 'ro_0.mcap')) as bag:
         yield bag
 
 
@@ -89,7 +75,7 @@ def test_a_bag_in_a_folder_that_cannot_be_written_is_refused_before_any_work(
 def test_a_complete_bag_in_a_folder_that_cannot_be_written_is_still_said_complete(
     tmp_path: Path,
 ) -> None:
-    with _immutable(_bag(tmp_path / 'complete')) as bag:
+    with immutable_folder(_bag(tmp_path / 'complete')) as bag:
         assert recover_bag(bag).is_intact  # nothing to write: nothing to refuse
 
 
