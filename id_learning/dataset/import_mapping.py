@@ -43,6 +43,8 @@ _TOP_KEYS = (
     'header',
     'delimiter',
     'comment',
+    'encoding',
+    'skip_lines',
     'time',
     'period_s',
     'joints',
@@ -159,6 +161,10 @@ class ImportMapping:
             (a header when a non-empty field is no number).
         delimiter: CSV field separator: one character, 'tab' or 'whitespace'; None sniffs.
         comment: prefix of CSV comment lines, or None.
+        encoding: a CSV's text encoding (a Python codec name: 'cp1252', 'latin-1', ...);
+            'utf-8' reads a UTF-8 file with or without a byte order mark, and a UTF-16 one that
+            starts with its byte order mark.
+        skip_lines: lines before the header (or the first data row) to skip: a trace's preamble.
         nan_policy: 'refuse' raises on an empty or non-finite cell, 'drop' drops its row.
         implausible_policy: 'refuse' raises on a value no arm can have (far beyond the robot's
             limits, or a non-physical magnitude: see ``import_values``), 'drop' drops its row.
@@ -179,6 +185,8 @@ class ImportMapping:
     header: bool | Literal['auto'] = 'auto'
     delimiter: str | None = None
     comment: str | None = '#'
+    encoding: str = 'utf-8'
+    skip_lines: int = 0
     nan_policy: Literal['refuse', 'drop'] = 'refuse'
     implausible_policy: Literal['refuse', 'drop'] = 'refuse'
     beyond_limits_policy: Literal['refuse', 'drop'] = 'refuse'
@@ -197,6 +205,13 @@ class ImportMapping:
         _check_resample(self, self.where)
         if self.motors is not None:
             _check_motors(self.motors, self.joints, self.where)
+
+    def mapped_columns(self) -> set[str | int]:
+        """The columns the mapping reads (time and every joint's quantities), by name or index."""
+        specs = [self.time] + [
+            getattr(joint, quantity) for joint in self.joints for quantity in QUANTITIES
+        ]
+        return {spec.column for spec in specs if spec is not None}
 
     @property
     def where(self) -> str:
@@ -228,6 +243,7 @@ def _check_options(mapping: ImportMapping, where: str) -> None:
         )
     if mapping.comment is not None and not (isinstance(mapping.comment, str) and mapping.comment):
         raise ConfigError(f'{where}: comment must be a non-empty prefix or null')
+    _check_text_options(mapping, where)
     for key in ('nan_policy', 'implausible_policy', 'beyond_limits_policy'):
         if getattr(mapping, key) not in ('refuse', 'drop'):
             raise ConfigError(
@@ -238,6 +254,22 @@ def _check_options(mapping: ImportMapping, where: str) -> None:
         raise ConfigError(
             f'{where}: jitter_tolerance must be in [0, 0.5) periods, got {tolerance!r}'
         )
+
+
+def _check_text_options(mapping: ImportMapping, where: str) -> None:
+    encoding = mapping.encoding
+    try:
+        if not isinstance(encoding, str):
+            raise LookupError(encoding)
+        'x'.encode(encoding)
+    except (LookupError, UnicodeError):
+        raise ConfigError(
+            f"{where}: encoding must name a text encoding ('utf-8', 'cp1252', 'latin-1', "
+            f"'utf-16', ...), got {encoding!r}"
+        ) from None
+    skip = mapping.skip_lines
+    if isinstance(skip, bool) or not isinstance(skip, int) or skip < 0:
+        raise ConfigError(f'{where}: skip_lines must be a count of lines >= 0, got {skip!r}')
 
 
 def _check_time_base(mapping: ImportMapping, where: str) -> None:

@@ -5,7 +5,8 @@ delimiter and the header row are detected unless the mapping names them. Fields 
 csv module's rules (``"time_ms"``, ``"1.5"``) read as their text, whitespace-separated ones too.
 A gzip-compressed CSV (``.csv.gz``) is read as its decompressed text. The file's first bytes are
 checked against the format it is read as, so that an NPZ read as CSV (or the other way round) is
-named as such rather than failing to decode.
+named as such rather than failing to decode. How a CSV's bytes become text and its text rows
+(encodings, a preamble, quoted fields spanning lines) is ``import_text``'s.
 
 Nothing is allocated on a file's word alone: each NPZ array's header (its shape and dtype) is
 read from the archive before the array, and an array is refused, naming the file, the array and
@@ -41,6 +42,13 @@ from typing import Literal
 import numpy as np
 
 from id_learning.dataset.import_mapping import ImportMapping
+from id_learning.dataset.import_text import (
+    MAX_LINE_CHARS,
+    decode_text,
+    field_limit,
+    numbered_rows,
+    refuse_preamble,
+)
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.memory import available_memory_bytes
 
@@ -62,9 +70,6 @@ _NPY_MAGIC = b'\x93NUM'
 MEMORY_SHARE = 0.5
 #: The decompressed bytes read at a time from a gzipped CSV.
 _GUNZIP_CHUNK = 2**20
-#: The characters a CSV line may hold (16 Mi): a long unmapped field (a note, a dump) is read; a
-#: longer line, most likely no line of a log (a file without line breaks), is refused.
-MAX_LINE_CHARS = 2**24
 
 
 @dataclass(frozen=True)
@@ -106,7 +111,7 @@ def read_table(source: Path, mapping: ImportMapping) -> LogTable:
     )
     if file_format == 'npz':
         return _read_npz(source, said, mapping.where)
-    return _read_csv(source, mapping, _csv_text(source, said, mapping.where))
+    return _read_csv(source, mapping, _csv_text(source, said, mapping))
 
 
 def log_suffix(path: Path) -> str:
@@ -272,12 +277,12 @@ def _memory_budget() -> int | None:
     return None if available is None else int(MEMORY_SHARE * available)
 
 
-def _csv_text(source: Path, said: str, where: str) -> str:
+def _csv_text(source: Path, said: str, mapping: ImportMapping) -> str:
     """The file's text, decompressed when gzip-compressed (``.csv.gz``).
 
     Raises:
         ConfigError: the file is an NPZ (zip) archive (names the format to set).
-        DatasetError: unreadable, a broken gzip stream, or no UTF-8 text.
+        DatasetError: unreadable, a broken gzip stream, or no text in the mapping's encoding.
     """
     budget = _memory_budget()
     try:
@@ -296,12 +301,9 @@ def _csv_text(source: Path, said: str, where: str) -> str:
     if data.startswith(_ZIP_MAGIC):
         raise ConfigError(
             f'{source}: {said} does not fit this file, which looks like an NPZ (zip) archive (it '
-            f'starts with PK\\x03\\x04); set format: npz in {where}'
+            f'starts with PK\\x03\\x04); set format: npz in {mapping.where}'
         )
-    try:
-        return data.decode('utf-8-sig')
-    except UnicodeDecodeError as err:
-        raise DatasetError(f'{source}: cannot read CSV file: not UTF-8 text ({err})') from err
+    return decode_text(source, data, mapping)
 
 
 def _gunzip(source: Path, data: bytes | bytearray, budget: int | None) -> bytearray:
@@ -328,27 +330,19 @@ def _gunzip(source: Path, data: bytes | bytearray, budget: int | None) -> bytear
 
 
 def _read_csv(source: Path, mapping: ImportMapping, text: str) -> LogTable:
-    comment = mapping.comment
-    numbered = [
-        (number, line)
-        for number, line in enumerate(text.splitlines(), start=1)
-        if line.strip() and not (comment and line.lstrip().startswith(comment))
-    ]
+    numbered = numbered_rows(source, text, mapping, None)
     if not numbered:
         raise DatasetError(f'{source}: no data rows')
-    too_long = [(number, len(line)) for number, line in numbered if len(line) > MAX_LINE_CHARS]
-    if too_long:
-        raise DatasetError(
-            f'{source}: line {too_long[0][0]} has {too_long[0][1]:,} characters, more than the '
-            f'{MAX_LINE_CHARS:,} a log line may have ({len(too_long)} such line(s)); is this a '
-            'log of one row per line? Split the long lines, or drop the long column'
-        )
-    lines = [line for _, line in numbered]
-    numbers = [number for number, _ in numbered]
+    refuse_preamble(source, numbered, mapping)
     delimiter = mapping.delimiter or _sniff_delimiter(
-        lines[:_SNIFF_LINES], source, numbers[:_SNIFF_LINES]
+        [line for _, line in numbered[:_SNIFF_LINES]],
+        source,
+        [number for number, _ in numbered[:_SNIFF_LINES]],
     )
-    rows = _split(lines, delimiter, source, numbers)
+    if '"' in text:  # quoted fields may span lines
+        numbered = numbered_rows(source, text, mapping, delimiter)
+    lines = [line for _, line in numbered]
+    rows = _split(lines, delimiter, source, [number for number, _ in numbered])
     has_header = _looks_like_header(rows[0]) if mapping.header == 'auto' else mapping.header
     if has_header is True and mapping.header is True:
         _check_header_row(rows[0], numbered[0][0], mapping, source)
@@ -397,18 +391,14 @@ def _split(
 
 def _split_quoted(line: str, char: str, source: Path, number: int) -> list[str]:
     """One line's stripped fields as the csv module reads them, fields up to MAX_LINE_CHARS."""
-    limit = csv.field_size_limit()
     try:
-        if limit < MAX_LINE_CHARS:
-            csv.field_size_limit(MAX_LINE_CHARS)
-        return [
-            cell.strip()
-            for cell in next(csv.reader([line], delimiter=char, skipinitialspace=True))
-        ]
+        with field_limit():
+            return [
+                cell.strip()
+                for cell in next(csv.reader([line], delimiter=char, skipinitialspace=True))
+            ]
     except csv.Error as err:
         raise DatasetError(f'{source}: line {number}: cannot split it into fields: {err}') from err
-    finally:
-        csv.field_size_limit(limit)
 
 
 #: A field of a whitespace-separated line: quoted (a ``""`` inside for a quote), or bare.
@@ -428,7 +418,10 @@ def _split_whitespace(line: str) -> list[str]:
 def _sniff_delimiter(lines: Sequence[str], source: Path, numbers: Sequence[int]) -> str:
     """The first candidate that splits the first line in several fields, as most lines split."""
     for candidate in _SNIFF_DELIMITERS:
-        counts = [len(row) for row in _split(lines, candidate, source, numbers)]
+        try:
+            counts = [len(row) for row in _split(lines, candidate, source, numbers)]
+        except DatasetError:  # a quoted line break outside a field of this delimiter's
+            continue
         if counts and counts[0] > 1 and 2 * counts.count(counts[0]) > len(counts):
             return candidate
     return ','
@@ -500,8 +493,11 @@ def _delimiter_hint(shape: _RowShape, line: str, number: int) -> str:
     decimal = ' (a decimal comma?)' if shape.delimiter == ',' and re.search(r'\d,\d', line) else ''
     for other in (d for d in _SNIFF_DELIMITERS if d != shape.delimiter):
         named = other if other in ('tab', 'whitespace') else repr(other)
-        cells = len(_split([line], other, shape.source, [number])[0])
-        header = len(_split([shape.header_line], other, shape.source, [number])[0])
+        try:
+            cells = len(_split([line], other, shape.source, [number])[0])
+            header = len(_split([shape.header_line], other, shape.source, [number])[0])
+        except DatasetError:  # a quoted line break outside a field of this delimiter's
+            continue
         if shape.header_line and header == cells > 1:
             return (
                 f'; the header and line {number} split by {named} into {cells} cells: set '
@@ -529,7 +525,7 @@ def _check_decimal_comma(
     Raises:
         DatasetError: names the file, the first such line, the column and the cell.
     """
-    for key in sorted(_mapped_keys(mapping) & columns.keys(), key=str):
+    for key in sorted(mapping.mapped_columns() & columns.keys(), key=str):
         for k, cell in enumerate(columns[key].tolist()):
             if _DECIMAL_COMMA.fullmatch(str(cell)):
                 raise DatasetError(
@@ -560,19 +556,9 @@ def _check_header_row(row: list[str], line: int, mapping: ImportMapping, source:
     )
 
 
-def _mapped_keys(mapping: ImportMapping) -> set[str | int]:
-    """The columns the mapping reads (time and every joint's quantities), by name or index."""
-    specs = [mapping.time] + [
-        getattr(joint, quantity)
-        for joint in mapping.joints
-        for quantity in ('position', 'velocity', 'current', 'torque')
-    ]
-    return {spec.column for spec in specs if spec is not None}
-
-
 def _mapped_names(mapping: ImportMapping) -> set[str]:
     """The column names the mapping reads (time and every joint's quantities)."""
-    return {key for key in _mapped_keys(mapping) if isinstance(key, str)}
+    return {key for key in mapping.mapped_columns() if isinstance(key, str)}
 
 
 def _repeated_names(names: list[str], mapping: ImportMapping, source: Path) -> set[str]:

@@ -18,6 +18,7 @@ A mapping (or other YAML/JSON file) given as a source is refused as such, not re
 
 from __future__ import annotations
 
+import codecs
 import gzip
 import logging
 import re
@@ -85,9 +86,10 @@ def log_problem(path: Path) -> str | None:
         return None  # the reader names why it cannot be read: never skipped for it
     if head.startswith(b'PK'):
         return None  # an NPZ named otherwise: the reader says what it is, or reads it
-    if b'\0' in head:
+    encoding = _text_encoding(head)
+    if encoding is None:
         return 'binary, no text'
-    lines = head.decode('utf-8-sig', errors='replace').splitlines()
+    lines = head.decode(encoding, errors='replace').splitlines()
     if len(head) == _HEAD_BYTES:
         lines = lines[:-1]  # cut off by the read
     lines = [line for line in lines if line.strip()]
@@ -106,6 +108,24 @@ def log_problem(path: Path) -> str | None:
             return None
     where = f'first {len(lines)} lines' if len(lines) > 1 else 'one line'
     return f'no table of numbers in its {where}'
+
+
+def _text_encoding(head: bytes) -> str | None:
+    """The encoding a file's head is judged in; None for bytes that are no text.
+
+    UTF-16 by its byte order mark, or by a NUL in (nearly) every other byte (text in UTF-16
+    without a mark, which the reader then names); else UTF-8.
+    """
+    if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        return 'utf-16'
+    if b'\0' not in head:
+        return 'utf-8-sig'
+    even, odd = head[0::2], head[1::2]
+    if 0 not in even and odd.count(0) >= 0.9 * len(odd):
+        return 'utf-16-le'
+    if 0 not in odd and even.count(0) >= 0.9 * len(even):
+        return 'utf-16-be'
+    return None
 
 
 def mapping_problem(path: Path) -> str | None:

@@ -80,11 +80,14 @@ def test_a_line_beyond_the_bound_is_refused_in_one_line(tmp_path: Path) -> None:
     assert len(str(err.value)) < 1000
 
 
-def test_a_long_quoted_field_left_open_reads_to_the_line_end(tmp_path: Path) -> None:
+def test_a_long_quoted_field_left_open_is_refused_at_its_line_in_one_short_line(
+    tmp_path: Path,
+) -> None:
     path = tmp_path / 'log.csv'
     path.write_text('t_ms,q1,q2\n0,1,2\n1,2,"' + 'n' * 200_000 + '\n', encoding='utf-8')
-    table = read_table(path, mapping(delimiter=','))  # csv reads an open quote to the end
-    assert len(table.columns['q2'][1]) == 200_000
+    with pytest.raises(DatasetError, match=r'line 3: a quoted field opens here and is not') as err:
+        read_table(path, mapping(delimiter=','))
+    assert len(str(err.value)) < 1000
 
 
 # -- 2: a row with fewer cells than the header ----------------------------------------------------
