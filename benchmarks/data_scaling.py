@@ -21,6 +21,7 @@ import math
 import sys
 import tempfile
 import time
+from collections.abc import Collection
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -54,9 +55,17 @@ def last_samples(result: TwinResult, n: int) -> TwinResult:
 
 
 def plot(
-    minutes: list[float], ratios: dict[str, np.ndarray], joints: list[str], path: Path
+    minutes: list[float],
+    ratios: dict[str, np.ndarray],
+    joints: list[str],
+    path: Path,
+    cut_short: Collection[str] = (),
 ) -> None:
-    """One panel per joint: test RMSE / floor against training minutes, a line per kind."""
+    """One panel per joint: test RMSE / floor against training minutes, a line per kind.
+
+    A fit the time budget cut short (``cut_short`` holds ``'<kind>, <m> min'``) is ringed in red:
+    its point is the budget's as much as the data's.
+    """
     import matplotlib
 
     matplotlib.use('Agg')
@@ -72,6 +81,11 @@ def plot(
         for k, (kind, ratio) in enumerate(ratios.items()):
             style = {'color': colours[k % len(colours)], 'marker': markers[k % len(markers)]}
             ax.plot(minutes, ratio[:, j], label=kind, **style)
+            cut = [i for i, m in enumerate(minutes) if f'{kind}, {m:g} min' in cut_short]
+            ax.scatter(
+                [minutes[i] for i in cut], ratio[cut, j], s=140, facecolors='none',
+                edgecolors='red', linewidths=1.5, zorder=3,
+            )  # fmt: skip
         ax.axhline(1.0, color='black', linewidth=0.8, linestyle='--')
         ax.set_xscale('log', base=2)
         ax.set_yscale('log')
@@ -82,6 +96,11 @@ def plot(
     for k in range(len(joints), rows * columns):
         axes[k // columns][k % columns].axis('off')
     handles, labels = axes[0][0].get_legend_handles_labels()
+    if cut_short:
+        handles.append(
+            plt.Line2D([], [], marker='o', color='red', markerfacecolor='none', linestyle='')
+        )
+        labels.append('cut short by the time budget')
     fig.legend(handles, labels, loc='lower center', ncol=min(6, len(labels)), fontsize='small')
     fig.tight_layout(rect=(0, 0.08, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -98,8 +117,15 @@ def main() -> None:
     parser.add_argument('--seconds-per-model', type=float, default=120.0)
     parser.add_argument('--out', type=Path, help='keep the bags and the runs here')
     parser.add_argument('--plot', type=Path, default=REPO / 'out/benchmarks/data_scaling.png')
+    parser.add_argument(
+        '--replot', type=Path, metavar='JSON',
+        help='only redraw --plot from a results document this benchmark wrote (its .json)',
+    )  # fmt: skip
     add_results_options(parser)
     args = parser.parse_args()
+    if args.replot is not None:
+        replot(args.replot, args.plot)
+        return
     minutes = sorted(float(m) for m in args.minutes.split(','))
     kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
     robot = load_robot_config(DEFAULT_ROBOT)
@@ -153,7 +179,7 @@ def main() -> None:
                 rmse[kind].append(entry['rmse_through_filter_nm'])
                 seconds[kind].append(entry['train_seconds'])
     joints = list(robot.joints)
-    plot(minutes, ratios, joints, args.plot)
+    plot(minutes, ratios, joints, args.plot, cut_short)
     for j, joint in enumerate(joints):
         print(f'\n{joint}: test RMSE / floor' + ''.join(f'{m:>9g} min' for m in minutes))
         for kind in kinds:
@@ -181,6 +207,17 @@ def main() -> None:
     lines = report(document, settings_lines('data_scaling', parser, args))
     publish_results('data_scaling', document, lines, args)
     print(json.dumps({**document, 'environment': environment()}))
+
+
+def replot(document_path: Path, path: Path) -> None:
+    """Redraw the plot from a results document (``docs/results/data_scaling.json``)."""
+    document = json.loads(document_path.read_text(encoding='utf-8'))
+    ratios = {
+        kind: np.array([[np.nan if x is None else x for x in row] for row in rows], dtype=float)
+        for kind, rows in document['ratio_to_floor'].items()
+    }
+    plot(document['minutes'], ratios, document['joints'], path, document['cut_short'])
+    print(f'plot: {path}')
 
 
 def report(document: dict[str, Any], settings: list[str]) -> list[str]:
