@@ -56,7 +56,6 @@ __all__ = [
     'apply_row_policies',
     'joint_side',
     'si_values',
-    'warn_narrow_floats',
 ]
 
 logger = logging.getLogger(__name__)
@@ -71,6 +70,17 @@ MAGNITUDE_BOUNDS = {'position': 1e3, 'velocity': 1e3, 'current': 1e4, 'torque': 
 _UNIT_OF = {'position': 'rad', 'velocity': 'rad/s', 'current': 'A', 'torque': 'N*m'}
 _GATE_FACTOR = {'velocity': VELOCITY_FACTOR, 'current': TORQUE_FACTOR, 'torque': TORQUE_FACTOR}
 _DEGREES_REMEDY = 'set its unit: deg'
+#: NPZ dtype kinds that hold no real numbers, and what they hold.
+_NOT_NUMBERS = {
+    'b': 'true/false values',
+    'c': 'complex numbers',
+    'M': 'dates',
+    'm': 'time differences',
+    'V': 'records (a structured array)',
+}
+#: The coarsest step a time array's float may have at its largest value, as a share of the
+#: array's median step: far below the jitter a grid tolerates.
+_TIME_RESOLUTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -87,32 +97,56 @@ class Field:
         return f'column {self.spec.describe()} ({meaning})'
 
 
-def warn_narrow_floats(
+def check_array_types(
     columns: Mapping[str | int, np.ndarray], fields: Sequence[Field], source: Path
 ) -> None:
-    """Warn once per mapped array stored as a float narrower than float32 (an NPZ's float16).
+    """Refuse mapped NPZ arrays that hold no real numbers; warn of floats too narrow for them.
 
-    It imports as it is, but float16 keeps 11 significant bits: positions near 37 deg step by
-    0.03 deg, a quantisation the identification would take for the motion. The warning names
-    the step at the array's largest magnitude, in the column's unit.
+    A bool array (``i > 0``) would import as 0 and 1, a complex one without its imaginary part, a
+    date or a structured array as no number at all: each is refused. A time array whose float
+    resolves less than ``_TIME_RESOLUTION`` of its median step at its largest value (float32
+    epoch seconds step by 128 s) cannot tell the samples apart: refused. float16 keeps 11
+    significant bits (positions near 37 deg step by 0.03 deg, a quantisation the identification
+    would take for the motion): a warning names the step at the largest magnitude, in its unit.
+
+    Raises:
+        DatasetError: names the file, the array, its dtype and what to store instead.
     """
-    warned: set[str | int] = set()
+    seen: set[str | int] = set()
     for item in fields:
         values = columns.get(item.spec.column)
-        if values is None or item.spec.column in warned:
+        if values is None or item.spec.column in seen:
             continue
-        if not (values.dtype.kind == 'f' and values.dtype.itemsize < 4):
+        seen.add(item.spec.column)
+        kind = values.dtype.kind
+        if kind in _NOT_NUMBERS:
+            raise DatasetError(
+                f'{source}: array {item.spec.column!r} ({item.describe()}) is '
+                f'{_NOT_NUMBERS[kind]} (dtype {values.dtype}), not real numbers; store it as '
+                'float64 (time too: seconds as float64, or nanoseconds as int64)'
+            )
+        if kind != 'f':
             continue
-        warned.add(item.spec.column)
         finite = np.abs(values[np.isfinite(values)].astype(np.float64))
         largest = float(finite.max()) if finite.size else 1.0
         step = float(np.spacing(values.dtype.type(largest)))
         unit = item.spec.unit
-        logger.warning(
-            '%s: array %r is %s: at its largest magnitude %.4g %s it resolves only %.3g %s; store '
-            'it as float32 or float64',
-            source, item.spec.column, values.dtype, largest, unit, step, unit,
-        )  # fmt: skip
+        if item.quantity == 'time':
+            steps = np.diff(values[np.isfinite(values)].astype(np.float64))
+            sampling = float(np.median(np.abs(steps))) if steps.size else math.inf
+            if step > _TIME_RESOLUTION * sampling:
+                raise DatasetError(
+                    f'{source}: array {item.spec.column!r} (time) is {values.dtype}: at its '
+                    f'largest value {largest:.6g} {unit} it resolves only {step:.3g} {unit}, '
+                    f'coarser than a tenth of its median step ({sampling:.3g} {unit}); store '
+                    'time as float64 (or int64 nanoseconds)'
+                )
+        elif values.dtype.itemsize < 4:
+            logger.warning(
+                '%s: array %r is %s: at its largest magnitude %.4g %s it resolves only %.3g %s; '
+                'store it as float32 or float64',
+                source, item.spec.column, values.dtype, largest, unit, step, unit,
+            )  # fmt: skip
 
 
 def si_values(raw: np.ndarray, fields: Sequence[Field]) -> dict[str, np.ndarray]:

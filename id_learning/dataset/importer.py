@@ -65,9 +65,9 @@ from id_learning.dataset.import_values import (
     Field,
     RowChecks,
     apply_row_policies,
+    check_array_types,
     joint_side,
     si_values,
-    warn_narrow_floats,
 )
 from id_learning.dataset.inspect_checks import iso_utc
 from id_learning.dataset.plausibility import check_efforts, check_motion
@@ -144,9 +144,20 @@ def _column(table: LogTable, item: Field, mapping: ImportMapping) -> np.ndarray:
     elif values.ndim != 1:
         raise ConfigError(
             f'{mapping.where}: {item.describe()} is an array of shape {values.shape} in '
-            f'{table.source}; give index to pick one of its columns'
+            f'{table.source}; {_shape_hint(values.shape)}'
         )
     return _as_float(values, table, item)
+
+
+def _shape_hint(shape: tuple[int, ...]) -> str:
+    """What a column of an array of this shape (not 1-D) needs."""
+    if len(shape) == 2 and shape[0] == 1 < shape[1]:
+        return 'one row of values: transposed? Store it as a 1-D array (N,)'
+    if len(shape) == 2:
+        return 'give index to pick one of its columns'
+    return (
+        'a column is a 1-D array (N,), or a 2-D one (N, k) with index picking one of its columns'
+    )
 
 
 def _as_float(values: np.ndarray, table: LogTable, item: Field) -> np.ndarray:
@@ -285,7 +296,7 @@ def _read_file(
     joints = tuple(mapping.joints[i] for i in order)
     table = read_table(source, mapping)
     fields = _fields(mapping, joints)
-    warn_narrow_floats(table.columns, fields, source)
+    check_array_types(table.columns, fields, source)
     raw = _raw_matrix(table, fields, mapping)
     keep, dropped = _finite_rows(raw, fields, table, mapping)
     values = si_values(raw, fields)
