@@ -165,7 +165,8 @@ class ImportMapping:
             'utf-8' reads a UTF-8 file with or without a byte order mark, and a UTF-16 one that
             starts with its byte order mark.
         skip_lines: lines before the header (or the first data row) to skip: a trace's preamble.
-        nan_policy: 'refuse' raises on an empty or non-finite cell, 'drop' drops its row.
+        nan_policy: 'refuse' raises on an empty, missing (``NA``, ``null``, ...) or non-finite
+            cell, 'drop' drops its row.
         implausible_policy: 'refuse' raises on a value no arm can have (far beyond the robot's
             limits, or a non-physical magnitude: see ``import_values``), 'drop' drops its row.
         beyond_limits_policy: 'refuse' raises on a value past the plausibility gate (just beyond

@@ -160,6 +160,13 @@ def _shape_hint(shape: tuple[int, ...]) -> str:
     )
 
 
+#: Cells that mark a missing value in logs written by R, pandas, Excel, SQL or by hand
+#: (compared in lower case): read as empty cells, so ``nan_policy`` decides.
+MISSING_MARKS = frozenset(
+    ('na', 'n/a', '#n/a', 'nan', 'null', 'none', 'nil', '-', '--', '?', 'missing')
+)
+
+
 def _as_float(values: np.ndarray, table: LogTable, item: Field) -> np.ndarray:
     try:
         return np.asarray(values, dtype=np.float64)
@@ -169,7 +176,7 @@ def _as_float(values: np.ndarray, table: LogTable, item: Field) -> np.ndarray:
     parsed = np.empty(len(values))
     for i, cell in enumerate(values.tolist()):
         text = str(cell).strip()
-        if not text:
+        if not text or text.lower() in MISSING_MARKS:
             parsed[i] = np.nan
         elif is_float(text):
             parsed[i] = float(text)
@@ -190,7 +197,8 @@ def _finite_rows(
     """Apply the NaN policy: (N,) mask of rows kept, and (position, reason) of rows dropped.
 
     Raises:
-        DatasetError: under 'refuse', the first empty or non-finite cell (names row and column).
+        DatasetError: under 'refuse', the first empty, missing or non-finite cell (names row and
+            column).
     """
     bad = ~np.isfinite(raw)
     bad_rows = np.flatnonzero(bad.any(axis=1))
@@ -199,7 +207,8 @@ def _finite_rows(
         row, col = (int(i) for i in np.argwhere(bad)[0])
         raise DatasetError(
             f'{table.source}: {table.row_label} {positions[row]}, {fields[col].describe()}: '
-            f'empty or non-finite value ({raw[row, col]}); {bad_rows.size} rows are affected. '
+            f'empty, missing (NA, null, -, ...) or non-finite value ({raw[row, col]}); '
+            f'{bad_rows.size} rows are affected. '
             'Fix the log or set nan_policy: drop'
         )
     dropped = [(int(positions[row]), _drop_reason(bad[row], fields)) for row in bad_rows]
@@ -208,7 +217,7 @@ def _finite_rows(
 
 def _drop_reason(bad_cells: np.ndarray, fields: Sequence[Field]) -> str:
     columns = ', '.join(fields[int(i)].describe() for i in np.flatnonzero(bad_cells))
-    return f'empty or non-finite {columns}'
+    return f'empty, missing or non-finite {columns}'
 
 
 # -- import ---------------------------------------------------------------------------------------

@@ -18,9 +18,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from id_learning.bag import read_joint_states
 from id_learning.dataset.import_readers import read_table
 from id_learning.dataset.import_sources import log_files, log_problem
-from id_learning.dataset.importer import ColumnSpec, ImportMapping, JointColumns
+from id_learning.dataset.importer import ColumnSpec, ImportMapping, JointColumns, import_log
 from id_learning.errors import ConfigError, DatasetError
 
 HEADER = ['t_ms', 'q1', 'note']
@@ -202,3 +203,18 @@ def test_a_utf16_log_in_a_folder_is_taken_as_a_log_not_skipped_as_binary(
     assert log_problem(tmp_path / 'log.csv') is None
     assert log_problem(tmp_path / 'notes.txt') == 'binary, no text'
     assert log_files([tmp_path]) == [tmp_path / 'log.csv']
+
+
+# -- missing-value marks -------------------------------------------------------------------------
+@pytest.mark.parametrize('mark', ['NA', 'n/a', '#N/A', 'null', 'None', '-', '?'])
+def test_a_missing_value_mark_is_a_missing_cell_for_the_nan_policy(
+    tmp_path: Path, mark: str
+) -> None:
+    lines = log_text(['ok'] * 6).splitlines()
+    lines[3] = lines[3].replace('0.002', mark)
+    source = write(tmp_path / 'log.csv', '\n'.join(lines) + '\n')
+    with pytest.raises(DatasetError, match=r'line 4, .*q1.*: empty, missing .* or non-finite'):
+        import_log(source, mapping(), tmp_path / 'refused')
+    report = import_log(source, mapping(nan_policy='drop'), tmp_path / 'bag')
+    assert [position for position, _ in report.dropped_rows] == [4]
+    assert read_joint_states(tmp_path / 'bag', '/joint_states').position.shape[0] == 5
