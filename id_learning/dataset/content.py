@@ -23,7 +23,10 @@ warns with these lines, ``inspect`` lists them as problems.
   is near +1 on a sound recording (friction, a payload, a balancer spring move it, hence the
   generous ``NOMINAL_SLOPE_FACTOR``); near -1 names a sign (the joint's current sign, or gravity
   acting otherwise than in the URDF: a robot mounted upside down), a factor 1e-3 or 1e3 a unit or
-  scale. Warned (``gravity_findings``).
+  scale. Warned (``gravity_findings``). So is, on any joint that moves (gravity or not), a
+  label whose 99th percentile magnitude stays below ``TINY_LABEL_SHARE`` of the joint's torque
+  limit: friction alone takes more to move a joint, so the currents' unit or the drive train
+  (a gear ratio written as joint turns per motor turn) is off.
 - A label that is one-signed and comes down to zero without crossing it while its joint moves
   both ways has lost its sign (a magnitude recorded): warned (``sign_findings``).
 
@@ -58,6 +61,7 @@ __all__ = [
     'SIGN_LOST_ZERO_SHARE',
     'STILL_NOISE_FACTOR',
     'STILL_SPAN_RAD',
+    'TINY_LABEL_SHARE',
     'Finding',
     'GravityTorque',
     'check_content',
@@ -71,6 +75,7 @@ __all__ = [
     'sampling_problem',
     'saturated_levels',
     'sign_findings',
+    'tiny_label_findings',
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -97,6 +102,9 @@ NOMINAL_MIN_CORRELATION = 0.5
 NOMINAL_SLOPE_FACTOR = 30.0
 #: At most this many samples, evenly strided, go through the nominal model.
 NOMINAL_MAX_SAMPLES = 5000
+#: A moving joint's label whose 99th percentile magnitude [N*m] is below this share of its torque
+#: limit is too small for any drive: friction alone takes more (percents of the limit).
+TINY_LABEL_SHARE = 1e-3
 #: A stamp within this share of the IPO period from the IPO grid is on it
 #: (``PreprocessConfig.jitter_tolerance``'s default: train refuses stamps further off).
 SAMPLING_TOLERANCE = 0.25
@@ -469,7 +477,39 @@ def gravity_findings(
     if quantity == 'motor current':
         label = label * torque_per_ampere(robot.drives)
     nominal = gravity(position)
-    return nominal_findings(label, nominal, robot.joints, robot.limits.torque, quantity=quantity)
+    findings = nominal_findings(
+        label, nominal, robot.joints, robot.limits.torque, quantity=quantity
+    )
+    scaled = {finding.joint for finding in findings if finding.kind == 'nominal_scale'}
+    tiny = tiny_label_findings(position, label, robot, quantity=quantity)
+    return findings + [finding for finding in tiny if finding.joint not in scaled]
+
+
+def tiny_label_findings(
+    position: np.ndarray, label_nm: np.ndarray, robot: RobotConfig, *, quantity: str
+) -> list[Finding]:
+    """Moving joints whose label (N, n) [N*m] stays below ``TINY_LABEL_SHARE`` of the limit."""
+    findings = []
+    still = {finding.joint for finding in motion_findings(position, robot.joints)}
+    for j, joint in enumerate(robot.joints):
+        if joint in still or not label_nm.shape[0]:
+            continue
+        size = float(np.percentile(np.abs(label_nm[:, j]), 99))
+        limit = float(robot.limits.torque[j])
+        if size < TINY_LABEL_SHARE * limit:
+            unit = (
+                "the currents' unit (mA recorded as A?) or the drive's gear_ratio (motor turns "
+                'per joint turn) and torque_constant'
+                if quantity == 'motor current'
+                else "the torques' unit (N*mm recorded as N*m?)"
+            )
+            text = (
+                f'{joint}: the {quantity} as joint torque reaches only {size:.3g} N*m (99th '
+                f'percentile) while the joint moves: {size / limit:.2g} of its torque limit '
+                f'{limit:g} N*m, less than friction alone takes; check {unit}'
+            )
+            findings.append(Finding(joint, 'nominal_scale', False, text))
+    return findings
 
 
 def grid_slots(
