@@ -127,6 +127,7 @@ def check_urdf(
     if key in _CHECKED:
         return list(_CHECKED[key])
     root = parse_urdf(urdf, text)
+    _check_unique_names(root, urdf)
     links = link_inertials(root, urdf)
     per_link = inertia_problems(links, urdf)
     urdf_joints = _urdf_joints(root)
@@ -141,6 +142,19 @@ def check_urdf(
         _LOG.warning('%s', line)
     _CHECKED[key] = tuple(lines)
     return lines
+
+
+def _check_unique_names(root: ElementTree.Element, urdf: Path | str) -> None:
+    """Refuse two links or two joints of one name: the tree, and which is meant, is ambiguous."""
+    for tag in ('link', 'joint'):
+        names = [element.get('name', '') for element in root.findall(tag)]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise RobotModelError(
+                f'{urdf}: {len(repeated)} {tag} name(s) given more than once: '
+                f'{", ".join(repeated)}; each {tag} needs a name of its own (a copied '
+                f'{tag} left unrenamed?)'
+            )
 
 
 def _check_axes(urdf_joints: list[_Joint], urdf: Path | str) -> None:

@@ -421,3 +421,23 @@ def test_mabi_joint_axes_are_unit_and_no_joint_mimics() -> None:
             assert length == pytest.approx(1.0)
     assert urdf_checks.MIN_AXIS_LENGTH < 1e-3
     assert tuple(load_robot_config(REPO / 'config/mabi_max100.yaml').joints) == MABI_JOINTS
+
+
+# -- names given twice (probe 15, A48: pinocchio said "does not contain a valid URDF model") -----
+@pytest.mark.parametrize(
+    ('old', 'new', 'said'),
+    [
+        (
+            'joint name="joint_3"',
+            'joint name="joint_2"',
+            'joint name(s) given more than once: joint_2',
+        ),
+        ('link name="link_2"', 'link name="link_1"', 'link name(s) given more than once: link_1'),
+    ],
+)
+def test_a_name_given_twice_is_refused_naming_it(old: str, new: str, said: str) -> None:
+    box = Link(5.0, np.diag([0.1, 0.1, 0.1]))
+    text = _arm([box] * 3, [Joint((0.0, 0.0, 0.3))] * 3)
+    assert old in text
+    with pytest.raises(RobotModelError, match=re.escape(said)):
+        _check(text.replace(old, new, 1))
