@@ -154,9 +154,9 @@ def short_twin_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 # -- sweep storage --------------------------------------------------------------------------------
 def test_a_sqlite_storage_in_a_missing_folder_is_refused_at_once(tmp_path: Path) -> None:
-    from id_learning.training.sweep import _check_sqlite_folder
+    from id_learning.training.sweep_storage import check_sqlite_file
 
     with pytest.raises(ConfigError, match=r'folder /no/such/dir does not exist'):
-        _check_sqlite_folder('sqlite:////no/such/dir/x.db')
-    _check_sqlite_folder(f'sqlite:///{tmp_path / "x.db"}')
-    _check_sqlite_folder('postgresql://host/db')
+        check_sqlite_file('sqlite:////no/such/dir/x.db')
+    check_sqlite_file(f'sqlite:///{tmp_path / "x.db"}')
+    check_sqlite_file('postgresql://host/db')

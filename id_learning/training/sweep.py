@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -38,6 +37,7 @@ from id_learning.models.torch_model import TorchModel
 from id_learning.outputs import check_kind, check_target
 from id_learning.robot.config import RobotConfig
 from id_learning.training.datasets import combine_datasets, load_datasets
+from id_learning.training.sweep_storage import check_sqlite_file
 
 if TYPE_CHECKING:
     import optuna
@@ -413,50 +413,6 @@ def _engine_options(storage: str, timeout_s: float) -> dict[str, Any]:
     return {}
 
 
-def _check_sqlite_folder(storage: str) -> None:
-    """Refuse a SQLite URL whose file or folder cannot be written, before any wait.
-
-    SQLite reports a missing or read-only folder, and a folder named as the file, as 'unable to
-    open database file', which the retries would wait out and then blame on a lock; a
-    read-only file reaches optuna as 'invalid data in the commit'. The cause is named at once.
-
-    Raises:
-        ConfigError: names the URL, the file or folder, and what it is.
-    """
-    from sqlalchemy.engine import make_url
-    from sqlalchemy.exc import ArgumentError
-
-    if not storage.startswith('sqlite'):
-        return
-    try:
-        database = make_url(storage).database
-    except ArgumentError as err:
-        raise ConfigError(f'sweep: the storage {storage!r} is no valid URL: {err}') from None
-    if not database or database == ':memory:' or database.startswith('file:'):
-        return
-    folder = Path(database).absolute().parent
-    if not folder.is_dir():
-        raise ConfigError(
-            f'sweep: the storage {storage!r}: folder {folder} does not exist; create it or '
-            'name another'
-        )
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise ConfigError(f'sweep: the storage {storage!r}: folder {folder} is not writable')
-    path = Path(database).absolute()
-    if path.is_dir():
-        raise ConfigError(
-            f'sweep: the storage {storage!r}: {path} is a folder, not a SQLite file; name a '
-            f'file (sqlite:///{path / "sweep.db"})'
-        )
-    if path.exists() and not path.is_file():
-        raise ConfigError(f'sweep: the storage {storage!r}: {path} is not a regular file')
-    if path.exists() and not os.access(path, os.R_OK | os.W_OK):  # also immutable, read-only fs
-        raise ConfigError(
-            f'sweep: the storage {storage!r}: {path} is read-only, and every trial is written '
-            'to it: make it writable, or copy it and name the copy'
-        )
-
-
 def _reason(err: Exception) -> str:
     """The driver's one-line reason behind a SQLAlchemy error (without its SQL and links)."""
     text = str(getattr(err, 'orig', None) or err)
@@ -477,7 +433,7 @@ def _open_study(
     import optuna
     from sqlalchemy.exc import SQLAlchemyError
 
-    _check_sqlite_folder(storage)
+    check_sqlite_file(storage)
     engine = _engine_options(storage, timeout_s)
     deadline = time.monotonic() + timeout_s
     last: Exception | None = None
