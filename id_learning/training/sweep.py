@@ -433,7 +433,7 @@ def _open_study(
     import optuna
     from sqlalchemy.exc import SQLAlchemyError
 
-    check_sqlite_file(storage)
+    check_sqlite_file(storage, timeout_s)
     engine = _engine_options(storage, timeout_s)
     deadline = time.monotonic() + timeout_s
     last: Exception | None = None

@@ -13,6 +13,7 @@ import sqlite3
 from pathlib import Path
 
 from id_learning.errors import ConfigError
+from id_learning.output_kinds import folder_holds
 
 __all__ = ['check_sqlite_file']
 
@@ -20,11 +21,9 @@ __all__ = ['check_sqlite_file']
 _SQLITE_MAGIC = b'SQLite format 3\x00'
 #: Tables every Optuna RDB storage has (a file without them is someone else's database).
 _OPTUNA_TABLES = frozenset(('studies', 'version_info'))
-#: How long reading the table names waits for a worker's write [s].
-_READ_TIMEOUT_S = 5.0
 
 
-def check_sqlite_file(storage: str) -> None:
+def check_sqlite_file(storage: str, timeout_s: float = 5.0) -> None:
     """Refuse a SQLite URL whose file or folder cannot be written or is another's, before any wait.
 
     SQLite reports a missing or read-only folder, and a folder named as the file, as 'unable to
@@ -33,6 +32,8 @@ def check_sqlite_file(storage: str) -> None:
 
     A database inside a bag or a train result would be taken for part of it (and deleted with
     it); an existing SQLite file that holds other tables than Optuna's is someone's database.
+
+    ``timeout_s`` bounds the wait to read an existing file's table names (a worker writing).
 
     Raises:
         ConfigError: names the URL, the file or folder, and what it is.
@@ -69,20 +70,26 @@ def check_sqlite_file(storage: str) -> None:
             f'sweep: the storage {storage!r}: {path} is read-only, and every trial is written '
             'to it: make it writable, or copy it and name the copy'
         )
-    _refuse_foreign(storage, folder, path)
+    _refuse_foreign(storage, folder, path, timeout_s)
 
 
-#: Files that make a folder a bag (rosbag2) or a train result, which a sweep must not write into.
-_OWNED_BY = {'metadata.yaml': 'a bag', 'run.json': 'a train result'}
+#: What a folder holding (or above) a sweep database may hold: a sweep's own files, nothing,
+#: or files that are no id_learning result and no bag.
+_SHARED_WITH = ('empty', 'foreign', 'sweep')
 
 
-def _refuse_foreign(storage: str, folder: Path, path: Path) -> None:
-    """Refuse a database in a bag or a run folder, or a SQLite file with tables not Optuna's."""
-    for marker, what in _OWNED_BY.items():
-        if (folder / marker).is_file():
+def _refuse_foreign(storage: str, folder: Path, path: Path, timeout_s: float) -> None:
+    """Refuse a database in (or below) a bag or a result, or a SQLite file not Optuna's."""
+    for parent in (folder, *folder.parents):
+        try:
+            held = folder_holds(parent)
+        except OSError:
+            continue  # a folder that cannot be listed says nothing
+        if held.kind not in _SHARED_WITH:
             raise ConfigError(
-                f'sweep: the storage {storage!r}: {folder} is {what} (it holds {marker}); a '
-                'sweep database there would be taken for part of it: name a file elsewhere'
+                f'sweep: the storage {storage!r}: {path} lies inside {parent}, which holds '
+                f'{held.describe()}; a sweep database there would be taken for part of it: '
+                'name a file elsewhere'
             )
     if not path.is_file() or path.stat().st_size == 0:
         return
@@ -94,7 +101,7 @@ def _refuse_foreign(storage: str, folder: Path, path: Path) -> None:
             )
     try:
         uri = f'{path.as_uri()}?mode=ro'
-        with contextlib.closing(sqlite3.connect(uri, uri=True, timeout=_READ_TIMEOUT_S)) as db:
+        with contextlib.closing(sqlite3.connect(uri, uri=True, timeout=timeout_s)) as db:
             rows = db.execute("SELECT name FROM sqlite_master WHERE type='table'").fetchall()
     except sqlite3.Error:
         return  # busy (another worker writes) or damaged: opening it names what is wrong

@@ -24,17 +24,34 @@ def _sweep(tmp_path: Path, mabi, storage: str) -> None:
 
 
 @pytest.mark.parametrize(
-    ('marker', 'what'), [('metadata.yaml', 'a bag'), ('run.json', 'a train result')]
+    ('files', 'what', 'below'),
+    [
+        (['metadata.yaml', 'x_0.mcap'], 'a bag', ''),
+        (['run.json', 'report.md'], 'a train run', ''),
+        (['run.json', 'report.md'], 'a train run', 'models'),  # a bag has no folders
+    ],
 )
 def test_a_database_inside_a_bag_or_a_run_is_refused(
-    tmp_path: Path, mabi, marker: str, what: str
+    tmp_path: Path, mabi, files: list[str], what: str, below: str
 ) -> None:
-    folder = tmp_path / 'owned'
-    folder.mkdir()
-    (folder / marker).write_text('{}\n')
-    with pytest.raises(ConfigError, match=rf'{folder} is {what} \(it holds {marker}\)'):
-        _sweep(tmp_path, mabi, f'sqlite:///{folder / "sweep.db"}')
-    assert sorted(p.name for p in folder.iterdir()) == [marker]
+    owned = tmp_path / 'owned'
+    (owned / below).mkdir(parents=True, exist_ok=True)
+    for name in files:
+        (owned / name).write_text('{}\n')
+    before = sorted(p.relative_to(owned) for p in owned.rglob('*'))
+    storage = owned / below / 'sweep.db'
+    with pytest.raises(ConfigError, match=rf'lies inside {owned}, which holds {what} '):
+        _sweep(tmp_path, mabi, f'sqlite:///{storage}')
+    assert sorted(p.relative_to(owned) for p in owned.rglob('*')) == before
+
+
+def test_a_second_worker_joins_the_first_ones_default_storage(tmp_path: Path, mabi) -> None:
+    first = tmp_path / 'first'
+    first.mkdir()
+    optuna.create_study(study_name='shared', storage=f'sqlite:///{first / "sweep.db"}')
+    (first / 'best.yaml').write_text('{}\n')
+    with pytest.raises(IdLearningError, match='no_such_bag'):  # after the storage opened
+        _sweep(tmp_path, mabi, f'sqlite:///{first / "sweep.db"}')
 
 
 def test_another_programs_sqlite_database_is_refused_and_left_as_it_was(
