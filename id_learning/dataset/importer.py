@@ -274,6 +274,14 @@ def _grid(
     policy = mapping.resample
     if mapping.time is None:
         assert mapping.period_s is not None  # ImportMapping guarantees one time base
+        if robot is not None and not math.isclose(mapping.period_s, robot.ipo_period_s):
+            raise ConfigError(
+                f'{mapping.where}: period_s {mapping.period_s:g} s is not the IPO period '
+                f'{robot.ipo_period_s:g} s of robot {robot.name}: a bag for this robot must be on '
+                'its grid, and a log without a time column cannot be resampled; log a time '
+                'column (resample: {method: interpolate}) or correct period_s or the robot '
+                "config's ipo_period_s"
+            )
         return slot_segments(np.flatnonzero(keep), kept, positions, mapping.period_s, policy)
     label = table.row_label
     times = relative_times(raw[keep, 0], positions, mapping, table.source, label)
