@@ -19,6 +19,8 @@ __all__ = ['check_sqlite_file']
 
 #: The first 16 bytes of every SQLite 3 database file.
 _SQLITE_MAGIC = b'SQLite format 3\x00'
+#: The database kinds a sweep runs on (SQLAlchemy dialects, any driver).
+_SCHEMES = ('sqlite', 'postgresql')
 #: Tables every Optuna RDB storage has (a file without them is someone else's database).
 _OPTUNA_TABLES = frozenset(('studies', 'version_info'))
 
@@ -41,6 +43,13 @@ def check_sqlite_file(storage: str, timeout_s: float = 5.0) -> None:
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import ArgumentError
 
+    scheme = storage.split('://', 1)[0] if '://' in storage else ''
+    if scheme.split('+', 1)[0] not in _SCHEMES:
+        raise ConfigError(
+            f'sweep: the storage {storage!r}: {scheme or "no scheme"!r} is no storage this '
+            'tool supports: give sqlite:///PATH/sweep.db (one machine) or '
+            'postgresql+psycopg://USER@HOST/DB (several machines)'
+        )
     if not storage.startswith('sqlite'):
         return
     try:

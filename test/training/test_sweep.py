@@ -144,11 +144,12 @@ def test_bad_sweeps_are_refused_with_the_reason(bag, tmp_path, mabi):
         run_sweep([bag], mabi, 'motor', 'magic', tmp_path, trials=1, progress=False)
     with pytest.raises(ConfigError, match='--trials must be >= 1'):
         run_sweep([bag], mabi, 'motor', 'mlp', tmp_path, trials=0, progress=False)
-    with pytest.raises(ConfigError, match='cannot open the storage'):
-        run_sweep(
-            [bag], mabi, 'motor', 'rnea_lq', tmp_path, trials=1, progress=False,
-            storage='nosuchdb://nowhere',
-        )  # fmt: skip
+    for storage in ('nosuchdb://nowhere', 'redis://localhost', 'mysql://u@localhost/db', 'x.db'):
+        with pytest.raises(ConfigError, match=r'is no storage this tool supports: give sqlite:///'):
+            run_sweep(
+                [bag], mabi, 'motor', 'rnea_lq', tmp_path, trials=1, progress=False,
+                storage=storage,
+            )  # fmt: skip
     bad = tmp_path / 'bad.yaml'
     bad.write_text('mlp: 3\n')
     code = cli([
