@@ -27,9 +27,9 @@ from typing import Any, Literal, Self
 import numpy as np
 
 from id_learning.config_io import finite_number
-from id_learning.dataset.content import SAMPLING_TOLERANCE, grid_slots
 from id_learning.dataset.inputs import InputDefinition, Motion
 from id_learning.dataset.recording import Recording
+from id_learning.dataset.sampling_grid import SAMPLING_TOLERANCE, grid_slots, sampling_problem
 from id_learning.dataset.signals import differentiate, lowpass
 from id_learning.errors import ConfigError, DatasetError
 from id_learning.robot.config import RobotConfig
@@ -205,14 +205,12 @@ def regularise(
 
     Raises:
         DatasetError: the log is sampled at another period than ``period_s`` (the robot
-            config's; ``content.sampling_problem`` names both), a stamp is further from the grid
-            than the tolerance, or two share a slot.
+            config's; ``sampling_grid.sampling_problem`` names both), a stamp is further from
+            the grid than the tolerance, or two share a slot.
     """
     period_ns = period_s * 1e9
     slots, jitter = grid_slots(recording.stamps_ns, period_ns, recording.stamps_ns[0])
     if (jitter > jitter_tolerance * period_ns).any():
-        from id_learning.dataset.content import sampling_problem  # content imports this module
-
         steps = np.diff(recording.stamps_ns)
         own = float(np.median(steps[steps > 0])) if (steps > 0).any() else period_ns
         line = sampling_problem(recording.stamps_ns, period_s, str(recording.source))

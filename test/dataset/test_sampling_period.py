@@ -15,10 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from support import sine_recording
 
-from id_learning.dataset.content import SAMPLING_TOLERANCE, sampling_problem
 from id_learning.dataset.inspect import inspect_bag
 from id_learning.dataset.preprocess import PreprocessConfig, regularise
 from id_learning.dataset.recording import write_recording
+from id_learning.dataset.sampling_grid import SAMPLING_TOLERANCE, sampling_problem
 from id_learning.errors import DatasetError
 
 PERIOD_S = 0.008
