@@ -31,7 +31,9 @@ from id_learning.bag.metadata_file import (
     bag_path_problem,
     load_metadata,
     metadata_text,
+    missing_key,
     refuse_special_files,
+    storage_mismatch,
 )
 from id_learning.bag.reader_paths import BagReader, folder_is_no_bag, storage_files
 from id_learning.bag.reader_storage import check_encodings, check_storage_types, order_by_time
@@ -168,12 +170,12 @@ def _check_metadata(path: Path) -> None:
     it (``../other/other_0.mcap``) names data the bag does not hold.
 
     Raises:
-        BagError: names metadata.yaml and why, a storage file and what it is, or the bag, the
-            entry and why.
+        BagError: names metadata.yaml and why (a key rosbags needs missing, a storage the files
+            are not), a storage file and what it is, or the bag, the entry and why.
     """
     refuse_special_files(path)  # metadata.yaml first: named as what it is, before a read
     text = metadata_text(path)
-    _check_metadata_shape(path / METADATA_FILE, text)
+    info = _check_metadata_shape(path / METADATA_FILE, text)
     listed = _listed_files(path)  # [] when unreadable: rosbags names what is wrong
     for entry in listed:
         why = 'an absolute path' if PurePath(entry).is_absolute() else 'outside the bag folder'
@@ -184,12 +186,16 @@ def _check_metadata(path: Path) -> None:
                 f'({PurePath(entry).name!r})'
             )
     refuse_special_files(path, listed)  # those in subfolders too
+    if info is not None and (
+        wrong := missing_key(path, info, text) or storage_mismatch(path, info)
+    ):
+        raise BagError(wrong)
 
 
-def _check_metadata_shape(file: Path, text: str) -> None:
+def _check_metadata_shape(file: Path, text: str) -> dict[str, Any] | None:
     """Refuse a metadata.yaml that is empty or not a mapping holding rosbag2_bagfile_information.
 
-    Text that is not YAML is left to rosbags, which names the line.
+    Text that is not YAML is left to rosbags, which names the line (None is returned).
 
     Raises:
         BagError: names the file, what it holds instead, and the recover hint.
@@ -197,15 +203,15 @@ def _check_metadata_shape(file: Path, text: str) -> None:
     try:
         meta = yaml.safe_load(text)
     except yaml.YAMLError:
-        return
+        return None
     if meta is None:
         what = 'is empty' if not text.strip() else 'holds no YAML value (only comments)'
     elif not isinstance(meta, dict):
         what = f'holds a {type(meta).__name__}, not a mapping'
-    elif not isinstance(meta.get('rosbag2_bagfile_information'), dict):
+    elif not isinstance(info := meta.get('rosbag2_bagfile_information'), dict):
         what = 'has no rosbag2_bagfile_information mapping'
     else:
-        return
+        return info
     raise BagError(f'{file} {what}; {RECOVER_HINT}')
 
 
