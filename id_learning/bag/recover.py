@@ -1,10 +1,12 @@
 """Rebuild a bag whose writer was killed: ``metadata.yaml`` missing, ``.mcap`` files truncated.
 
-Each ``.mcap`` file is scanned record by record with ``mcap.stream_reader.StreamReader``; the scan
-stops at the first record that is incomplete (the torn tail) or does not decode (a chunk whose
-compressed data or CRC is damaged). Everything before it -- schemas, channels and every message of
-the complete chunks -- is written again with ``BagWriter``, message bytes and log times unchanged,
-so the recovered messages are a prefix of what was recorded. A chunk torn by the cut is not lost
+Each ``.mcap`` file is scanned record by record with ``mcap.stream_reader.StreamReader``. A chunk
+whose compressed data or CRC is damaged but whose record framing holds is skipped (named in the
+report with its offset, reason and the log times lost) and the scan goes on after it; the scan
+stops at the first record that is incomplete (the torn tail) or whose framing is broken.
+Everything read -- schemas, channels and every message of the complete chunks -- is written again
+with ``BagWriter``, message bytes and log times unchanged, so the recovered messages are what was
+recorded less the torn tail and the chunks skipped. A chunk torn by the cut is not lost
 whole: its compressed bytes are decompressed as a stream as far as they go (zstd, lz4 or none),
 and every record complete within them is kept (the chunk's CRC cannot be checked; each record's
 length is). The stop reason names the chunk (its offset and compression).
@@ -87,7 +89,7 @@ class RecoverReport:
 
     @property
     def bytes_discarded(self) -> int:
-        """Bytes lost at the files' torn tails."""
+        """Bytes lost at the files' torn tails and in the damaged chunks skipped."""
         return sum(scan.bytes_discarded for scan in self.files)
 
     def summary(self) -> str:
@@ -95,17 +97,25 @@ class RecoverReport:
         if self.is_intact:
             head = f'{self.path}: bag is complete with valid metadata; nothing to recover'
         else:
+            chunks = [chunk for scan in self.files for chunk in scan.skipped]
+            in_chunks = sum(chunk.length_bytes for chunk in chunks)
+            where = (
+                f' ({self.bytes_discarded - in_chunks} at the tail, {in_chunks} in '
+                f'{len(chunks)} damaged chunk(s) skipped)'
+                if chunks
+                else ' at the tail'
+            )
             head = (
                 f'{self.path}: recovered {self.messages} messages into {self.output}, '
-                f'{self.bytes_discarded} bytes discarded at the tail'
+                f'{self.bytes_discarded} bytes discarded{where}'
             )
         lines = [head]
         for scan in self.files:
-            state = 'complete' if scan.is_complete else f'torn ({scan.stop_reason})'
             lines.append(
                 f'  file {scan.name}: {scan.size_bytes} bytes, {scan.messages} messages, '
-                f'{scan.bytes_discarded} bytes discarded, {state}'
+                f'{scan.bytes_discarded} bytes discarded, {scan.state()}'
             )
+            lines += [f'    {chunk.describe()}' for chunk in scan.skipped]
         lines += [f'  topic {t.name} [{t.msgtype}]: {t.count} messages' for t in self.topics]
         lines += [f'  kept damaged original {path}' for path in self.damaged_kept]
         lines += [
@@ -288,8 +298,9 @@ def recover_bag(
 ) -> RecoverReport:
     """Turn a torn rosbag2 MCAP folder into a valid bag, keeping every complete message.
 
-    The recovered messages are a prefix of each file's messages (file order), with their bytes and
-    log times unchanged (publish times are set to the log times, sequence numbers renumbered).
+    The recovered messages are a prefix of each file's messages (file order) less those of the
+    damaged chunks skipped (``FileScan.skipped``), with their bytes and log times unchanged
+    (publish times are set to the log times, sequence numbers renumbered).
     Split bags are merged into one ``.mcap`` file. If the bag is complete and its metadata agrees
     with its files, nothing is written, whatever ``out`` says.
 
@@ -344,6 +355,9 @@ def recover_bag(
         if had_metadata and _is_intact(path, scans, topics):
             _LOG.info('%s: bag is complete with valid metadata; nothing to recover', path)
             return RecoverReport(path, path, True, had_metadata, tuple(scans), topics.infos())
+        for scan in scans:
+            for chunk in scan.skipped:
+                _LOG.warning('%s: %s', path / scan.name, chunk.describe())
         _check_types(path, topics)
         _refuse_empty(path, target, scans)
         if had_metadata:
@@ -386,7 +400,12 @@ def _refuse_empty(path: Path, target: Path | None, scans: list[FileScan]) -> Non
         return
     where = f'nothing written to {target}' if target is not None else 'nothing replaced'
     files = '; '.join(
-        f'{scan.name} ({scan.size_bytes} bytes): {scan.stop_reason or "no message"}'
+        f'{scan.name} ({scan.size_bytes} bytes): '
+        + (
+            ', '.join([scan.state(), *(chunk.describe() for chunk in scan.skipped)])
+            if scan.skipped
+            else scan.stop_reason or 'no message'
+        )
         for scan in scans
     )
     raise BagError(
