@@ -518,6 +518,11 @@ def inspect_bag(
             reports.append(TopicReport(name, msgtypes[name], count, timing))
 
     reports = with_nominal_lines(reports, series, topics, robot, gravity)
+    # The messages' own span, not metadata.yaml's (which may be edited or copied): a
+    # disagreement is named among the problems (``metadata_mismatches``).
+    firsts = [min(times) for times in every.values() if times]
+    start_ns = min(firsts) if firsts else info.start_ns
+    end_ns = max((max(times) for times in every.values() if times), default=start_ns)
     order = (f'metadata: {info.order_note.removeprefix(f"{path}: ")}',) if info.order_note else ()
     report = BagReport(
         metadata_mismatches=order
@@ -527,9 +532,9 @@ def inspect_bag(
         path=path,
         storage=info.storage,
         files=info.files,
-        start_ns=info.start_ns,
-        start_iso=iso_utc(info.start_ns),
-        duration_s=info.duration_ns * 1e-9,
+        start_ns=start_ns,
+        start_iso=iso_utc(start_ns),
+        duration_s=(end_ns - start_ns if firsts else info.duration_ns) * 1e-9,
         message_count=sum(len(times) for times in every.values()),
         robot_name=robot.name if robot else None,
         topics=tuple(reports),

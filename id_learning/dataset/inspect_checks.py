@@ -37,6 +37,8 @@ __all__ = [
 ]
 
 NS_PER_S = 1_000_000_000
+#: How far metadata.yaml's starting_time may lie from the first message's log time [ns].
+START_TOLERANCE_NS = NS_PER_S
 
 
 def joint_accelerations(
@@ -155,7 +157,8 @@ def metadata_mismatches(
 
     A metadata.yaml written by hand or copied from another recording: its message_count, a
     topic's message_count or its duration disagree with what was read (a negative duration
-    never fits). ``log_times`` holds the messages read by (topic, type).
+    never fits), or its starting_time lies more than ``START_TOLERANCE_NS`` from the first
+    message's log time. ``log_times`` holds the messages read by (topic, type).
     """
     counts: dict[tuple[str, str], int] = {}
     for topic in topics:
@@ -185,7 +188,23 @@ def metadata_mismatches(
         lines.append(
             f'metadata: duration {stated} ns, the messages span {span} ns (last minus first)'
         )
+    starting = meta.get('starting_time', {}) if isinstance(meta, dict) else {}
+    start = starting.get('nanoseconds_since_epoch') if isinstance(starting, dict) else None
+    if stamps and isinstance(start, int) and abs(start - min(stamps)) > START_TOLERANCE_NS:
+        lines.append(
+            f'metadata: starting_time {start} ns ({_iso_or_ns(start)}), the first message is '
+            f'logged at {min(stamps)} ns ({iso_utc(min(stamps))}); start and duration above '
+            "are the messages'"
+        )
     return tuple(lines)
+
+
+def _iso_or_ns(stamp_ns: int) -> str:
+    """``iso_utc``, or 'no date' where the stamp lies beyond the calendar's range."""
+    try:
+        return iso_utc(stamp_ns)
+    except (OverflowError, OSError, ValueError):
+        return 'no date'
 
 
 def log_time_problems(every: Mapping[tuple[str, str], list[int]]) -> tuple[str, ...]:

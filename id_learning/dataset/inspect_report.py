@@ -253,8 +253,8 @@ class BagReport:
             for ``plot_report``.
         robot_joints: the joints of the robot checked against (empty without one): the
             contract topics must name exactly these, or limits cannot be checked.
-        metadata_mismatches: where metadata.yaml's message counts or duration contradict the
-            messages the files hold, one line each.
+        metadata_mismatches: where metadata.yaml's message counts, starting time or duration
+            contradict the messages the files hold, one line each.
         several_types: topics holding messages of several types: (topic, ((type, messages
             read), ...)); the topic's report covers one of them (JointState where it is one).
     """
