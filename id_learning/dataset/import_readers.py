@@ -186,10 +186,18 @@ def _check_npz_headers(source: Path, archive: zipfile.ZipFile, budget: int | Non
     ``budget`` [bytes] (None: not known).
 
     Raises:
-        DatasetError: a member is no NPY array, or its header is unreadable, claims an object
-            array or more data than stored, or the arrays exceed ``budget``; names the file, the
-            array and, when read, its claimed shape and dtype.
+        DatasetError: a member name is given twice, a member is no NPY array, or its header
+            is unreadable, claims an object array or more data than stored, or the arrays
+            exceed ``budget``; names the file, the array and, when read, its claimed shape and
+            dtype.
     """
+    names = [info.filename for info in archive.infolist()]
+    twice = sorted({name.removesuffix('.npy') for name in names if names.count(name) > 1})
+    if twice:
+        raise DatasetError(
+            f'{source}: the archive holds array(s) {twice} more than once (zip members of one '
+            'name): which one holds the values is ambiguous; export the log again'
+        )
     total = 0
     for info in archive.infolist():
         if info.is_dir():

@@ -7,7 +7,10 @@ as "repeated times"; a 0-d or 3-D array was told to "give index".
 
 from __future__ import annotations
 
+import io
 import logging
+import warnings
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -102,3 +105,15 @@ def test_an_array_of_another_shape_gets_the_hint_that_fits_it(
         import_log(source, mapping(), tmp_path / 'bag')
     assert f'{shape} in ' in str(error.value)
     assert str(error.value).endswith(hint) or f'; {hint}' in str(error.value)
+
+
+def test_an_archive_holding_one_array_twice_is_refused(tmp_path: Path) -> None:
+    # Probe 15 (A89): the second 'i.npy' member (1.5 x the first) was imported without a word.
+    source = save(tmp_path / 'log.npz')
+    with zipfile.ZipFile(source, 'a') as archive, warnings.catch_warnings():
+        warnings.simplefilter('ignore', UserWarning)  # zipfile's "Duplicate name"
+        buffer = io.BytesIO()
+        np.save(buffer, 1.5 * arrays()['i'])
+        archive.writestr('i.npy', buffer.getvalue())
+    with pytest.raises(DatasetError, match=r"holds array\(s\) \['i'\] more than once"):
+        import_log(source, mapping(), tmp_path / 'bag')
