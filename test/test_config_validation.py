@@ -165,6 +165,16 @@ def test_a_hyper_parameter_file_with_a_key_twice_or_a_nan_is_refused(tmp_path: P
         options.hyper_file(str(nan))
 
 
+def test_a_hyper_parameter_file_of_another_kind_names_its_flat_keys(tmp_path: Path):
+    # Probe 15 (A93): a robot config given as --hyper-file was "expected a mapping".
+    robot = tmp_path / 'robot.yaml'
+    robot.write_text('name: arm\nipo_period_s: 0.008\njoints: [a, b]\nlimits: {torque: [1, 2]}\n')
+    with pytest.raises(
+        ConfigError, match=r'but name, ipo_period_s, joints hold\(s\) no mapping; is this another'
+    ):
+        options.hyper_file(str(robot))
+
+
 # -- topic names (test/ros/test_topic_names.py holds them equal to rclpy's) ----------------------
 @pytest.mark.parametrize(
     'name', ['joint_states', '/joint_states', '~/tau_u', '{node}/out', '/a/b_2', '~', '~x']

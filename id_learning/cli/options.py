@@ -358,8 +358,13 @@ def hyper_file(path: str | None) -> dict[str, dict[str, Any]]:
     if not path:
         return {}
     data = load_yaml_mapping(Path(path))
-    if not all(isinstance(v, dict) for v in data.values()):
-        raise ConfigError(f'--hyper-file {path}: expected a mapping kind -> {{key: value}}')
+    flat = [str(key) for key, value in data.items() if not isinstance(value, dict)]
+    if flat:
+        raise ConfigError(
+            f'--hyper-file {path}: expected a mapping of model kind -> {{key: value}} (as a '
+            f"sweep's best.yaml), but {', '.join(flat[:3])}{', ...' if len(flat) > 3 else ''} "
+            'hold(s) no mapping; is this another kind of file (a robot or twin config)?'
+        )
     _finite_values(data, f'--hyper-file {path}')
     return {str(kind): dict(values) for kind, values in data.items()}
 
