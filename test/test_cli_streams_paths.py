@@ -40,6 +40,16 @@ def test_guarded_notes_the_first_failure() -> None:
     assert failure('output', Guarded(io.StringIO())) is None
 
 
+def test_a_stream_in_ascii_gets_escapes_not_a_write_failure() -> None:
+    # Probe 15 (A97): PYTHONIOENCODING=ascii and a robot named with a non-ASCII letter made
+    # inspect print nothing and say "cannot write the standard output: Bad file descriptor".
+    buffer = io.BytesIO()
+    ascii_out = Guarded(io.TextIOWrapper(buffer, encoding='ascii', write_through=True))
+    ascii_out.write('robot Roboter-Kühn: 6 joints\n')
+    assert failure('output', ascii_out) is None
+    assert buffer.getvalue() == b'robot Roboter-K\\xfchn: 6 joints\n'
+
+
 def test_version_on_a_full_stdout_is_one_line_and_1(monkeypatch: pytest.MonkeyPatch) -> None:
     err = io.StringIO()
     monkeypatch.setattr('sys.stdout', _Full())

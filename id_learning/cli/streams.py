@@ -43,9 +43,24 @@ class Guarded:
             return self.stream.write(text)
         except BrokenPipeError:
             raise
+        except UnicodeEncodeError:  # a stream in ASCII (PYTHONIOENCODING, a C locale)
+            return self._write_escaped(text)
         except (OSError, ValueError) as err:  # ValueError: the file object was closed
             self._failed(err if isinstance(err, OSError) else OSError(errno.EBADF, str(err)))
             return len(text)
+
+    def _write_escaped(self, text: str) -> int:
+        """Write what the stream's encoding cannot hold as Python escapes (backslashreplace)."""
+        assert self.stream is not None  # write() checked it
+        encoding = getattr(self.stream, 'encoding', None) or 'ascii'
+        escaped = text.encode(encoding, 'backslashreplace').decode(encoding)
+        try:
+            self.stream.write(escaped)
+        except BrokenPipeError:
+            raise
+        except (OSError, ValueError) as err:
+            self._failed(err if isinstance(err, OSError) else OSError(errno.EBADF, str(err)))
+        return len(text)
 
     def flush(self) -> None:
         """Flush; a failure is noted."""
