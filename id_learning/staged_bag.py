@@ -134,7 +134,7 @@ def _remove_leftover(root: Path, out: Path) -> None:
 
 @contextlib.contextmanager
 def _signals_deferred() -> Iterator[None]:
-    """SIGINT and SIGTERM wait (blocked, not lost) until the block has run.
+    """SIGINT, SIGTERM and SIGHUP wait (blocked, not lost) until the block has run.
 
     A replacement is two renames (the old bag aside, the new one in); a signal between them
     would leave neither at ``out``. Only the main thread receives them (Python's handlers).
@@ -142,7 +142,7 @@ def _signals_deferred() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    held = {signal.SIGINT, signal.SIGTERM}
+    held = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
         yield

@@ -28,7 +28,7 @@ from id_learning.cli.sweep import add_sweep_command
 from id_learning.cli.train import add_train_commands
 from id_learning.errors import IdLearningError
 
-__all__ = ['Terminated', 'build_parser', 'main', 'stdout_closed', 'train_main']
+__all__ = ['HungUp', 'Terminated', 'build_parser', 'main', 'stdout_closed', 'train_main']
 
 _LOG = logging.getLogger('id_learning.cli')
 
@@ -38,6 +38,16 @@ _RESULT_COMMANDS = frozenset({'train', 'evaluate', 'closed-loop', 'diagnose', 'd
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where Ctrl-C raises KeyboardInterrupt: every writer cleans up alike."""
+
+    number = signal.SIGTERM
+    word = 'terminated'
+
+
+class HungUp(Terminated):
+    """SIGHUP (its terminal or ssh session closed): stops the command as SIGTERM does."""
+
+    number = signal.SIGHUP
+    word = 'hung up (SIGHUP)'
 
 
 class _Stopping(logging.Filter):
@@ -53,7 +63,10 @@ class _Stopping(logging.Filter):
 
 @contextlib.contextmanager
 def _signals_raise() -> Iterator[None]:
-    """SIGINT raises KeyboardInterrupt, SIGTERM ``Terminated``, while the command runs.
+    """SIGINT raises KeyboardInterrupt, SIGTERM ``Terminated``, SIGHUP ``HungUp``, while it runs.
+
+    SIGHUP's default would end the process at once, leaving a half-written bag or lock behind
+    (a closed terminal or ssh session): it stops the command as SIGTERM does.
 
     Only the first: a signal repeated while its cleanup runs (Ctrl-C pressed again) is ignored,
     so that the cleanup finishes, and the tool still ends with its one line and status. A
@@ -66,8 +79,12 @@ def _signals_raise() -> Iterator[None]:
         yield
         return
     stopping = _Stopping()
-    raised = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated}
-    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    raised = {signal.SIGINT: KeyboardInterrupt, signal.SIGTERM: Terminated, signal.SIGHUP: HungUp}
+    defaults = {
+        signal.SIGINT: signal.default_int_handler,
+        signal.SIGTERM: signal.SIG_DFL,
+        signal.SIGHUP: signal.SIG_DFL,
+    }
 
     def handle(number: int, frame: FrameType | None) -> None:
         if stopping.stopped:
@@ -180,8 +197,8 @@ def stdout_closed() -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; package errors print one clear line and exit with status 2.
 
-    Ctrl-C (SIGINT) and SIGTERM print one line saying what is left where and exit with
-    130 and 143 (128 + the signal's number): the writers clean up as for any failure. A closed
+    Ctrl-C (SIGINT), SIGTERM and SIGHUP print one line saying what is left where and exit with
+    130, 143 and 129 (128 + the signal's number): the writers clean up as for any failure. A closed
     standard output (``id-learning inspect BAG | head -1``, also under ``--help``) ends the
     command quietly with 141 (``stdout_closed``); the writers clean up alike. A standard output
     or error that cannot be written otherwise (closed when the tool started, a full disk) does
@@ -256,8 +273,11 @@ def _run(argv: Sequence[str] | None) -> int:
         )
         return 2
     except KeyboardInterrupt as err:
-        number = signal.SIGTERM if isinstance(err, Terminated) else signal.SIGINT
-        stopped = 'terminated' if number == signal.SIGTERM else 'interrupted'
+        number, stopped = (
+            (err.number, err.word)
+            if isinstance(err, Terminated)
+            else (signal.SIGINT, 'interrupted')
+        )
         print(f'id-learning {args.command}: {stopped}; {_left(args, before)}', file=sys.stderr)
         return 128 + number
 

@@ -2,12 +2,14 @@
 
 On Jazzy ``rclpy.init()`` is no context manager: init, spin inside try, catch
 ``KeyboardInterrupt`` and ``ExternalShutdownException``, and ``rclpy.try_shutdown()`` in finally.
-SIGINT and SIGTERM end the spin through our own handler (see _StopOnSignal). A node's ``close()``
-runs before the node is destroyed, so that the recorder finishes its bag and every node logs its
-final report, and the process exits 0. A signal before that, while Python imports the node
-(``id_learning.entry``) or ROS starts, ends it with one line and 130 (143 for SIGTERM). A
-signal while the node is made and waits on a pipe (``robot_config:=<(...)``) ends that wait at
-once (``config_io.pipe_waits_stop_when``): the node is refused, naming the file, and exits 2.
+SIGINT, SIGTERM and SIGHUP (a closed terminal or ssh session) end the spin through our own
+handler (see _StopOnSignal); a SIGHUP ignored when the node started (``nohup``) stays ignored.
+A node's ``close()`` runs before the node is destroyed, so that the recorder finishes its bag
+and every node logs its final report, and the process exits 0. A signal before that, while
+Python imports the node (``id_learning.entry``) or ROS starts, ends it with one line and 130
+(143 for SIGTERM). A signal while the node is made and waits on a pipe
+(``robot_config:=<(...)``) ends that wait at once (``config_io.pipe_waits_stop_when``): the node
+is refused, naming the file, and exits 2.
 A ``--params-file`` that is no regular file is refused before ROS reads it
 (``param_ros.params_file_kind``).
 """
@@ -129,19 +131,22 @@ def make_executor(name: str) -> rclpy.executors.Executor:
 
 
 class _StopOnSignal:
-    """SIGINT/SIGTERM end the spin while the context is still valid, so close() can log.
+    """SIGINT/SIGTERM/SIGHUP end the spin while the context is still valid, so close() can log.
 
     rclpy's own handlers would shut the context down first; the node's final report would then
     fail to reach /rosout. Further signals are ignored while the node closes (a recorder must
-    finish its bag); SIGKILL remains the way to end a node that hangs.
+    finish its bag); SIGKILL remains the way to end a node that hangs. SIGHUP, whose default
+    would end the process at once (a torn bag, an adaptation's state lost), stops the node like
+    SIGTERM, unless it was ignored when the node started (``nohup``: meant to outlive the
+    terminal).
     """
 
     def __init__(self) -> None:
         self.event = threading.Event()
-        self._previous = {
-            number: signal.signal(number, self._handle)
-            for number in (signal.SIGINT, signal.SIGTERM)
-        }
+        numbers = [signal.SIGINT, signal.SIGTERM]
+        if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+            numbers.append(signal.SIGHUP)
+        self._previous = {number: signal.signal(number, self._handle) for number in numbers}
 
     def _handle(self, number: int, frame: object) -> None:
         self.event.set()
