@@ -11,12 +11,16 @@
   same look counts the publishers of the right type: several on a topic whose samples must
   follow one another (the predictor's reference) interleave two motions, which the node then
   names once per episode (``newly_shared``, ``shared_text``).
+- ``OtherPublishers``: another node publishing on a topic the node publishes on (a second
+  predictor on tau_u, a second replay on /reference): a consumer there takes both streams. Said
+  once per episode, naming the other node, on /diagnostics while it lasts, and when it is gone.
 """
 
 from __future__ import annotations
 
 import contextlib
 import re
+import threading
 import time
 from collections import Counter
 from collections.abc import Iterator, Mapping
@@ -37,8 +41,10 @@ if TYPE_CHECKING:
     from id_learning.robot.config import RobotConfig
 
 __all__ = [
+    'EVERY_NODES_TOPICS',
     'Foreign',
     'ForeignPublishers',
+    'OtherPublishers',
     'endpoint',
     'refuse_clashing_topics',
     'refuse_contract_topics',
@@ -51,6 +57,13 @@ UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
 NAME_WAIT_S = 3.0
 #: rcl's source locations at the end of its error text.
 _WHERE = re.compile(r',\s*at\s+\S+:\d+')
+#: The topics every node publishes itself (rclpy's own), with their types: the graph may not
+#: list a node's own publishers yet when its next endpoint is refused.
+EVERY_NODES_TOPICS = {
+    '/parameter_events': 'rcl_interfaces/msg/ParameterEvent',
+    '/rosout': 'rcl_interfaces/msg/Log',
+    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',  # each node of this package's
+}
 
 
 def refuse_clashing_topics(
@@ -106,7 +119,7 @@ def endpoint(node: Node, parameter: str, topic: str) -> Iterator[None]:
         reason = _WHERE.sub('', str(err).splitlines()[0] if str(err) else type(err).__name__)
         # rcl may overwrite its first reason ('invalid allocator'): name what the node has there.
         resolved = node.resolve_topic_name(topic)
-        mine = sorted(
+        mine = {
             f'a {kind} of {info.topic_type}'
             for kind, infos in (
                 ('publisher', node.get_publishers_info_by_topic(resolved)),
@@ -114,8 +127,15 @@ def endpoint(node: Node, parameter: str, topic: str) -> Iterator[None]:
             )
             for info in infos
             if info.node_name == node.get_name() and info.node_namespace == node.get_namespace()
+        }
+        if resolved in EVERY_NODES_TOPICS:
+            mine.add(f'a publisher of {EVERY_NODES_TOPICS[resolved]}')
+        held = (
+            f' (the node itself already has {", ".join(sorted(mine))} on {resolved}: choose '
+            'another topic)'
+            if mine
+            else ''
         )
-        held = f' (the node already has {", ".join(mine)} on {resolved})' if mine else ''
         raise ConfigError(
             f'node {node.get_name()}: {parameter} {topic!r}: ROS 2 refused the topic: '
             f'{reason}{held}'
@@ -233,3 +253,79 @@ def shared_text(topic: str, nodes: list[str], consequence: str) -> str:
         for node, n in sorted(counts.items())
     )
     return f'{len(nodes)} publishers on {topic} ({named}): {consequence}'
+
+
+class OtherPublishers:
+    """Publishers of other nodes on the topics a node publishes on (its outputs).
+
+    A consumer of such a topic takes every publisher's messages: two predictors on one tau_u
+    give it two torques per cycle, from two models; two replays on one reference interleave two
+    motions. The node's own publisher is left out (once per topic: a second node of its very
+    name counts, ``NameClash`` names that). ``look`` may be called from several threads.
+
+    Args:
+        node: the node whose graph is looked at.
+        topics: each output's resolved topic, by the parameter that names it.
+        consequence: what the other publishers do there, ending the warning.
+    """
+
+    def __init__(self, node: Node, topics: Mapping[str, str], consequence: str) -> None:
+        self._node = node
+        self.topics = dict(topics)
+        self._consequence = consequence
+        self._lock = threading.Lock()
+        #: Per topic, the other publishers' nodes at the last look (sorted, one per publisher).
+        self.others: dict[str, list[str]] = {}
+        #: Per topic with others: since when (time.monotonic() [s]), or None once said.
+        self._since: dict[str, float | None] = {}
+
+    def look(self) -> list[tuple[bool, str]]:
+        """Look at the graph; the lines to log: (is a warning, text), each episode said once.
+
+        A warning when other publishers are found (after up to ``NAME_WAIT_S`` for discovery
+        to name their nodes), a line when they are gone again.
+        """
+        me = f'{self._node.get_namespace().rstrip("/")}/{self._node.get_name()}'
+        lines: list[tuple[bool, str]] = []
+        with self._lock:
+            now = time.monotonic()
+            for parameter, topic in self.topics.items():
+                nodes = sorted(
+                    f'{info.node_namespace.rstrip("/")}/{info.node_name}'
+                    for info in self._node.get_publishers_info_by_topic(topic)
+                )
+                if me in nodes:
+                    nodes.remove(me)
+                self.others[topic] = nodes
+                if not nodes:
+                    if self._since.pop(topic, 0.0) is None:
+                        lines.append((False, f'{topic} ({parameter}): no other publisher now'))
+                    continue
+                since = self._since.setdefault(topic, now)
+                unnamed = any(UNKNOWN_NODE in node for node in nodes)
+                if since is None or (unnamed and now - since < NAME_WAIT_S):
+                    continue
+                self._since[topic] = None
+                lines.append((True, self._text(parameter, topic, nodes)))
+        return lines
+
+    def _text(self, parameter: str, topic: str, nodes: list[str]) -> str:
+        counts = Counter(nodes)
+        named = ', '.join(
+            ('a node not discovered yet' if UNKNOWN_NODE in node else f'node {node}')
+            + ('' if n == 1 else f' ({n} publishers)')
+            for node, n in sorted(counts.items())
+        )
+        return (
+            f"another publisher on {topic}, the topic of this node's {parameter}: {named}; "
+            f'{self._consequence}'
+        )
+
+    def text(self) -> str:
+        """What is there now, in words, for /diagnostics ('' if nothing)."""
+        with self._lock:
+            return '; '.join(
+                self._text(parameter, topic, self.others[topic])
+                for parameter, topic in self.topics.items()
+                if self.others.get(topic)
+            )

@@ -24,6 +24,7 @@ from __future__ import annotations
 import array
 import dataclasses
 import difflib
+import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -325,12 +326,27 @@ def _as_double(given: Any) -> Any:
     return Parameter(given.name, Parameter.Type.DOUBLE, float(given.value))
 
 
+def _as_integer(given: Any) -> Any:
+    """A whole, finite double rclpy Parameter as the integer of the same value; any other as is.
+
+    ``ros2 param set /predictor resync_after 3.0`` (or a tuning UI that sends every number as a
+    double) means 3; rclpy would refuse it without naming the parameter.
+    """
+    from rclpy.parameter import Parameter
+
+    value = given.value
+    if given.type_ != Parameter.Type.DOUBLE or not math.isfinite(value) or value != int(value):
+        return given
+    return Parameter(given.name, Parameter.Type.INTEGER, int(value))
+
+
 def _before_set(node: Node, cls: type, changes: list[Any]) -> list[Any]:
     """Refuse an undeclared parameter at runtime, naming it; an int for a float becomes a double.
 
     rclpy's own refusal names none (its list of undeclared names comes out empty). An integer
     for a float parameter (``ros2 param set`` sends 1 as one) becomes the double of the same
-    value, so that the parameter keeps its type DOUBLE.
+    value, so that the parameter keeps its type DOUBLE; a whole double for an integer parameter
+    becomes that integer (``_as_integer``).
 
     Raises:
         ParameterNotDeclaredException: names each undeclared parameter and the closest one.
@@ -345,9 +361,12 @@ def _before_set(node: Node, cls: type, changes: list[Any]) -> list[Any]:
             f'{", ".join(sorted(known))})'
         )
     types = field_types(cls)
-    return [
-        _as_double(change) if types.get(change.name) is float else change for change in changes
-    ]
+    convert: dict[object, Callable[[Any], Any]] = {float: _as_double, int: _as_integer}
+    return [convert.get(types.get(change.name), _as_is)(change) for change in changes]
+
+
+def _as_is(given: Any) -> Any:
+    return given
 
 
 def _hinted(unknown: list[str], known: list[str]) -> str:

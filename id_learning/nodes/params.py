@@ -309,14 +309,16 @@ class ReplayConfig:
     def topic_checks(self) -> TopicChecks:
         """Groups of (topic by parameter, the node's own topics) no two of which may meet.
 
-        A bag's /diagnostics may be played beside the replay's own reports (one type); a bag's
+        A bag's /diagnostics may be played beside the replay's own reports (one type), the
+        reference never (a trajectory or joint state there would clash with them); a bag's
         /clock may not while the replay publishes its own.
         """
         named = {f'topics[{k}]': topic for k, topic in enumerate(self.topics)}
-        if self.reference_mode != 'none':
-            named['reference_topic'] = self.reference_topic
         own = {'/clock': 'clock (publish_clock)'} if self.publish_clock else {}
-        return [(named, own)]
+        if self.reference_mode == 'none':
+            return [(named, own)]
+        named['reference_topic'] = self.reference_topic
+        return [(named, own), ({'reference_topic': self.reference_topic}, DIAGNOSTICS)]
 
 
 @dataclass(frozen=True)

@@ -79,6 +79,7 @@ from trajectory_msgs.msg import JointTrajectory
 from id_learning.errors import ConfigError
 from id_learning.nodes.endpoints import (
     ForeignPublishers,
+    OtherPublishers,
     endpoint,
     refuse_clashing_topics,
     refuse_contract_topics,
@@ -109,6 +110,7 @@ from id_learning.nodes.predictor_core import adaptation_loop, build_core
 from id_learning.nodes.predictor_report import (
     INPUT_TYPES,
     SHARED_INPUT,
+    SHARED_OUTPUT,
     TROUBLES,
     NodeCounts,
     ahead_text,
@@ -181,6 +183,8 @@ class Predictor(ShellNode):
         self.stamp_rate = StampRate()  # the stamps' rate against the receive clock
         self._is_closed = False
         refuse_contract_topics(self, config, robot)
+        # Its own topic first: a topic parameter that clashes with it is refused by ``endpoint``.
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         output_qos = output_qos or torque_qos(config.output_depth)
         with endpoint(self, 'output_topic', config.output_topic):
             self._tau_u = self.create_publisher(JointState, config.output_topic, output_qos)
@@ -190,7 +194,6 @@ class Predictor(ShellNode):
                 self._command = CommandOutput(
                     self, config.command_topic, output_qos, core, config.zero_command_on_stale
                 )
-        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         n = len(self.names)
         self._tau_u_bytes = SerializedOutput(
             lambda stamp_ns, tau: joint_state_message(stamp_ns, self.names, effort=tau),
@@ -236,6 +239,10 @@ class Predictor(ShellNode):
         if self._measured is not None:
             expected[self._measured.topic_name] = JOINT_STATE
         self.foreign = ForeignPublishers(self, expected)
+        outputs = {'output_topic': self._tau_u.topic_name}
+        if self._command is not None:
+            outputs['command_topic'] = self._command.publisher.topic_name
+        self.other_publishers = OtherPublishers(self, outputs, SHARED_OUTPUT)
         source = self.core.range.source if self.core.range else 'none'
         self.get_logger().info(
             f'{self.core.model.kind} model from {Path(config.artifact).resolve()}: '
@@ -468,6 +475,7 @@ class Predictor(ShellNode):
             'compute_max_ms': compute.max * 1e3,
         }
         values['input_publishers'] = len(self.foreign.matching.get(self._input_topic, []))
+        values['other_output_publishers'] = sum(map(len, self.other_publishers.others.values()))
         if self.foreign.present:
             values['wrong_type_publishers'] = '; '.join(
                 f'{item.node} {item.msg_type} on {item.topic}' for item in self.foreign.present
@@ -482,7 +490,9 @@ class Predictor(ShellNode):
         return values
 
     def _check_publishers(self) -> str:
-        """Name new publishers of another type once, several on the input once per episode.
+        """Name publishers of another type, several on the input, other nodes on an output.
+
+        Each publisher of another type once; the others once per episode.
 
         Returns:
             What is there now, in words ('' if nothing).
@@ -498,7 +508,9 @@ class Predictor(ShellNode):
             texts.append(shared_text(topic, shared, SHARED_INPUT))
             if is_new:
                 self.get_logger().warning(texts[-1])
-        return '; '.join(texts)
+        self._say(self.other_publishers.look())  # another node on tau_u or the command
+        texts.append(self.other_publishers.text())
+        return '; '.join(filter(None, texts))
 
     def _publish_diagnostics(self) -> None:
         foreign = self._check_publishers()  # first: the values show this look

@@ -19,6 +19,7 @@ from id_learning.predictor.timing import StatsSummary
 __all__ = [
     'INPUT_TYPES',
     'SHARED_INPUT',
+    'SHARED_OUTPUT',
     'TROUBLES',
     'NodeCounts',
     'ahead_text',
@@ -54,6 +55,12 @@ INPUT_TYPES = {
 SHARED_INPUT = (
     'the predictor takes one reference, so their samples interleave, and those that do not '
     'follow from the one before are rejected (inconsistent): leave one publisher on it'
+)
+
+#: What another node's publisher on the predictor's output does (``endpoints.OtherPublishers``).
+SHARED_OUTPUT = (
+    'a consumer there takes the torques of both, two per cycle, from two models: give each '
+    'predictor its own output (another output_topic or namespace) or stop the other'
 )
 
 

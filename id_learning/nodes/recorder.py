@@ -172,6 +172,8 @@ class Recorder(ShellNode):
         self.foreign = ForeignPublishers(
             self, {self._resolved[topic]: msg_type for topic, msg_type in typed}
         )
+        # Its own topic first: a topic that clashes with it is refused by ``endpoint``.
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         # Subscribed before the bag is opened (nothing is taken before the node spins): a
         # topic that cannot be subscribed leaves no bag behind.
         for k, (topic, msg_type) in enumerate(typed):
@@ -215,7 +217,6 @@ class Recorder(ShellNode):
         self.path = self.writer.path  # normalised: "a/../b" is b
         for topic, msg_type in typed:
             self.writer.add_topic(topic, msg_type)
-        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         steady = Clock(clock_type=ClockType.STEADY_TIME)  # runs whatever /clock does
         self._flush_timer = self.create_timer(config.flush_period_s, self._flush, clock=steady)
         self._diagnostics_timer = self.create_timer(

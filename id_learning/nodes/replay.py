@@ -31,10 +31,10 @@ reference source, refuses the bag, naming it. A reference source sampled off the
 period is refused; with ``timing: log_time``, log times that do not advance refuse it.
 
 Jitter: each cycle's lateness (publish time minus its deadline) is recorded; the median, 99th
-percentile and maximum [ms] and the cycles later than one IPO period are logged at the end and
-published on /diagnostics. With ``loop`` the bag starts again one period after its last cycle
-(/clock then jumps back). A play longer than an hour of wall time (its duration / rate) is said
-as it starts.
+percentile and maximum [ms] and the cycles later than one played period (the IPO period / rate)
+are logged at the end and published on /diagnostics. With ``loop`` the bag starts again one
+period after its last cycle (/clock then jumps back). A play longer than an hour of wall time
+(its duration / rate) is said as it starts.
 
 From before the bag is read until it closes, the replay holds the bag shared
 (``outputs.read_lock``, ``<bag>.lock`` beside it): a writer that would replace it meanwhile (a
@@ -63,7 +63,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from id_learning.nodes.endpoints import endpoint, refuse_clashing_topics
+from id_learning.nodes.endpoints import OtherPublishers, endpoint, refuse_clashing_topics
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     clock_message,
@@ -96,6 +96,11 @@ START_LEAD_NS = 20_000_000
 LONG_PLAY_S = 3600.0
 #: The longest single wait on a deadline [s] (threading's waits refuse more than ~292 years).
 MAX_WAIT_S = 3600.0
+#: What another node's publisher on a topic the replay plays does (``OtherPublishers``).
+SHARED_TOPIC = (
+    'a subscriber there takes both streams, interleaved (a second replay, the robot or a '
+    'simulator): stop the other, or play into another namespace (-r __ns:=/NAME)'
+)
 _NO_VALUES = np.empty(0)
 
 
@@ -124,6 +129,12 @@ class Replay(ShellNode):
             self._bag_lock.close()
             raise
         self.done: Future = Future()
+        # The node's own topics first: a topic parameter that clashes with one of them is then
+        # refused by ``endpoint``, naming the parameter, never a traceback (the probe's B74).
+        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self._clock_publisher = (
+            self.create_publisher(Clock, '/clock', CLOCK_QOS) if config.publish_clock else None
+        )
         qos = sensor_qos(config.qos_depth)
         self._topic_publishers: list[Publisher] = []
         for k, (topic, msg_type) in enumerate(
@@ -140,11 +151,14 @@ class Replay(ShellNode):
                 self._reference = self.create_publisher(
                     kind, config.reference_topic, reference_qos(config.qos_depth)
                 )
-        self._clock_publisher = (
-            self.create_publisher(Clock, '/clock', CLOCK_QOS) if config.publish_clock else None
-        )
+        played = {
+            f'topics[{k}]': publisher.topic_name
+            for k, publisher in enumerate(self._topic_publishers)
+        }
+        if self._reference is not None:
+            played['reference_topic'] = self._reference.topic_name
+        self.other_publishers = OtherPublishers(self, played, SHARED_TOPIC)
         self._clock_bytes = SerializedOutput(lambda stamp_ns, _: clock_message(stamp_ns), Clock, 0)
-        self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.lateness_ns = RollingStats(1 << 16)
         self.cycles_published = 0
         self.messages_published = 0
@@ -244,7 +258,7 @@ class Replay(ShellNode):
                 self.lateness_ns.add(lateness)
                 self.cycles_published += 1
                 self.messages_published += len(cycle.messages)
-                if lateness > period_ns:
+                if lateness * rate > period_ns:  # later than one played period
                     self.late_cycles += 1
         return deadline + round(period_ns / rate)
 
@@ -275,14 +289,21 @@ class Replay(ShellNode):
         return (
             f'published {self.cycles_published} cycles ({self.messages_published} messages) at '
             f'rate {self.config.rate:g}; lateness against the '
-            f'{self.plan.period_ns * 1e-6:g} ms grid: median {jitter["lateness_median_ms"]:.3f} '
+            f'{self.plan.period_ns * 1e-6 / self.config.rate:g} ms grid: median '
+            f'{jitter["lateness_median_ms"]:.3f} '
             f'ms, p99 {jitter["lateness_p99_ms"]:.3f} ms, max {jitter["lateness_max_ms"]:.3f} '
             f'ms; {self.late_cycles} cycles later than one period'
         )
 
     def _publish_diagnostics(self) -> None:
+        for is_warning, line in self.other_publishers.look():  # each episode said once
+            if is_warning:
+                self.get_logger().warning(line)
+            else:
+                self.get_logger().info(line)
+        others = self.other_publishers.text()
         jitter = self.jitter_ms()
-        level = 'warn' if self.late_cycles else 'ok'
+        level = 'warn' if self.late_cycles or others else 'ok'
         state = 'playing' if self._is_playing else 'waiting for subscribers'
         if self._thread is not None and not self._thread.is_alive():
             state = 'finished'
@@ -304,7 +325,8 @@ class Replay(ShellNode):
                     name=f'id_learning{self.get_fully_qualified_name()}',
                     hardware_id=self.config.bag,
                     level=level,
-                    message=f'{state}: {self.cycles_published}/{len(self.plan.cycles)} cycles',
+                    message=f'{state}: {self.cycles_published}/{len(self.plan.cycles)} cycles'
+                    + (f'; {others}' if others else ''),
                     values=values,
                 )
             )
