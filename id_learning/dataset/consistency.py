@@ -520,6 +520,18 @@ class ConsistencyStream:
         self._history.clear()
         self._scale.forget_pending()
 
+    def regate(self, gate: KinematicConsistency) -> bool:
+        """Judge by ``gate`` from the next sample on (runtime settings); whether state was kept.
+
+        A gate of the same joints and IPO period (another scale, or the same) keeps the window and
+        the scale horizon; one of another period counts in other samples: no history (False).
+        """
+        if (gate.joints, gate.period_s) != (self.gate.joints, self.gate.period_s):
+            self.__init__(gate)  # type: ignore[misc]  # a new stream, as after a hole
+            return False
+        self.gate = self._scale.gate = gate  # the scale's verdict stands to its next window
+        return True
+
     def check(
         self, stamp_ns: int, q: np.ndarray, v: np.ndarray, a: np.ndarray | None
     ) -> Inconsistency | None:

@@ -20,7 +20,10 @@ tau_u the same bound per period of its stamps). It
 - ramps back from wherever the ramp has brought it when the reference resumes, towards tau_u at
   the same rate, until it has caught up (tau_u itself continues from its last published value).
 
-The first command is the first tau_u: there is no command before it to move from.
+The first command is the first tau_u: there is no command before it to move from. Every command
+lies within the torque limits in force (``torque_limit_scale`` times the limits, the clamp
+last): a limit lowered at runtime below the last command brings the next one to it at once, the
+one step that may exceed the bound above.
 """
 
 from __future__ import annotations
@@ -67,8 +70,10 @@ class CommandStream:
             bound, change = self.step, target - last
             within = np.abs(change) <= bound  # those get the target exactly
             out = np.where(within, target, last + np.clip(change, -bound, bound))
-        self.last = out
-        return out
+        limit = self._core.output.limit  # the clamp last: a lowered limit holds at once
+        clamped: np.ndarray = np.clip(out, -limit, limit)
+        self.last = clamped
+        return clamped
 
     def follow(self, tau: np.ndarray) -> np.ndarray:
         """The command for a published tau_u: moved towards it by at most ``step``."""

@@ -7,7 +7,8 @@ Guards, in the order they run (the first that fails decides):
    and one IPO period ahead against the stream's time base; ``resync_after`` such rejections in a
    row start a new time base (one warning; the only place published stamps may step back);
 3. plausible: a state an arm of these limits can be in (``dataset.plausibility.SampleGate``);
-4. consistent: the sample follows from the ones before it, and the last 2 s of velocities
+4. consistent: the sample follows from the ones before it, its given accelerations integrate to
+   the velocities' change (``predictor.acceleration_gate``), and the last 2 s of velocities
    integrate to the positions' change (``dataset.consistency``); one that does not yields no
    model torque, nor do the ``rearm_samples`` consistent ones after it (or after a new time
    base): they get the hold output instead;
@@ -43,12 +44,13 @@ from typing import Literal
 import numpy as np
 import torch
 
-from id_learning.dataset.consistency import ConsistencyStream, KinematicConsistency
+from id_learning.dataset.consistency import KinematicConsistency
 from id_learning.dataset.inputs import InputDefinition
 from id_learning.dataset.plausibility import SampleGate
 from id_learning.errors import ConfigError
 from id_learning.models.base import InverseDynamicsModel, as_sequence_model
 from id_learning.predictor.acceleration import CausalAccelerationEstimator
+from id_learning.predictor.acceleration_gate import StreamGate
 from id_learning.predictor.adaptation import AdaptationLoop
 from id_learning.predictor.config import GuardConfig
 from id_learning.predictor.fallback import (
@@ -142,10 +144,11 @@ class FeedForwardPredictor:
         self.counters = PredictorCounters(n)
         self._gate = None if limits is None else SampleGate(self.joint_names, limits)
         self._limits = limits
-        self._consistency = self._consistency_stream(self.config)
+        gate = self._consistency_gate(self.config)
+        self._consistency = None if gate is None else StreamGate(gate)
         self._check = SampleCheck(self.joint_names)
         self._clock = StampClock(config.max_age_s, config.resync_after, config.period_s)
-        self.output = self._output_stage(self.config)
+        self.output = OutputStage(*self._output_settings(self.config))
         #: Consistent samples since the last inconsistent one, up to rearm_samples (armed at
         #: start and after a hole: there is nothing to doubt the stream yet).
         self._armed = self.config.rearm_samples
@@ -177,17 +180,15 @@ class FeedForwardPredictor:
         self.inputs: InputDefinition | None = None
         self.fitting_inputs: InputDefinition | None = None
 
-    def _consistency_stream(self, config: GuardConfig) -> ConsistencyStream | None:
+    def _consistency_gate(self, config: GuardConfig) -> KinematicConsistency | None:
         if self._limits is None:
             return None
         scale = config.consistency_scale
-        return ConsistencyStream(
-            KinematicConsistency(self.joint_names, self._limits, config.period_s, scale)
-        )
+        return KinematicConsistency(self.joint_names, self._limits, config.period_s, scale)
 
-    def _output_stage(self, config: GuardConfig) -> OutputStage:
+    def _output_settings(self, config: GuardConfig) -> tuple[np.ndarray, np.ndarray, float, float]:
         slew = self._robot_limit / config.torque_rise_s
-        return OutputStage(self.torque_limit, slew, config.period_s, config.stale_after_ns * 1e-9)
+        return self.torque_limit, slew, config.period_s, config.stale_after_ns * 1e-9
 
     def _action(self, config: GuardConfig) -> str:
         """The out-of-range action ``config`` asks for, 'auto' resolved."""
@@ -280,8 +281,8 @@ class FeedForwardPredictor:
     def update_config(self, config: GuardConfig) -> None:
         """Apply new guard settings to the running stream (limits, margins, age, cut-off).
 
-        The history is kept (the consistency gate's starts again); a new acceleration cut-off
-        applies from the next sample.
+        The history is kept, the consistency gate's too (``regate``); the output continues from
+        the last torque, a lower limit holding at once; a new cut-off applies from the next sample.
         """
         self.out_of_range_action = self._action(config)
         self.config = config
@@ -293,11 +294,10 @@ class FeedForwardPredictor:
         )
         self._estimator.cutoff_hz = config.acceleration_cutoff_hz
         self._clock.configure(config.max_age_s, config.resync_after, config.period_s)
-        last = self.output.last
-        self.output = self._output_stage(config)
-        self.output.last = last
-        if self._consistency is not None:
-            self._consistency = self._consistency_stream(config)
+        self.output.configure(*self._output_settings(config))
+        gate = self._consistency_gate(config)
+        if self._consistency is not None and gate is not None:
+            self._consistency.regate(gate)
 
     @property
     def recovery_samples(self) -> int:
