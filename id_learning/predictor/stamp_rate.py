@@ -20,6 +20,11 @@ window deviate beyond the tolerance, the same way: one step of the offset (a clo
 restarted, a delivery that stays later, one stamp far ahead) lies in one half only, a rate in
 both. It clears when ``ratio`` is within half the tolerance again. O(1) per sample; the estimate is
 made once per block, the first once the window and a block have passed (2.25 s).
+
+A stamp before the newest one seen (a replay looping or restarted, a sender's clock set back: what
+the time base answers with a resync) starts the estimate afresh, ``ratio`` None and ``is_off``
+cleared until a new window has passed: a step back is the stamps' origin moving, no rate, and a
+loop of a span shorter than the window would otherwise read as stamps that hardly advance.
 """
 
 from __future__ import annotations
@@ -58,9 +63,15 @@ class StampRate:
         self.ratio: float | None = None
         #: The rates differ by more than the tolerance (in both halves of the window).
         self.is_off = False
+        #: The newest stamp seen [ns]: one before it starts the estimate afresh.
+        self._newest_ns: int | None = None
 
     def add(self, stamp_ns: int, receive_ns: int) -> bool:
         """Take one sample; True when ``is_off`` changed with it (say so)."""
+        newest = self._newest_ns
+        if newest is not None and stamp_ns < newest:
+            return self.restart(stamp_ns, receive_ns)
+        self._newest_ns = stamp_ns
         start = self._start_ns
         if start is not None and receive_ns - start < self.block_ns:
             quickest = self._quickest
@@ -72,6 +83,15 @@ class StampRate:
         self._start_ns = receive_ns
         self._quickest = (receive_ns, stamp_ns)
         return self._estimate()
+
+    def restart(self, stamp_ns: int, receive_ns: int) -> bool:
+        """Start afresh at this sample (the stamps stepped back); True when ``is_off`` cleared."""
+        was_off = self.is_off
+        self.points.clear()
+        self.ratio, self.is_off = None, False
+        self._newest_ns, self._start_ns = stamp_ns, receive_ns
+        self._quickest = (receive_ns, stamp_ns)
+        return was_off
 
     def _estimate(self) -> bool:
         points = self.points
@@ -97,6 +117,11 @@ class StampRate:
         """What to say of the rate now: (is a warning, text)."""
         ratio = self.ratio if self.ratio is not None else float('nan')
         over = f'over the last {self.window_s:g} s'
+        if self.ratio is None:
+            return False, (
+                "the reference's stamps stepped back (a replay looped or restarted, a sender's "
+                'clock set back): their rate against the receive clock is measured afresh'
+            )
         if not self.is_off:
             return False, (
                 f"the reference's stamps advance with the receive clock again ({ratio:.3f} "
