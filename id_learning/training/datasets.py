@@ -286,6 +286,26 @@ def _nominal_findings(
 
 #: ``Dataset.extra`` key of what loading the recordings warned of (``dataset.content``).
 DATA_WARNINGS = 'data_warnings'
+#: A test part shorter than this [s] judges the models on too little motion for its RMSE to
+#: stand for the robot's: said in the run's warnings (another stretch may differ severalfold).
+MIN_TEST_S = 30.0
+
+
+def _with_short_test_note(dataset: Dataset) -> Dataset:
+    """The dataset; a test part shorter than ``MIN_TEST_S`` is warned of (logged, and kept)."""
+    test_s = len(dataset.test_rows) * dataset.period_s
+    if test_s >= MIN_TEST_S:
+        return dataset
+    note = (
+        f'the test part holds {test_s:.1f} s of motion, less than {MIN_TEST_S:g} s: its RMSE '
+        'judges the models on too little motion to stand for the robot (another stretch may '
+        f'differ severalfold); record longer (at {1 - dataset.n_train / len(dataset.q):.0%} for '
+        f'the test part, {MIN_TEST_S * len(dataset.q) / max(len(dataset.test_rows), 1):.0f} s '
+        'or more)'
+    )
+    _LOG.warning('%s: %s', dataset.source, note)
+    dataset.extra[DATA_WARNINGS] = [*dataset.extra.get(DATA_WARNINGS, ()), note]
+    return dataset
 
 
 def data_warnings(datasets: Sequence[Dataset]) -> list[str]:
@@ -319,7 +339,8 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
                 f'{other.source}: period, cut-offs or inputs differ from {first.source}'
             )
     if any(d.is_shuffled for d in datasets):
-        return _joined_whole(datasets, [_mask(d) for d in datasets], first.regularise_report)
+        joined = _joined_whole(datasets, [_mask(d) for d in datasets], first.regularise_report)
+        return _with_short_test_note(joined)
     train_rows = [slice(0, d.n_train) for d in datasets]
     test_rows = [slice(d.n_train, len(d.q)) for d in datasets]
     segments: list[dict[str, Any]] = []
@@ -337,12 +358,14 @@ def combine_datasets(datasets: Sequence[Dataset]) -> Dataset:
 
     pieces = [(d, rows) for d, rows in zip(datasets, train_rows, strict=True)]
     pieces += [(d, rows) for d, rows in zip(datasets, test_rows, strict=True)]
-    return _joined(
-        datasets,
-        pieces,
-        n_train=n_train,
-        segments=segments,
-        regularise_report=first.regularise_report if len(datasets) == 1 else None,
+    return _with_short_test_note(
+        _joined(
+            datasets,
+            pieces,
+            n_train=n_train,
+            segments=segments,
+            regularise_report=first.regularise_report if len(datasets) == 1 else None,
+        )
     )
 
 
