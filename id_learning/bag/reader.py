@@ -54,6 +54,8 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
+#: ``staged_bag.STAGING_SUFFIX`` (that module imports this package: not imported here).
+_STAGING_SUFFIX = '.writing'
 #: Bags whose unlisted storage files were already warned about (one warning per bag).
 _WARNED_UNLISTED: set[tuple[Path, tuple[str, ...]]] = set()
 #: Notes on misordered storage files already warned about (one warning per bag).
@@ -106,7 +108,14 @@ def _open(path: Path) -> tuple[Reader, str | None]:
     if (why := bag_path_problem(path)) is not None:
         raise BagError(why)  # a device, a FIFO: said so, never read, no recover hint
     if not path.exists():
-        raise BagError(f'{path}: no such bag')
+        # ``staged_bag`` writes a bag beside its place, in ``.<name>.writing``, until complete.
+        staging = path.parent / f'.{path.name}{_STAGING_SUFFIX}'
+        raise BagError(
+            f'{path}: no such bag; it is being written in {staging} (by a command still running, '
+            'or left by one that was killed: its next writer removes it)'
+            if staging.is_dir()
+            else f'{path}: no such bag'
+        )
     if path.is_file():
         within = (
             f'; it is a file of the bag {path.parent}: give that folder'

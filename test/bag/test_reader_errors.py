@@ -244,3 +244,18 @@ def test_a_file_of_a_bag_given_for_the_bag_names_its_folder(bag: Path, tmp_path:
     lone.write_bytes(next(bag.glob('*.mcap')).read_bytes())
     with pytest.raises(BagError, match=r'got a file$'):  # no folder to name
         bag_info(lone)
+
+
+def test_a_bag_still_being_written_is_named_where_it_is_written(tmp_path: Path) -> None:
+    # Probe 15 (A95): inspect on a bag a running simulate writes said only 'no such bag'.
+    from id_learning.staged_bag import STAGING_SUFFIX, staging_folder
+
+    out = tmp_path / 'busy'
+    staging_folder(out).mkdir()
+    assert staging_folder(out).name == f'.busy{STAGING_SUFFIX}'
+    with pytest.raises(
+        BagError, match=r'busy: no such bag; it is being written in .*\.busy\.writing'
+    ):
+        bag_info(out)
+    with pytest.raises(BagError, match=r'other: no such bag$'):
+        bag_info(tmp_path / 'other')
