@@ -15,6 +15,7 @@ storage plugins rosbags opened, one per file listed in metadata.yaml.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -110,6 +111,17 @@ def check_encodings(path: Path, reader: Any, topics: Sequence[str]) -> None:
             )
 
 
+#: How far a storage file's first message may lie before the previous file's last [ns] (a
+#: writer's reordering across a split; at most half the previous file's span): more is an
+#: overlap of two recordings or copies.
+OVERLAP_TOLERANCE_NS = 1_000_000_000
+
+
+def _span(start: int, end: object) -> str:
+    """A file's log-time span, for messages: '<start> to <end> ns since epoch'."""
+    return f'{start} to {end} ns since epoch'
+
+
 def order_by_time(path: Path, reader: Any) -> str | None:
     """Put an open reader's storage files in the order of their first message times.
 
@@ -117,6 +129,9 @@ def order_by_time(path: Path, reader: Any) -> str | None:
         A note naming the listed and the time order when metadata.yaml lists the files in
         another order (the files are then read in time order), else None. Files without
         messages keep their place after those with messages.
+
+    Raises:
+        BagError: two files overlap in log time (a copy listed twice, two recordings in one).
     """
     stores = _storages(reader)
     found = [getattr(getattr(s, 'metadata', None), 'start_time', None) for s in stores]
@@ -128,9 +143,22 @@ def order_by_time(path: Path, reader: Any) -> str | None:
     order = sorted(timed, key=lambda k: starts[k]) + [
         k for k in range(len(stores)) if k not in timed
     ]
+    names = [Path(str(s.path)).name for s in stores]
+    ends = [getattr(getattr(s, 'metadata', None), 'end_time', None) for s in stores]
+    for first, then in itertools.pairwise(k for k in order if k in timed):
+        end = ends[first]
+        tolerance = (
+            min(OVERLAP_TOLERANCE_NS, (end - starts[first]) // 2) if isinstance(end, int) else 0
+        )
+        if isinstance(end, int) and starts[then] < end - tolerance:
+            raise BagError(
+                f'{path}: its storage files {names[first]} and {names[then]} overlap in log time '
+                f"({_span(starts[first], end)} and {_span(starts[then], ends[then])}): a bag's "
+                'files follow each other in time; is one a copy of the other, or are two '
+                'recordings in one folder? Keep one, or import them as two bags'
+            )
     if order == list(range(len(stores))):
         return None
-    names = [Path(str(s.path)).name for s in stores]
     stores[:] = [stores[k] for k in order]
     return (
         f'{path}: metadata.yaml lists the storage files as {", ".join(names)}, but their '

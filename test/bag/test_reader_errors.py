@@ -259,3 +259,24 @@ def test_a_bag_still_being_written_is_named_where_it_is_written(tmp_path: Path) 
         bag_info(out)
     with pytest.raises(BagError, match=r'other: no such bag$'):
         bag_info(tmp_path / 'other')
+
+
+def test_two_storage_files_overlapping_in_time_are_named(bag: Path, tmp_path: Path) -> None:
+    # Probe 15 (A75): a bag listing a storage file and its copy said 'time stamp goes backwards
+    # at sample 3251'.
+    copy = tmp_path / 'two'
+    shutil.copytree(bag, copy)
+    (first,) = sorted(copy.glob('*.mcap'))
+    shutil.copy(first, copy / 'second.mcap')
+    meta = copy / 'metadata.yaml'
+    document = yaml.safe_load(meta.read_text())
+    info = document['rosbag2_bagfile_information']
+    info['relative_file_paths'] = [first.name, 'second.mcap']
+    info['files'] = [info['files'][0], {**info['files'][0], 'path': 'second.mcap'}]
+    info['message_count'] *= 2
+    for topic in info['topics_with_message_count']:
+        topic['message_count'] *= 2
+    meta.write_text(yaml.safe_dump(document, sort_keys=False))
+    overlap = rf'{first.name} and second\.mcap overlap in log time .* a copy of the other'
+    with pytest.raises(BagError, match=overlap):
+        read_joint_states(copy, '/joint_states')
