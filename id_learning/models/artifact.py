@@ -418,10 +418,12 @@ def _refuse_no_folder(folder: Path) -> None:
 
     A FIFO given as the artifact is never opened (that would wait for a writer), a regular file
     (a model.json given instead of its folder) is named as a file. A path that does not exist
-    is left to the caller's 'not a model artifact'.
+    is named so, with the working directory a relative path was taken in (a launch file or
+    parameter file run from elsewhere).
 
     Raises:
-        CheckpointError: the path is a file, a FIFO, a device or socket, or a link to nothing.
+        CheckpointError: the path does not exist, is a file, a FIFO, a device or socket, or a
+            link to nothing.
     """
     expected = f'expected a folder with {METADATA_FILE} and {WEIGHTS_FILE}'
     link = broken_link(folder)
@@ -432,6 +434,16 @@ def _refuse_no_folder(folder: Path) -> None:
         raise CheckpointError(f'{folder}: a regular file, not a model folder ({expected})')
     if kind not in ('a folder', 'no such file') and not kind.startswith('cannot be read'):
         raise CheckpointError(f'{folder}: {kind}, not a model folder ({expected})')
+    if kind == 'no such file':
+        relative = (
+            ''
+            if folder.is_absolute()
+            else f' (a path relative to the working directory {Path.cwd()})'
+        )
+        raise CheckpointError(
+            f'{folder}: no such folder, so not a model artifact (needs {METADATA_FILE} and '
+            f'{WEIGHTS_FILE}){relative}'
+        )
 
 
 #: Summaries in the fitted metadata that describe the fit and never enter a prediction (a loss

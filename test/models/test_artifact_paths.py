@@ -65,3 +65,14 @@ def test_a_missing_artifact_is_still_said_to_be_no_model_artifact(
     """The wording nodes and tests rely on for a path that does not exist stays."""
     assert 'not a model artifact' in _refusal(tmp_path / 'none', mabi)
     assert 'not a model artifact' in _refusal(tmp_path, mabi)  # an empty folder
+
+
+def test_a_missing_relative_artifact_names_the_working_directory(
+    tmp_path: Path, mabi: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Probe 15 (B93): config/nodes.yaml run from another folder gave only 'not a model artifact'.
+    monkeypatch.chdir(tmp_path)
+    said = _refusal(Path('out/demo/run/models/mlp'), mabi)
+    assert 'out/demo/run/models/mlp: no such folder, so not a model artifact' in said
+    assert f'a path relative to the working directory {tmp_path}' in said
+    assert 'working directory' not in _refusal(tmp_path / 'none', mabi)
