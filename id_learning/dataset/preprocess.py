@@ -425,8 +425,9 @@ def target_torque(recording: Recording, robot: RobotConfig, target: Target) -> n
         return motor_torque_from_current(recording.current, robot.drives)
     if recording.joint_torque is None:
         raise DatasetError(
-            f'{recording.source}: {robot.topics.joint_states} carries no effort (joint torques); '
-            "use the 'motor' target (tau_u from currents)"
+            f'{recording.source}: {robot.topics.joint_states} carries no effort (joint torques), '
+            "which the 'joint' target needs: a model trained on measured joint torques is "
+            "evaluated on recordings that hold them; tau_u from currents is the 'motor' target"
         )
     return recording.joint_torque
 
