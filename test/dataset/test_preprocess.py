@@ -132,7 +132,8 @@ def test_an_unknown_split_is_refused():
 
 def test_the_joint_target_needs_measured_joint_torques(short_twin, mabi):
     _, result = short_twin
-    with pytest.raises(DatasetError, match="carries no effort .*, which the 'joint' target needs"):
+    needs = r"carries no effort .*, which the 'joint' target needs"
+    with pytest.raises(DatasetError, match=needs):
         prepare_dataset(result.recording, mabi, PreprocessConfig(target='joint'))
 
 
