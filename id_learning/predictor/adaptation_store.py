@@ -150,6 +150,8 @@ class StoredBase:
         read: ``load_base`` looked at the file: ``content`` is what it held.
         content: the sha256 of the file when read or last written by this session (None: none).
         side: where this session's state went beside a file another session changed.
+        elsewhere: with no file at ``path``, a state of this model an earlier session saved in
+            a fallback place (named at start, so that it is not taken for lost).
     """
 
     path: Path
@@ -162,6 +164,7 @@ class StoredBase:
     read: bool = False
     content: str | None = None
     side: Path | None = None
+    elsewhere: Path | None = None
 
     @property
     def folder(self) -> Path:
@@ -177,6 +180,12 @@ class StoredBase:
                 f'adaptation starts from zero: {self.path} cannot be continued from '
                 f'({self.problem}); it is kept as {self.path.name}.{self.aside_tag} if this '
                 'session learns'
+            )
+        if not self.found and self.elsewhere is not None:
+            return True, (
+                f"adaptation starts from zero: there is no {self.path}, but this model's state "
+                f'of an earlier session lies at {self.elsewhere} (saved there when its own place '
+                f'could not be written): move it to {self.path} to continue from it'
             )
         if not self.found:
             return None
@@ -350,7 +359,8 @@ def load_base(
     path = base.path
     base = replace(base, read=True, content=_digest(path))
     if not path.exists():
-        return replace(base, found=False)
+        elsewhere = next((p for p in _elsewhere(base) if p.is_file()), None)
+        return replace(base, found=False, elsewhere=elsewhere)
     try:
         state = json.loads(
             read_capped(path, 'adaptation state', MAX_STATE_BYTES, regular=True).decode('utf-8')

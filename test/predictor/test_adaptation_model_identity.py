@@ -221,3 +221,27 @@ def test_a_session_that_learnt_nothing_and_found_no_state_says_none_was_written(
     assert 'left as it was' not in line
     assert 'none written' in line
     assert not adaptation_path(artifact).exists()
+
+
+def test_a_restart_names_the_state_an_earlier_session_saved_in_a_fallback_place(
+    mabi: RobotConfig, tmp_path: Path
+) -> None:
+    """Probe 15 B78: the restart said only 'there is none at <artifact>.adaptation.json'."""
+    artifact = model(tmp_path / 'run' / 'models' / 'rnea_id', OLD)
+    path = adaptation_path(artifact)
+    blocker = path.with_name(f'.{path.name}.tmp')
+    blocker.mkdir()  # the state cannot be written beside its model
+    is_warning, _ = learnt(mabi, artifact).finish(artifact, mabi.joints)
+    assert is_warning
+    blocker.rmdir()
+    side = path.with_name(f'{path.name}.model-{OLD[:12]}')
+    assert side.is_file()
+
+    again = AdaptationLoop.for_robot(mabi, mabi.joints, AdaptationConfig())
+    said = again.load(artifact, mabi.joints).line()
+
+    assert said is not None
+    assert said[0]  # a warning
+    assert f'there is no {path}' in said[1]
+    assert f'lies at {side}' in said[1]
+    assert f'move it to {path}' in said[1]
