@@ -59,6 +59,7 @@ from id_learning.predictor.adaptation_store import (
     load_base,
     model_identity,
     save_state,
+    unlearnt_line,
     unloaded_base,
 )
 from id_learning.robot.config import RobotConfig
@@ -472,12 +473,9 @@ class AdaptationLoop:
             return True, f'adapted parameters not saved: {err}'
         if saved is not None:
             return saved[0], f'adapted parameters saved to {saved[1]}: {saved[2]}'
-        why = self.frozen_reason or 'no paired currents'
-        return False, (
-            f'adaptation accepted no update this session ({self.adapter.counters.frozen} '
-            f'frozen samples, the latest: {why}; {self.unpaired} currents unpaired); '
-            f'{base.untouched()}'
-        )
+        gated = self.adapter.counters.gated if self.inertia is None else self.inertia.gated
+        frozen = (self.adapter.counters.frozen, self.frozen_reason or 'no paired currents')
+        return unlearnt_line(gated, frozen, self.unpaired, base)
 
     def state(self, joints: tuple[str, ...]) -> dict[str, Any]:
         """The active estimator's state, JSON-ready.

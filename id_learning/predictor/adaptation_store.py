@@ -64,6 +64,7 @@ __all__ = [
     'load_base',
     'model_identity',
     'save_state',
+    'unlearnt_line',
     'unloaded_base',
 ]
 
@@ -201,6 +202,17 @@ class StoredBase:
         return f'none written, and there is none at {self.path}'
 
 
+def unlearnt_line(
+    gated: int, frozen: tuple[int, str], unpaired: int, base: StoredBase
+) -> tuple[bool, str]:
+    """(is a warning, the line) of a session that learnt nothing; gated samples warn (why)."""
+    gate = f'{gated} joint samples gated, {_GATED_ALL}; ' if gated else ''
+    return gated > 0, (
+        f'adaptation accepted no update this session ({gate}{frozen[0]} frozen samples, the '
+        f'latest: {frozen[1]}; {unpaired} currents unpaired); {base.untouched()}'
+    )
+
+
 def adaptation_path(artifact: Path | str) -> Path:
     """``<artifact>.adaptation.json`` beside the artifact folder (never in it: it is hashed)."""
     artifact = Path(artifact).resolve()
@@ -304,6 +316,8 @@ def _model_tag(digest: object) -> str:
     return f'model-{hex_start}' if re.fullmatch('[0-9a-f]{12}', hex_start) else 'model-unknown'
 
 
+#: Why every sample of a session that learnt nothing was gated, on a sound stream.
+_GATED_ALL = "the measured tau_u lay far from the model's: currents [A] on measured_topic?"
 #: A key the stored state lacks, or a model.json that cannot be read.
 _ABSENT = object()
 

@@ -245,3 +245,27 @@ def test_a_restart_names_the_state_an_earlier_session_saved_in_a_fallback_place(
     assert f'there is no {path}' in said[1]
     assert f'lies at {side}' in said[1]
     assert f'move it to {path}' in said[1]
+
+
+def test_a_session_whose_every_sample_was_gated_says_so_as_a_warning(
+    mabi: RobotConfig, tmp_path: Path
+) -> None:
+    """Probe 15 B48: joint torques on measured_topic (~420 x the currents) gated every sample;
+    the last line blamed the latest frozen sample instead."""
+    artifact = model(tmp_path / 'run' / 'models' / 'rnea_id', OLD)
+    loop = AdaptationLoop.for_robot(mabi, mabi.joints, AdaptationConfig())
+    loop.load(artifact, mabi.joints)
+    rng = np.random.default_rng(5)
+    n = len(mabi.joints)
+    for k in range(200):
+        stamp = 1_000_000 + k * 8_000_000
+        loop.serve(stamp, (rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), np.zeros(n)), np.zeros(n))
+        torques = list(420.0 * rng.normal(0.0, 5.0, n) + 4000.0)
+        loop.measured_message(stamp, list(mabi.joints), torques, list(mabi.joints))
+    assert loop.session_updates == 0
+
+    is_warning, line = loop.finish(artifact, mabi.joints)
+
+    assert is_warning
+    assert 'joint samples gated' in line
+    assert 'currents [A] on measured_topic?' in line
