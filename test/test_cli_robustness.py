@@ -203,3 +203,29 @@ def test_a_fit_budget_below_what_a_fit_takes_names_the_option_given(argv, capsys
     assert stop.value.code == 2
     said = capsys.readouterr().err
     assert f'argument {argv[-2]}: must be a finite number in [0.001, 10000000], got 1e-9' in said
+
+
+# -- an address-space limit (probe 16, C26/C27) -------------------------------------------------
+def _limited(limit_bytes: int) -> None:
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+
+
+def test_a_memory_limit_is_one_line_naming_it_and_nothing_is_left(tmp_path):
+    # Under ulimit -v, numpy's allocation of a long excitation failed with a traceback.
+    out = tmp_path / 'sim'
+    done = subprocess.run(
+        [sys.executable, '-m', 'id_learning.cli', 'simulate', '--config',
+         str(REPO / 'config/twin_default.yaml'), '--out', str(out), '--duration', '20000',
+         '--quiet'],
+        capture_output=True, text=True, cwd=tmp_path, timeout=300, check=False,
+        preexec_fn=lambda: _limited(2_500 * 2**20),
+    )  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert lines[0].startswith('id-learning simulate: error: out of memory (')
+    assert 'of address space (ulimit -v): raise it' in lines[0]
+    assert 'Traceback' not in done.stderr
+    assert not out.exists()

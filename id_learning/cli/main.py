@@ -272,6 +272,16 @@ def _run(argv: Sequence[str] | None) -> int:
             file=sys.stderr,
         )
         return 2
+    except (MemoryError, ImportError) as err:
+        # Under an address-space limit (ulimit -v) torch cannot map its libraries and numpy
+        # cannot allocate: the environment's limit, said in one line, not a traceback.
+        what = 'out of memory' if isinstance(err, MemoryError) else 'cannot load a module'
+        print(
+            f'id-learning {args.command}: error: {what} ({err or type(err).__name__})'
+            f'{_memory_limit()}; {_left(args, before)}',
+            file=sys.stderr,
+        )
+        return 1
     except KeyboardInterrupt as err:
         number, stopped = (
             (err.number, err.word)
@@ -280,6 +290,16 @@ def _run(argv: Sequence[str] | None) -> int:
         )
         print(f'id-learning {args.command}: {stopped}; {_left(args, before)}', file=sys.stderr)
         return 128 + number
+
+
+def _memory_limit() -> str:
+    """'; the process may use N MiB of address space (ulimit -v)' where limited, else ''."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return ''
+    return f'; the process may use {soft / 2**20:.0f} MiB of address space (ulimit -v): raise it'
 
 
 def _without_ros_arguments(argv: Sequence[str]) -> list[str]:
