@@ -161,8 +161,8 @@ def _reference_rows(
     ``unseen``: a recording the run was not trained on, tracked from its start (its first
     segment).
     """
-    if unseen:
-        start, end = segment_rows(dataset, 'all')[0]
+    if unseen:  # the whole of its first segment: no part of it was trained on
+        start, end = 0, len(dataset.q)
         part = 'a recording the run was not trained on, from its start'
     elif dataset.is_shuffled:  # its test samples are scattered: the last share in time
         start, end = round(config.train_fraction * len(dataset.q)), len(dataset.q)

@@ -57,6 +57,14 @@ def test_closed_loop_tracks_another_recording_from_its_start_on_its_own_twin(
     assert reference['bag'] == str(unseen)
     assert reference['rows'] == [0, 500]
     assert 'not trained on' in reference['part']
+    # Probe 16 (C21): asked for more than it holds, the whole of it, not its first 70 %.
+    from id_learning.dataset.preprocess import PreprocessConfig
+    from id_learning.training.closed_loop_run import _reference_rows
+    from id_learning.training.datasets import load_datasets
+
+    whole = load_datasets([unseen], mabi, PreprocessConfig(), progress=False)[0]
+    rows = _reference_rows(whole, PreprocessConfig(), 10**9, unseen=True)
+    assert rows[:3] == (0, len(whole.q), len(whole.q))
     assert str(unseen / 'twin_config.yaml') == result.document['twin_config']
     # A training bag given as --bag is tracked on its test part, as without it.
     again = closed_loop_run(
