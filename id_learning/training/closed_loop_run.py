@@ -148,8 +148,9 @@ def _twin_config_path(bag: Path, twin_config: Path | None) -> Path:
     if (bag / TWIN_CONFIG_COPY).is_file():
         return bag / TWIN_CONFIG_COPY
     raise ConfigError(
-        f"no {TWIN_CONFIG_COPY} beside {bag}, the run's first training bag: the closed loop "
-        'needs the twin robot the data came from; pass --twin CONFIG'
+        f'no {TWIN_CONFIG_COPY} beside {bag}, the bag the reference is taken from (a recording '
+        'the twin did not write?): the closed loop needs the twin robot the data came from; '
+        'pass --twin CONFIG'
     )
 
 
