@@ -33,6 +33,13 @@ def _number(value: float | None, digits: int = 3) -> str:
     return '-' if value is None else f'{value:.{digits}f}'
 
 
+#: Said where no robot config was given: what is then not judged, and how to have it judged.
+_NO_ROBOT = (
+    '- (not given: limits, the IPO grid and whether samples follow from the ones before them are '
+    'not checked; pass --robot CONFIG, as train reads the bag with its default robot)'
+)
+
+
 def _percent(fraction: float | None) -> str:
     return '-' if fraction is None else f'{100 * fraction:.2f} %'
 
@@ -44,7 +51,7 @@ def render_report(report: BagReport) -> str:
         f'storage   {report.storage}, {len(report.files)} file(s): {", ".join(report.files)}',
         f'start     {report.start_iso} ({report.start_ns} ns)',
         f'duration  {report.duration_s:.3f} s, {report.message_count} messages',
-        f'robot     {report.robot_name or "-"}',
+        f'robot     {report.robot_name or _NO_ROBOT}',
         '',
         'topics',
         *_timing_table(report),

@@ -138,6 +138,11 @@ def test_backward_header_stamp_is_counted_even_when_log_times_advance(tmp_path: 
     assert timing.nominal_period_s == pytest.approx(0.008)  # the median step, without a robot
     assert report.contract.missing == ('/motor_currents',)
     assert not report.contract.is_met
+    # Probe 16 (C25): without a robot, what is not checked is said, and how to have it checked.
+    assert 'robot     - (not given: limits, the IPO grid and whether samples follow' in (
+        render_report(report)
+    )
+    assert 'pass --robot CONFIG' in render_report(report)
 
 
 def test_non_finite_values_are_counted_instead_of_raised(
