@@ -344,6 +344,11 @@ def design_excitation(
     return trajectory
 
 
+#: How far beyond its limit's step (rate x grid step) a value may move between grid points:
+#: a smooth trajectory moves less than the limit allows, a jump by far more.
+_STEP_MARGIN = 1.5
+
+
 def check_limits(
     trajectory: ExcitationTrajectory,
     limits: JointLimits,
@@ -375,4 +380,37 @@ def check_limits(
             raise ConfigError(
                 f'excitation exceeds the {name} limit of {joint} at t = {t[k]:.3f} s: '
                 f'{value:.6g} outside [{low[j]:.6g}, {high[j]:.6g}]{beyond}'
+            )
+    _check_continuous(t, q, qd, limits, joints)
+
+
+def _check_continuous(
+    t: np.ndarray,
+    q: np.ndarray,
+    qd: np.ndarray,
+    limits: JointLimits,
+    joints: tuple[str, ...] | None,
+) -> None:
+    """Refuse positions (velocities) that step further than their rate limit allows.
+
+    Between grid points a smooth trajectory moves less than its velocity (acceleration) limit
+    allows; a jump is a segment that does not start where the one before ended.
+
+    Raises:
+        ConfigError: names the quantity, the joint, the time and the step.
+    """
+    step = np.diff(t)[:, None]
+    for name, unit, values, rate in (
+        ('position', 'rad', q, limits.velocity),
+        ('velocity', 'rad/s', qd, limits.acceleration),
+    ):
+        jumps = np.abs(np.diff(values, axis=0)) > _STEP_MARGIN * rate * step + 1e-9
+        if jumps.any():
+            k, j = (int(x) for x in np.argwhere(jumps)[0])
+            joint = joints[j] if joints is not None else f'joint_{j + 1}'
+            jump = float(values[k + 1, j] - values[k, j])
+            raise ConfigError(
+                f'excitation {name} of {joint} jumps by {jump:.6g} {unit} at t = '
+                f'{t[k + 1]:.3f} s, more than its limits allow in {float(step[k, 0]):.3g} s: a '
+                'segment that does not start where the one before ended (an edited design?)'
             )

@@ -222,6 +222,23 @@ def test_tripled_segment_fails_the_real_limits(
         check_limits(scaled(trajectory, 1, 3.0), limits, PERIOD_S / 8)
 
 
+def test_a_segment_that_does_not_start_at_home_is_refused_as_a_jump() -> None:
+    # Probe 16 (C24): a design edited to hold joint_6 (its a, b zeroed, q0 left) was simulated
+    # with 2.24 rad steps at every segment start.
+    trajectory = designed('mabi_max100', 0)
+    limits = robot('mabi_max100').limits
+    segments = list(trajectory.segments)
+    first = segments[0]
+    a, b = first.a.copy(), first.b.copy()
+    a[5], b[5] = 0.0, 0.0
+    segments[0] = FourierSegment(a, b, first.q0, first.omega)
+    held = replace(trajectory, segments=tuple(segments))
+    if abs(first.q0[5] - trajectory.home[5]) < 1e-3:
+        pytest.skip('this design starts joint_6 at home anyway')
+    with pytest.raises(ConfigError, match=r'excitation position of joint_6 jumps by .* rad at t'):
+        check_limits(held, limits, PERIOD_S / 8)
+
+
 @pytest.mark.parametrize(
     ('home', 'match'),
     [
