@@ -116,6 +116,8 @@ def _text_encoding(head: bytes) -> str | None:
     UTF-16 by its byte order mark, or by a NUL in (nearly) every other byte (text in UTF-16
     without a mark, which the reader then names); else UTF-8.
     """
+    if head.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)):
+        return 'utf-32'
     if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         return 'utf-16'
     if b'\0' not in head:

@@ -31,7 +31,7 @@ _CANDIDATES = {'tab': '\t', ';': ';', ',': ',', 'whitespace': ' '}
 
 
 def decode_text(source: Path, data: bytes | bytearray, mapping: ImportMapping) -> str:
-    """The log's text in the mapping's encoding (UTF-8 by default, UTF-16 by its byte order mark).
+    """The log's text in the mapping's encoding (UTF-8 by default, UTF-16/32 by their BOM).
 
     Raises:
         DatasetError: a byte sequence that is not text in that encoding (names the line, the
@@ -39,7 +39,9 @@ def decode_text(source: Path, data: bytes | bytearray, mapping: ImportMapping) -
     """
     encoding = codecs.lookup(mapping.encoding).name
     if encoding == 'utf-8':
-        if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        if data.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)):  # before UTF-16's FF FE
+            encoding = 'utf-32'
+        elif data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
             encoding = 'utf-16'
         elif b'\x00' in data[:_NUL_WINDOW]:
             line = data.count(b'\n', 0, data.index(b'\x00')) + 1

@@ -162,9 +162,10 @@ def _shape_hint(shape: tuple[int, ...]) -> str:
 
 #: Cells that mark a missing value in logs written by R, pandas, Excel, SQL or by hand
 #: (compared in lower case): read as empty cells, so ``nan_policy`` decides.
+#: Excel's #N/A is written #NV in German, #N/D in Italian and Spanish, #N/B in Dutch.
 MISSING_MARKS = frozenset(
-    ('na', 'n/a', '#n/a', 'nan', 'null', 'none', 'nil', '-', '--', '?', 'missing')
-)
+    ('na', 'n/a', '#n/a', 'nan', 'null', 'none', 'nil', '-', '--', '?', 'missing', 'n.a.')
+) | frozenset(('#nv', '#n/d', '#n/b', '#n/v', '#nd'))
 
 
 def _as_float(values: np.ndarray, table: LogTable, item: Field) -> np.ndarray:

@@ -81,10 +81,24 @@ def test_a_bad_byte_in_a_later_line_is_named_by_that_line(tmp_path: Path) -> Non
     assert read_table(source, mapping(encoding='cp1252')).columns['note'][2] == 'Grad°'
 
 
-@pytest.mark.parametrize('bom', [codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE, codecs.BOM_UTF8])
+@pytest.mark.parametrize(
+    'bom',
+    [
+        codecs.BOM_UTF16_LE,
+        codecs.BOM_UTF16_BE,
+        codecs.BOM_UTF8,
+        codecs.BOM_UTF32_LE,
+        codecs.BOM_UTF32_BE,
+    ],
+)
 def test_a_byte_order_mark_reads_as_its_encoding(tmp_path: Path, bom: bytes) -> None:
     text = log_text(['ä', 'ok', 'ß'])
-    codec = {codecs.BOM_UTF16_LE: 'utf-16-le', codecs.BOM_UTF16_BE: 'utf-16-be'}.get(bom, 'utf-8')
+    codec = {
+        codecs.BOM_UTF16_LE: 'utf-16-le',
+        codecs.BOM_UTF16_BE: 'utf-16-be',
+        codecs.BOM_UTF32_LE: 'utf-32-le',
+        codecs.BOM_UTF32_BE: 'utf-32-be',
+    }.get(bom, 'utf-8')
     source = write(tmp_path / 'log.csv', bom + text.encode(codec))
     table = read_table(source, mapping())
     assert list(table.columns) == HEADER
@@ -193,7 +207,12 @@ def test_a_quote_inside_a_bare_field_is_text_not_a_field_spanning_lines(tmp_path
 
 @pytest.mark.parametrize(
     ('prefix', 'codec'),
-    [(codecs.BOM_UTF16_LE, 'utf-16-le'), (b'', 'utf-16-le'), (b'', 'utf-16-be')],
+    [
+        (codecs.BOM_UTF16_LE, 'utf-16-le'),
+        (b'', 'utf-16-le'),
+        (b'', 'utf-16-be'),
+        (codecs.BOM_UTF32_LE, 'utf-32-le'),
+    ],
 )
 def test_a_utf16_log_in_a_folder_is_taken_as_a_log_not_skipped_as_binary(
     tmp_path: Path, prefix: bytes, codec: str
@@ -206,7 +225,7 @@ def test_a_utf16_log_in_a_folder_is_taken_as_a_log_not_skipped_as_binary(
 
 
 # -- missing-value marks -------------------------------------------------------------------------
-@pytest.mark.parametrize('mark', ['NA', 'n/a', '#N/A', 'null', 'None', '-', '?'])
+@pytest.mark.parametrize('mark', ['NA', 'n/a', '#N/A', 'null', 'None', '-', '?', '#NV', '#N/D'])
 def test_a_missing_value_mark_is_a_missing_cell_for_the_nan_policy(
     tmp_path: Path, mark: str
 ) -> None:
