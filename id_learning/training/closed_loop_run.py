@@ -194,7 +194,12 @@ def _tracked(
     seconds = DEFAULT_DURATION_S if asked is None else asked
     start, stop, end, part = _reference_rows(dataset, config, round(seconds / period_s), unseen)
     if stop - start < 2:
-        raise ConfigError(f'{bag}: {stop - start} samples of the test part to track')
+        if asked is not None and round(asked / period_s) < 2:
+            raise ConfigError(
+                f'--duration {asked:g} s is shorter than two IPO periods '
+                f'({2 * period_s:g} s): nothing to track'
+            )
+        raise ConfigError(f'{bag}: {stop - start} samples of {part} to track')
     available = (end - start) * period_s
     shortened = asked is not None and stop == end and asked > available + period_s
     if shortened:

@@ -39,6 +39,9 @@ def test_closed_loop_tracks_the_test_motion_better_with_feed_forward(run, mabi, 
     (bare / 'run.json').write_text(json.dumps(meta))
     with pytest.raises(ConfigError, match=r'twin_config\.yaml.*pass --twin'):
         closed_loop_run(bare, mabi, tmp_path / 'y', progress=False)
+    # Probe 16 (C70): half an IPO period to track blamed the bag, not --duration.
+    with pytest.raises(ConfigError, match=r'--duration 0\.004 s is shorter than two IPO periods'):
+        closed_loop_run(run.out, mabi, tmp_path / 'z', duration_s=0.004, progress=False)
 
 
 def test_closed_loop_tracks_another_recording_from_its_start_on_its_own_twin(
