@@ -72,6 +72,7 @@ class RecoverReport:
         files: one scan per ``.mcap`` file, in bag order.
         topics: recovered topics with their message counts, in first-seen order.
         damaged_kept: the damaged originals kept as ``<file>.damaged``.
+        asked: the ``out`` asked for (None: in place); an intact bag is not copied there.
     """
 
     path: Path
@@ -81,6 +82,7 @@ class RecoverReport:
     files: tuple[FileScan, ...]
     topics: tuple[TopicInfo, ...]
     damaged_kept: tuple[Path, ...] = ()
+    asked: Path | None = None
 
     @property
     def messages(self) -> int:
@@ -95,7 +97,11 @@ class RecoverReport:
     def summary(self) -> str:
         """Describe the outcome in a few lines of plain text."""
         if self.is_intact:
-            head = f'{self.path}: bag is complete with valid metadata; nothing to recover'
+            head = f'{self.path}: bag is complete with valid metadata; nothing to recover' + (
+                f' (nothing written to {self.asked}: use {self.path} as it is)'
+                if self.asked is not None and self.asked != self.path
+                else ''
+            )
         else:
             chunks = [chunk for scan in self.files for chunk in scan.skipped]
             in_chunks = sum(chunk.length_bytes for chunk in chunks)
@@ -354,7 +360,8 @@ def recover_bag(
         scans = [scan_file(file, topics, None) for file in files]
         if had_metadata and _is_intact(path, scans, topics):
             _LOG.info('%s: bag is complete with valid metadata; nothing to recover', path)
-            return RecoverReport(path, path, True, had_metadata, tuple(scans), topics.infos())
+            infos = topics.infos()
+            return RecoverReport(path, path, True, had_metadata, tuple(scans), infos, asked=target)
         for scan in scans:
             for chunk in scan.skipped:
                 _LOG.warning('%s: %s', path / scan.name, chunk.describe())

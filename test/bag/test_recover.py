@@ -237,8 +237,13 @@ def test_recovering_an_intact_bag_changes_nothing(
 
     assert report.is_intact
     assert 'nothing to recover' in report.summary()
+    assert 'nothing written to' not in report.summary()
     assert report.messages == 2 * N_SAMPLES
     assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in bag.iterdir()} == before
+    # Probe 16 (C53): with --out, the summary says nothing went there and the bag is to be used.
+    elsewhere = recover_bag(bag, tmp_path / 'copy')
+    assert f'(nothing written to {tmp_path / "copy"}: use {bag} as it is)' in elsewhere.summary()
+    assert not (tmp_path / 'copy').exists()
 
 
 def test_folder_without_mcap_files_raises_bag_error(tmp_path: Path) -> None:
