@@ -276,9 +276,16 @@ def _check_robot(saved: Any, robot: RobotConfig, folder: Path) -> None:
         )
     for key in ('name', 'urdf_sha256'):
         if saved.get(key) != current[key]:
+            urdf = (
+                f' (the URDF given: {robot.urdf_path}; a URDF whose bytes differ, even only in '
+                'comments or line ends, is another robot here: give the one the model was '
+                'trained with)'
+                if key == 'urdf_sha256'
+                else ''
+            )
             raise CheckpointError(
                 f'{folder}: model was trained for robot {key} {saved.get(key)!r}, '
-                f'not {current[key]!r}'
+                f'not {current[key]!r}{urdf}'
             )
     for key, values in _drive_values(robot).items():
         if not np.allclose(saved.get('drives', {}).get(key, []), values, rtol=1e-12, atol=0):

@@ -152,9 +152,14 @@ def write_twin_output(
     except OSError as err:
         for path in extras:  # half a ground truth would be read as the whole
             path.unlink(missing_ok=True)
+        state = (
+            'the new bag is not kept'  # written beside its place: the writer discards it
+            if place is not None
+            else 'the bag is complete, its ground truth is not there'
+        )
         raise OutputError(
             f'{err.filename or out}: {os_reason(err)} (writing the ground truth beside the '
-            'bag; the bag is complete, its ground truth is not there)'
+            f'bag; {state})'
         ) from err
     _LOG.info('twin: wrote %d samples to %s', result.recording.n_samples, out)
     return out
