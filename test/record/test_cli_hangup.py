@@ -31,4 +31,3 @@ def test_an_import_hung_up_while_writing_leaves_no_bag_and_says_so(
     assert not out.exists()
     assert not staging_folder(out).exists()  # cleaned up, as after SIGTERM
     assert sorted(path.name for path in tmp_path.iterdir()) == ['log.csv', 'map.yaml']
-

@@ -47,9 +47,7 @@ def test_a_bag_topic_named_diagnostics_of_another_type_is_refused_naming_it(tmp_
     assert 'a publisher of diagnostic_msgs/msg/DiagnosticArray' in log, log
 
 
-def test_recording_parameter_events_as_joint_states_names_the_nodes_own_publisher(
-    tmp_path, nodes
-):
+def test_recording_parameter_events_as_joint_states_names_the_nodes_own_publisher(tmp_path, nodes):
     recorder = nodes(
         'recorder',
         {

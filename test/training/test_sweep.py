@@ -145,7 +145,9 @@ def test_bad_sweeps_are_refused_with_the_reason(bag, tmp_path, mabi):
     with pytest.raises(ConfigError, match='--trials must be >= 1'):
         run_sweep([bag], mabi, 'motor', 'mlp', tmp_path, trials=0, progress=False)
     for storage in ('nosuchdb://nowhere', 'redis://localhost', 'mysql://u@localhost/db', 'x.db'):
-        with pytest.raises(ConfigError, match=r'is no storage this tool supports: give sqlite:///'):
+        with pytest.raises(
+            ConfigError, match=r'is no storage this tool supports: give sqlite:///'
+        ):
             run_sweep(
                 [bag], mabi, 'motor', 'rnea_lq', tmp_path, trials=1, progress=False,
                 storage=storage,
