@@ -15,6 +15,7 @@ does (the nodes the tests and the online check start).
 from __future__ import annotations
 
 import importlib
+import os
 import signal
 import sys
 from collections.abc import Callable, Iterator
@@ -79,8 +80,21 @@ def _signals_raise() -> Iterator[None]:
 
 
 def run(program: str) -> int:
-    """Import ``program`` inside the signal handling, then run it; its exit status."""
+    """Import ``program`` inside the signal handling, then run it; its exit status.
+
+    A working folder deleted under the shell is refused first, in one line: torch's MKL cannot
+    load its libraries from there and ends the process with a line that does not say why.
+    """
     module, function = PROGRAMS[program]
+    try:
+        os.getcwd()
+    except FileNotFoundError:
+        print(
+            f'{program}: error: the working folder no longer exists (deleted after the shell '
+            'entered it); cd into an existing folder',
+            file=sys.stderr,
+        )
+        return 2
     try:
         with _signals_raise():
             main: Callable[[], int] = getattr(importlib.import_module(module), function)

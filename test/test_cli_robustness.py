@@ -229,3 +229,19 @@ def test_a_memory_limit_is_one_line_naming_it_and_nothing_is_left(tmp_path):
     assert 'of address space (ulimit -v): raise it' in lines[0]
     assert 'Traceback' not in done.stderr
     assert not out.exists()
+
+
+def test_a_deleted_working_folder_is_one_line_naming_it(tmp_path):
+    # Probe 16 (C58): train from a deleted folder ended in MKL's 'Cannot load libtorch_cpu.so'.
+    gone = tmp_path / 'gone'
+    gone.mkdir()
+    done = subprocess.run(
+        [sys.executable, '-m', 'id_learning.entry', 'id-learning', '--version'],
+        capture_output=True, text=True, cwd=gone, timeout=120, check=False,
+        preexec_fn=lambda: os.rmdir(gone), env={**os.environ, 'PYTHONPATH': str(REPO)},
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip() == (
+        'id-learning: error: the working folder no longer exists (deleted after the shell '
+        'entered it); cd into an existing folder'
+    )
