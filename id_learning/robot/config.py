@@ -142,8 +142,12 @@ class RobotConfig:
         return len(self.joints)
 
     def urdf_sha256(self) -> str:
-        """SHA-256 of the URDF file, to tie data and models to the exact robot description."""
-        return hashlib.sha256(self.urdf_path.read_bytes()).hexdigest()
+        """SHA-256 of the URDF file, to tie data and models to the exact robot description.
+
+        Its line ends count as LF: a checkout with CRLF (git's ``core.autocrlf`` on Windows)
+        is the same robot, and hashes as the LF file always did.
+        """
+        return hashlib.sha256(self.urdf_path.read_bytes().replace(b'\r\n', b'\n')).hexdigest()
 
 
 _TOP_KEYS = (

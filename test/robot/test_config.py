@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 import re
 import shutil
-from dataclasses import FrozenInstanceError
+from dataclasses import FrozenInstanceError, replace
 from pathlib import Path
 from typing import Any
 
@@ -132,6 +132,20 @@ def test_urdf_sha256_is_the_hash_of_the_urdf_bytes(robot_configs: dict[str, Robo
     for config in robot_configs.values():
         expected = hashlib.sha256(config.urdf_path.read_bytes()).hexdigest()
         assert config.urdf_sha256() == expected
+
+
+def test_a_urdf_checked_out_with_crlf_line_ends_is_the_same_robot(
+    robot_configs: dict[str, RobotConfig], tmp_path: Path
+) -> None:
+    # Probe 16 (C65): git's core.autocrlf made the shipped URDF another robot for every model.
+    config = robot_configs['mabi_max100']
+    crlf = tmp_path / config.urdf_path.name
+    crlf.write_bytes(config.urdf_path.read_bytes().replace(b'\n', b'\r\n'))
+    assert b'\r\n' in crlf.read_bytes()
+    assert replace(config, urdf_path=crlf).urdf_sha256() == config.urdf_sha256()
+    edited = tmp_path / 'edited.urdf'
+    edited.write_bytes(config.urdf_path.read_bytes().replace(b'<robot', b'<robot ', 1))
+    assert replace(config, urdf_path=edited).urdf_sha256() != config.urdf_sha256()
 
 
 def test_unedited_copy_loads_like_the_original(
