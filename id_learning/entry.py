@@ -46,27 +46,46 @@ PROGRAMS = {
 class _Terminated(KeyboardInterrupt):
     """SIGTERM while a program starts, raised where Ctrl-C raises KeyboardInterrupt."""
 
+    number = signal.SIGTERM
+    word = 'terminated'
+
+
+class _HungUp(_Terminated):
+    """SIGHUP (its terminal or ssh session closed) while a program starts."""
+
+    number = signal.SIGHUP
+    word = 'hung up (SIGHUP)'
+
 
 def stopped_while_starting(program: str, err: KeyboardInterrupt) -> int:
     """Say in one line that ``program`` stopped before it did anything; the exit status."""
-    number = signal.SIGTERM if isinstance(err, _Terminated) else signal.SIGINT
-    stopped = 'terminated' if number == signal.SIGTERM else 'interrupted'
+    number, stopped = (
+        (err.number, err.word) if isinstance(err, _Terminated) else (signal.SIGINT, 'interrupted')
+    )
     print(f'{program}: {stopped} while starting; nothing was done', file=sys.stderr, flush=True)
     return 128 + number
 
 
 def _raise(number: int, frame: FrameType | None) -> None:
-    raise _Terminated if number == signal.SIGTERM else KeyboardInterrupt
+    raised: dict[int, type[KeyboardInterrupt]] = {
+        signal.SIGTERM: _Terminated,
+        signal.SIGHUP: _HungUp,
+    }
+    raise raised.get(number, KeyboardInterrupt)
 
 
 @contextmanager
 def _signals_raise() -> Iterator[None]:
-    """SIGINT and SIGTERM raise while the block runs (ignored ones stay ignored); restored after.
+    """SIGINT, SIGTERM and SIGHUP raise while the block runs (ignored ones stay ignored).
 
-    After the block SIGINT raises KeyboardInterrupt again (Python's default) and SIGTERM ends
-    the process (the program's own handling takes over from there).
+    After the block SIGINT raises KeyboardInterrupt again (Python's default) and SIGTERM and
+    SIGHUP end the process (the program's own handling takes over from there).
     """
-    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    defaults = {
+        signal.SIGINT: signal.default_int_handler,
+        signal.SIGTERM: signal.SIG_DFL,
+        signal.SIGHUP: signal.SIG_DFL,
+    }
     previous = {number: signal.getsignal(number) for number in defaults}
     for number, handler in previous.items():
         if handler is defaults[number]:

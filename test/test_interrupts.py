@@ -181,7 +181,11 @@ def _slow_start(tmp_path: Path) -> subprocess.Popen[str]:
 
 @pytest.mark.parametrize(
     ('number', 'status', 'word'),
-    [(signal.SIGINT, 130, 'interrupted'), (signal.SIGTERM, 143, 'terminated')],
+    [
+        (signal.SIGINT, 130, 'interrupted'),
+        (signal.SIGTERM, 143, 'terminated'),
+        (signal.SIGHUP, 129, 'hung up (SIGHUP)'),  # probe 16 D17: died without a line
+    ],
 )
 def test_a_signal_while_a_program_imports_is_one_line_and_the_shells_status(
     tmp_path: Path, number: int, status: int, word: str
