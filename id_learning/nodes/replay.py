@@ -104,6 +104,10 @@ SHARED_TOPIC = (
 _NO_VALUES = np.empty(0)
 
 
+#: What rmw names the node of an endpoint discovery has not matched to a node yet.
+_UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
+
+
 class Replay(ShellNode):
     """Publishes a bag's cycles on their deadlines from a playback thread.
 
@@ -202,7 +206,7 @@ class Replay(ShellNode):
         if self._clock_publisher is not None:
             watched.append(self._clock_publisher)
         while not self._stop.is_set():
-            counts = {p.topic_name: p.get_subscription_count() for p in watched}
+            counts = {p.topic_name: self._others_subscribed(p.topic_name) for p in watched}
             if sum(counts.values()) >= wanted:
                 return
             if time.monotonic() > deadline:
@@ -212,6 +216,18 @@ class Replay(ShellNode):
                 )
                 return
             self._stop.wait(0.01)
+
+    def _others_subscribed(self, topic: str) -> int:
+        """Subscriptions to ``topic`` of other nodes (with use_sim_time this one reads /clock).
+
+        One whose node discovery has not named yet is not counted until it is: it may be this
+        node's own (the wait goes on, a real subscriber is named within moments).
+        """
+        own = (self.get_name(), self.get_namespace())
+        return sum(
+            (info.node_name, info.node_namespace) != own and info.node_name != _UNKNOWN_NODE
+            for info in self.get_subscriptions_info_by_topic(topic)
+        )
 
     def _play(self) -> None:
         try:
