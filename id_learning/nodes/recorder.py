@@ -215,16 +215,18 @@ class Recorder(ShellNode):
             self._output.close()
             raise
         self.path = self.writer.path  # normalised: "a/../b" is b
-        for topic, msg_type in typed:
-            self.writer.add_topic(topic, msg_type)
+        for topic, msg_type in typed:  # as subscribed: a relative name in its namespace
+            self.writer.add_topic(self._resolved[topic], msg_type)
         steady = Clock(clock_type=ClockType.STEADY_TIME)  # runs whatever /clock does
         self._flush_timer = self.create_timer(config.flush_period_s, self._flush, clock=steady)
         self._diagnostics_timer = self.create_timer(
             config.diagnostics_period_s, self._publish_diagnostics, clock=steady
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        resolved = [self._resolved[topic] for topic in config.topics]
+        named = '' if resolved == list(config.topics) else f' (resolved: {resolved})'
         self.get_logger().info(
-            f'recording {list(config.topics)} to {self.path} (flush every '
+            f'recording {list(config.topics)}{named} to {self.path} (flush every '
             f'{config.flush_period_s:g} s, QoS {config.reliability} depth {config.qos_depth})'
         )
 
@@ -235,7 +237,7 @@ class Recorder(ShellNode):
         if self.failure is not None:  # the recording has ended: counted as lost
             return
         try:
-            self.writer.write(topic, log_time_ns, data)
+            self.writer.write(self._resolved[topic], log_time_ns, data)
         except BagError as err:
             self._stop(err)
 
@@ -250,7 +252,7 @@ class Recorder(ShellNode):
     def _count_written(self) -> None:
         """Take the writer's count of what is in the file; after a failure the rest is lost."""
         for topic, counts in self.counts.items():
-            counts.written = self.writer.on_disk.get(topic, 0)
+            counts.written = self.writer.on_disk.get(self._resolved[topic], 0)
             if self.failure is not None or self._is_closed:
                 counts.lost = counts.received - counts.written
 
