@@ -25,7 +25,7 @@ import time
 from collections import Counter
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from id_learning.errors import ConfigError
 from id_learning.nodes.params import (
@@ -255,6 +255,11 @@ def shared_text(topic: str, nodes: list[str], consequence: str) -> str:
     return f'{len(nodes)} publishers on {topic} ({named}): {consequence}'
 
 
+def _node_of(info: Any) -> str:
+    """'/namespace/name' of an endpoint's node (a TopicEndpointInfo)."""
+    return f'{info.node_namespace.rstrip("/")}/{info.node_name}'
+
+
 class OtherPublishers:
     """Publishers of other nodes on the topics a node publishes on (its outputs).
 
@@ -290,9 +295,12 @@ class OtherPublishers:
         with self._lock:
             now = time.monotonic()
             for parameter, topic in self.topics.items():
+                infos = self._node.get_publishers_info_by_topic(topic)
+                mine = {info.topic_type for info in infos if _node_of(info) == me}
                 nodes = sorted(
-                    f'{info.node_namespace.rstrip("/")}/{info.node_name}'
-                    for info in self._node.get_publishers_info_by_topic(topic)
+                    _node_of(info)
+                    + ('' if not mine or info.topic_type in mine else f' ({info.topic_type})')
+                    for info in infos
                 )
                 if me in nodes:
                     nodes.remove(me)
@@ -310,6 +318,13 @@ class OtherPublishers:
         return lines
 
     def _text(self, parameter: str, topic: str, nodes: list[str]) -> str:
+        if all(node.endswith(')') for node in nodes):  # all of another type than this node's
+            return (
+                f"another publisher on {topic}, the topic of this node's {parameter}, of "
+                f'another type: {", ".join(f"node {node}" for node in nodes)}; a topic of two '
+                'types: a consumer takes only '
+                "its own type's messages, but tools see both: give one of them another topic"
+            )
         counts = Counter(nodes)
         named = ', '.join(
             ('a node not discovered yet' if UNKNOWN_NODE in node else f'node {node}')

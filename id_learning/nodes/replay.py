@@ -63,7 +63,12 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from id_learning.nodes.endpoints import OtherPublishers, endpoint, refuse_clashing_topics
+from id_learning.nodes.endpoints import (
+    UNKNOWN_NODE,
+    OtherPublishers,
+    endpoint,
+    refuse_clashing_topics,
+)
 from id_learning.nodes.msg_conversions import (
     SerializedOutput,
     clock_message,
@@ -102,10 +107,6 @@ SHARED_TOPIC = (
     'simulator): stop the other, or play into another namespace (-r __ns:=/NAME)'
 )
 _NO_VALUES = np.empty(0)
-
-
-#: What rmw names the node of an endpoint discovery has not matched to a node yet.
-_UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
 
 
 class Replay(ShellNode):
@@ -225,7 +226,7 @@ class Replay(ShellNode):
         """
         own = (self.get_name(), self.get_namespace())
         return sum(
-            (info.node_name, info.node_namespace) != own and info.node_name != _UNKNOWN_NODE
+            (info.node_name, info.node_namespace) != own and info.node_name != UNKNOWN_NODE
             for info in self.get_subscriptions_info_by_topic(topic)
         )
 

@@ -75,3 +75,20 @@ def test_two_replays_on_one_reference_each_name_the_other(tmp_path, nodes):
     wait_for_log(first, "another publisher on /joint_states, the topic of this node's topics[0]")
     assert 'node /replay_b' in first.log()
     wait_for_log(second, 'node /replay;')
+
+
+def test_a_publisher_of_another_type_on_the_output_is_named_with_its_type(
+    nodes, listener, tiny_artifacts
+):
+    # Probe 16 (D15): a std_msgs/String publisher on /tau_u was warned of as 'two torques per
+    # cycle, from two models'.
+    from std_msgs.msg import String
+
+    publisher = listener.node.create_publisher(String, '/tau_u', 10)
+    try:
+        predictor = nodes('predictor', {'artifact': str(tiny_artifacts['mlp'])})
+        wait_for_log(predictor, "the topic of this node's output_topic, of another type: node /")
+        assert '(std_msgs/msg/String)' in predictor.log()
+        assert 'two per cycle' not in predictor.log()
+    finally:
+        listener.node.destroy_publisher(publisher)
