@@ -388,8 +388,9 @@ class PredictorNodeConfig:
     )
     resync_after: int = param(
         5,
-        'Rejections for time in a row after which the next sample starts a new time base, '
-        'with one warning: a clock step on the sender never locks the stream out [samples].',
+        'Samples refused for time in a row at which the last of them starts a new time base, '
+        'with one warning (1: the first such sample does): a clock step on the sender never '
+        'locks the stream out [samples].',
         read_only=False,
         low=1,
         high=10**6,
