@@ -18,7 +18,6 @@ A mapping (or other YAML/JSON file) given as a source is refused as such, not re
 
 from __future__ import annotations
 
-import codecs
 import gzip
 import logging
 import re
@@ -30,6 +29,7 @@ from pathlib import Path
 from id_learning.bag.distinct import check_distinct
 from id_learning.config_io import broken_link, special_kind
 from id_learning.dataset.import_readers import is_float, log_suffix
+from id_learning.dataset.import_text import bom_encoding
 from id_learning.errors import DatasetError
 
 __all__ = ['LOG_SUFFIXES', 'log_files', 'log_problem', 'mapping_problem']
@@ -116,10 +116,8 @@ def _text_encoding(head: bytes) -> str | None:
     UTF-16 by its byte order mark, or by a NUL in (nearly) every other byte (text in UTF-16
     without a mark, which the reader then names); else UTF-8.
     """
-    if head.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)):
-        return 'utf-32'
-    if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
-        return 'utf-16'
+    if (marked := bom_encoding(head)) is not None:
+        return marked
     if b'\0' not in head:
         return 'utf-8-sig'
     even, odd = head[0::2], head[1::2]

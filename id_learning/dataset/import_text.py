@@ -18,7 +18,7 @@ from pathlib import Path
 from id_learning.dataset.import_mapping import ImportMapping
 from id_learning.errors import DatasetError
 
-__all__ = ['MAX_LINE_CHARS', 'decode_text', 'numbered_rows', 'refuse_preamble']
+__all__ = ['MAX_LINE_CHARS', 'bom_encoding', 'decode_text', 'numbered_rows', 'refuse_preamble']
 
 #: The characters a CSV line may hold (16 Mi): a long unmapped field (a note, a dump) is read; a
 #: longer line, most likely no line of a log (a file without line breaks), is refused.
@@ -39,10 +39,8 @@ def decode_text(source: Path, data: bytes | bytearray, mapping: ImportMapping) -
     """
     encoding = codecs.lookup(mapping.encoding).name
     if encoding == 'utf-8':
-        if data.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)):  # before UTF-16's FF FE
-            encoding = 'utf-32'
-        elif data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
-            encoding = 'utf-16'
+        if (marked := bom_encoding(data)) is not None:
+            encoding = marked
         elif b'\x00' in data[:_NUL_WINDOW]:
             line = data.count(b'\n', 0, data.index(b'\x00')) + 1
             raise DatasetError(
@@ -71,6 +69,15 @@ def decode_text(source: Path, data: bytes | bytearray, mapping: ImportMapping) -
             f'{err.start - line_start + 1}: {bytes(data[err.start : err.end])!r} is not '
             f'{mapping.encoding} text ({shown!r}); {hint}'
         ) from err
+
+
+def bom_encoding(data: bytes | bytearray) -> str | None:
+    """'utf-32' or 'utf-16' when ``data`` starts with that byte order mark, else None."""
+    if data.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)):  # before UTF-16's FF FE
+        return 'utf-32'
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        return 'utf-16'
+    return None
 
 
 def numbered_rows(
