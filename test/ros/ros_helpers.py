@@ -135,6 +135,18 @@ class Listener:
             f'{count} subscription(s) on {topic}',
         )
 
+    def publishers_subscribed(
+        self, msg_type: type, topics: Any, qos: Any, what: str = 'the recorder to subscribe'
+    ) -> dict[str, Any]:
+        """A publisher per topic, returned once each has a subscriber (``what`` waited for)."""
+        publishers = {topic: self.node.create_publisher(msg_type, topic, qos) for topic in topics}
+        self.wait_for(
+            lambda: all(p.get_subscription_count() >= 1 for p in publishers.values()),
+            STARTUP_S,
+            what,
+        )
+        return publishers
+
     def diagnostics(self, name: str) -> dict[str, str] | None:
         """The key-values of the latest /diagnostics status with this name."""
         for msg in reversed(self.messages['/diagnostics']):

@@ -47,15 +47,7 @@ def test_a_recorder_hung_up_finishes_its_bag_with_every_message_it_received(
         recorder = nodes(
             'recorder', {'output': str(path), 'diagnostics_period_s': 0.1, 'flush_period_s': 0.5}
         )
-    publishers = {
-        topic: listener.node.create_publisher(JointState, topic, sensor_qos(200))
-        for topic in TOPICS
-    }
-    listener.wait_for(
-        lambda: all(p.get_subscription_count() >= 1 for p in publishers.values()),
-        STARTUP_S,
-        'the recorder to subscribe',
-    )
+    publishers = listener.publishers_subscribed(JointState, TOPICS, sensor_qos(200))
     names = [f'joint_{i}' for i in range(1, 7)]
     for k in range(N_CYCLES):
         msg = JointState(name=names, position=[float(k)] * 6, velocity=[0.0] * 6)

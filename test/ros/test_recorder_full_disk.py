@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed')
 
-from ros.ros_helpers import STARTUP_S, node_environment
+from ros.ros_helpers import node_environment
 
 from id_learning.bag import read_joint_states
 from id_learning.bag.recover import recover_bag
@@ -57,15 +57,7 @@ def test_a_recorder_on_a_full_disk_stops_says_what_reached_it_and_exits_non_zero
             command, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=tmp_path
         )
         try:
-            publishers = {
-                topic: listener.node.create_publisher(JointState, topic, sensor_qos(200))
-                for topic in TOPICS
-            }
-            listener.wait_for(
-                lambda: all(p.get_subscription_count() >= 1 for p in publishers.values()),
-                STARTUP_S,
-                'the recorder to subscribe',
-            )
+            publishers = listener.publishers_subscribed(JointState, TOPICS, sensor_qos(200))
             rng = np.random.default_rng(5)
             names = [f'joint_{i}' for i in range(1, 7)]
             start, period, k = time.monotonic(), 0.004, 0

@@ -34,15 +34,7 @@ def _publish(listener, count: int, clock=None) -> None:
 
     from id_learning.nodes.qos import sensor_qos
 
-    publishers = {
-        topic: listener.node.create_publisher(JointState, topic, sensor_qos(200))
-        for topic in TOPICS
-    }
-    listener.wait_for(
-        lambda: all(p.get_subscription_count() >= 1 for p in publishers.values()),
-        STARTUP_S,
-        'the recorder to subscribe',
-    )
+    publishers = listener.publishers_subscribed(JointState, TOPICS, sensor_qos(200))
     if clock is not None:
         listener.wait_for(
             lambda: clock.get_subscription_count() >= 1, STARTUP_S, "the recorder's /clock"
