@@ -21,7 +21,7 @@ from id_learning.dataset.importer import (
     import_log,
     import_logs,
 )
-from id_learning.errors import DatasetError
+from id_learning.errors import ConfigError, DatasetError
 
 NEW_YEAR_2026_S = 1_767_225_600  # 2026-01-01T00:00:00Z
 PERIOD_NS = 8_000_000
@@ -187,3 +187,23 @@ def test_an_absolute_time_is_one_of_this_century(
     first: float, unit: str, expected: int | None
 ) -> None:
     assert absolute_start_ns(first, mapping(unit)) == expected
+
+
+@pytest.mark.parametrize('period_s', [0.010, 0.0081, 0.004])
+def test_a_fixed_period_off_the_robots_ipo_period_is_refused(
+    tmp_path: Path, mabi, period_s: float
+) -> None:
+    # Probe 15 (A63): period_s 0.010 for an 8 ms robot gave a 10 ms bag without a word.
+
+    rows = np.outer(np.arange(20), np.full(6, 0.002))  # a slow ramp on every joint
+    csv = tmp_path / 'log.csv'
+    np.savetxt(csv, rows, delimiter=',', header=','.join(mabi.joints), comments='')
+
+    def fixed(period: float) -> ImportMapping:
+        joints = tuple(JointColumns(name, ColumnSpec(name, 'rad')) for name in mabi.joints)
+        return ImportMapping(period_s=period, joints=joints)
+
+    with pytest.raises(ConfigError, match=rf'period_s {period_s:g} s is not the IPO period 0.008'):
+        import_log(csv, fixed(period_s), tmp_path / 'bag', robot=mabi)
+    assert not (tmp_path / 'bag').exists()
+    import_log(csv, fixed(0.008), tmp_path / 'ok', robot=mabi)

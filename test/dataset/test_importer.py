@@ -374,24 +374,6 @@ def test_dropped_rows_leave_gaps_in_a_fixed_period_time_base(tmp_path: Path) -> 
     np.testing.assert_array_equal(states.stamps_ns // PERIOD_NS, [0, 1, 2, 4, 5, 6, 8, 9])
 
 
-@pytest.mark.parametrize('period_s', [0.010, 0.0081, 0.004])
-def test_a_fixed_period_off_the_robots_ipo_period_is_refused(
-    tmp_path: Path, robot: RobotConfig, period_s: float
-) -> None:
-    # Probe 15 (A63): period_s 0.010 for an 8 ms robot gave a 10 ms bag without a word.
-    rows = np.outer(np.arange(20), np.full(6, 0.002))  # a slow ramp on every joint
-    csv = write_csv(tmp_path / 'log.csv', list(robot.joints), rows)
-
-    def mapping(period: float) -> ImportMapping:
-        joints = tuple(JointColumns(name, ColumnSpec(name, 'rad')) for name in robot.joints)
-        return ImportMapping(period_s=period, joints=joints)
-
-    with pytest.raises(ConfigError, match=rf'period_s {period_s:g} s is not the IPO period 0.008'):
-        import_log(csv, mapping(period_s), tmp_path / 'bag', robot=robot)
-    assert not (tmp_path / 'bag').exists()
-    import_log(csv, mapping(0.008), tmp_path / 'ok', robot=robot)
-
-
 def test_text_in_a_number_column_is_refused_naming_line_and_value(tmp_path: Path) -> None:
     rows: list[list[object]] = [[8.0 * k, 0.1 * k, 0.0, 1.0, 2.0] for k in range(5)]
     rows[2][4] = 'err'
